@@ -1,0 +1,41 @@
+# Two entry points, each installing what it needs into .venv on a fresh machine:
+#   make eval   -- the APF evaluated on the paper's scenario, metrics printed
+#   make test   -- ruff + the whole test suite
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+# A local CPU build; a plain "torch" requirement would pull a multi-GB CUDA build.
+TORCH  := torch==2.13.0
+
+.PHONY: eval test lint bench clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+# Core + plotting: what the evaluation needs (no torch).
+$(VENV)/.core: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e ".[viz]"
+	touch $@
+
+# Everything: torch first, then the package with every extra the tests use.
+$(VENV)/.all: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet $(TORCH)
+	$(BIN)/python -m pip install --quiet -e ".[dev,train,viz]"
+	touch $@ $(VENV)/.core
+
+eval: $(VENV)/.core
+	$(BIN)/uasep-eval --policy apf --scenario paper --episodes 1 --seed 0
+
+lint: $(VENV)/.all
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check uasep_env
+
+test: lint
+	$(BIN)/python -m pytest -n 2 -q
+
+bench: $(VENV)/.all
+	$(BIN)/python benchmarks/bench_core.py
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis

@@ -1,0 +1,82 @@
+"""Formation geometry (eqs. 5-7) and the planned trajectory."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from uasep_env.config import FORMATION_PATTERNS
+from uasep_env.formation import (
+    PlannedTrajectory,
+    formation_center,
+    pattern_slots,
+    rotation_from_velocity,
+)
+
+
+def test_center_is_mean_state_eq5():
+    pos = np.arange(18.0).reshape(2, 3, 3)
+    vel = -pos
+    c, v = formation_center(pos, vel)
+    np.testing.assert_allclose(c, pos.mean(axis=1))
+    np.testing.assert_allclose(v, vel.mean(axis=1))
+
+
+@settings(max_examples=200, deadline=None)
+@given(arrays(float, (3,), elements=st.floats(-50, 50)))
+def test_rotation_is_proper_and_y_axis_on_velocity_eq6(vel):
+    speed = np.linalg.norm(vel)
+    c = rotation_from_velocity(vel, fallback=np.array([0.0, 1.0, 0.0]))
+    np.testing.assert_allclose(c.T @ c, np.eye(3), atol=1e-9)
+    assert np.linalg.det(c) == pytest.approx(1.0, abs=1e-9)
+    assert abs(c[2, 0]) < 1e-12  # X_f is horizontal
+    if speed >= 0.5:
+        np.testing.assert_allclose(c[:, 1], vel / speed, atol=1e-9)  # Y_f along v_o
+    else:
+        np.testing.assert_allclose(c[:, 1], [0.0, 1.0, 0.0], atol=1e-9)  # planned heading
+
+
+def test_level_flight_north_frame():
+    c = rotation_from_velocity(np.array([5.0, 0.0, 0.0]))
+    np.testing.assert_allclose(c[:, 0], [0, 1, 0], atol=1e-12)  # X_f starboard = east
+    np.testing.assert_allclose(c[:, 2], [0, 0, -1], atol=1e-12)  # Z_f up
+
+
+def test_slots_eq7_paper_pattern_flying_east():
+    slots = pattern_slots("paper", 3, 20.0)
+    np.testing.assert_allclose(slots, [[-20, 0, 0], [20, 0, 0], [0, 0, 0]])
+    c = rotation_from_velocity(np.array([0.0, 5.0, 0.0]))  # flying east
+    p_o = np.array([100.0, 50.0, -100.0])
+    desired = slots @ c.T + p_o
+    # Starboard of east is south (-x): the -20 slot is 20 m north.
+    np.testing.assert_allclose(desired[0], [120.0, 50.0, -100.0], atol=1e-9)
+    np.testing.assert_allclose(desired[2], p_o, atol=1e-9)
+
+
+@pytest.mark.parametrize("pattern", FORMATION_PATTERNS)
+@pytest.mark.parametrize("n", [2, 3, 5, 8, 32])
+def test_patterns_centred_distinct_and_spaced(pattern, n):
+    slots = pattern_slots(pattern, n, 15.0)
+    assert slots.shape == (n, 3)
+    np.testing.assert_allclose(slots.mean(axis=0), 0.0, atol=1e-9)
+    d = np.linalg.norm(slots[:, None] - slots[None], axis=-1) + np.eye(n) * 1e9
+    assert d.min() >= 15.0 - 1e-9
+
+
+def test_planned_trajectory_flown_at_cruise_speed():
+    wp = np.array([[[0, 0, -100], [100, 0, -100], [100, 100, -100], [100, 100, -100]]], float)
+    plan = PlannedTrajectory(wp, 5.0)
+    pos, vel = plan.center(np.array([10.0]))
+    np.testing.assert_allclose(pos[0], [50, 0, -100])
+    np.testing.assert_allclose(vel[0], [5, 0, 0])
+    pos, vel = plan.center(np.array([30.0]))
+    np.testing.assert_allclose(pos[0], [100, 50, -100])
+    np.testing.assert_allclose(vel[0], [0, 5, 0])
+    pos, vel = plan.center(np.array([100.0]))  # past the end: stays at the last way-point
+    np.testing.assert_allclose(pos[0], [100, 100, -100])
+    np.testing.assert_allclose(vel[0], 0.0)
+    assert plan.finished(np.array([40.0]))[0] and not plan.finished(np.array([39.0]))[0]
+    slots = pattern_slots("paper", 3, 20.0)[None]
+    upos, _ = plan.uav_positions(np.array([10.0]), slots)
+    np.testing.assert_allclose(upos[0, 1], [50, 20, -100])  # +20 slot is starboard (east)

@@ -1,0 +1,377 @@
+"""Tests of the matplotlib renderer (headless: the Agg backend is forced)."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import textwrap
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+
+import gymnasium
+
+import uasep_env
+from uasep_env.rendering import Renderer, ellipsoid_points, save_frame
+from uasep_env.world import World
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(autouse=True)
+def _agg_backend():
+    import matplotlib
+
+    matplotlib.use("Agg")  # never open windows in tests, even with a display
+
+
+def _run_python(code: str) -> subprocess.CompletedProcess:
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def _world(seed: int = 0, **config) -> World:
+    w = World({"scenario": "paper", **config}, n_envs=1)
+    w.reset(seed=seed)
+    return w
+
+
+def _zero(w: World) -> np.ndarray:
+    return np.zeros((w.n_envs, w.n_uavs, 3))
+
+
+def _check_frame(frame) -> None:
+    assert isinstance(frame, np.ndarray)
+    assert frame.dtype == np.uint8
+    assert frame.ndim == 3 and frame.shape[2] == 3
+    assert frame.shape[0] >= 100 and frame.shape[1] >= 100
+    colours = np.unique(frame.reshape(-1, 3)[::7], axis=0)
+    assert len(colours) > 20, "frame looks blank"
+
+
+def test_import_does_not_import_matplotlib():
+    res = _run_python(
+        """
+        import sys
+        import uasep_env.rendering
+        import uasep_env
+        env = uasep_env.parallel_env()
+        env.reset(seed=0)
+        bad = sorted(m for m in sys.modules if m.split(".")[0] in ("matplotlib", "mpl_toolkits"))
+        assert not bad, bad
+        print("ok")
+        """
+    )
+    assert res.returncode == 0, res.stderr
+    assert "ok" in res.stdout
+
+
+def test_rgb_array_frame():
+    w = _world()
+    r = Renderer(w.config, mode="rgb_array")
+    try:
+        frame = r.render(w)
+        _check_frame(frame)
+        assert frame.shape == (640, 1120, 3)  # default size: multiples of 16 for video
+        # Red obstacle and coloured UAV pixels are present, not only greys.
+        assert (frame.astype(int).max(axis=2) - frame.astype(int).min(axis=2) > 80).sum() > 50
+    finally:
+        r.close()
+
+
+def test_frames_change_as_world_steps():
+    w = _world()
+    r = Renderer(w.config)
+    try:
+        first = r.render(w)
+        for _ in range(10):
+            w.step(_zero(w))
+        second = r.render(w)
+        assert first.shape == second.shape
+        assert (first != second).any(axis=2).sum() > 100
+    finally:
+        r.close()
+
+
+def test_figure_reused_and_trails_cleared_on_reset():
+    w = _world(seed=3)
+    r = Renderer(w.config)
+    fresh = Renderer(w.config)
+    try:
+        r.render(w)
+        fig = r.fig
+        for _ in range(8):
+            w.step(_zero(w))
+            r.render(w)
+        assert r.fig is fig  # one figure for the whole run
+        w.reset(seed=3)  # time goes back to 0: the trails must restart
+        again = r.render(w)
+        np.testing.assert_array_equal(again, fresh.render(w))
+    finally:
+        r.close()
+        fresh.close()
+
+
+def test_close_is_idempotent_and_renderer_reusable():
+    w = _world()
+    r = Renderer(w.config)
+    r.render(w)
+    r.close()
+    r.close()
+    assert r.fig is None
+    _check_frame(r.render(w))  # a closed renderer draws again with a new figure
+    r.close()
+
+
+def test_invalid_arguments():
+    with pytest.raises(ValueError, match="render mode"):
+        Renderer(None, mode="ansi")
+    with pytest.raises(ValueError):
+        Renderer(None, figsize=(0, 3))
+    w = _world()
+    r = Renderer(w.config)
+    with pytest.raises(IndexError):
+        r.render(w, env=1)
+    r.close()
+
+
+def test_batched_world_renders_selected_env():
+    w = World({"scenario": "random"}, n_envs=3)
+    w.reset(seed=5)
+    r = Renderer(w.config)
+    try:
+        frames = [r.render(w, env=i) for i in range(3)]
+        for f in frames:
+            _check_frame(f)
+        assert (frames[0] != frames[2]).any()
+    finally:
+        r.close()
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        {"n_obstacles": 0},
+        {"scenario": "large_formation", "n_uavs": 10, "formation": "wedge", "n_obstacles": 3},
+        {"scenario": "multi_obstacle", "n_obstacles": 4},
+    ],
+)
+def test_other_configurations(config):
+    w = _world(seed=1, **config)
+    r = Renderer(w.config)
+    try:
+        for _ in range(3):
+            w.step(_zero(w))
+            _check_frame(r.render(w))
+    finally:
+        r.close()
+
+
+def test_inactive_obstacles_and_scattered_formation():
+    w = _world(n_obstacles=2)
+    w.obstacles.active[0, 1] = False
+    r = Renderer(w.config, top_view=False)
+    try:
+        # Zero actions: the paper's UAVs drift apart; the view grows instead of losing them.
+        for _ in range(300):
+            w.step(_zero(w))
+        _check_frame(r.render(w))
+    finally:
+        r.close()
+
+
+def test_view_box_stable_between_frames():
+    w = _world()
+    r = Renderer(w.config)
+    try:
+        widths = []
+        for _ in range(12):
+            w.step(_zero(w))
+            r.render(w)
+            ax = r.fig.axes[0]
+            lo, hi = ax.get_xlim()
+            widths.append(hi - lo)
+            centre = np.asarray(w.uav_pos[0]).mean(axis=0)
+            assert math.isclose((lo + hi) / 2, centre[1], abs_tol=1e-6)  # east centred
+        assert np.ptp(widths) == 0.0
+        assert widths[0] >= 300.0
+    finally:
+        r.close()
+
+
+def test_ellipsoid_points_geometry():
+    centre = np.array([100.0, 50.0, -80.0])  # NED
+    axes = np.array([30.0, 10.0, 5.0])
+    unit = np.eye(3)
+    # Heading east: longitudinal -> east, lateral (right) -> south, vertical -> down.
+    pts = ellipsoid_points(unit, centre, axes, math.pi / 2)  # (east, north, altitude)
+    np.testing.assert_allclose(pts[0], [50.0 + 30.0, 100.0, 80.0], atol=1e-9)
+    np.testing.assert_allclose(pts[1], [50.0, 100.0 - 10.0, 80.0], atol=1e-9)
+    np.testing.assert_allclose(pts[2], [50.0, 100.0, 80.0 - 5.0], atol=1e-9)
+    # Heading north: longitudinal -> north, lateral -> east.
+    pts = ellipsoid_points(unit, centre, axes, 0.0)
+    np.testing.assert_allclose(pts[0], [50.0, 130.0, 80.0], atol=1e-9)
+    np.testing.assert_allclose(pts[1], [60.0, 100.0, 80.0], atol=1e-9)
+
+
+def test_save_frame(tmp_path):
+    w = _world()
+    path = save_frame(w, tmp_path / "sub" / "frame.png")
+    assert path.exists()
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    r = Renderer(w.config)
+    for _ in range(5):
+        w.step(_zero(w))
+        r.render(w)
+    save_frame(w, tmp_path / "with_trails.png", renderer=r)
+    assert r.fig is not None  # a renderer passed in is not closed
+    r.close()
+
+
+def test_human_mode_headless_does_not_crash():
+    res = _run_python(
+        """
+        import warnings
+        import numpy as np
+        from uasep_env.rendering import Renderer
+        from uasep_env.world import World
+        w = World({"scenario": "paper"}); w.reset(seed=0)
+        r = Renderer(w.config, mode="human")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for _ in range(3):
+                assert r.render(w) is None
+                w.step(np.zeros((1, 3, 3)))
+        r.close()
+        msgs = [str(c.message) for c in caught if "interactive" in str(c.message)]
+        assert len(msgs) == 1, [str(c.message) for c in caught]
+        print("ok")
+        """
+    )
+    assert res.returncode == 0, res.stderr
+    assert "ok" in res.stdout
+
+
+def test_human_mode_in_process():
+    w = _world()
+    r = Renderer(w.config, mode="human")
+    with pytest.warns(RuntimeWarning, match="interactive"):
+        assert r.render(w) is None
+    assert r.render(w) is None  # warns only once
+    r.close()
+
+
+def test_parallel_env_rgb_array():
+    env = uasep_env.parallel_env(render_mode="rgb_array")
+    env.reset(seed=0)
+    frames = [env.render()]
+    for _ in range(3):
+        env.step({a: np.zeros(3, dtype=np.float32) for a in env.agents})
+        frames.append(env.render())
+    for f in frames:
+        _check_frame(f)
+    assert (frames[0] != frames[-1]).any()
+    env.close()
+
+
+def test_parallel_env_human_headless():
+    env = uasep_env.parallel_env(render_mode="human")
+    with pytest.warns(RuntimeWarning, match="interactive"):
+        env.reset(seed=0)  # renders in human mode
+    env.step({a: np.zeros(3, dtype=np.float32) for a in env.agents})
+    assert env.render() is None
+    env.close()
+
+
+def test_pettingzoo_render_test():
+    from pettingzoo.test import render_test
+    from pettingzoo.utils.conversions import parallel_to_aec
+
+    def env_fn(render_mode=None):
+        return parallel_to_aec(uasep_env.parallel_env(render_mode=render_mode))
+
+    with pytest.warns(RuntimeWarning, match="interactive"):
+        render_test(env_fn)
+
+
+def test_pettingzoo_render_test_parallel_equivalent():
+    """render_test's checks, through the parallel API, for every declared render mode."""
+    modes = uasep_env.parallel_env().metadata["render_modes"]
+    assert set(modes) == {"human", "rgb_array"}
+    for mode in modes:
+        env = uasep_env.parallel_env(render_mode=mode)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # human mode, headless
+            env.reset(seed=0)
+            results = []
+            for i in range(5):
+                if i:
+                    env.step({a: env.action_space(a).sample() for a in env.agents})
+                results.append(env.render())
+        for res in results:
+            if mode == "rgb_array":
+                _check_frame(res)
+            else:
+                assert res is None
+        env.close()
+
+
+def test_gymnasium_env_frames_for_video():
+    """The frames a video recorder would get: constant shape, even sizes, uint8."""
+    env = gymnasium.make("uasep/PaperEncounter-v0", render_mode="rgb_array", episode_duration=4.0)
+    env.reset(seed=0)
+    frames = [env.render()]
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        frames.append(env.render())
+        done = term or trunc
+    env.close()
+    assert len(frames) == 21  # 4 s of 0.2 s steps, plus the reset frame
+    shapes = {f.shape for f in frames}
+    assert len(shapes) == 1
+    h, w, _ = shapes.pop()
+    assert h % 2 == 0 and w % 2 == 0
+    for f in frames[:: len(frames) // 3]:
+        _check_frame(f)
+
+
+def test_gymnasium_record_video(tmp_path):
+    pytest.importorskip("moviepy", reason="gymnasium's RecordVideo needs moviepy")
+    from gymnasium.wrappers import RecordVideo
+
+    env = gymnasium.make("uasep/PaperEncounter-v0", render_mode="rgb_array", episode_duration=4.0)
+    env = RecordVideo(env, video_folder=str(tmp_path), episode_trigger=lambda ep: True)
+    env.reset(seed=0)
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        done = term or trunc
+    env.close()
+    assert list(tmp_path.glob("*.mp4"))
+
+
+def test_vector_env_render():
+    env = gymnasium.make_vec(
+        "uasep/PaperEncounter-v0",
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        render_mode="rgb_array",
+    )
+    env.reset(seed=0)
+    env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    _check_frame(env.render())
+    env.close()

@@ -1,0 +1,82 @@
+"""Each named reward term reacts as documented in uasep_env.rewards."""
+
+import numpy as np
+import pytest
+
+from uasep_env import make_config
+from uasep_env.config import RewardWeights
+from uasep_env.envs.core import EnvCore
+from uasep_env.rewards import REWARD_TERMS, compute_rewards
+
+
+@pytest.fixture
+def core():
+    c = EnvCore(make_config(scenario="paper", noise=False), n_envs=1)
+    c.reset(seed=0)
+    c.step(np.zeros((1, 3, 3)))
+    return c
+
+
+def _terms_with_uav2_at(core, pos, cmd=None, prev=None):
+    w = core.world
+    w.uav_pos[0, 2] = pos
+    if cmd is not None:
+        w.accel_cmd[0, 2] = cmd
+    if prev is not None:
+        w.prev_accel_cmd[0, 2] = prev
+    w._update_safety(reset_mask=np.ones(1, dtype=bool))
+    _, terms = compute_rewards(w, core.config.reward)
+    return {k: v[0, 2] for k, v in terms.items()}
+
+
+def test_moving_into_reachable_region_lowers_region_term(core):
+    w = core.world
+    center = w.pred_center[0, 0]
+    axes = w.pred_axes[0, 0]
+    values = []
+    # From well outside, through the surface, to the centre of the ellipsoid (laterally).
+    lateral = np.array([-np.sin(w.pred_heading[0, 0]), np.cos(w.pred_heading[0, 0]), 0.0])
+    for k in np.linspace(3.0, 0.0, 13):
+        values.append(_terms_with_uav2_at(core, center + lateral * axes[1] * k)["separation_region"])
+    assert values[0] == 0.0
+    assert all(b <= a for a, b in zip(values, values[1:], strict=False))
+    assert values[-1] < values[6] < 0.0
+
+
+def test_obstacle_and_inner_separation_terms(core):
+    w = core.world
+    obs = w.obstacles.pos[0, 0]
+    far = _terms_with_uav2_at(core, obs + np.array([0.0, 0.0, -200.0]))
+    near = _terms_with_uav2_at(core, obs + np.array([0.0, 0.0, -5.0]))
+    assert far["separation_obstacle"] == 0.0 and near["separation_obstacle"] < 0.0
+    assert near["collision"] == 0.0
+    hit = _terms_with_uav2_at(core, obs + np.array([0.0, 0.0, -1.0]))
+    assert hit["collision"] == -1.0
+    other = w.uav_pos[0, 0].copy()
+    close = _terms_with_uav2_at(core, other + np.array([0.0, 4.0, 0.0]))
+    closer = _terms_with_uav2_at(core, other + np.array([0.0, 3.5, 0.0]))
+    assert closer["separation_inner"] < close["separation_inner"] < 0.0
+
+
+def test_deviation_control_smoothness_terms(core):
+    w = core.world
+    plan, _ = w.planned()
+    on = _terms_with_uav2_at(core, plan[0, 2], cmd=np.zeros(3), prev=np.zeros(3))
+    off = _terms_with_uav2_at(core, plan[0, 2] + np.array([0, 0, 20.0]))
+    assert on["deviation"] == pytest.approx(0.0, abs=1e-12)
+    assert off["deviation"] == pytest.approx(-2.0)
+    assert on["control"] == 0.0 and on["smoothness"] == 0.0
+    a = core.config.uav.max_accel
+    t = _terms_with_uav2_at(core, plan[0, 2], cmd=np.array([a, 0, 0]), prev=np.array([-a, 0, 0]))
+    assert t["control"] == pytest.approx(-1 / 3) and t["smoothness"] == pytest.approx(-4 / 3)
+
+
+def test_weights_and_sharing_combine_terms(core):
+    w = core.world
+    w.uav_pos[0, 2] += np.array([0.0, 0.0, 30.0])  # only uav_2 deviates much
+    only_dev = RewardWeights(**dict.fromkeys(REWARD_TERMS, 0.0), deviation=1.0)
+    own, terms = compute_rewards(w, only_dev)
+    np.testing.assert_allclose(own, terms["deviation"])
+    shared = RewardWeights(**dict.fromkeys(REWARD_TERMS, 0.0), deviation=1.0, shared=1.0)
+    team, _ = compute_rewards(w, shared)
+    np.testing.assert_allclose(team, np.broadcast_to(terms["deviation"].mean(), (1, 3)))

@@ -1,0 +1,124 @@
+"""The Gymnasium vector env and the stable-baselines3 adapter."""
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import uasep_env  # noqa: F401 - registers the ids
+from uasep_env.envs.gym_env import FormationEnv
+from uasep_env.envs.vector import FormationVectorEnv
+
+SHORT = {"episode_duration": 3.0, "n_obstacles": 2}
+
+
+def test_make_vec_uses_native_vector_env():
+    vec = gymnasium.make_vec("uasep/Formation-v0", num_envs=8, **SHORT)
+    assert isinstance(vec.unwrapped, FormationVectorEnv)
+    obs, _ = vec.reset(seed=0)
+    assert obs.shape == (8, *vec.single_observation_space.shape)
+    assert vec.observation_space.contains(obs)
+    assert vec.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+
+
+def test_vector_env_matches_single_envs_across_autoreset():
+    n = 4
+    vec = FormationVectorEnv(n, **SHORT)
+    singles = [FormationEnv(**SHORT) for _ in range(n)]
+    obs_v, _ = vec.reset(seed=10)
+    obs_s = [env.reset(seed=10 + i)[0] for i, env in enumerate(singles)]
+    np.testing.assert_array_equal(obs_v, np.stack(obs_s))
+    rng = np.random.default_rng(0)
+    pending = np.zeros(n, dtype=bool)
+    ended = 0
+    for _ in range(40):
+        act = rng.uniform(-1, 1, size=vec.action_space.shape).astype(np.float32)
+        obs_v, rew_v, term_v, trunc_v, _ = vec.step(act)
+        for i, env in enumerate(singles):
+            if pending[i]:  # NextStep autoreset: this step resets env i, action ignored
+                o, r, te, tr = env.reset()[0], 0.0, False, False
+            else:
+                o, r, te, tr, _ = env.step(act[i])
+            np.testing.assert_array_equal(obs_v[i], o)
+            assert rew_v[i] == pytest.approx(r, abs=1e-12)
+            assert (term_v[i], trunc_v[i]) == (te, tr)
+        pending = term_v | trunc_v
+        ended += int(pending.sum())
+    assert ended >= n  # every env went through at least one autoreset
+
+
+def test_same_step_autoreset_final_obs():
+    vec = FormationVectorEnv(3, autoreset_mode="SameStep", **SHORT)
+    single = FormationEnv(**SHORT)
+    vec.reset(seed=5)
+    single.reset(seed=5)
+    zero = np.zeros(vec.action_space.shape, np.float32)
+    for _ in range(200):
+        obs, _, term, trunc, info = vec.step(zero)
+        o, _, te, tr, _ = single.step(zero[0])
+        if te or tr:
+            assert term[0] or trunc[0]
+            assert info["_final_obs"][0]
+            np.testing.assert_array_equal(info["final_obs"][0], o)
+            assert obs[0].tolist() != o.tolist()  # the returned obs is the new episode's
+            return
+        np.testing.assert_array_equal(obs[0], o)
+    pytest.fail("episode did not end")
+
+
+def test_vector_bad_actions_and_modes():
+    vec = FormationVectorEnv(2, **SHORT)
+    vec.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(2, 9\)"):
+        vec.step(np.zeros((3, 9)))
+    bad = np.zeros((2, 9))
+    bad[1, 4] = np.inf
+    with pytest.raises(ValueError, match=r"non-finite value inf at index \(1, 4\)"):
+        vec.step(bad)
+    with pytest.raises(ValueError, match="autoreset_mode 'Sometimes'"):
+        FormationVectorEnv(2, autoreset_mode="Sometimes")
+    with pytest.raises(ValueError, match="num_envs"):
+        FormationVectorEnv(0)
+
+
+def test_vector_disabled_mode_reset_mask():
+    vec = FormationVectorEnv(2, autoreset_mode="Disabled", **SHORT)
+    vec.reset(seed=0)
+    zero = np.zeros(vec.action_space.shape, np.float32)
+    for _ in range(3):
+        vec.step(zero)
+    t_before = vec.world.time.copy()
+    vec.reset(options={"reset_mask": np.array([True, False])})
+    assert vec.world.time[0] == 0.0 and vec.world.time[1] == t_before[1]
+
+
+sb3 = pytest.importorskip("stable_baselines3")
+
+
+def test_sb3_adapter_passes_sb3_checks_and_terminal_obs():
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+
+    venv = UAVSharedVecEnv(n_envs=2, seed=3, **SHORT)
+    assert venv.num_envs == 2 * 3
+    obs = venv.reset()
+    assert obs.shape == (6, venv.observation_space.shape[0])
+    mon = VecMonitor(venv)
+    mon.reset()
+    finished = False
+    for _ in range(100):
+        venv.step_async(np.zeros((6, 3), np.float32))
+        obs, rew, dones, infos = venv.step_wait()
+        assert rew.shape == (6,) and dones.shape == (6,)
+        if dones.any():
+            k = int(np.flatnonzero(dones)[0])
+            assert "terminal_observation" in infos[k]
+            assert infos[k]["TimeLimit.truncated"] is True
+            assert not np.array_equal(infos[k]["terminal_observation"], obs[k])
+            finished = True
+            break
+    assert finished
+    with pytest.raises(ValueError, match=r"shape \(6, 3\)"):
+        venv.step_async(np.zeros((5, 3)))
+        venv.step_wait()

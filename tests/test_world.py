@@ -1,0 +1,183 @@
+"""The batched world: determinism, batch invariance, per-env reset, bounds, extremes."""
+
+import numpy as np
+import pytest
+
+from uasep_env import World, make_config
+from uasep_env.config import SCENARIOS
+
+STATE = ("uav_pos", "uav_vel", "est_pos", "est_vel", "obs_est_pos", "pred_center", "time")
+
+
+def _actions(rng, e, n, scale=2.0):
+    return rng.uniform(-scale, scale, size=(e, n, 3))
+
+
+def _run(world, steps, seed_actions=0):
+    rng = np.random.default_rng(seed_actions)
+    traj = []
+    for _ in range(steps):
+        world.step(_actions(rng, world.n_envs, world.n_uavs))
+        traj.append({k: getattr(world, k).copy() for k in STATE})
+        traj[-1]["obs_pos"] = world.obstacles.pos.copy()
+    return traj
+
+
+@pytest.mark.parametrize("scenario", ["paper", "random", "multi_obstacle"])
+def test_same_seed_bit_identical(scenario):
+    cfg = make_config(scenario=scenario, n_obstacles=2)
+    a, b = World(cfg, 3), World(cfg, 3)
+    a.reset(seed=7)
+    b.reset(seed=7)
+    for sa, sb in zip(_run(a, 300), _run(b, 300), strict=True):
+        for k in sa:
+            assert np.array_equal(sa[k], sb[k]), k
+
+
+def test_different_seed_differs():
+    cfg = make_config(scenario="random")
+    a, b = World(cfg, 1), World(cfg, 1)
+    a.reset(seed=1)
+    b.reset(seed=2)
+    assert not np.array_equal(a.uav_pos, b.uav_pos)
+
+
+def test_batch_gives_same_per_env_result_as_alone():
+    cfg = make_config(scenario="random", n_obstacles=2, decision_interval=2)
+    e = 5
+    batch = World(cfg, e)
+    batch.reset(seed=100)
+    rng = np.random.default_rng(3)
+    acts = [_actions(rng, e, cfg.n_uavs) for _ in range(150)]
+    hist = []
+    for a in acts:
+        batch.step(a)
+        hist.append({k: getattr(batch, k).copy() for k in STATE})
+    for i in range(e):
+        alone = World(cfg, 1)
+        alone.reset(seed=100 + i)
+        for a, h in zip(acts, hist, strict=True):
+            alone.step(a[i : i + 1])
+            for k in STATE:
+                assert np.array_equal(getattr(alone, k)[0], h[k][i]), (i, k)
+
+
+def test_masked_reset_leaves_other_envs_untouched_and_matches_fresh_env():
+    cfg = make_config(scenario="crossing")
+    w = World(cfg, 3)
+    w.reset(seed=[10, 11, 12])
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        w.step(_actions(rng, 3, cfg.n_uavs))
+    before = w.uav_pos.copy()
+    w.reset(seed=[None, 99, None], mask=np.array([False, True, False]))
+    np.testing.assert_array_equal(w.uav_pos[[0, 2]], before[[0, 2]])
+    fresh = World(cfg, 1)
+    fresh.reset(seed=99)
+    np.testing.assert_array_equal(w.uav_pos[1], fresh.uav_pos[0])
+    np.testing.assert_array_equal(w.est_pos[1], fresh.est_pos[0])
+    assert w.time[1] == 0.0 and w.time[0] > 0.0
+
+
+def test_inactive_envs_do_not_move_or_consume_randomness():
+    cfg = make_config(scenario="random")
+    w, ref = World(cfg, 2), World(cfg, 2)
+    w.reset(seed=5)
+    ref.reset(seed=5)
+    zero = np.zeros((2, cfg.n_uavs, 3))
+    frozen_pos = None
+    for k in range(10):
+        w.step(zero, active=np.array([True, k >= 5]))
+        if k == 4:
+            frozen_pos = w.uav_pos[1].copy()
+    assert frozen_pos is not None
+    for _ in range(5):
+        ref.step(zero)
+    # Env 1 moved only 5 steps, exactly like 5 unmasked steps of a fresh copy.
+    np.testing.assert_array_equal(w.uav_pos[1], ref.uav_pos[1])
+    assert w.steps[1] == 5 and w.steps[0] == 10
+
+
+def test_speed_limit_holds_in_world_under_extreme_actions():
+    cfg = make_config(scenario="random", uav={"max_speed": 7.0, "max_accel": 50.0})
+    w = World(cfg, 4)
+    w.reset(seed=0)
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        w.step(rng.choice([-1e6, 1e6], size=(4, cfg.n_uavs, 3)))
+        assert np.all(np.linalg.norm(w.uav_vel, axis=-1) <= 7.0 * (1 + 1e-12))
+        assert np.all(np.isfinite(w.uav_pos)) and np.all(np.isfinite(w.est_pos))
+
+
+def test_zero_noise_estimates_are_exact():
+    cfg = make_config(noise=False)
+    w = World(cfg, 2)
+    w.reset(seed=0)
+    _run(w, 50)
+    np.testing.assert_allclose(w.est_pos, w.uav_pos, atol=1e-9)
+    np.testing.assert_allclose(w.obs_est_pos, w.obstacles.pos, atol=1e-9)
+
+
+def test_noise_makes_estimates_differ_and_kalman_helps():
+    cfg = make_config(noise={"position_std": 2.0, "velocity_std": 0.3})
+    raw = make_config(cfg, prediction={"kalman": False})
+    errs = {}
+    for name, c in (("kf", cfg), ("raw", raw)):
+        w = World(c, 8)
+        w.reset(seed=3)
+        e = []
+        rng = np.random.default_rng(0)
+        for _ in range(200):
+            w.step(_actions(rng, 8, c.n_uavs, 0.5))
+            e.append(np.linalg.norm(w.est_pos - w.uav_pos, axis=-1).mean())
+        errs[name] = np.mean(e[20:])
+    assert errs["kf"] < 0.7 * errs["raw"], errs
+
+
+def test_true_obstacle_inside_predicted_ellipsoid_noise_free():
+    # The prediction is made from the estimate; with no noise the obstacle's position over
+    # the horizon must stay inside the ellipsoid predicted at the start (swept set).
+    cfg = make_config(scenario="random", noise=False, n_obstacles=3)
+    w = World(cfg, 16)
+    w.reset(seed=11)
+    zero = np.zeros((16, cfg.n_uavs, 3))
+    for _ in range(5):
+        w.step(zero)
+    centers, axes, heading = w.pred_center.copy(), w.pred_axes.copy(), w.pred_heading.copy()
+    from uasep_env.reachable import distance_to_ellipsoid
+
+    horizon_steps = int(cfg.prediction.horizon / cfg.step_duration)
+    for _ in range(horizon_steps):
+        w.step(zero)
+        d = distance_to_ellipsoid(w.obstacles.pos, centers, axes, heading)
+        assert np.all(d <= 1e-6), d.max()
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_every_scenario_runs_and_stays_finite(scenario):
+    n = 8 if scenario == "large_formation" else 3
+    cfg = make_config(scenario=scenario, n_uavs=n, n_obstacles=2)
+    w = World(cfg, 2)
+    w.reset(seed=1)
+    _run(w, 30)
+    assert np.all(np.isfinite(w.uav_pos)) and np.all(np.isfinite(w.pred_center))
+    assert np.all(w.pred_axes > 0)
+
+
+def test_step_validation_errors():
+    w = World(make_config(), 2)
+    with pytest.raises(RuntimeError, match="before"):
+        w.step(np.zeros((2, 3, 3)))
+    w.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(2, 3, 3\)"):
+        w.step(np.zeros((2, 3)))
+    bad = np.zeros((2, 3, 3))
+    bad[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match=r"\[\[1, 2, 0\]\]"):
+        w.step(bad)
+    with pytest.raises(ValueError, match="mask"):
+        w.reset(mask=np.array([True]))
+    with pytest.raises(ValueError, match="expected 2 seeds"):
+        w.reset(seed=[1, 2, 3])
+    with pytest.raises(ValueError, match="n_envs"):
+        World(make_config(), 0)

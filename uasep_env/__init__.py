@@ -1,0 +1,29 @@
+"""uasep-env: separation management for UAV formations among non-cooperative obstacles.
+
+* :func:`parallel_env` -- the PettingZoo parallel environment (primary API).
+* ``gymnasium.make("uasep/Formation-v0")`` / ``"uasep/PaperEncounter-v0"`` -- centralised
+  Gymnasium views, registered on import (``gymnasium.make_vec`` gives the batched vector env).
+* :class:`World` -- the batched numpy core, the one transition function.
+* :mod:`uasep_env.policies` -- the paper's APF and its comparison methods.
+"""
+
+from __future__ import annotations
+
+from uasep_env.config import EnvConfig, make_config
+from uasep_env.envs.parallel import UAVSeparationParallelEnv, parallel_env
+from uasep_env.registration import register_envs
+from uasep_env.world import World
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "EnvConfig",
+    "UAVSeparationParallelEnv",
+    "World",
+    "__version__",
+    "make_config",
+    "parallel_env",
+    "register_envs",
+]
+
+register_envs()

@@ -1,0 +1,159 @@
+"""The batched environment core shared by every environment view.
+
+:class:`EnvCore` wraps a :class:`~uasep_env.world.World` and adds what an RL environment
+needs on top of the physics: action validation and scaling, observations, named rewards,
+termination (a collision), truncation (time limit / end of the plan) and the per-step
+safety figures. The PettingZoo env, the Gymnasium env, the vector env and the SB3 adapter
+are thin views of it; none of them steps the world another way.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from uasep_env.config import EnvConfig, make_config
+from uasep_env.observation import ObservationLayout, build_observations, global_state
+from uasep_env.rewards import REWARD_TERMS, collisions, compute_rewards
+from uasep_env.world import World
+
+__all__ = ["ACTION_TOLERANCE", "EnvCore", "StepResult", "validate_actions"]
+
+#: Actions may exceed ``[-1, 1]`` by this much (rounding) before they are rejected.
+ACTION_TOLERANCE = 1e-6
+
+
+def validate_actions(actions: np.ndarray, shape: tuple[int, ...], where: str = "action") -> np.ndarray:
+    """Check normalised actions: shape, finiteness and the ``[-1, 1]`` box.
+
+    Args:
+        actions: The actions.
+        shape: Their expected shape.
+        where: Name used in error messages.
+
+    Returns:
+        The actions as float64, clipped only by the rounding tolerance.
+
+    Raises:
+        ValueError: Naming the wrong shape, or the first non-finite or out-of-range value.
+    """
+    a = np.asarray(actions, dtype=float) if not isinstance(actions, np.ndarray) else actions
+    if a.shape != shape:
+        raise ValueError(f"{where} must have shape {shape}, got {a.shape}")
+    a = a.astype(float, copy=False)
+    finite = np.isfinite(a)
+    if not finite.all():
+        idx = tuple(int(i) for i in np.argwhere(~finite)[0])
+        raise ValueError(f"{where} contains a non-finite value {a[idx]!r} at index {idx}")
+    over = np.abs(a) > 1.0 + ACTION_TOLERANCE
+    if over.any():
+        idx = tuple(int(i) for i in np.argwhere(over)[0])
+        raise ValueError(
+            f"{where} value {a[idx]!r} at index {idx} is outside the action space [-1, 1]"
+        )
+    return np.clip(a, -1.0, 1.0)
+
+
+@dataclass
+class StepResult:
+    """What one batched step produced (arrays over ``(n_envs, n_uavs)``).
+
+    Attributes:
+        obs: ``(E, N, D)`` observations after the step.
+        rewards: ``(E, N)`` rewards.
+        terms: Unweighted reward terms, name -> ``(E, N)``.
+        terminated: ``(E,)`` an episode ended by a collision.
+        truncated: ``(E,)`` an episode ended by the time limit or the end of the plan.
+        safety: Per-step safety figures, name -> ``(E, N)``.
+    """
+
+    obs: np.ndarray
+    rewards: np.ndarray
+    terms: dict[str, np.ndarray]
+    terminated: np.ndarray
+    truncated: np.ndarray
+    safety: dict[str, np.ndarray]
+
+
+class EnvCore:
+    """Observations, rewards and episode ends over a batched :class:`World`.
+
+    Args:
+        config: The validated config (or a dict).
+        n_envs: Number of environments in the batch.
+    """
+
+    def __init__(self, config: EnvConfig | dict | None = None, n_envs: int = 1) -> None:
+        self.config = config if isinstance(config, EnvConfig) else make_config(config)
+        self.world = World(self.config, n_envs)
+        self.layout = ObservationLayout.from_config(self.config)
+        self.n_envs = n_envs
+        self.n_uavs = self.config.n_uavs
+        self._obs = np.zeros((n_envs, self.n_uavs, self.layout.dim), dtype=np.float32)
+
+    @property
+    def obs_dim(self) -> int:
+        """Width of one agent's observation."""
+        return self.layout.dim
+
+    def reset(
+        self, seed: int | Sequence[int | None] | None = None, mask: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Reset the environments in ``mask`` (all by default); returns all observations."""
+        self.world.reset(seed=seed, mask=mask)
+        return build_observations(self.world, self.layout, self._obs).copy()
+
+    def observations(self) -> np.ndarray:
+        """Current observations ``(E, N, D)`` (a copy)."""
+        return build_observations(self.world, self.layout, self._obs).copy()
+
+    def state(self) -> np.ndarray:
+        """Global true state ``(E, state_dim)``."""
+        return global_state(self.world)
+
+    def step(
+        self, actions: np.ndarray, validate: bool = True, active: np.ndarray | None = None
+    ) -> StepResult:
+        """Apply normalised actions ``(E, N, 3)`` in ``[-1, 1]`` and advance one step.
+
+        Args:
+            actions: Accelerations as fractions of ``uav.max_accel`` per axis.
+            validate: Check the actions (shape, finite, in range) first.
+            active: Optional ``(E,)`` mask of environments that move (see
+                :meth:`World.step <uasep_env.world.World.step>`).
+
+        Returns:
+            The :class:`StepResult`. Episodes that ended are not reset here.
+        """
+        w = self.world
+        if validate:
+            actions = validate_actions(actions, (self.n_envs, self.n_uavs, 3), "actions")
+        w.step(actions * self.config.uav.max_accel, active=active)
+        region = w.region_distances()
+        rewards, terms = compute_rewards(w, self.config.reward, region)
+        collided = collisions(w)
+        terminated = collided.any(axis=1)
+        truncated = ((w.steps >= self.config.max_steps) | w.plan_finished()) & ~terminated
+        u = self.config.uav
+        d_region = region.min(axis=-1, initial=np.inf)
+        safety = {
+            "min_uav_distance": w.min_uav_dist.copy(),
+            "min_obstacle_distance": w.min_obs_dist.copy(),
+            "min_region_distance": d_region,
+            "loss_of_separation_uav": w.min_uav_dist < u.separation_distance,
+            "loss_of_separation_obstacle": w.min_obs_dist < u.obstacle_separation,
+            "in_reachable_region": d_region < 0.0,
+            "collision": collided,
+        }
+        obs = build_observations(w, self.layout, self._obs).copy()
+        return StepResult(obs, rewards, terms, terminated, truncated, safety)
+
+    @staticmethod
+    def agent_info(result: StepResult, env: int, uav: int) -> dict:
+        """The ``info`` dict of one agent: reward terms and safety figures."""
+        return {
+            "reward_terms": {k: float(result.terms[k][env, uav]) for k in REWARD_TERMS},
+            **{k: (v[env, uav].item()) for k, v in result.safety.items()},
+        }

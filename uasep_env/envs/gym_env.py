@@ -1,0 +1,105 @@
+"""Gymnasium single-agent (centralised) view: joint observation and joint action."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium
+import numpy as np
+
+from uasep_env.config import EnvConfig, make_config
+from uasep_env.envs.core import EnvCore, validate_actions
+from uasep_env.rewards import REWARD_TERMS
+
+__all__ = ["FormationEnv"]
+
+
+class FormationEnv(gymnasium.Env):
+    """All UAVs of the formation controlled by one (centralised) agent.
+
+    The same world, observations and rewards as
+    :class:`~uasep_env.envs.parallel.UAVSeparationParallelEnv`, seen jointly.
+
+    ## Action space
+    ``Box(-1, 1, (3 N,), float32)``: the UAVs' normalised accelerations, UAV-major.
+
+    ## Observation space
+    ``Box(-clip, clip, (N D,), float32)``: the agents' observations concatenated.
+
+    ## Rewards
+    The mean of the agents' rewards; ``info["rewards"]`` has each agent's reward and
+    ``info["reward_terms"]`` the mean of each named term.
+
+    ## Episode end
+    Terminated on a collision, truncated at the time limit (no ``TimeLimit`` wrapper is
+    needed).
+
+    ## Arguments
+    Any :class:`~uasep_env.config.EnvConfig` field as a keyword, validated.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}  # noqa: RUF012
+
+    def __init__(self, config: EnvConfig | dict | None = None, **kwargs: Any) -> None:
+        self.config = make_config(config, **kwargs)
+        self.render_mode = self.config.render_mode
+        self.core = EnvCore(self.config, n_envs=1)
+        n, d = self.config.n_uavs, self.core.obs_dim
+        clip = self.config.observation.clip
+        self.observation_space = gymnasium.spaces.Box(-clip, clip, (n * d,), np.float32)
+        self.action_space = gymnasium.spaces.Box(-1.0, 1.0, (n * 3,), np.float32)
+        self._renderer: Any = None
+
+    @property
+    def world(self) -> Any:
+        """The underlying :class:`~uasep_env.world.World` (one environment)."""
+        return self.core.world
+
+    def reset(
+        self, *, seed: int | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict]:
+        """Start an episode; ``seed`` fixes it."""
+        super().reset(seed=seed)
+        if options:
+            raise ValueError(f"unsupported reset options {sorted(options)}")
+        obs = self.core.reset(seed=seed)
+        if self.render_mode == "human":
+            self.render()
+        return obs[0].reshape(-1), {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Advance one step with the joint action."""
+        n = self.config.n_uavs
+        a = validate_actions(action, (n * 3,), "action").reshape(1, n, 3)
+        res = self.core.step(a, validate=False)
+        info: dict[str, Any] = {
+            "rewards": res.rewards[0].copy(),
+            "reward_terms": {k: float(res.terms[k][0].mean()) for k in REWARD_TERMS},
+            **{k: v[0].copy() for k, v in res.safety.items()},
+        }
+        if self.render_mode == "human":
+            self.render()
+        return (
+            res.obs[0].reshape(-1),
+            float(res.rewards[0].mean()),
+            bool(res.terminated[0]),
+            bool(res.truncated[0]),
+            info,
+        )
+
+    def render(self) -> np.ndarray | None:
+        """Render with matplotlib (lazily imported)."""
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode; returning None")
+            return None
+        if self._renderer is None:
+            from uasep_env.rendering import Renderer
+
+            self._renderer = Renderer(self.config, mode=self.render_mode)
+        return self._renderer.render(self.core.world, env=0)
+
+    def close(self) -> None:
+        """Close the renderer, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,234 @@
+"""The PettingZoo parallel environment (the primary API)."""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import gymnasium
+import numpy as np
+from pettingzoo import ParallelEnv
+
+from uasep_env.config import EnvConfig, make_config
+from uasep_env.envs.core import EnvCore, StepResult, validate_actions
+from uasep_env.observation import state_dim
+
+__all__ = ["UAVSeparationParallelEnv", "parallel_env"]
+
+# Config keys that change the spaces: they cannot be changed at reset.
+_SPACE_KEYS = ("n_uavs", "n_obstacles", "observation")
+
+
+class UAVSeparationParallelEnv(ParallelEnv):
+    """A formation of UAVs keeping separation from each other and non-cooperative obstacles.
+
+    ## Description
+    ``N`` cooperative UAVs (agents ``uav_0 ... uav_{N-1}``) fly a planned trajectory in a
+    formation (the behaviour method, paper eqs. 5-7) through airspace with ``M``
+    non-cooperative obstacles that fly a 3D Dubins model and change course at random.
+    Each UAV only knows Kalman-filtered estimates of the states and, for each obstacle, the
+    predicted reachable ellipsoid over the horizon (eqs. 8-18). The agents must keep
+    separation from each other and from the obstacles while deviating as little as possible
+    from their planned trajectories. The reference policy is the paper's APF
+    (:class:`uasep_env.policies.APF`).
+
+    ## Action space
+    ``Box(-1, 1, (3,), float32)`` per agent: the commanded acceleration along north, east
+    and down as a fraction of ``uav.max_accel`` (m/s^2). Actions of the wrong shape,
+    non-finite, outside ``[-1, 1]``, missing agents or unknown agents raise ``ValueError``.
+
+    ## Observation space
+    ``Box(-clip, clip, (D,), float32)`` per agent, normalised; the features are listed in
+    :mod:`uasep_env.observation` (own slot/plan offsets and velocities, formation goal, the
+    nearest UAVs, and the nearest obstacles' reachable ellipsoids with presence masks).
+    :meth:`state` returns the global true state.
+
+    ## Rewards
+    Named terms per agent (:mod:`uasep_env.rewards`): separation between UAVs, from the
+    obstacles and from their reachable regions, deviation from the plan, control effort,
+    smoothness, collision and an alive bonus, combined by ``reward`` weights. Each agent's
+    unweighted terms are in ``infos[agent]["reward_terms"]``.
+
+    ## Episode end
+    Termination: any UAV comes within ``uav.collision_distance`` of another UAV or an
+    obstacle (the formation's mission fails, so every agent terminates). Truncation: the
+    time limit ``episode_duration`` (the end of the planned trajectory).
+
+    ## Info
+    ``reward_terms``, ``min_uav_distance``, ``min_obstacle_distance``,
+    ``min_region_distance`` (m), and the flags ``loss_of_separation_uav``,
+    ``loss_of_separation_obstacle``, ``in_reachable_region``, ``collision``.
+
+    ## Arguments
+    Any :class:`~uasep_env.config.EnvConfig` field as a keyword (nested dicts for the
+    sub-configs), e.g. ``parallel_env(n_uavs=5, scenario="crossing", noise=False)``.
+    Unknown keys raise ``ValueError``. ``reset(options={"config": {...}})`` changes the
+    config for the next episodes, except the keys that change the spaces.
+    """
+
+    metadata = {  # noqa: RUF012 - PettingZoo reads it as a class attribute
+        "name": "uasep_formation_v0",
+        "render_modes": ["human", "rgb_array"],
+        "is_parallelizable": True,
+        "render_fps": 10,
+    }
+
+    def __init__(self, config: EnvConfig | dict | None = None, **kwargs: Any) -> None:
+        self.config = make_config(config, **kwargs)
+        self.render_mode = self.config.render_mode
+        self.core = EnvCore(self.config, n_envs=1)
+        self.possible_agents = [f"uav_{i}" for i in range(self.config.n_uavs)]
+        self.agents: list[str] = []
+        self._index = {a: i for i, a in enumerate(self.possible_agents)}
+        self._obs_space = gymnasium.spaces.Box(
+            -self.config.observation.clip,
+            self.config.observation.clip,
+            (self.core.obs_dim,),
+            np.float32,
+        )
+        self._act_space = gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self.state_space = gymnasium.spaces.Box(
+            -self.config.observation.clip,
+            self.config.observation.clip,
+            (state_dim(self.config),),
+            np.float32,
+        )
+        self._renderer: Any = None
+        self._last: StepResult | None = None
+
+    @functools.lru_cache(maxsize=None)  # noqa: B019 - spaces must be the same object per agent
+    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
+        """The observation space of ``agent``."""
+        self._check_agent(agent)
+        return self._obs_space
+
+    @functools.lru_cache(maxsize=None)  # noqa: B019
+    def action_space(self, agent: str) -> gymnasium.spaces.Box:
+        """The action space of ``agent``."""
+        self._check_agent(agent)
+        return self._act_space
+
+    def _check_agent(self, agent: str) -> None:
+        if agent not in self._index:
+            raise ValueError(f"unknown agent {agent!r}; agents are {self.possible_agents}")
+
+    @property
+    def world(self) -> Any:
+        """The underlying batched :class:`~uasep_env.world.World` (one environment)."""
+        return self.core.world
+
+    @property
+    def layout(self) -> Any:
+        """The :class:`~uasep_env.observation.ObservationLayout` of the observations."""
+        return self.core.layout
+
+    def reset(
+        self, seed: int | None = None, options: dict | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+        """Start an episode.
+
+        Args:
+            seed: Seeds the episode's generator (all randomness flows from it).
+            options: ``{"config": {...}}`` to change config fields for this and later
+                episodes (not those that change the spaces).
+
+        Returns:
+            ``(observations, infos)`` keyed by agent.
+        """
+        if options:
+            unknown = sorted(set(options) - {"config"})
+            if unknown:
+                raise ValueError(f"unknown reset option(s) {unknown}; supported: ['config']")
+            if options.get("config"):
+                self._reconfigure(options["config"])
+        obs = self.core.reset(seed=seed)
+        self.agents = list(self.possible_agents)
+        self._last = None
+        observations = {a: obs[0, i] for a, i in self._index.items()}
+        infos: dict[str, dict] = {a: {} for a in self.agents}
+        if self.render_mode == "human":
+            self.render()
+        return observations, infos
+
+    def _reconfigure(self, changes: dict) -> None:
+        if not isinstance(changes, dict):
+            raise ValueError(f"options['config'] must be a dict, got {changes!r}")
+        fixed = [k for k in changes if k in _SPACE_KEYS]
+        if fixed:
+            raise ValueError(
+                f"config key(s) {fixed} change the spaces and cannot be set at reset; "
+                "create a new environment instead"
+            )
+        config = make_config(self.config, **changes)
+        seed_state = self.core.world._rngs  # keep each environment's random stream going
+        self.config = config
+        self.render_mode = config.render_mode
+        self.core = EnvCore(config, n_envs=1)
+        self.core.world._rngs = seed_state
+
+    def step(
+        self, actions: dict[str, np.ndarray]
+    ) -> tuple[
+        dict[str, np.ndarray],
+        dict[str, float],
+        dict[str, bool],
+        dict[str, bool],
+        dict[str, dict],
+    ]:
+        """Advance one step with every live agent's action.
+
+        Raises:
+            ValueError: Missing or unknown agents, or a bad action (named).
+            RuntimeError: Stepping a finished episode without reset.
+        """
+        if not self.agents:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        if not isinstance(actions, dict):
+            raise ValueError(f"actions must be a dict keyed by agent, got {type(actions).__name__}")
+        unknown = sorted(set(actions) - set(self.agents))
+        missing = sorted(set(self.agents) - set(actions))
+        if unknown or missing:
+            raise ValueError(f"bad action keys: missing {missing}, unknown {unknown}")
+        joint = np.empty((1, len(self.possible_agents), 3))
+        for agent, i in self._index.items():
+            joint[0, i] = validate_actions(actions[agent], (3,), f"action of {agent}")
+        res = self.core.step(joint, validate=False)
+        self._last = res
+        done_term = bool(res.terminated[0])
+        done_trunc = bool(res.truncated[0])
+        observations = {a: res.obs[0, i] for a, i in self._index.items()}
+        rewards = {a: float(res.rewards[0, i]) for a, i in self._index.items()}
+        terminations = dict.fromkeys(self.agents, done_term)
+        truncations = dict.fromkeys(self.agents, done_trunc)
+        infos = {a: self.core.agent_info(res, 0, i) for a, i in self._index.items()}
+        if done_term or done_trunc:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return observations, rewards, terminations, truncations, infos
+
+    def state(self) -> np.ndarray:
+        """The global true state (normalised), shape ``state_space.shape``."""
+        return self.core.state()[0]
+
+    def render(self) -> np.ndarray | None:
+        """Render with matplotlib (imported lazily): an RGB array or a window."""
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode; returning None")
+            return None
+        if self._renderer is None:
+            from uasep_env.rendering import Renderer
+
+            self._renderer = Renderer(self.config, mode=self.render_mode)
+        return self._renderer.render(self.core.world, env=0)
+
+    def close(self) -> None:
+        """Close the renderer, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def parallel_env(config: EnvConfig | dict | None = None, **kwargs: Any) -> UAVSeparationParallelEnv:
+    """Create the PettingZoo parallel environment (see :class:`UAVSeparationParallelEnv`)."""
+    return UAVSeparationParallelEnv(config, **kwargs)

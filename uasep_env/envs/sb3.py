@@ -1,0 +1,130 @@
+"""A stable-baselines3 ``VecEnv`` for parameter sharing over the batched core.
+
+Every UAV of every environment is one SB3 sub-environment (the observation and action of
+one agent), so ``PPO("MlpPolicy", UAVSharedVecEnv(n_envs=...))`` trains one policy shared
+by all UAVs. Sub-environment ``e * n_uavs + i`` is UAV ``i`` of environment ``e``. Episodes
+end for all UAVs of an environment together; the environment is then reset in the same
+step, and each of its agents' infos carries ``terminal_observation`` and
+``TimeLimit.truncated`` as SB3 expects.
+
+This module imports stable-baselines3; the rest of the package does not.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import gymnasium
+import numpy as np
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+
+from uasep_env.config import EnvConfig, make_config
+from uasep_env.envs.core import EnvCore
+
+__all__ = ["UAVSharedVecEnv"]
+
+
+class UAVSharedVecEnv(VecEnv):
+    """All agents of ``n_envs`` batched environments as one SB3 ``VecEnv``.
+
+    Args:
+        n_envs: Number of environments (``num_envs`` of the VecEnv is ``n_envs * n_uavs``).
+        config: Base config (or dict); keyword arguments override it.
+        seed: Seed of the first reset (environment ``e`` gets ``seed + e``).
+        **kwargs: :class:`~uasep_env.config.EnvConfig` fields.
+    """
+
+    def __init__(
+        self,
+        n_envs: int = 1,
+        config: EnvConfig | dict | None = None,
+        seed: int | None = None,
+        **kwargs: Any,
+    ) -> None:
+        self.config = make_config(config, **kwargs)
+        self.core = EnvCore(self.config, n_envs=n_envs)
+        self.n_envs = n_envs
+        self.n_uavs = self.config.n_uavs
+        clip = self.config.observation.clip
+        obs_space = gymnasium.spaces.Box(-clip, clip, (self.core.obs_dim,), np.float32)
+        act_space = gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32)
+        super().__init__(n_envs * self.n_uavs, obs_space, act_space)
+        self._seed = seed
+        self._actions: np.ndarray | None = None
+        self.episode_returns = np.zeros(self.num_envs)
+        self.render_mode = None
+
+    def seed(self, seed: int | None = None) -> Sequence[None | int]:
+        """Seed the next reset (environment ``e`` gets ``seed + e``)."""
+        self._seed = seed
+        return [seed] * self.num_envs
+
+    def reset(self) -> np.ndarray:
+        """Reset every environment; observations ``(n_envs * n_uavs, obs_dim)``."""
+        obs = self.core.reset(seed=self._seed)
+        self._seed = None
+        return obs.reshape(self.num_envs, -1)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        """Store the actions ``(n_envs * n_uavs, 3)``."""
+        self._actions = np.asarray(actions)
+
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+        """Step all environments; reset those that ended (same step)."""
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without step_async()")
+        acts = self._actions
+        if acts.shape != (self.num_envs, 3):
+            raise ValueError(f"actions must have shape ({self.num_envs}, 3), got {acts.shape}")
+        self._actions = None
+        res = self.core.step(acts.reshape(self.n_envs, self.n_uavs, 3))
+        obs = res.obs.reshape(self.num_envs, -1)
+        rewards = res.rewards.reshape(-1).astype(np.float32)
+        done_env = res.terminated | res.truncated
+        dones = np.repeat(done_env, self.n_uavs)
+        infos: list[dict] = [{} for _ in range(self.num_envs)]
+        if done_env.any():
+            for e in np.flatnonzero(done_env):
+                trunc = bool(res.truncated[e] and not res.terminated[e])
+                for i in range(self.n_uavs):
+                    k = e * self.n_uavs + i
+                    infos[k]["terminal_observation"] = obs[k].copy()
+                    infos[k]["TimeLimit.truncated"] = trunc
+            obs_new = self.core.reset(mask=done_env).reshape(self.num_envs, -1)
+            obs[dones] = obs_new[dones]
+        return obs, rewards, dones, infos
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        """Rendering is done by the Gymnasium/PettingZoo views."""
+        return [None] * self.num_envs
+
+    def _indices(self, indices: VecEnvIndices) -> Iterable[int]:
+        if indices is None:
+            return range(self.num_envs)
+        if isinstance(indices, int):
+            return [indices]
+        return indices
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """Attributes are the same for every sub-environment (``render_mode``, ``config``...)."""
+        value = getattr(self, attr_name)
+        return [value for _ in self._indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set an attribute on the adapter."""
+        setattr(self, attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+    ) -> list[Any]:
+        """Call a method of the adapter once per requested index."""
+        method = getattr(self, method_name)
+        return [method(*method_args, **method_kwargs) for _ in self._indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        """No sub-environment is wrapped."""
+        return [False for _ in self._indices(indices)]

@@ -1,0 +1,164 @@
+"""A native Gymnasium vector environment over the batched core.
+
+``gymnasium.make_vec("uasep/Formation-v0", num_envs=4096)`` returns
+:class:`FormationVectorEnv`: one :class:`~uasep_env.world.World` of ``num_envs``
+environments stepped by array operations, with no Python loop over environments. Each
+environment is the centralised view of :class:`~uasep_env.envs.gym_env.FormationEnv`
+(joint observation and action of its UAVs).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from uasep_env.config import EnvConfig, make_config
+from uasep_env.envs.core import EnvCore, validate_actions
+from uasep_env.rewards import REWARD_TERMS
+
+__all__ = ["FormationVectorEnv"]
+
+
+class FormationVectorEnv(VectorEnv):
+    """``num_envs`` centralised formation environments in one batched world.
+
+    Args:
+        num_envs: Number of environments.
+        config: Base config (or dict); keyword arguments override it, validated.
+        autoreset_mode: ``"NextStep"`` (Gymnasium's default: an environment that ended is
+            reset on the following ``step``, whose action for it is ignored),
+            ``"SameStep"`` (reset in the same step; the final observation and info are in
+            ``infos["final_obs"]`` / ``infos["final_info"]``) or ``"Disabled"`` (reset
+            ended environments with ``reset(options={"reset_mask": mask})``).
+        **kwargs: :class:`~uasep_env.config.EnvConfig` fields.
+
+    Infos are dicts of arrays with Gymnasium's ``_key`` masks: ``rewards`` (per UAV),
+    ``reward_terms`` (team mean of each term) and the safety figures per UAV.
+    """
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        config: EnvConfig | dict | None = None,
+        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
+    ) -> None:
+        if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        self.config = make_config(config, **kwargs)
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError as err:
+            raise ValueError(
+                f"autoreset_mode {autoreset_mode!r} must be one of {[m.value for m in AutoresetMode]}"
+            ) from err
+        self.metadata = {
+            "render_modes": ["rgb_array"],
+            "render_fps": 10,
+            "autoreset_mode": self.autoreset_mode,
+        }
+        self.render_mode = self.config.render_mode
+        self.num_envs = int(num_envs)
+        self.core = EnvCore(self.config, n_envs=self.num_envs)
+        n, d = self.config.n_uavs, self.core.obs_dim
+        clip = self.config.observation.clip
+        self.single_observation_space = gymnasium.spaces.Box(-clip, clip, (n * d,), np.float32)
+        self.single_action_space = gymnasium.spaces.Box(-1.0, 1.0, (n * 3,), np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._needs_reset = np.zeros(self.num_envs, dtype=bool)
+        self._renderer: Any = None
+
+    @property
+    def world(self) -> Any:
+        """The underlying batched :class:`~uasep_env.world.World`."""
+        return self.core.world
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict]:
+        """Reset every environment (or those in ``options["reset_mask"]``).
+
+        Args:
+            seed: One int (environment ``i`` gets ``seed + i``) or one seed per environment.
+            options: ``{"reset_mask": bool array}`` to reset only some environments.
+        """
+        mask = None
+        if options:
+            unknown = sorted(set(options) - {"reset_mask"})
+            if unknown:
+                raise ValueError(f"unknown reset option(s) {unknown}; supported: ['reset_mask']")
+            mask = np.asarray(options["reset_mask"])
+        if seed is not None:
+            self._np_random_seed = seed if isinstance(seed, int) else -1
+        obs = self.core.reset(seed=seed, mask=mask)
+        if mask is None:
+            self._needs_reset[:] = False
+        else:
+            self._needs_reset[mask] = False
+        return obs.reshape(self.num_envs, -1), {}
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+        """Step every environment with ``actions`` of shape ``(num_envs, 3 N)``."""
+        n = self.config.n_uavs
+        a = validate_actions(actions, (self.num_envs, n * 3), "actions").reshape(
+            self.num_envs, n, 3
+        )
+        pending = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
+        res = self.core.step(a, validate=False, active=None if pending is None else ~pending)
+        obs = res.obs.reshape(self.num_envs, -1)
+        rewards = res.rewards.mean(axis=1)
+        terminated = res.terminated.copy()
+        truncated = res.truncated.copy()
+        infos = self._infos(res)
+        done = terminated | truncated
+        if pending is not None and pending.any():
+            # Environments that ended last step: reset now, ignoring their action.
+            obs_reset = self.core.reset(mask=pending).reshape(self.num_envs, -1)
+            obs[pending] = obs_reset[pending]
+            rewards[pending] = 0.0
+            terminated[pending] = False
+            truncated[pending] = False
+            done = terminated | truncated
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._needs_reset = done
+        elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            infos["final_obs"] = np.where(done[:, None], obs, 0.0).astype(np.float32)
+            infos["_final_obs"] = done.copy()
+            infos["final_info"] = {k: v for k, v in infos.items() if not k.startswith("final")}
+            infos["_final_info"] = done.copy()
+            obs_reset = self.core.reset(mask=done).reshape(self.num_envs, -1)
+            obs[done] = obs_reset[done]
+        elif self.autoreset_mode == AutoresetMode.DISABLED:
+            self._needs_reset = self._needs_reset | done
+        return obs, rewards, terminated, truncated, infos
+
+    def _infos(self, res: Any) -> dict[str, Any]:
+        ones = np.ones(self.num_envs, dtype=bool)
+        infos: dict[str, Any] = {"rewards": res.rewards.copy(), "_rewards": ones}
+        infos["reward_terms"] = {k: res.terms[k].mean(axis=1) for k in REWARD_TERMS}
+        infos["_reward_terms"] = ones
+        for k, v in res.safety.items():
+            infos[k] = v.copy()
+            infos["_" + k] = ones
+        return infos
+
+    def render(self) -> np.ndarray | None:
+        """An RGB frame of environment 0 (``render_mode="rgb_array"``)."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            from uasep_env.rendering import Renderer
+
+            self._renderer = Renderer(self.config, mode="rgb_array")
+        return self._renderer.render(self.core.world, env=0)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Close the renderer."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,227 @@
+"""Formation geometry: the behaviour method of paper eqs. 5-7 and the planned trajectory.
+
+* Eq. 5: the formation centre ``x_o`` is the mean of the UAVs' states.
+* Eq. 6: the formation frame has ``Y_f`` along the mean velocity ``v_o`` and ``X_f`` horizontal.
+  The extracted ``C = RotZ(theta) RotX(phi)`` is not trustworthy (at ``theta = phi = 0`` it
+  maps ``Y_f`` to east while ``theta`` is measured from north), so this module builds the
+  rotation from its definition instead: ``Y_f`` = unit(``v_o``), ``X_f`` = horizontal and to
+  the right (starboard) of ``Y_f``, ``Z_f = X_f x Y_f`` (up in level flight). ``C`` has
+  columns ``(X_f, Y_f, Z_f)`` in NED, is orthonormal with determinant +1, and equals a
+  heading rotation times a pitch rotation (``theta`` from north towards east, ``phi`` the climb
+  angle). When ``|v_o|`` is below ``min_speed`` the frame is undefined and the planned
+  trajectory's heading is used instead (notes).
+* Eq. 7: the desired slot ``p_i^d = C p_i^r + p_o``.
+
+Patterns are centred (their mean is removed) because the behaviour method places the
+pattern on the mean position: an off-centre pattern would pull the whole formation.
+
+The planned trajectory is a polyline of way-points flown by the formation centre at a
+constant cruise speed from ``t = 0``; each UAV's planned position is the planned centre plus
+its slot rotated into the planned heading. Deviation is measured from it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "PlannedTrajectory",
+    "formation_center",
+    "formation_rotation",
+    "pattern_slots",
+    "rotation_from_velocity",
+]
+
+
+def pattern_slots(
+    pattern: str | tuple[tuple[float, float, float], ...], n: int, spacing: float
+) -> np.ndarray:
+    """Slots ``p_i^r`` of a formation pattern in the formation frame (m), centred.
+
+    Args:
+        pattern: ``"paper"`` (line abreast with the middle UAV last, as in section 4:
+            ``[-20,0,0], [20,0,0], [0,0,0]`` for three UAVs), ``"line_abreast"``,
+            ``"column"``, ``"v"`` / ``"wedge"``, ``"grid"``, ``"circle"``, or explicit slots.
+        n: Number of UAVs.
+        spacing: Distance between neighbouring slots (m).
+
+    Returns:
+        ``(n, 3)`` slots ``(x right, y forward, z up)`` with zero mean.
+    """
+    s = float(spacing)
+    if not isinstance(pattern, str):
+        slots = np.asarray(pattern, dtype=float).reshape(n, 3)
+    elif pattern == "paper":
+        if n == 3:
+            slots = np.array([[-s, 0.0, 0.0], [s, 0.0, 0.0], [0.0, 0.0, 0.0]])
+        else:
+            slots = pattern_slots("line_abreast", n, s)
+    elif pattern == "line_abreast":
+        slots = np.stack([(np.arange(n) - (n - 1) / 2) * s, np.zeros(n), np.zeros(n)], axis=1)
+    elif pattern == "column":
+        slots = np.stack([np.zeros(n), -(np.arange(n) - (n - 1) / 2) * s, np.zeros(n)], axis=1)
+    elif pattern in ("v", "wedge"):
+        i = np.arange(n)
+        rank = (i + 1) // 2  # 0, 1, 1, 2, 2, ...
+        side = np.where(i % 2 == 1, -1.0, 1.0)
+        slots = np.stack([side * rank * s, -rank * s, np.zeros(n)], axis=1)
+    elif pattern == "grid":
+        cols = math.ceil(math.sqrt(n))
+        i = np.arange(n)
+        slots = np.stack([(i % cols) * s, -(i // cols) * s, np.zeros(n)], axis=1)
+    elif pattern == "circle":
+        radius = s / (2.0 * math.sin(math.pi / n))
+        ang = 2.0 * math.pi * np.arange(n) / n
+        slots = np.stack([radius * np.sin(ang), radius * np.cos(ang), np.zeros(n)], axis=1)
+    else:
+        raise ValueError(f"unknown formation pattern {pattern!r}")
+    return slots - slots.mean(axis=0, keepdims=True)
+
+
+def formation_center(pos: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 5: mean position and velocity over the UAV axis (``axis=-2``).
+
+    Args:
+        pos: ``(..., n_uavs, 3)`` positions (m).
+        vel: ``(..., n_uavs, 3)`` velocities (m/s).
+
+    Returns:
+        ``(p_o, v_o)`` each ``(..., 3)``.
+    """
+    return pos.mean(axis=-2), vel.mean(axis=-2)
+
+
+def rotation_from_velocity(
+    vel: np.ndarray, fallback: np.ndarray | None = None, min_speed: float = 0.5
+) -> np.ndarray:
+    """Eq. 6: rotation ``C`` from the formation frame to NED, from a velocity.
+
+    Args:
+        vel: ``(..., 3)`` velocity defining ``Y_f`` (m/s).
+        fallback: ``(..., 3)`` velocity used where ``|vel| < min_speed`` (e.g. the planned
+            velocity); ``None`` falls back to north.
+        min_speed: Below this speed the frame is taken from ``fallback`` (m/s).
+
+    Returns:
+        ``(..., 3, 3)`` matrices with columns ``X_f, Y_f, Z_f`` in NED.
+    """
+    vel = np.asarray(vel, dtype=float)
+    speed = np.linalg.norm(vel, axis=-1)
+    if fallback is None:
+        fallback = np.broadcast_to(np.array([1.0, 0.0, 0.0]), vel.shape)
+    use = np.where((speed >= min_speed)[..., None], vel, fallback)
+    horiz = np.hypot(use[..., 0], use[..., 1])
+    theta = np.arctan2(use[..., 1], use[..., 0])  # heading from north towards east
+    # A vertical fallback velocity has no heading: keep north there.
+    theta = np.where(horiz > 1e-9, theta, 0.0)
+    phi = np.arctan2(-use[..., 2], np.maximum(horiz, 1e-12))  # climb angle (NED z down)
+    phi = np.where((horiz <= 1e-9) & (np.abs(use[..., 2]) <= 1e-9), 0.0, phi)
+    ct, st, cp, sp = np.cos(theta), np.sin(theta), np.cos(phi), np.sin(phi)
+    x_f = np.stack([-st, ct, np.zeros_like(ct)], axis=-1)  # starboard, horizontal
+    y_f = np.stack([cp * ct, cp * st, -sp], axis=-1)  # along the velocity
+    z_f = np.stack([-ct * sp, -st * sp, -cp], axis=-1)  # X_f x Y_f (up when level)
+    return np.stack([x_f, y_f, z_f], axis=-1)
+
+
+def formation_rotation(
+    mean_vel: np.ndarray, planned_vel: np.ndarray, min_speed: float = 0.5
+) -> np.ndarray:
+    """Eq. 6 with the notes' fallback to the planned heading at low speed."""
+    return rotation_from_velocity(mean_vel, planned_vel, min_speed)
+
+
+class PlannedTrajectory:
+    """Batched polyline trajectories flown by the formation centre at cruise speed.
+
+    Args:
+        waypoints: ``(n_envs, W, 3)`` way-points (NED, m); consecutive duplicates allowed
+            only at the end (padding).
+        cruise_speed: ``(n_envs,)`` or scalar speed along the path (m/s).
+
+    The centre's planned position at time ``t`` is the point at arc length
+    ``min(cruise_speed * t, length)``; the planned velocity is ``cruise_speed`` along the
+    current segment, zero once the end is reached.
+    """
+
+    def __init__(self, waypoints: np.ndarray, cruise_speed: np.ndarray | float) -> None:
+        wp = np.asarray(waypoints, dtype=float)
+        if wp.ndim != 3 or wp.shape[-1] != 3 or wp.shape[1] < 2:
+            raise ValueError(f"waypoints must have shape (n_envs, W>=2, 3), got {wp.shape}")
+        n = wp.shape[0]
+        self.waypoints = wp.copy()
+        self.cum = np.zeros(wp.shape[:2])
+        self.length = np.zeros(n)
+        self.direction = np.zeros((n, wp.shape[1] - 1, 3))
+        self.cruise_speed = np.zeros(n)
+        self.set_rows(np.ones(n, dtype=bool), wp, cruise_speed)
+
+    def set_rows(
+        self, mask: np.ndarray, waypoints: np.ndarray, cruise_speed: np.ndarray | float
+    ) -> None:
+        """Replace the trajectories of the environments where ``mask`` (per-env reset).
+
+        Args:
+            mask: ``(n_envs,)`` bool.
+            waypoints: ``(mask.sum(), W, 3)`` new way-points (m).
+            cruise_speed: ``(mask.sum(),)`` or scalar cruise speed (m/s).
+        """
+        wp = np.asarray(waypoints, dtype=float)
+        seg = np.diff(wp, axis=1)
+        seg_len = np.linalg.norm(seg, axis=-1)
+        cum = np.concatenate([np.zeros((wp.shape[0], 1)), np.cumsum(seg_len, axis=1)], axis=1)
+        # Direction of each segment; padding (zero-length) segments inherit the last one.
+        direction = np.zeros_like(seg)
+        last = np.zeros((wp.shape[0], 3))
+        last[:, 0] = 1.0
+        for k in range(seg.shape[1]):
+            ok = seg_len[:, k] > 1e-9
+            last = np.where(ok[:, None], seg[:, k] / np.maximum(seg_len[:, k, None], 1e-12), last)
+            direction[:, k] = last
+        self.waypoints[mask] = wp
+        self.cum[mask] = cum
+        self.length[mask] = cum[:, -1]
+        self.direction[mask] = direction
+        self.cruise_speed[mask] = np.broadcast_to(
+            np.asarray(cruise_speed, dtype=float), (wp.shape[0],)
+        )
+
+    def center(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Planned centre position and velocity at times ``t`` (``(n_envs,)``, s)."""
+        s = np.minimum(self.cruise_speed * np.maximum(t, 0.0), self.length)
+        n_seg = self.direction.shape[1]
+        idx = np.clip((self.cum[:, 1:-1] <= s[:, None]).sum(axis=1), 0, n_seg - 1)
+        rows = np.arange(len(s))
+        start = self.waypoints[rows, idx]
+        d = self.direction[rows, idx]
+        pos = start + (s - self.cum[rows, idx])[:, None] * d
+        moving = (self.cruise_speed * t < self.length)[:, None]
+        vel = np.where(moving, self.cruise_speed[:, None] * d, 0.0)
+        return pos, vel
+
+    def heading_velocity(self, t: np.ndarray) -> np.ndarray:
+        """Unit direction of the planned path at ``t`` (kept after the end)."""
+        s = np.minimum(self.cruise_speed * np.maximum(t, 0.0), self.length)
+        n_seg = self.direction.shape[1]
+        idx = np.clip((self.cum[:, 1:-1] <= s[:, None]).sum(axis=1), 0, n_seg - 1)
+        return self.direction[np.arange(len(s)), idx]
+
+    def uav_positions(self, t: np.ndarray, slots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each UAV's planned position and velocity at ``t``.
+
+        Args:
+            t: ``(n_envs,)`` times (s).
+            slots: ``(n_envs, n_uavs, 3)`` pattern slots in the formation frame (m).
+
+        Returns:
+            ``(pos, vel)`` each ``(n_envs, n_uavs, 3)``.
+        """
+        center, vel = self.center(t)
+        rot = rotation_from_velocity(self.heading_velocity(t))  # (E, 3, 3)
+        pos = center[:, None, :] + np.einsum("eij,enj->eni", rot, slots)
+        return pos, np.broadcast_to(vel[:, None, :], pos.shape)
+
+    def finished(self, t: np.ndarray) -> np.ndarray:
+        """Whether the centre's plan has reached its last way-point at ``t``."""
+        return self.cruise_speed * t >= self.length - 1e-9

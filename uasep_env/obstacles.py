@@ -1,0 +1,109 @@
+"""Non-cooperative obstacles: a 3D Dubins model with random pilot commands (paper eq. 8).
+
+Each obstacle flies at a constant horizontal airspeed ``v`` (m/s) with heading ``psi``
+(rad, from north towards east), a turn rate ``|omega| <= w_max`` (rad/s) and a climb rate
+``|c| <= vz_max`` (m/s, positive up; NED ``v_z = -c``). A steady wind (m/s, NED) adds to the
+ground velocity. The pilot changes the commands at random: in each physics step of
+``dt`` a new command is drawn with probability ``dt / mean_switch_time`` (a discretised
+exponential reaction time); a new command is "straight and level" with probability
+``straight_probability``, else turn and climb rates uniform within their bounds. An
+obstacle that would leave its altitude band holds its altitude instead.
+
+The horizontal motion over a step is integrated exactly (a circular arc: the chord has
+length ``v dt sinc(omega dt / 2)`` and direction ``psi + omega dt / 2``), so the bounds of the
+model hold exactly and the reachable-set prediction (:mod:`uasep_env.reachable`) is sound.
+
+Arrays are batch-first: ``(n_envs, n_obstacles)``. Randomness comes in as pre-drawn
+uniforms (see :mod:`uasep_env.world`), never from global state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["N_UNIFORMS", "ObstacleState", "obstacle_velocity", "step_obstacles"]
+
+#: Uniform draws each obstacle consumes per physics step (switch?, straight?, turn, climb).
+N_UNIFORMS = 4
+
+
+class ObstacleState:
+    """Batched obstacle state and parameters (all arrays ``(n_envs, n_obstacles)``).
+
+    Attributes:
+        pos: ``(E, M, 3)`` true position, NED (m).
+        heading: ``psi`` (rad).
+        speed: Constant horizontal airspeed (m/s).
+        turn_rate: Current turn command (rad/s).
+        climb_rate: Current climb command, positive up (m/s).
+        max_turn_rate: ``w_max`` (rad/s).
+        max_climb_rate: ``vz_max`` (m/s).
+        radius: Safety radius ``r`` (m).
+        alt_band: ``(E, M, 2)`` allowed altitude band ``(min, max)`` (m, positive up).
+        active: Whether the obstacle slot is in use.
+        switch_prob: Per-step command-change probability.
+        straight_prob: Probability of a straight-and-level command.
+        wind: ``(E, 3)`` steady wind (m/s, NED).
+    """
+
+    def __init__(self, n_envs: int, n_obstacles: int) -> None:
+        shape = (n_envs, n_obstacles)
+        self.pos = np.zeros((*shape, 3))
+        self.heading = np.zeros(shape)
+        self.speed = np.zeros(shape)
+        self.turn_rate = np.zeros(shape)
+        self.climb_rate = np.zeros(shape)
+        self.max_turn_rate = np.zeros(shape)
+        self.max_climb_rate = np.zeros(shape)
+        self.radius = np.zeros(shape)
+        self.alt_band = np.zeros((*shape, 2))
+        self.alt_band[..., 1] = 1e9
+        self.active = np.zeros(shape, dtype=bool)
+        self.switch_prob = np.zeros(shape)
+        self.straight_prob = np.zeros(shape)
+        self.wind = np.zeros((n_envs, 3))
+
+
+def obstacle_velocity(obs: ObstacleState) -> np.ndarray:
+    """Ground velocity of every obstacle, NED (m/s), ``(E, M, 3)``."""
+    vel = np.stack(
+        [
+            obs.speed * np.cos(obs.heading),
+            obs.speed * np.sin(obs.heading),
+            -obs.climb_rate,
+        ],
+        axis=-1,
+    )
+    return vel + obs.wind[:, None, :]
+
+
+def step_obstacles(obs: ObstacleState, uniforms: np.ndarray, dt: float) -> None:
+    """Advance every obstacle one physics step, in place.
+
+    Args:
+        obs: The batched obstacle state.
+        uniforms: ``(E, M, N_UNIFORMS)`` uniforms in ``[0, 1)`` for the pilot's commands.
+        dt: Physics step (s).
+    """
+    switch = uniforms[..., 0] < obs.switch_prob
+    straight = uniforms[..., 1] < obs.straight_prob
+    new_turn = np.where(straight, 0.0, (2.0 * uniforms[..., 2] - 1.0) * obs.max_turn_rate)
+    new_climb = np.where(straight, 0.0, (2.0 * uniforms[..., 3] - 1.0) * obs.max_climb_rate)
+    obs.turn_rate = np.where(switch, new_turn, obs.turn_rate)
+    obs.climb_rate = np.where(switch, new_climb, obs.climb_rate)
+
+    # Hold altitude rather than leave the band (keeps the climb bound: |c| only shrinks).
+    alt_next = -obs.pos[..., 2] + obs.climb_rate * dt
+    leave = ((alt_next > obs.alt_band[..., 1]) & (obs.climb_rate > 0)) | (
+        (alt_next < obs.alt_band[..., 0]) & (obs.climb_rate < 0)
+    )
+    obs.climb_rate = np.where(leave, 0.0, obs.climb_rate)
+
+    half = 0.5 * obs.turn_rate * dt
+    chord = obs.speed * dt * np.sinc(half / np.pi)  # np.sinc(x) = sin(pi x) / (pi x)
+    mid = obs.heading + half
+    active = obs.active
+    obs.pos[..., 0] += np.where(active, chord * np.cos(mid) + obs.wind[:, None, 0] * dt, 0.0)
+    obs.pos[..., 1] += np.where(active, chord * np.sin(mid) + obs.wind[:, None, 1] * dt, 0.0)
+    obs.pos[..., 2] += np.where(active, -obs.climb_rate * dt + obs.wind[:, None, 2] * dt, 0.0)
+    obs.heading = np.where(active, np.mod(obs.heading + 2.0 * half + np.pi, 2 * np.pi) - np.pi, obs.heading)

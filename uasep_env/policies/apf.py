@@ -1,0 +1,290 @@
+"""The paper's improved artificial potential field (APF) and its two comparison methods.
+
+All three act on the environments' observations (decoded to SI units by
+:class:`~uasep_env.observation.ObservationLayout`), batched over any leading shape such as
+``(n_envs, n_uavs)``, and return normalised accelerations in ``[-1, 1]^3``.
+
+:class:`APF` -- the proposed method (paper eqs. 19-32, with the notes' errata):
+
+* attraction (eqs. 19-22): ``F_att = K_g sat(p_g - p_o) + K_p (p_d - p) + K_v (v_d - v)
+  - K_d (v - v_o)``. ``p_g`` is the planned position of the formation centre now (a key
+  point of the planned trajectory; the goal term is saturated at ``goal_saturation`` so a
+  far goal cannot demand unbounded force), ``p_d`` the slot of eq. 7, ``v_d`` the planned
+  velocity. Eq. 21's damping ``-K v`` is applied to the velocity relative to the formation
+  (``v - v_o``): it damps the oscillation about the slot that the paper describes, without
+  the steady lag that damping the absolute velocity of a cruising formation would cause.
+* obstacle repulsion (eqs. 23-25): from the obstacle's predicted reachable ellipsoid,
+  ``F = K_obs (1/d - 1/r_safe) n`` for ``d < r_safe``, with ``d`` the true distance to the
+  ellipsoid's surface (the notes: eq. 25's ``r_elli`` only bounds it) and ``n`` the outward
+  normal at the nearest surface point. The safe distance grows with the approach speed,
+  ``r_safe = r_min + K_t v cos(delta)`` for ``delta`` in ``[0, pi/2]`` (eq. 24; measured from
+  the surface, so ``r_elli`` is already included). The force is active only when the UAV,
+  flying straight on, is predicted to come within ``r_min`` of the region within the
+  horizon ``K_s`` (or already is) -- otherwise it keeps its motion, as the paper says.
+* inner repulsion (eqs. 26-30, garbled in the paper; the notes' intent): for a UAV ``j``
+  closer than ``r_inner = 2 r_min_inner + K_safe s`` (eq. 29; ``s`` = approach speed
+  ``|v_j - v_i| cos(delta)`` when closing, else 0),
+  ``F_ij = (1/d - 1/r_inner) (alpha u + beta (v_j - v_i))`` with ``u`` the unit vector from
+  ``j`` to ``i``; the velocity part only acts while closing. Both parts have a non-negative
+  component along ``u``, so the force always pushes the pair apart (tested).
+* bounds: each axis is clipped to ``a_max`` and the component along the velocity is capped
+  so that the speed stays below ``V_max`` after the step (eq. 4).
+
+:class:`MotionStateAPF` -- the authors' earlier method: the same structure without
+trajectory prediction; the obstacle is a sphere of radius ``r`` around its current
+position, the safe distance grows with the relative approach speed, always active.
+
+:class:`TraditionalAPF` -- distance-only repulsion (Khatib's potential,
+``F = eta (1/rho - 1/rho_0) / rho^2``) from the obstacle's current position and between
+UAVs, with fixed influence distances.
+
+The attraction is the same for the three methods, so the comparison isolates how each
+treats conflicts. Gains are not given in the paper: the defaults below were chosen for
+the ``paper`` scenario and are documented with their units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from uasep_env import reachable
+from uasep_env.config import EnvConfig
+from uasep_env.observation import ObservationLayout
+
+__all__ = ["APF", "APFGains", "MotionStateAPF", "TraditionalAPF"]
+
+# Fractions of the horizon at which the straight-line prediction is checked.
+_PREDICTION_SAMPLES = np.linspace(0.0, 1.0, 11)
+
+
+@dataclass(frozen=True)
+class APFGains:
+    """Gains of the APF controllers (units in brackets; accelerations in m/s^2).
+
+    Attributes:
+        k_goal: ``K_g`` [1/s^2], pull of the formation centre towards the planned centre.
+        goal_saturation: Distance beyond which the goal term stops growing [m].
+        k_slot: ``K_p`` [1/s^2], pull towards the formation slot (eq. 19).
+        k_vel: ``K_v`` [1/s], velocity matching with the planned velocity (eq. 20).
+        k_damp: ``K`` of eq. 21 [1/s], damping of the velocity relative to the formation.
+        k_obs: ``K_obs`` [m^2/s^2], obstacle repulsion (eq. 23).
+        obs_safe_min: ``r_safe^min`` [m], safe distance from the reachable region (eq. 24).
+        obs_time: ``K`` of eq. 24 [s], growth of the safe distance with approach speed.
+        horizon: ``K_s`` [s], look-ahead of the entry prediction.
+        alpha: Weight of the line-of-sight part of the inner repulsion [m^2/s^2].
+        beta: Weight of the relative-velocity part of the inner repulsion [m/s].
+        inner_safe_min: ``r_safe^min`` of eq. 29 [m]; the base inner distance is twice it.
+        k_safe: ``K_safe`` of eq. 29 [s], growth of the inner distance with approach speed.
+        traditional_eta: ``eta`` of the traditional APF [m^4/s^2].
+        traditional_range: ``rho_0`` of the traditional APF from obstacles [m].
+        traditional_inner_range: ``rho_0`` of the traditional APF between UAVs [m].
+        max_repulsion: Cap on the norm of each repulsive force [m/s^2] (before the
+            acceleration bound), so a singular ``1/d`` stays finite.
+    """
+
+    k_goal: float = 0.04
+    goal_saturation: float = 15.0
+    k_slot: float = 0.08
+    k_vel: float = 0.6
+    k_damp: float = 0.3
+    k_obs: float = 40.0
+    obs_safe_min: float = 6.0
+    obs_time: float = 2.0
+    horizon: float = 10.0
+    alpha: float = 30.0
+    beta: float = 3.0
+    inner_safe_min: float = 5.0
+    k_safe: float = 2.0
+    traditional_eta: float = 4000.0
+    traditional_range: float = 25.0
+    traditional_inner_range: float = 10.0
+    max_repulsion: float = 20.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+                raise ValueError(f"invalid APF gain {f.name}={v!r}: must be a finite number >= 0")
+        for name in ("goal_saturation", "obs_safe_min", "horizon", "inner_safe_min"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"invalid APF gain {name}={getattr(self, name)!r}: must be > 0")
+
+
+def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    n = np.sqrt(np.einsum("...i,...i->...", v, v))
+    return v / np.maximum(n, eps)[..., None], n
+
+
+def _cap_norm(f: np.ndarray, cap: float) -> np.ndarray:
+    n = np.sqrt(np.einsum("...i,...i->...", f, f))
+    return f * np.minimum(1.0, cap / np.maximum(n, 1e-12))[..., None]
+
+
+class _APFBase:
+    """Shared machinery: decoding, attraction, inner repulsion and the bounds."""
+
+    name = "apf-base"
+
+    def __init__(self, config: EnvConfig, gains: APFGains | None = None) -> None:
+        self.config = config
+        self.gains = gains if gains is not None else APFGains()
+        self.layout = ObservationLayout.from_config(config)
+        self.max_accel = config.uav.max_accel
+        self.max_speed = config.uav.max_speed
+        self.dt = config.step_duration
+
+    def reset(self) -> None:
+        """The APFs are memoryless."""
+
+    # -- pieces --------------------------------------------------------------------
+    def attraction(self, o: dict[str, np.ndarray]) -> np.ndarray:
+        """Eqs. 19-22: goal, slot, velocity matching and damping (m/s^2)."""
+        g = self.gains
+        goal = _cap_norm(o["goal_offset"], g.goal_saturation)
+        return (
+            g.k_goal * goal
+            + g.k_slot * o["slot_offset"]
+            + g.k_vel * (o["plan_velocity"] - o["velocity"])
+            - g.k_damp * (o["velocity"] - o["formation_velocity"])
+        )
+
+    def inner_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
+        """Eqs. 26-30: relative-motion repulsion from the other UAVs (m/s^2)."""
+        g = self.gains
+        rel = o["uav_rel_pos"]  # p_j - p_i
+        relv = o["uav_rel_vel"]  # v_j - v_i
+        away, d = _unit(-rel)  # from j towards i
+        closing = np.maximum(0.0, np.einsum("...i,...i->...", relv, away))  # s >= 0
+        r_inner = 2.0 * g.inner_safe_min + g.k_safe * closing
+        dd = np.maximum(d, 0.1)
+        mag = np.where((d < r_inner) & o["uav_mask"], 1.0 / dd - 1.0 / r_inner, 0.0)
+        vel_part = np.where((closing > 0.0)[..., None], relv, 0.0)
+        f = mag[..., None] * (g.alpha * away + g.beta * vel_part)
+        return _cap_norm(f, g.max_repulsion).sum(axis=-2)
+
+    def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
+        """Repulsion from the obstacles (method-specific)."""
+        raise NotImplementedError
+
+    def bound(self, accel: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """Eq. 4 and the acceleration bound; returns normalised actions."""
+        v_hat, speed = _unit(velocity)
+        along = np.einsum("...i,...i->...", accel, v_hat)
+        limit = (self.max_speed - speed) / self.dt  # most speed gain allowed this step
+        excess = np.maximum(0.0, along - np.maximum(limit, 0.0))
+        accel = accel - excess[..., None] * v_hat
+        return np.clip(accel / self.max_accel, -1.0, 1.0)
+
+    def forces(self, observations: np.ndarray) -> dict[str, np.ndarray]:
+        """Every force term (m/s^2) for the observations, by name (for analysis/tests)."""
+        o = self.layout.decode(observations)
+        return {
+            "attraction": self.attraction(o),
+            "obstacle": self.obstacle_repulsion(o),
+            "inner": self.inner_repulsion(o),
+        }
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        """Normalised accelerations ``(..., 3)`` for observations ``(..., obs_dim)``."""
+        observations = np.asarray(observations)
+        o = self.layout.decode(observations)
+        total = self.attraction(o) + self.obstacle_repulsion(o) + self.inner_repulsion(o)
+        return self.bound(total, o["velocity"]).astype(np.float32)
+
+
+class APF(_APFBase):
+    """The paper's method: reachable-set repulsion with entry prediction (eqs. 19-32).
+
+    Args:
+        config: The environment config (layout, bounds and step duration).
+        gains: Controller gains (defaults: :class:`APFGains`).
+    """
+
+    name = "apf"
+
+    def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
+        """Eqs. 23-25 with entry prediction over the horizon ``K_s``."""
+        g = self.gains
+        center = o["obstacle_center"]  # ellipsoid centre relative to the UAV
+        axes = np.maximum(o["obstacle_axes"], 1e-3)
+        cs = o["obstacle_heading_cs"]
+        heading = np.arctan2(cs[..., 1], cs[..., 0])
+        mask = o["obstacle_mask"]
+        origin = np.zeros_like(center)
+        d, normal = reachable.distance_to_ellipsoid(
+            origin, center, axes, heading, return_normal=True
+        )
+        # Straight-line prediction: does the UAV come within r_min of the region?
+        vel = o["velocity"][..., None, :]  # (..., 1, 3)
+        taus = _PREDICTION_SAMPLES * g.horizon
+        future = vel[..., None, :] * taus[:, None]  # (..., 1, S, 3)
+        d_future = reachable.distance_to_ellipsoid(
+            future,
+            center[..., None, :],
+            axes[..., None, :],
+            heading[..., None],
+        )
+        will_enter = d_future.min(axis=-1) < g.obs_safe_min
+        # Approach speed towards the region: velocity against the outward normal.
+        v_hat, speed = _unit(o["velocity"])
+        cos_delta = np.einsum("...ki,...i->...k", -normal, v_hat)
+        approach = np.where(cos_delta > 0.0, speed[..., None] * cos_delta, 0.0)
+        r_safe = g.obs_safe_min + g.obs_time * approach
+        dd = np.maximum(d, 0.5)  # inside the region: the strongest push, outwards
+        active = mask & will_enter & (d < r_safe)
+        mag = np.where(active, g.k_obs * (1.0 / dd - 1.0 / r_safe), 0.0)
+        f = mag[..., None] * normal
+        return _cap_norm(f, g.max_repulsion).sum(axis=-2)
+
+
+class MotionStateAPF(_APFBase):
+    """The authors' earlier method [23]: motion-state repulsion, no trajectory prediction.
+
+    The obstacle is a sphere of its safety radius around its current (estimated) position;
+    the safe distance grows with the relative approach speed; always active inside it.
+    """
+
+    name = "motion-state-apf"
+
+    def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
+        """Repulsion from the obstacle's current position and motion."""
+        g = self.gains
+        rel = o["obstacle_rel_pos"]  # obstacle - UAV
+        away, dist = _unit(-rel)
+        radius = self.config.obstacle.radius
+        d = dist - radius
+        relv = o["obstacle_vel"] - o["velocity"][..., None, :]  # v_obs - v_i
+        closing = np.maximum(0.0, np.einsum("...ki,...ki->...k", relv, away))
+        r_safe = g.obs_safe_min + g.obs_time * closing
+        dd = np.maximum(d, 0.5)
+        active = o["obstacle_mask"] & (d < r_safe)
+        mag = np.where(active, g.k_obs * (1.0 / dd - 1.0 / r_safe), 0.0)
+        return _cap_norm(mag[..., None] * away, g.max_repulsion).sum(axis=-2)
+
+
+class TraditionalAPF(_APFBase):
+    """Distance-only APF (Khatib): ``eta (1/rho - 1/rho_0) / rho^2`` away from each source."""
+
+    name = "traditional-apf"
+
+    def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
+        """Repulsion from the obstacle's current position, by distance only."""
+        g = self.gains
+        away, dist = _unit(-o["obstacle_rel_pos"])
+        rho = np.maximum(dist - self.config.obstacle.radius, 0.5)
+        active = o["obstacle_mask"] & (rho < g.traditional_range)
+        mag = np.where(active, g.traditional_eta * (1.0 / rho - 1.0 / g.traditional_range) / rho**2, 0.0)
+        return _cap_norm(mag[..., None] * away, g.max_repulsion).sum(axis=-2)
+
+    def inner_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
+        """Repulsion between UAVs by distance only."""
+        g = self.gains
+        away, dist = _unit(-o["uav_rel_pos"])
+        rho = np.maximum(dist, 0.5)
+        active = o["uav_mask"] & (rho < g.traditional_inner_range)
+        mag = np.where(
+            active, g.traditional_eta * (1.0 / rho - 1.0 / g.traditional_inner_range) / rho**2, 0.0
+        )
+        return _cap_norm(mag[..., None] * away, g.max_repulsion).sum(axis=-2)

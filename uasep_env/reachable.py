@@ -1,0 +1,922 @@
+"""Reachable sets of non-cooperative obstacles and the ellipses/ellipsoids that enclose them.
+
+Paper section 3.1 (eqs. 8-18) with the errata of ``notes.md`` ("Obstacle reachable set").
+Units: metres, seconds, radians, m/s throughout.
+
+Model (eq. 8)
+    The obstacle is a Dubins car: constant horizontal speed ``v``, turn rate in
+    ``[-w_max, w_max]``; in 3D also a climb rate ``|v_z| <= vz_max`` independent of the
+    horizontal motion. A safety radius ``r`` is added around every reachable position.
+
+Paper frame (2D functions of this module)
+    Obstacle at the origin heading ``+y``, ``x`` lateral (to the right). Directions are given
+    by ``theta`` measured from the heading axis: ``u(theta) = (sin theta, cos theta)``.
+    ``rho = v / w_max`` (minimum turning radius), ``phi = w_max t``.
+
+Front curve (r = 0), a full-rate turn through ``theta`` followed by a straight leg::
+
+    F(theta) = ( sgn(theta) rho (1 - cos theta) + (v t - rho |theta|) sin theta,
+                 rho sin|theta| + (v t - rho |theta|) cos theta ),   |theta| <= min(phi, pi).
+
+``F(theta)`` is the point of the reachable set at time ``t`` that is extreme in direction
+``u(theta)`` (a turn as fast as possible to heading ``theta``, then straight, maximises
+``v int cos(psi(s) - theta) ds`` because ``|psi(s)| <= w_max s``).  It is evaluated as
+``v t`` times functions of ``theta`` and ``theta / phi`` only, so ``w_max -> 0`` (``rho``
+infinite) is exact and stable.
+
+Terminal set S1..S5 (eqs. 9-16), positions reachable at exactly ``t``, inflated by ``r``
+    * S1 (eq. 9, ``-min(phi, pi) <= theta <= 0``, eq. 11) and S2 (eq. 10,
+      ``0 <= theta <= min(phi, pi)``, eq. 12): ``F(theta) + r u(theta)``.
+    * S3 (eq. 13, ``-pi <= theta <= -phi``, eq. 15) and S4 (eq. 14, ``phi <= theta <= pi``,
+      eq. 16): arcs of radius ``r`` centred on ``F(-phi)`` and ``F(phi)``.
+      **Erratum:** the paper centres them on ``S1(-phi)`` / ``S2(phi)``, which already contain
+      ``r``; as printed the region misses reachable points by about ``r`` (3 m at the paper's
+      example). For ``phi >= pi`` S3 and S4 vanish.
+    * S5: the chord closing the region at ``y = F_y(+-min(phi, pi)) - r`` (``= rho sin(phi) - r``
+      for ``phi <= pi``).
+
+    The region is exactly ``conv(reachable set at t) (+) disc(r)``; its support function is
+    ``h_T(theta) = r + v t - rho (|theta| - sin|theta|)`` for ``|theta| <= phi`` and
+    ``h_T(theta) = r + rho (sin|theta| + sin(phi - |theta|))`` (support of the corner
+    ``F(+-phi)``) for ``phi < |theta| <= pi`` (``|theta|`` wrapped to ``[0, pi]``).
+
+Swept set (the project's default)
+    Every position reachable at *any* time in ``[0, t]``, inflated by ``r``. Its convex hull is
+    ``conv({0}, front curve) (+) disc(r)`` with support ``h_S(theta) = r + max(0, h_T(theta) - r)``:
+    for ``|theta| <= phi`` the terminal support grows with the time, and beyond ``phi`` the
+    terminal support ``rho (sin a + sin(w tau - a))`` is convex in ``tau`` on ``[0, t]`` so its
+    maximum is at ``tau = 0`` (the origin) or ``tau = t``. For ``phi < pi`` the hull has a
+    straight edge from the origin to ``F(+-phi)`` (normal at ``|theta| = (pi + phi) / 2``).
+
+Enclosing ellipse (replaces the paper's eq. 17, which does not enclose)
+    Heading-aligned, centred on the heading axis ``center_offset`` metres ahead of the obstacle,
+    with lateral semi-axis ``A`` and longitudinal semi-axis ``B``; its support is
+    ``h_E(theta) = c cos theta + sqrt(A^2 sin^2 theta + B^2 cos^2 theta)``.  The minimum-area
+    enclosing ellipse of a set symmetric about the heading axis belongs to this family, so the
+    family loses nothing. ``(c, B)`` come from a table of optimal shapes (a function of the two
+    dimensionless numbers ``phi`` and ``r / (v t)``, computed by :func:`_optimal_shape`);
+    ``A`` is then the smallest value that passes the enclosure certificate below, so the
+    result encloses whatever the table says.
+
+    *Certificate.*  ``E`` contains the set iff ``g = h_E - h_set >= 0`` for all ``theta``
+    (both are convex, support functions characterise them). By symmetry ``[0, pi]`` suffices.
+    Take nodes ``0 = theta_0 < ... < theta_N = pi`` that include ``pi/2`` and every kink of
+    ``h_set`` (the edge normals ``(pi + phi) / 2`` and ``pi``). Between nodes both support
+    functions are ``C^1`` and piecewise ``C^2`` with ``h'' + h = `` radius of curvature, so
+    ``g'' = rho_E - rho_set - g <= (max rho_E - r) - g`` (the set's curvature radius is at least
+    ``r``). ``rho_E(theta) = A^2 B^2 / (A^2 sin^2 + B^2 cos^2)^{3/2}`` is monotone on each
+    quadrant, so its maximum on an interval is at an end. If ``M = max rho_E - r`` and the node
+    values satisfy ``g >= max(M, 0) Delta^2 / 8`` (``Delta`` the interval length, ``< sqrt 8``),
+    then ``g >= 0`` on the whole interval: at an interior minimum ``m < 0`` the bound
+    ``g'' <= M - m`` gives ``m >= min(g_ends) - (M - m) Delta^2 / 8`` hence ``m (1 - Delta^2 / 8)
+    >= 0``, a contradiction. Nodes are spaced uniformly in the ellipse's parametric angle, which
+    keeps ``rho_E Delta^2`` small even for elongated ellipses. A further ``1e-12 (v t + r)``
+    absorbs rounding. If the certificate ever fails, the axes grow until it passes, and as a
+    last resort the circle of radius ``v t + r`` about the obstacle (which trivially contains
+    everything within reach) is returned.
+
+    Measured area factors (``_area_ratio`` in the tests, speeds 0.5-60 m/s, ``w_max`` 0-1
+    rad/s, horizons 1-60 s, radii 0-20 m): ellipse area over the minimum enclosing ellipse
+    (the best this family can do) at most 1.02 (swept) / 1.05 (terminal), median 1.001;
+    ellipse area over the area of the set itself between 1.0 and 2.45 (any convex set has a
+    minimum enclosing ellipse at most ``4 pi / (3 sqrt 3) = 2.418`` times its area; the worst
+    cases are the thin triangle-like swept sets of small ``phi`` and ``r``), 1.55 at the paper's
+    example (``w_max = 0.013``, ``v = 4``, ``t = 10``, ``r = 3``).
+
+Enclosing ellipsoid (eq. 18, corrected)
+    The 3D swept set lies in ``(swept 2D set (+) disc(r)) x [-(vz_max t + r), vz_max t + r]``
+    (the ball of radius ``r`` lies in a disc times an interval). With the 2D ellipse
+    ``(A, B)`` and ``Z = vz_max t + r``, the ellipsoid with semi-axes ``sqrt(3/2) (B, A)`` and
+    ``sqrt(3) Z`` contains that cylinder: a point of it has
+    ``x^2 / (1.5 A^2) + y^2 / (1.5 B^2) + z^2 / (3 Z^2) <= 2/3 + 1/3``. Among ellipsoids
+    ``(lambda B, lambda A, mu Z)`` that contain the cylinder (``1/lambda^2 + 1/mu^2 <= 1``) it
+    has the least volume. When ``Z = 0`` the flat ellipse itself (``lambda = 1``) is returned.
+
+Distances
+    :func:`distance_to_ellipsoid` computes the true Euclidean distance from points to the
+    ellipsoid surface (negative inside) with Newton's method on the Lagrange multiplier of the
+    nearest-point problem, written as the concave increasing function
+    ``1 / ||(a_i q_i / (t + a_i^2))_i|| - 1`` so that Newton from a lower bound of the root
+    converges monotonically; the nearest point is then projected onto the surface, which
+    makes the distance error second order in the multiplier's error.
+
+Frames for ellipsoids: world NED (x north, y east, z down); heading ``psi`` from north towards
+east; the body frame has axis 0 along the heading, axis 1 to the right (``psi + pi/2``) and
+axis 2 down. ``semi_axes[..., :]`` is ordered (longitudinal, lateral, vertical).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "boundary",
+    "contains",
+    "distance_to_ellipsoid",
+    "ellipse",
+    "ellipse_area",
+    "ellipsoid",
+    "ellipsoid_volume",
+    "front_curve",
+    "nearest_point_on_ellipsoid",
+    "support",
+]
+
+Mode = Literal["swept", "terminal"]
+_MODES = ("swept", "terminal")
+FloatArray = NDArray[np.float64]
+
+#: Intervals of the enclosure certificate on ``[0, pi]`` (even, so that pi/2 is a node).
+_N_CERT = 256
+#: Relative absolute margin (of ``v t + r``) that absorbs floating-point rounding.
+_EPS_ABS = 1e-12
+#: Newton iterations of the point-to-ellipsoid distance.
+_N_NEWTON = 8
+
+
+# ---------------------------------------------------------------------------- validation
+def _nonneg(name: str, value: ArrayLike) -> FloatArray:
+    """``value`` as a float64 array; raises if any entry is negative, NaN or infinite."""
+    arr = np.asarray(value, dtype=np.float64)
+    bad = ~(np.isfinite(arr) & (arr >= 0.0))
+    if np.any(bad):
+        first = arr[bad].flat[0] if arr.ndim else arr.item()
+        raise ValueError(f"{name} must be finite and >= 0, got {first!r}")
+    return arr
+
+
+def _check_mode(mode: str) -> bool:
+    """True for ``"swept"``, False for ``"terminal"``; raises on anything else."""
+    if mode not in _MODES:
+        raise ValueError(f"mode must be 'swept' or 'terminal', got {mode!r}")
+    return mode == "swept"
+
+
+def _out(x: FloatArray) -> FloatArray:
+    """0-d arrays come back as 0-d float64 arrays, others unchanged."""
+    return np.asarray(x, dtype=np.float64)
+
+
+# ---------------------------------------------------------------------------- core maths
+def _inv(phi: FloatArray) -> FloatArray:
+    """``1 / phi`` with ``1 / 0 := 0`` (every use multiplies a quantity that is 0 there)."""
+    safe = np.where(phi > 0.0, phi, 1.0)
+    return np.where(phi > 0.0, 1.0 / safe, 0.0)
+
+
+def _wrap_abs(theta: FloatArray) -> FloatArray:
+    """``|theta|`` wrapped to ``[0, pi]``."""
+    return np.abs(np.remainder(theta + np.pi, 2.0 * np.pi) - np.pi)
+
+
+def _h_unit(a: FloatArray, phi: FloatArray, swept: bool) -> FloatArray:
+    """Support of the ``r = 0`` set in units of ``v t``, direction ``a = |theta|`` in [0, pi].
+
+    ``1 - (a - sin a) / phi`` where the heading ``a`` can be reached (``a <= phi``), else the
+    support of the corner ``F(phi)``: ``sin a (1 - cos phi) / phi + cos a sin(phi) / phi``;
+    clipped at 0 (the origin) for the swept set.
+    """
+    ip = _inv(phi)
+    reach = 1.0 - (a - np.sin(a)) * ip
+    omc = 2.0 * np.sin(0.5 * phi) ** 2 * ip  # (1 - cos phi) / phi
+    corner = np.sin(a) * omc + np.cos(a) * np.sinc(phi / np.pi)
+    if swept:
+        corner = np.maximum(corner, 0.0)
+    return np.where(a <= phi, reach, corner)
+
+
+def _front_unit(a: FloatArray, phi: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``F(a) / (v t)`` for ``0 <= a <= min(phi, pi)`` (x >= 0 branch)."""
+    ip = _inv(phi)
+    x = np.sin(a) + (2.0 * np.sin(0.5 * a) ** 2 - a * np.sin(a)) * ip
+    y = np.cos(a) + (np.sin(a) - a * np.cos(a)) * ip
+    return x, y
+
+
+# ---------------------------------------------------------------------------- 2D public API
+def front_curve(
+    theta: ArrayLike, speed: ArrayLike, max_turn_rate: ArrayLike, horizon: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Front curve ``F(theta)`` of the reachable set (``r = 0``), paper frame.
+
+    ``F(theta)`` is the position at time ``t`` after turning at the full rate ``w_max`` to the
+    heading ``theta`` and flying straight since; S1 (eq. 9) and S2 (eq. 10) are
+    ``F(theta) + r (sin theta, cos theta)``.
+
+    Args:
+        theta: Final heading / outward normal angle from the heading axis (rad). Clipped to
+            the curve's domain ``|theta| <= min(w_max t, pi)`` (eqs. 11-12).
+        speed: Horizontal speed ``v`` (m/s).
+        max_turn_rate: ``w_max`` (rad/s); 0 gives the straight-line tip ``(0, v t)``.
+        horizon: Time ``t`` (s).
+
+    Returns:
+        ``(x, y)`` in the paper frame (x lateral, y along the heading) (m), broadcast shape.
+
+    Raises:
+        ValueError: If a speed, turn rate or horizon is negative or not finite.
+    """
+    th = np.asarray(theta, dtype=np.float64)
+    v = _nonneg("speed", speed)
+    w = _nonneg("max_turn_rate", max_turn_rate)
+    t = _nonneg("horizon", horizon)
+    th, v, w, t = np.broadcast_arrays(th, v, w, t)
+    phi = w * t
+    lim = np.minimum(phi, np.pi)
+    a = np.minimum(np.abs(th), lim)
+    xu, yu = _front_unit(a, phi)
+    vt = v * t
+    return _out(np.sign(th) * vt * xu), _out(vt * yu)
+
+
+def support(
+    theta: ArrayLike,
+    speed: ArrayLike,
+    max_turn_rate: ArrayLike,
+    horizon: ArrayLike,
+    radius: ArrayLike,
+    mode: Mode = "swept",
+) -> FloatArray:
+    """Support function of the reachable set (plus the safety radius), paper frame.
+
+    ``h(theta) = max over the set of p . (sin theta, cos theta)``. Exact for both modes:
+    ``"swept"`` is the convex hull of everything reachable in ``[0, t]``; ``"terminal"`` is
+    the S1..S5 region (eqs. 9-16 with the erratum), the convex hull of the positions at exactly
+    ``t``. For ``|theta| <= w_max t``: ``r + v t - rho (|theta| - sin|theta|)``.
+
+    Args:
+        theta: Direction from the heading axis (rad), any real (wrapped).
+        speed: Horizontal speed ``v`` (m/s).
+        max_turn_rate: ``w_max`` (rad/s).
+        horizon: Prediction horizon ``t`` (s).
+        radius: Safety radius ``r`` (m).
+        mode: ``"swept"`` or ``"terminal"``.
+
+    Returns:
+        The support value (m), broadcast shape.
+
+    Raises:
+        ValueError: On a negative/non-finite parameter or an unknown mode.
+    """
+    swept = _check_mode(mode)
+    th = np.asarray(theta, dtype=np.float64)
+    v = _nonneg("speed", speed)
+    w = _nonneg("max_turn_rate", max_turn_rate)
+    t = _nonneg("horizon", horizon)
+    r = _nonneg("radius", radius)
+    th, v, w, t, r = np.broadcast_arrays(th, v, w, t, r)
+    return _out(r + v * t * _h_unit(_wrap_abs(th), w * t, swept))
+
+
+def boundary(
+    speed: float,
+    max_turn_rate: float,
+    horizon: float,
+    radius: float,
+    n: int = 721,
+    mode: Mode = "terminal",
+) -> FloatArray:
+    """Closed polygon through the boundary of the reachable region, paper frame.
+
+    For ``mode="terminal"`` the pieces are, in order: S3 (eq. 13, arc of radius ``r`` about
+    ``F(-phi)``, normals ``-pi..-phi``), S1 (eq. 9), S2 (eq. 10), S4 (eq. 14, arc about
+    ``F(phi)``), and the closing edge from the last point back to the first is the chord S5.
+    For ``phi >= pi`` S3/S4 are empty. ``mode="swept"`` gives the swept set's hull boundary
+    (arcs about the origin replace part of S3/S4 for ``phi < pi``). Every vertex lies on the
+    boundary (the polygon is inscribed); the corner normals ``+-phi`` are vertices.
+
+    Args:
+        speed: Horizontal speed ``v`` (m/s).
+        max_turn_rate: ``w_max`` (rad/s).
+        horizon: Time ``t`` (s).
+        radius: Safety radius ``r`` (m).
+        n: Number of rows; the last row repeats the first (at least 8).
+        mode: ``"terminal"`` (S1..S5, default) or ``"swept"``.
+
+    Returns:
+        ``(n, 2)`` array of ``(x, y)`` vertices (m), x lateral, y along the heading.
+
+    Raises:
+        ValueError: On a negative/non-finite or non-scalar parameter, ``n < 8`` or an unknown
+            mode.
+    """
+    swept = _check_mode(mode)
+    vals = []
+    for name, val in (
+        ("speed", speed),
+        ("max_turn_rate", max_turn_rate),
+        ("horizon", horizon),
+        ("radius", radius),
+    ):
+        arr = _nonneg(name, val)
+        if arr.ndim:
+            raise ValueError(f"{name} must be a scalar, got shape {arr.shape}")
+        vals.append(float(arr))
+    v, w, t, r = vals
+    if int(n) != n or n < 8:
+        raise ValueError(f"n must be an integer >= 8, got {n!r}")
+    n = int(n)
+    phi = w * t
+    lim = min(phi, np.pi)
+    th = np.linspace(-np.pi, np.pi, n - 1)
+    if lim < np.pi:
+        specials = [lim]
+        if swept:
+            specials.append(0.5 * (np.pi + phi))
+        for s in specials:
+            for sgn in (-1.0, 1.0):
+                th[np.argmin(np.abs(th - sgn * s))] = sgn * s
+        th = np.sort(th)
+    a = np.abs(th)
+    xu, yu = _front_unit(np.minimum(a, lim), np.asarray(phi))
+    if swept and lim < np.pi:
+        behind = a > 0.5 * (np.pi + phi)
+        xu = np.where(behind, 0.0, xu)
+        yu = np.where(behind, 0.0, yu)
+    vt = v * t
+    x = np.sign(th) * vt * xu + r * np.sin(th)
+    y = vt * yu + r * np.cos(th)
+    pts = np.stack([x, y], axis=-1)
+    return np.concatenate([pts, pts[:1]], axis=0)
+
+
+def ellipse_area(lateral_semi_axis: ArrayLike, longitudinal_semi_axis: ArrayLike) -> FloatArray:
+    """Area ``pi A B`` of an ellipse (m^2)."""
+    return _out(
+        np.pi * np.asarray(lateral_semi_axis, float) * np.asarray(longitudinal_semi_axis, float)
+    )
+
+
+def ellipsoid_volume(semi_axes: ArrayLike) -> FloatArray:
+    """Volume ``4/3 pi a b c`` of ellipsoids with semi-axes ``(..., 3)`` (m^3)."""
+    return _out(4.0 / 3.0 * np.pi * np.prod(np.asarray(semi_axes, float), axis=-1))
+
+
+# ---------------------------------------------------------------------------- shape table
+# Optimal (c, B, A) of the minimum-area enclosing ellipse as fractions of the set's extent
+# along the heading, on a grid of alpha = (2/pi) atan2(2 r/(v t), phi) (0: r = 0, 1: phi = 0)
+# and log10(hypot(phi, 2 r/(v t))). Generated by ``_build_table`` (see the tests).
+_TAB_ALPHA = np.linspace(0.0, 1.0, 0)
+_TAB_LOGR = np.linspace(-3.0, 3.0, 0)
+_TAB: dict[bool, FloatArray] = {}
+
+
+def _table_coords(phi: FloatArray, eps: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Table coordinates for ``phi = w t`` and ``eps = r / (v t)`` (may be inf)."""
+    finite = np.isfinite(eps)
+    e = np.where(finite, eps, 0.0)
+    alpha = np.where(finite, np.arctan2(2.0 * e, phi) * (2.0 / np.pi), 1.0)
+    rad = np.where(finite, np.hypot(phi, 2.0 * e), np.inf)
+    with np.errstate(divide="ignore"):
+        logr = np.log10(rad)
+    return alpha, logr
+
+
+def _interp_table(swept: bool, alpha: FloatArray, logr: FloatArray) -> FloatArray:
+    """Bilinear interpolation of the shape table, ``(..., 3)`` = (c, B, A) fractions."""
+    tab = _TAB[swept]
+    na, nl = tab.shape[:2]
+    fa = np.clip((alpha - _TAB_ALPHA[0]) / (_TAB_ALPHA[1] - _TAB_ALPHA[0]), 0.0, na - 1.0)
+    fl = np.clip((logr - _TAB_LOGR[0]) / (_TAB_LOGR[1] - _TAB_LOGR[0]), 0.0, nl - 1.0)
+    fl = np.where(np.isnan(fl), 0.0, fl)
+    i0 = np.minimum(fa.astype(np.intp), na - 2)
+    j0 = np.minimum(fl.astype(np.intp), nl - 2)
+    ta = (fa - i0)[..., None]
+    tl = (fl - j0)[..., None]
+    return (
+        tab[i0, j0] * (1 - ta) * (1 - tl)
+        + tab[i0 + 1, j0] * ta * (1 - tl)
+        + tab[i0, j0 + 1] * (1 - ta) * tl
+        + tab[i0 + 1, j0 + 1] * ta * tl
+    )
+
+
+# ---------------------------------------------------------------------------- reference optimiser
+def _golden_max(
+    f: Callable[[FloatArray], FloatArray], lo: FloatArray, hi: FloatArray, iters: int
+) -> FloatArray:
+    """Vectorised golden-section search for the maximiser of a unimodal ``f`` on ``[lo, hi]``."""
+    g = (np.sqrt(5.0) - 1.0) / 2.0
+    a, b = lo, hi
+    c1 = b - g * (b - a)
+    c2 = a + g * (b - a)
+    f1, f2 = f(c1), f(c2)
+    for _ in range(iters):
+        right = f1 < f2
+        a = np.where(right, c1, a)
+        b = np.where(right, b, c2)
+        new = np.where(right, a + g * (b - a), b - g * (b - a))
+        fn = f(new)
+        c1, c2, f1, f2 = (
+            np.where(right, c2, new),
+            np.where(right, new, c1),
+            np.where(right, f2, fn),
+            np.where(right, fn, f1),
+        )
+    return 0.5 * (a + b)
+
+
+def _boundary_points_unit(
+    phi: FloatArray, kappa: FloatArray, swept: bool, m: int
+) -> tuple[FloatArray, FloatArray]:
+    """Boundary points (x >= 0 half) of the set scaled by ``v t + r``; ``kappa = r/(v t + r)``.
+
+    Three runs of ``m`` points: the front curve (S2), the arc about ``F(phi)`` (S4) and, for
+    the swept set with ``phi < pi``, the arc about the origin. Shapes ``(..., 3 m)``.
+    """
+    phi = phi[..., None]
+    kap = kappa[..., None]
+    lim = np.minimum(phi, np.pi)
+    s = np.linspace(0.0, 1.0, m)
+    a_front = lim * s
+    end = np.where(swept & (phi < np.pi), 0.5 * (np.pi + phi), np.pi)
+    a_corner = lim + (end - lim) * s
+    a_origin = end + (np.pi - end) * s
+    fx, fy = _front_unit(a_front, phi)
+    cx, cy = _front_unit(np.broadcast_to(lim, a_corner.shape), phi)
+    ox = np.where(swept & (phi < np.pi), 0.0, cx[..., -1:])
+    oy = np.where(swept & (phi < np.pi), 0.0, cy[..., -1:])
+    ox, oy = np.broadcast_to(ox, a_origin.shape), np.broadcast_to(oy, a_origin.shape)
+    a = np.concatenate([a_front, a_corner, a_origin], axis=-1)
+    x0 = np.concatenate([fx, cx, ox], axis=-1)
+    y0 = np.concatenate([fy, cy, oy], axis=-1)
+    x = (1.0 - kap) * x0 + kap * np.sin(a)
+    y = (1.0 - kap) * y0 + kap * np.cos(a)
+    return np.where(np.abs(x) < 1e-13, 0.0, x), y
+
+
+def _optimal_shape(
+    phi: ArrayLike, kappa: ArrayLike, swept: bool, m: int = 160, iters: int = 48
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Reference minimum-area enclosing ellipse ``(c, A, B)`` of the set scaled by ``v t + r``.
+
+    Slow, for building the shape table and for tests. For a fixed centre ``c`` the problem in
+    ``(P, Q) = (1/A^2, 1/B^2)`` is concave (maximise ``log P + log Q`` subject to the linear
+    constraints ``P x_k^2 + Q (y_k - c)^2 <= 1`` at sampled boundary points), solved by golden
+    section on ``Q``; ``c`` is found by a scan plus golden section. Inner approximation: the
+    result encloses the sampled points, not necessarily the whole set.
+
+    Args:
+        phi: ``w_max t`` (rad).
+        kappa: ``r / (v t + r)`` in ``[0, 1]``.
+        swept: Swept (True) or terminal (False) set.
+        m: Points per boundary piece.
+        iters: Golden-section iterations.
+
+    Returns:
+        ``(c, A, B)`` in units of ``v t + r``.
+    """
+    phi = np.asarray(phi, dtype=np.float64)
+    kappa = np.asarray(kappa, dtype=np.float64)
+    phi, kappa = np.broadcast_arrays(phi, kappa)
+    x, y = _boundary_points_unit(phi, kappa, swept, m)
+    x2 = x * x
+
+    def inner(c: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        e = (y - c[..., None]) ** 2
+        qmax = 1.0 / np.maximum(np.max(np.where(x2 == 0.0, e, 0.0), axis=-1), 1e-300)
+        safe = np.where(x2 > 0.0, x2, 1.0)
+
+        def p_of(q: FloatArray) -> FloatArray:
+            val = np.where(x2 > 0.0, (1.0 - e * q[..., None]) / safe, np.inf)
+            return np.min(val, axis=-1)
+
+        def obj(tq: FloatArray) -> FloatArray:
+            q = tq * qmax
+            p = p_of(q)
+            ok = (p > 0.0) & (q > 0.0)
+            return np.where(
+                ok, np.log(np.where(ok, p, 1.0)) + np.log(np.where(ok, q, 1.0)), -np.inf
+            )
+
+        tq = _golden_max(obj, np.zeros_like(c), np.ones_like(c), iters)
+        q = tq * qmax
+        return obj(tq), q, p_of(q)
+
+    lo = np.min(y, axis=-1)
+    hi = np.max(y, axis=-1)
+    n_scan = 24
+    cs = lo[..., None] + (hi - lo)[..., None] * (np.arange(1, n_scan) / n_scan)
+    vals = np.stack([inner(cs[..., k])[0] for k in range(n_scan - 1)], axis=-1)
+    k = np.argmax(vals, axis=-1)
+    step = (hi - lo) / n_scan
+    cbest = np.take_along_axis(cs, k[..., None], axis=-1)[..., 0]
+    c = _golden_max(lambda cc: inner(cc)[0], cbest - step, cbest + step, iters)
+    _, q, p = inner(c)
+    return c, 1.0 / np.sqrt(p), 1.0 / np.sqrt(q)
+
+
+def _build_table(
+    swept: bool, alpha: FloatArray, logr: FloatArray, **kwargs: int
+) -> FloatArray:
+    """Shape table ``(len(alpha), len(logr), 3)``: (c, B) over the y-extent, A over max |x|."""
+    al, lr = np.meshgrid(alpha, logr, indexing="ij")
+    rad = 10.0**lr
+    phi = np.where(al >= 1.0, 0.0, rad * np.cos(0.5 * np.pi * al))
+    eps = 0.5 * rad * np.sin(0.5 * np.pi * al)
+    kappa = eps / (1.0 + eps)
+    c, lat, lon = _optimal_shape(phi, kappa, swept, **kwargs)
+    h0 = kappa + (1.0 - kappa) * _h_unit(np.zeros_like(phi), phi, swept)
+    hpi = kappa + (1.0 - kappa) * _h_unit(np.full_like(phi, np.pi), phi, swept)
+    hx = kappa + (1.0 - kappa) * _h_unit(np.full_like(phi, 0.5 * np.pi), phi, swept)
+    ext = h0 + hpi
+    return np.stack([(c + hpi) / ext, lon / ext, lat / np.maximum(hx, 1e-300)], axis=-1)
+
+
+# ---------------------------------------------------------------------------- ellipse fit
+def _margins(
+    th: FloatArray, lat: FloatArray, lon: FloatArray, r: FloatArray, eps_abs: FloatArray
+) -> FloatArray:
+    """Certificate margins at the nodes ``th`` (``(..., K)``, sorted, 0 and pi included)."""
+    s2 = np.sin(th) ** 2
+    c2 = np.cos(th) ** 2
+    a2 = (lat**2)[..., None]
+    b2 = (lon**2)[..., None]
+    den = np.maximum(a2 * s2 + b2 * c2, 1e-300)
+    rho_e = a2 * b2 / den**1.5
+    m_int = np.maximum(np.maximum(rho_e[..., 1:], rho_e[..., :-1]) - r[..., None], 0.0)
+    m_int = m_int * np.diff(th, axis=-1) ** 2 / 8.0
+    pad = np.zeros_like(th[..., :1])
+    left = np.concatenate([pad, m_int], axis=-1)
+    right = np.concatenate([m_int, pad], axis=-1)
+    return np.maximum(left, right) + eps_abs[..., None]
+
+
+def _fit_axes(
+    th: FloatArray,
+    h: FloatArray,
+    c: FloatArray,
+    lat: FloatArray,
+    lon: FloatArray,
+    r: FloatArray,
+    eps_abs: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Smallest axes ``(A, B >= lon)`` that meet the node constraints with margins for ``A``."""
+    delta = _margins(th, lat, lon, r, eps_abs)
+    lon = np.maximum(lon, h[..., 0] + delta[..., 0] - c)
+    lon = np.maximum(lon, h[..., -1] + delta[..., -1] + c)
+    ti = th[..., 1:-1]
+    s2 = np.sin(ti) ** 2
+    c2 = np.cos(ti) ** 2
+    need = np.maximum(h[..., 1:-1] + delta[..., 1:-1] - c[..., None] * np.cos(ti), 0.0)
+    a2 = (need**2 - (lon**2)[..., None] * c2) / s2
+    return np.sqrt(np.maximum(np.max(a2, axis=-1), 0.0)), lon
+
+
+def _certified(
+    th: FloatArray,
+    h: FloatArray,
+    c: FloatArray,
+    lat: FloatArray,
+    lon: FloatArray,
+    r: FloatArray,
+    eps_abs: FloatArray,
+) -> NDArray[np.bool_]:
+    """Whether ``(c, A, B)`` passes the enclosure certificate (see the module docstring)."""
+    delta = _margins(th, lat, lon, r, eps_abs)
+    he = c[..., None] * np.cos(th) + np.sqrt(
+        (lat**2)[..., None] * np.sin(th) ** 2 + (lon**2)[..., None] * np.cos(th) ** 2
+    )
+    return np.all(he - h >= delta, axis=-1)
+
+
+def _ellipse_core(
+    vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Certified near-minimal ellipse ``(c, A, B)`` for flat arrays of parameters."""
+    scale = vt + r
+    live = scale > 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eps = np.where(vt > 0.0, r / np.where(vt > 0.0, vt, 1.0), np.inf)
+    alpha, logr = _table_coords(phi, eps)
+    frac = _interp_table(swept, alpha, logr)
+    zero = np.zeros_like(vt)
+    h0 = r + vt * _h_unit(zero, phi, swept)
+    hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
+    hx = r + vt * _h_unit(zero + 0.5 * np.pi, phi, swept)
+    ext = h0 + hpi
+    c = frac[..., 0] * ext - hpi
+    lon = frac[..., 1] * ext
+    lat = frac[..., 2] * hx
+    eps_abs = _EPS_ABS * scale
+    tpar = np.linspace(0.0, np.pi, _N_CERT + 1)
+    kink = np.where(swept & (phi < np.pi), 0.5 * (np.pi + phi), 0.5 * np.pi)
+    for _ in range(2):
+        # Nodes uniform in the parametric angle of the current ellipse (+ pi/2 and the kinks).
+        lat_g = np.maximum(lat, 1e-9 * scale)
+        lon_g = np.maximum(lon, 1e-9 * scale)
+        th = np.arctan2(lon_g[..., None] * np.sin(tpar), lat_g[..., None] * np.cos(tpar))
+        th[..., 0] = 0.0
+        th[..., _N_CERT // 2] = 0.5 * np.pi
+        th[..., -1] = np.pi
+        th = np.sort(np.concatenate([th, kink[..., None]], axis=-1), axis=-1)
+        h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept)
+        for _ in range(2):
+            lat, lon = _fit_axes(th, h, c, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)
+    ok = _certified(th, h, c, lat, lon, r, eps_abs)
+    grow = 1.0
+    for _ in range(40):
+        if np.all(ok | ~live):
+            break
+        grow *= 1.5
+        bad = ~ok
+        fac = 1.0 + 1e-9 * grow
+        lat = np.where(bad, lat * fac + 1e-12 * grow * scale, lat)
+        lon = np.where(bad, lon * fac + 1e-12 * grow * scale, lon)
+        ok = ok | _certified(th, h, c, lat, lon, r, eps_abs)
+    fallback = ~ok & live
+    c = np.where(fallback, 0.0, c)
+    lat = np.where(fallback, scale, lat)
+    lon = np.where(fallback, scale, lon)
+    # Exact special cases: a disc (v t = 0), a segment (phi = 0, r = 0), a point.
+    disc = vt <= 0.0
+    seg = (phi <= 0.0) & (r <= 0.0) & ~disc
+    c = np.where(disc, 0.0, np.where(seg, 0.5 * vt, c))
+    lat = np.where(disc, r, np.where(seg, 0.0, lat))
+    lon = np.where(disc, r, np.where(seg, 0.5 * vt, lon))
+    return c, lat, lon
+
+
+def ellipse(
+    speed: ArrayLike,
+    max_turn_rate: ArrayLike,
+    horizon: ArrayLike,
+    radius: ArrayLike,
+    mode: Mode = "swept",
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Heading-aligned ellipse that provably encloses the reachable set plus the radius.
+
+    Replaces the paper's eq. 17 (whose axes are read off the figure and do not enclose).
+    See the module docstring for the enclosure certificate and the measured area factors
+    (at most ~1.02-1.05 times the minimum enclosing ellipse).
+
+    Args:
+        speed: Horizontal speed ``v`` (m/s).
+        max_turn_rate: ``w_max`` (rad/s); 0 (straight flight) is allowed.
+        horizon: Prediction horizon ``t`` (s).
+        radius: Safety radius ``r`` (m).
+        mode: ``"swept"`` (reachable at any time in ``[0, t]``, default) or ``"terminal"``
+            (the S1..S5 region, reachable at exactly ``t``).
+
+    Returns:
+        ``(center_offset, lateral_semi_axis, longitudinal_semi_axis)`` (m), broadcast shape:
+        the centre lies ``center_offset`` ahead of the obstacle along its heading.
+
+    Raises:
+        ValueError: On a negative/non-finite parameter or an unknown mode.
+    """
+    swept = _check_mode(mode)
+    v = _nonneg("speed", speed)
+    w = _nonneg("max_turn_rate", max_turn_rate)
+    t = _nonneg("horizon", horizon)
+    r = _nonneg("radius", radius)
+    v, w, t, r = np.broadcast_arrays(v, w, t, r)
+    shape = v.shape
+    vt = (v * t).ravel()
+    phi = (w * t).ravel()
+    c, lat, lon = _ellipse_core(vt, phi, r.ravel().astype(np.float64), swept)
+    return _out(c.reshape(shape)), _out(lat.reshape(shape)), _out(lon.reshape(shape))
+
+
+def ellipsoid(
+    speed: ArrayLike,
+    max_turn_rate: ArrayLike,
+    max_climb_rate: ArrayLike,
+    horizon: ArrayLike,
+    radius: ArrayLike,
+    mode: Mode = "swept",
+) -> tuple[FloatArray, FloatArray]:
+    """Heading-aligned ellipsoid that provably encloses the 3D reachable set (eq. 18, fixed).
+
+    Horizontal Dubins motion as in :func:`ellipse`, vertical speed ``|v_z| <= vz_max``,
+    everything inflated by a ball of radius ``r``. Semi-axes are ``sqrt(3/2)`` times the 2D
+    ellipse's and ``sqrt(3) (vz_max t + r)`` vertically (the least-volume ellipsoid of that
+    family containing the cylinder "2D ellipse x vertical extent"); the flat 2D ellipse when
+    ``vz_max t + r = 0``.
+
+    Args:
+        speed: Horizontal speed ``v`` (m/s).
+        max_turn_rate: ``w_max`` (rad/s).
+        max_climb_rate: ``vz_max`` (m/s).
+        horizon: Prediction horizon ``t`` (s).
+        radius: Safety radius ``r`` (m).
+        mode: ``"swept"`` (default) or ``"terminal"``.
+
+    Returns:
+        ``(center_offset, semi_axes)``: the offset ahead of the obstacle along its heading
+        (m, broadcast shape) and the semi-axes ``(..., 3)`` ordered (longitudinal, lateral,
+        vertical) (m).
+
+    Raises:
+        ValueError: On a negative/non-finite parameter or an unknown mode.
+    """
+    swept = _check_mode(mode)
+    v = _nonneg("speed", speed)
+    w = _nonneg("max_turn_rate", max_turn_rate)
+    vz = _nonneg("max_climb_rate", max_climb_rate)
+    t = _nonneg("horizon", horizon)
+    r = _nonneg("radius", radius)
+    v, w, vz, t, r = np.broadcast_arrays(v, w, vz, t, r)
+    shape = v.shape
+    c, lat, lon = _ellipse_core((v * t).ravel(), (w * t).ravel(), r.ravel().astype(float), swept)
+    z = (vz * t + r).ravel()
+    flat = z <= 0.0
+    lam = np.where(flat, 1.0, np.sqrt(1.5))
+    axes = np.stack([lam * lon, lam * lat, np.sqrt(3.0) * z], axis=-1)
+    return _out(c.reshape(shape)), axes.reshape((*shape, 3))
+
+
+# ---------------------------------------------------------------------------- distances
+def _to_body(
+    points: ArrayLike, centers: ArrayLike, headings: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Body-frame coordinates of ``points`` and the heading's cos/sin (broadcast)."""
+    p = np.asarray(points, dtype=np.float64)
+    ctr = np.asarray(centers, dtype=np.float64)
+    psi = np.asarray(headings, dtype=np.float64)
+    d = p - ctr
+    cp = np.cos(psi)
+    sp = np.sin(psi)
+    q0 = d[..., 0] * cp + d[..., 1] * sp
+    q1 = -d[..., 0] * sp + d[..., 1] * cp
+    q2 = np.broadcast_to(d[..., 2], q0.shape)
+    return np.stack([q0, q1, q2], axis=-1), cp, sp
+
+
+def _check_axes(semi_axes: ArrayLike) -> FloatArray:
+    ax = np.asarray(semi_axes, dtype=np.float64)
+    if ax.shape[-1:] != (3,):
+        raise ValueError(f"semi_axes must have a last dimension of 3, got shape {ax.shape}")
+    bad = ~(np.isfinite(ax) & (ax >= 0.0))
+    if np.any(bad):
+        raise ValueError(f"semi_axes must be finite and >= 0, got {ax[bad].flat[0]!r}")
+    return ax
+
+
+def _nearest_body(q: FloatArray, ax: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Nearest surface point, signed distance and outward unit normal, body frame.
+
+    Args:
+        q: ``(..., 3)`` points relative to the centre, body frame.
+        ax: ``(..., 3)`` semi-axes (broadcastable with ``q``).
+
+    Returns:
+        ``(x, dist, normal)``: nearest point ``(..., 3)``, signed distance ``(...)`` and the
+        unit outward normal at ``x`` ``(..., 3)``.
+    """
+    q, ax = np.broadcast_arrays(q, ax)
+    sgn = np.where(q < 0.0, -1.0, 1.0)
+    qa = np.abs(q)
+    scale = np.maximum(np.max(ax, axis=-1), np.max(qa, axis=-1))
+    scale = np.where(scale > 0.0, scale, 1.0)[..., None]
+    qs = qa / scale
+    a = ax / scale
+    m = np.argmin(a, axis=-1)[..., None]
+    am = np.take_along_axis(a, m, axis=-1)
+    is_m = np.arange(3) == m
+    off = a * a - am * am  # >= 0, exactly 0 on the smallest axis
+    cq = a * qs
+    # Lower bounds of sigma = t + a_m^2 at the root (t: the Lagrange multiplier).
+    sig = np.max(cq - a * a + am * am, axis=-1)
+    sig = np.maximum(sig, np.sqrt(np.sum(cq * cq, axis=-1)) - np.max(a, axis=-1) ** 2 + am[..., 0] ** 2)
+    sig = np.maximum(sig, 0.0)
+    for _ in range(_N_NEWTON):
+        s = sig[..., None] + off
+        w = np.where(s > 0.0, cq / np.where(s > 0.0, s, 1.0), 0.0)
+        f2 = np.sum(w * w, axis=-1)
+        g = np.sum(np.where(s > 0.0, w * w / np.where(s > 0.0, s, 1.0), 0.0), axis=-1)
+        f = np.sqrt(f2)
+        step = np.where(g > 0.0, f2 * (f - 1.0) / np.where(g > 0.0, g, 1.0), 0.0)
+        sig = np.maximum(sig, sig + step)
+    s = sig[..., None] + off
+    w = np.where(s > 0.0, cq / np.where(s > 0.0, s, 1.0), 0.0)
+    w = np.where(is_m, 0.0, w)
+    rest = np.sum(w * w, axis=-1)
+    shrink = np.where(rest > 1.0, 1.0 / np.sqrt(np.maximum(rest, 1.0)), 1.0)
+    w = w * shrink[..., None]
+    wm = np.sqrt(np.maximum(1.0 - rest, 0.0))
+    w = np.where(is_m, wm[..., None], w)
+    x = a * w  # positive orthant, scaled units
+    # Outward normal ~ x_i / a_i^2 = w_i / a_i, multiplied through by a_m to stay bounded.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ng = np.where(a > 0.0, w * am / np.where(a > 0.0, a, 1.0), 0.0)
+    ng = np.where(is_m & (am <= 0.0), np.where(rest < 1.0, 1.0, 0.0)[..., None], ng)
+    diff = qs - x
+    dist = np.sqrt(np.sum(diff * diff, axis=-1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(a > 0.0, qs / np.where(a > 0.0, a, 1.0), np.where(qs > 0.0, np.inf, 0.0))
+    level = np.sum(ratio * ratio, axis=-1)
+    inside = level < 1.0
+    ngn = np.sqrt(np.sum(ng * ng, axis=-1))
+    dirn = np.where(
+        (inside | (dist <= 1e-12))[..., None] & (ngn > 0.0)[..., None],
+        ng / np.where(ngn > 0.0, ngn, 1.0)[..., None],
+        diff / np.where(dist > 0.0, dist, 1.0)[..., None],
+    )
+    dn = np.sqrt(np.sum(dirn * dirn, axis=-1))
+    dirn = np.where((dn > 0.0)[..., None], dirn, is_m.astype(np.float64))
+    signed = np.where(inside, -dist, dist) * scale[..., 0]
+    return x * scale * sgn, signed, dirn * sgn
+
+
+def _to_world(n: FloatArray, cp: FloatArray, sp: FloatArray) -> FloatArray:
+    """Rotate body-frame vectors back to NED."""
+    return np.stack(
+        [n[..., 0] * cp - n[..., 1] * sp, n[..., 0] * sp + n[..., 1] * cp, n[..., 2]], axis=-1
+    )
+
+
+def distance_to_ellipsoid(
+    points: ArrayLike,
+    centers: ArrayLike,
+    semi_axes: ArrayLike,
+    headings: ArrayLike,
+    return_normal: bool = False,
+) -> FloatArray | tuple[FloatArray, FloatArray]:
+    """Signed Euclidean distance from points to heading-aligned ellipsoids (negative inside).
+
+    The true distance to the surface (not the support-function bound of the paper's eq. 25),
+    by Newton's method on the Lagrange multiplier (see the module docstring); degenerate
+    cases (a point at the centre or on an axis, zero semi-axes, huge distances) are handled.
+
+    Args:
+        points: ``(..., 3)`` positions, NED (m).
+        centers: ``(..., 3)`` ellipsoid centres, NED (m).
+        semi_axes: ``(..., 3)`` semi-axes (longitudinal, lateral, vertical) (m).
+        headings: ``(...)`` heading ``psi`` of each ellipsoid (rad from north towards east).
+        return_normal: Also return the repulsion direction.
+
+    Returns:
+        The signed distance ``(...)`` (m); with ``return_normal`` also ``(..., 3)`` unit
+        vectors, NED: the outward surface normal at the nearest surface point, i.e. from that
+        point towards an outside point, and the direction that pushes an inside point out.
+        Never NaN; for a point exactly at the centre the smallest axis (the first of equal
+        ones, positive direction) is chosen.
+
+    Raises:
+        ValueError: If a semi-axis is negative or not finite.
+    """
+    ax = _check_axes(semi_axes)
+    q, cp, sp = _to_body(points, centers, headings)
+    _, dist, n = _nearest_body(q, ax)
+    if not return_normal:
+        return dist
+    cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
+    return dist, _to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+
+
+def nearest_point_on_ellipsoid(
+    points: ArrayLike, centers: ArrayLike, semi_axes: ArrayLike, headings: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Nearest surface point, signed distance and outward unit normal (all NED).
+
+    Args:
+        points: ``(..., 3)`` positions, NED (m).
+        centers: ``(..., 3)`` ellipsoid centres, NED (m).
+        semi_axes: ``(..., 3)`` semi-axes (longitudinal, lateral, vertical) (m).
+        headings: ``(...)`` headings (rad).
+
+    Returns:
+        ``(nearest, distance, normal)``: ``(..., 3)`` surface points (m), ``(...)`` signed
+        distances (m, negative inside) and ``(..., 3)`` unit outward normals at the nearest
+        points, as in :func:`distance_to_ellipsoid`.
+
+    Raises:
+        ValueError: If a semi-axis is negative or not finite.
+    """
+    ax = _check_axes(semi_axes)
+    q, cp, sp = _to_body(points, centers, headings)
+    x, dist, n = _nearest_body(q, ax)
+    cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
+    ctr = np.asarray(centers, dtype=np.float64)
+    xw = _to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp) + ctr
+    return xw, dist, _to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+
+
+def contains(
+    points: ArrayLike, centers: ArrayLike, semi_axes: ArrayLike, headings: ArrayLike
+) -> NDArray[np.bool_]:
+    """Whether each point lies inside or on its ellipsoid.
+
+    Args:
+        points: ``(..., 3)`` positions, NED (m).
+        centers: ``(..., 3)`` ellipsoid centres, NED (m).
+        semi_axes: ``(..., 3)`` semi-axes (longitudinal, lateral, vertical) (m).
+        headings: ``(...)`` headings (rad).
+
+    Returns:
+        Boolean array of the broadcast shape.
+
+    Raises:
+        ValueError: If a semi-axis is negative or not finite.
+    """
+    ax = _check_axes(semi_axes)
+    q, _, _ = _to_body(points, centers, headings)
+    q, ax = np.broadcast_arrays(q, ax)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(ax > 0.0, q / np.where(ax > 0.0, ax, 1.0), np.where(q != 0.0, np.inf, 0.0))
+    return np.sum(ratio * ratio, axis=-1) <= 1.0

@@ -1,0 +1,37 @@
+"""Gymnasium registration of the ``uasep`` ids (idempotent; runs on ``import uasep_env``)."""
+
+from __future__ import annotations
+
+import gymnasium
+
+__all__ = ["ENV_IDS", "register_envs"]
+
+#: id -> default config overrides.
+ENV_IDS: dict[str, dict] = {
+    "uasep/Formation-v0": {"scenario": "random"},
+    "uasep/PaperEncounter-v0": {"scenario": "paper"},
+    "uasep/LargeFormation-v0": {
+        "scenario": "large_formation",
+        "n_uavs": 8,
+        "formation": "wedge",
+        "n_obstacles": 2,
+    },
+}
+
+
+def register_envs() -> None:
+    """Register every id in :data:`ENV_IDS` that is not registered yet.
+
+    The entry points are import strings, so processes started with ``spawn`` (e.g.
+    ``AsyncVectorEnv``) import this package, and so register the ids, by themselves.
+    """
+    for env_id, defaults in ENV_IDS.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point="uasep_env.envs.gym_env:FormationEnv",
+            vector_entry_point="uasep_env.envs.vector:FormationVectorEnv",
+            kwargs=dict(defaults),
+            disable_env_checker=False,
+        )

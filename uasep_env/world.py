@@ -1,0 +1,460 @@
+"""The batched world: the one transition function of the project.
+
+:class:`World` holds ``n_envs`` independent worlds as arrays shaped ``(n_envs, n_uavs, ...)``
+and ``(n_envs, n_obstacles, ...)`` and moves them all with :meth:`World.step`. Every
+environment class in :mod:`uasep_env.envs` (PettingZoo, Gymnasium, vector, SB3) is a view of
+a ``World``; none moves anything itself.
+
+One environment step (``decision_interval`` physics steps of ``dt``) does, per physics step:
+
+1. UAVs: the commanded accelerations, bounded per axis, plus process noise, through the
+   double integrator with the speed limit (:mod:`uasep_env.dynamics`, eqs. 1-4);
+2. obstacles: the 3D Dubins model with random pilot commands (:mod:`uasep_env.obstacles`);
+3. sensing and estimation: noisy measurements of every UAV and obstacle, Kalman filtered
+   (:mod:`uasep_env.estimation`);
+4. safety: the minimum UAV-UAV and UAV-obstacle distances over the physics steps, so that a
+   collision inside a long decision interval is not missed;
+
+and then predicts each obstacle's reachable ellipsoid over the horizon from its estimate
+(:mod:`uasep_env.reachable`, eqs. 8-18).
+
+Randomness: each environment owns a :class:`numpy.random.Generator`, seeded at reset
+(``seed + i`` for environment ``i`` when one seed is given for the batch, the Gymnasium
+vector convention). Noise is drawn from it in blocks of ``noise_block`` physics steps, per
+environment, so environment ``i`` of a batch follows exactly the same episode as a
+single environment seeded with ``seed + i``, bit for bit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from uasep_env import reachable
+from uasep_env.config import EnvConfig, make_config
+from uasep_env.dynamics import measure, step_double_integrator
+from uasep_env.estimation import KalmanModel
+from uasep_env.formation import PlannedTrajectory, formation_center, formation_rotation
+from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
+from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, sample_scenario
+
+__all__ = ["World"]
+
+
+class World:
+    """``n_envs`` batched worlds of UAVs and obstacles.
+
+    Args:
+        config: The validated configuration (or a dict for :func:`make_config`).
+        n_envs: Number of independent worlds.
+        noise_block: Physics steps of noise drawn at once per environment.
+
+    Attributes:
+        config: The configuration.
+        n_envs: Batch size ``E``.
+        n_uavs: ``N``.
+        n_obstacles: ``M``.
+        time: ``(E,)`` simulated time since reset (s).
+        steps: ``(E,)`` environment steps since reset.
+        uav_pos: ``(E, N, 3)`` true UAV positions (m, NED).
+        uav_vel: ``(E, N, 3)`` true UAV velocities (m/s).
+        uav_acc: ``(E, N, 3)`` accelerations applied over the last physics step (m/s^2).
+        accel_cmd: ``(E, N, 3)`` last commanded accelerations (m/s^2).
+        prev_accel_cmd: ``(E, N, 3)`` the command before that (m/s^2).
+        est_pos: ``(E, N, 3)`` estimated UAV positions (m).
+        est_vel: ``(E, N, 3)`` estimated UAV velocities (m/s).
+        obstacles: The obstacles' true state (:class:`ObstacleState`).
+        obs_est_pos: ``(E, M, 3)`` estimated obstacle positions (m).
+        obs_est_vel: ``(E, M, 3)`` estimated obstacle ground velocities (m/s).
+        pred_center: ``(E, M, 3)`` centres of the predicted reachable ellipsoids (m).
+        pred_axes: ``(E, M, 3)`` their semi-axes (longitudinal, lateral, vertical) (m).
+        pred_heading: ``(E, M)`` their headings (rad).
+        slots: ``(E, N, 3)`` formation pattern (m, formation frame).
+        plan: The planned trajectories (:class:`PlannedTrajectory`).
+        min_uav_dist: ``(E, N)`` smallest distance to another UAV over the last env step (m).
+        min_obs_dist: ``(E, N)`` smallest distance to an active obstacle over it (m).
+        families: Scenario family of each environment's episode.
+    """
+
+    def __init__(
+        self, config: EnvConfig | dict | None = None, n_envs: int = 1, noise_block: int = 64
+    ) -> None:
+        cfg = config if isinstance(config, EnvConfig) else make_config(config)
+        if not isinstance(n_envs, (int, np.integer)) or isinstance(n_envs, bool) or n_envs < 1:
+            raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
+        self.config = cfg
+        self.n_envs = e = int(n_envs)
+        self.n_uavs = n = cfg.n_uavs
+        self.n_obstacles = m = cfg.n_obstacles
+        self.noise_block = int(noise_block)
+        nz = cfg.noise
+        self._uav_kf = KalmanModel(cfg.dt, nz.accel_std, nz.position_std, nz.velocity_std)
+        self._obs_kf: KalmanModel | None = None  # built per obstacle speed class at reset
+        self._n_normal = n * 9 + m * 6
+        self._n_unif = m * N_UNIFORMS
+        self._rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(e)]
+        self._normal_buf = np.zeros((e, self.noise_block, self._n_normal))
+        self._unif_buf = np.zeros((e, self.noise_block, self._n_unif))
+        self._buf_pos = np.full(e, self.noise_block, dtype=np.int64)
+
+        self.time = np.zeros(e)
+        self.steps = np.zeros(e, dtype=np.int64)
+        self._kf_count = np.zeros(e, dtype=np.int64)
+        self.uav_pos = np.zeros((e, n, 3))
+        self.uav_vel = np.zeros((e, n, 3))
+        self.uav_acc = np.zeros((e, n, 3))
+        self.accel_cmd = np.zeros((e, n, 3))
+        self.prev_accel_cmd = np.zeros((e, n, 3))
+        self.est_pos = np.zeros((e, n, 3))
+        self.est_vel = np.zeros((e, n, 3))
+        self.obstacles = ObstacleState(e, m)
+        self.obs_est_pos = np.zeros((e, m, 3))
+        self.obs_est_vel = np.zeros((e, m, 3))
+        self.pred_offset = np.zeros((e, m))
+        self.pred_center = np.zeros((e, m, 3))
+        self.pred_axes = np.ones((e, m, 3))
+        self.pred_heading = np.zeros((e, m))
+        self.slots = np.zeros((e, n, 3))
+        self.plan = PlannedTrajectory(np.tile(np.eye(N_WAYPOINTS, 3)[None], (e, 1, 1)), 1.0)
+        self.min_uav_dist = np.full((e, n), np.inf)
+        self.min_obs_dist = np.full((e, n), np.inf)
+        self.families: list[str] = [""] * e
+        self._obs_kf_std = (
+            max(cfg.obstacle.speed * cfg.obstacle.max_turn_rate, 0.1),
+            nz.obstacle_position_std,
+            nz.obstacle_velocity_std,
+        )
+        self._obs_kf = KalmanModel(cfg.dt, *self._obs_kf_std)
+        self._offdiag = ~np.eye(n, dtype=bool)
+        self._has_reset = False
+
+    # ------------------------------------------------------------------ reset
+    def reset(
+        self,
+        seed: int | Sequence[int | None] | None = None,
+        mask: np.ndarray | None = None,
+    ) -> None:
+        """Start new episodes in the environments selected by ``mask`` (all by default).
+
+        Args:
+            seed: ``None`` (continue each environment's generator; fresh entropy on the
+                first reset), an int (environment ``i`` gets ``seed + i``) or one seed per
+                environment (``None`` entries continue).
+            mask: ``(n_envs,)`` bool; which environments to reset.
+
+        Raises:
+            ValueError: If ``mask`` or ``seed`` has the wrong shape or type.
+        """
+        e = self.n_envs
+        if mask is None:
+            mask = np.ones(e, dtype=bool)
+        mask = np.asarray(mask)
+        if mask.shape != (e,) or mask.dtype != bool:
+            raise ValueError(f"mask must be a bool array of shape ({e},), got {mask!r}")
+        seeds: list[int | None]
+        if seed is None:
+            seeds = [None] * e
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            if seed < 0:
+                raise ValueError(f"seed must be >= 0, got {seed}")
+            seeds = [int(seed) + i for i in range(e)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != e:
+                raise ValueError(f"expected {e} seeds, got {len(seeds)}: {seed!r}")
+        idx = np.flatnonzero(mask)
+        specs: list[ScenarioSpec] = []
+        for i in idx:
+            s = seeds[i]
+            if s is not None:
+                self._rngs[i] = np.random.default_rng(int(s))
+                self._buf_pos[i] = self.noise_block  # drop noise drawn from the old stream
+            specs.append(sample_scenario(self._rngs[i], self.config))
+            self.families[i] = specs[-1].family
+        if len(idx) == 0:
+            return
+        self._apply_specs(mask, idx, specs)
+        self._has_reset = True
+
+    def _apply_specs(self, mask: np.ndarray, idx: np.ndarray, specs: list[ScenarioSpec]) -> None:
+        cfg = self.config
+
+        def stack(name: str) -> np.ndarray:
+            return np.stack([getattr(s, name) for s in specs])
+
+        self.time[mask] = 0.0
+        self.steps[mask] = 0
+        self._kf_count[mask] = 0
+        self.plan.set_rows(mask, stack("waypoints"), np.array([s.cruise_speed for s in specs]))
+        self.slots[mask] = stack("slots")
+        self.uav_pos[mask] = stack("uav_pos")
+        self.uav_vel[mask] = stack("uav_vel")
+        self.uav_acc[mask] = 0.0
+        self.accel_cmd[mask] = 0.0
+        self.prev_accel_cmd[mask] = 0.0
+        ob = self.obstacles
+        if self.n_obstacles:
+            ob.pos[mask] = stack("obs_pos")
+            ob.heading[mask] = stack("obs_heading")
+            ob.speed[mask] = stack("obs_speed")
+            ob.turn_rate[mask] = stack("obs_turn_rate")
+            ob.climb_rate[mask] = stack("obs_climb_rate")
+            ob.max_turn_rate[mask] = stack("obs_max_turn_rate")
+            ob.max_climb_rate[mask] = stack("obs_max_climb_rate")
+            ob.radius[mask] = stack("obs_radius")
+            ob.alt_band[mask] = stack("obs_alt_band")
+            ob.active[mask] = stack("obs_active")
+            ob.switch_prob[mask] = min(1.0, cfg.dt / cfg.obstacle.mean_switch_time)
+            ob.straight_prob[mask] = cfg.obstacle.straight_probability
+            ob.wind[mask] = stack("wind")
+            # The ellipsoid's shape is fixed by the obstacle's performance; only its pose moves.
+            # Inflations keep the true obstacle inside despite wind drift and the track error.
+            pred = cfg.prediction
+            wind_speed = np.linalg.norm(ob.wind[mask], axis=-1)[:, None]
+            track_err = 3.0 * self._obs_kf.steady_state_position_std()
+            offset, axes = reachable.ellipsoid(
+                ob.speed[mask],
+                ob.max_turn_rate[mask],
+                ob.max_climb_rate[mask],
+                pred.horizon,
+                ob.radius[mask] + wind_speed * pred.horizon + track_err,
+                mode=pred.mode,
+            )
+            self.pred_offset[mask] = offset
+            self.pred_axes[mask] = axes
+        # First measurements start the tracks.
+        self._sense(mask, initialise=True)
+        self._predict_regions()
+        self._update_safety(reset_mask=mask)
+
+    # ------------------------------------------------------------------ noise
+    def _draw(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """This physics step's standard normals and uniforms, per environment.
+
+        Environments outside ``active`` consume nothing (their values are discarded).
+        """
+        due = self._buf_pos >= self.noise_block
+        if active is not None:
+            due &= active
+        refill = np.flatnonzero(due)
+        for i in refill:
+            rng = self._rngs[i]
+            self._normal_buf[i] = rng.standard_normal((self.noise_block, self._n_normal))
+            self._unif_buf[i] = rng.random((self.noise_block, self._n_unif))
+            self._buf_pos[i] = 0
+        rows = np.arange(self.n_envs)
+        normals = self._normal_buf[rows, np.minimum(self._buf_pos, self.noise_block - 1)]
+        unifs = self._unif_buf[rows, np.minimum(self._buf_pos, self.noise_block - 1)]
+        if active is None:
+            self._buf_pos += 1
+        else:
+            self._buf_pos += active
+        return normals, unifs
+
+    # ------------------------------------------------------------------ step
+    def step(self, accel_cmd: np.ndarray, active: np.ndarray | None = None) -> None:
+        """Advance every environment by one environment step.
+
+        Args:
+            accel_cmd: ``(n_envs, n_uavs, 3)`` commanded accelerations (m/s^2), finite;
+                each axis is bounded by ``uav.max_accel`` (the physical limit).
+            active: Optional ``(n_envs,)`` bool; environments outside it do not move and
+                consume no randomness (used by vector envs that reset them instead).
+
+        Raises:
+            ValueError: Wrong shape or non-finite values (the offending entries are named).
+            RuntimeError: If called before :meth:`reset`.
+        """
+        if not self._has_reset:
+            raise RuntimeError("World.step called before World.reset")
+        cmd = np.asarray(accel_cmd, dtype=float)
+        expected = (self.n_envs, self.n_uavs, 3)
+        if cmd.shape != expected:
+            raise ValueError(f"accel_cmd must have shape {expected}, got {cmd.shape}")
+        if not np.all(np.isfinite(cmd)):
+            bad = np.argwhere(~np.isfinite(cmd))[:3].tolist()
+            raise ValueError(f"accel_cmd has non-finite values at (env, uav, axis) {bad}")
+        cfg = self.config
+        frozen = None
+        if active is not None:
+            active = np.asarray(active, dtype=bool)
+            if active.shape != (self.n_envs,):
+                raise ValueError(f"active must have shape ({self.n_envs},), got {active.shape}")
+            if active.all():
+                active = None
+            else:
+                frozen = self._snapshot(~active)
+        self.prev_accel_cmd[...] = self.accel_cmd
+        self.accel_cmd[...] = np.clip(cmd, -cfg.uav.max_accel, cfg.uav.max_accel)
+        self.min_uav_dist.fill(np.inf)
+        self.min_obs_dist.fill(np.inf)
+        for _ in range(cfg.decision_interval):
+            self._physics_step(active)
+        self.steps += 1
+        self._predict_regions()
+        if frozen is not None:
+            self._restore(~active, frozen)
+
+    _STATE = (
+        "time", "steps", "_kf_count", "uav_pos", "uav_vel", "uav_acc", "accel_cmd",
+        "prev_accel_cmd", "est_pos", "est_vel", "obs_est_pos", "obs_est_vel", "pred_center",
+        "pred_heading", "min_uav_dist", "min_obs_dist",
+    )
+    _OBSTACLE_STATE = ("pos", "heading", "turn_rate", "climb_rate")
+
+    def _snapshot(self, mask: np.ndarray) -> dict[str, np.ndarray]:
+        snap = {name: getattr(self, name)[mask].copy() for name in self._STATE}
+        for name in self._OBSTACLE_STATE:
+            snap["obstacles." + name] = getattr(self.obstacles, name)[mask].copy()
+        return snap
+
+    def _restore(self, mask: np.ndarray, snap: dict[str, np.ndarray]) -> None:
+        for name in self._STATE:
+            getattr(self, name)[mask] = snap[name]
+        for name in self._OBSTACLE_STATE:
+            getattr(self.obstacles, name)[mask] = snap["obstacles." + name]
+
+    def _physics_step(self, active: np.ndarray | None = None) -> None:
+        cfg = self.config
+        n, m = self.n_uavs, self.n_obstacles
+        normals, unifs = self._draw(active)
+        nz = cfg.noise
+        acc_noise = normals[:, : n * 3].reshape(self.n_envs, n, 3) * nz.accel_std
+        applied = step_double_integrator(
+            self.uav_pos,
+            self.uav_vel,
+            self.accel_cmd,
+            acc_noise,
+            cfg.dt,
+            cfg.uav.max_speed,
+            cfg.uav.max_accel,
+        )
+        self.uav_acc[...] = applied
+        if m:
+            step_obstacles(self.obstacles, unifs.reshape(self.n_envs, m, N_UNIFORMS), cfg.dt)
+        self.time += cfg.dt
+        self._sense(None, initialise=False, normals=normals, known_accel=applied - acc_noise)
+        self._update_safety()
+
+    # ------------------------------------------------------------------ sensing
+    def _sense(
+        self,
+        mask: np.ndarray | None,
+        *,
+        initialise: bool,
+        normals: np.ndarray | None = None,
+        known_accel: np.ndarray | None = None,
+    ) -> None:
+        cfg = self.config
+        nz = cfg.noise
+        e, n, m = self.n_envs, self.n_uavs, self.n_obstacles
+        if normals is None:
+            # Initial measurements use the next noise draw too (consumed only by those envs).
+            normals, _ = self._draw(mask)
+        z_meas = normals[:, n * 3 : n * 9].reshape(e, n, 6)
+        mp, mv = measure(
+            self.uav_pos,
+            self.uav_vel,
+            z_meas[..., :3] * nz.position_std,
+            z_meas[..., 3:] * nz.velocity_std,
+        )
+        obs_vel = obstacle_velocity(self.obstacles)
+        if m:
+            z_obs = normals[:, n * 9 :].reshape(e, m, 6)
+            omp, omv = measure(
+                self.obstacles.pos,
+                obs_vel,
+                z_obs[..., :3] * nz.obstacle_position_std,
+                z_obs[..., 3:] * nz.obstacle_velocity_std,
+            )
+        if initialise or not cfg.prediction.kalman:
+            sel = mask if mask is not None else np.ones(e, dtype=bool)
+            self.est_pos[sel], self.est_vel[sel] = mp[sel], mv[sel]
+            if m:
+                self.obs_est_pos[sel], self.obs_est_vel[sel] = omp[sel], omv[sel]
+            if initialise:
+                self._kf_count[sel] = 0
+            return
+        self._kf_count += 1
+        self._uav_kf.update(self.est_pos, self.est_vel, known_accel, mp, mv, self._kf_count)
+        if m:
+            self._obs_kf.update(self.obs_est_pos, self.obs_est_vel, None, omp, omv, self._kf_count)
+
+    # ------------------------------------------------------------------ prediction
+    def _predict_regions(self) -> None:
+        """Place each obstacle's reachable ellipsoid on its current estimate (eqs. 8-18)."""
+        if not self.n_obstacles:
+            return
+        wind = self.obstacles.wind[:, None, :]
+        air = self.obs_est_vel - wind  # heading is the airspeed direction
+        heading = np.arctan2(air[..., 1], air[..., 0])
+        self.pred_heading[...] = heading
+        self.pred_center[..., 0] = self.obs_est_pos[..., 0] + self.pred_offset * np.cos(heading)
+        self.pred_center[..., 1] = self.obs_est_pos[..., 1] + self.pred_offset * np.sin(heading)
+        self.pred_center[..., 2] = self.obs_est_pos[..., 2]
+
+    # ------------------------------------------------------------------ safety
+    def _update_safety(self, reset_mask: np.ndarray | None = None) -> None:
+        d_uav = self.uav_distances()
+        d_uav = np.where(self._offdiag, d_uav, np.inf).min(axis=-1)
+        d_obs = self.obstacle_distances().min(axis=-1, initial=np.inf)
+        if reset_mask is not None:
+            self.min_uav_dist[reset_mask] = d_uav[reset_mask]
+            self.min_obs_dist[reset_mask] = d_obs[reset_mask]
+        else:
+            np.minimum(self.min_uav_dist, d_uav, out=self.min_uav_dist)
+            np.minimum(self.min_obs_dist, d_obs, out=self.min_obs_dist)
+
+    # ------------------------------------------------------------------ queries
+    def uav_distances(self, pos: np.ndarray | None = None) -> np.ndarray:
+        """``(E, N, N)`` distances between UAVs (true positions unless ``pos`` given) (m)."""
+        p = self.uav_pos if pos is None else pos
+        diff = p[:, :, None, :] - p[:, None, :, :]
+        return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+
+    def obstacle_distances(self, pos: np.ndarray | None = None) -> np.ndarray:
+        """``(E, N, M)`` UAV-obstacle centre distances, inf for inactive obstacles (m)."""
+        p = self.uav_pos if pos is None else pos
+        diff = p[:, :, None, :] - self.obstacles.pos[:, None, :, :]
+        d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
+        return np.where(self.obstacles.active[:, None, :], d, np.inf)
+
+    def region_distances(self, pos: np.ndarray | None = None) -> np.ndarray:
+        """``(E, N, M)`` signed distance to each predicted reachable ellipsoid (m), inf if inactive."""
+        p = self.uav_pos if pos is None else pos
+        if not self.n_obstacles:
+            return np.zeros((self.n_envs, self.n_uavs, 0))
+        d = reachable.distance_to_ellipsoid(
+            p[:, :, None, :],
+            self.pred_center[:, None, :, :],
+            self.pred_axes[:, None, :, :],
+            self.pred_heading[:, None, :],
+        )
+        return np.where(self.obstacles.active[:, None, :], d, np.inf)
+
+    def obstacle_velocities(self) -> np.ndarray:
+        """``(E, M, 3)`` true obstacle ground velocities (m/s)."""
+        return obstacle_velocity(self.obstacles)
+
+    def planned(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each UAV's planned position and velocity now, ``(E, N, 3)`` each."""
+        return self.plan.uav_positions(self.time, self.slots)
+
+    def desired_slots(self, estimated: bool = True) -> np.ndarray:
+        """Eq. 7: each UAV's slot in the current formation frame, ``(E, N, 3)`` (m).
+
+        Args:
+            estimated: Use the estimates (what the UAVs know) rather than the truth.
+        """
+        pos = self.est_pos if estimated else self.uav_pos
+        vel = self.est_vel if estimated else self.uav_vel
+        center, mean_vel = formation_center(pos, vel)
+        _, plan_vel = self.plan.center(self.time)
+        fallback = self.plan.heading_velocity(self.time)
+        rot = formation_rotation(mean_vel, np.where(np.linalg.norm(plan_vel, axis=-1, keepdims=True) > 0, plan_vel, fallback))
+        return center[:, None, :] + np.einsum("eij,enj->eni", rot, self.slots)
+
+    def plan_finished(self) -> np.ndarray:
+        """``(E,)`` whether the planned trajectory has been flown to its end."""
+        return self.plan.finished(self.time)
