@@ -96,8 +96,8 @@ def test_obstacle_repulsion_points_out_of_the_region_and_only_when_entering():
     lateral = np.array([-np.sin(heading), np.cos(heading), 0.0])
     center = w.pred_center[0, 0]
     axes = w.pred_axes[0, 0]
-    # A UAV just outside the region, laterally, flying towards it: repelled outwards.
-    w.est_pos[0, 2] = center + lateral * (axes[1] + 3.0)
+    # A UAV 10 m outside the region, laterally, flying towards it: repelled outwards.
+    w.est_pos[0, 2] = center + lateral * (axes[1] + 10.0)
     w.est_vel[0, 2] = -lateral * 5.0
     f = apf.forces(core.observations()[0, 2])["obstacle"]
     assert f @ lateral > 0.0

@@ -74,9 +74,10 @@ def test_deviation_control_smoothness_terms(core):
 def test_weights_and_sharing_combine_terms(core):
     w = core.world
     w.uav_pos[0, 2] += np.array([0.0, 0.0, 30.0])  # only uav_2 deviates much
-    only_dev = RewardWeights(**dict.fromkeys(REWARD_TERMS, 0.0), deviation=1.0)
+    zeros = dict.fromkeys(REWARD_TERMS, 0.0)
+    only_dev = RewardWeights(**{**zeros, "deviation": 1.0})
     own, terms = compute_rewards(w, only_dev)
     np.testing.assert_allclose(own, terms["deviation"])
-    shared = RewardWeights(**dict.fromkeys(REWARD_TERMS, 0.0), deviation=1.0, shared=1.0)
+    shared = RewardWeights(**{**zeros, "deviation": 1.0, "shared": 1.0})
     team, _ = compute_rewards(w, shared)
     np.testing.assert_allclose(team, np.broadcast_to(terms["deviation"].mean(), (1, 3)))

@@ -179,8 +179,8 @@ class ObstacleConfig:
     max_turn_rate: float = 0.013  # rad/s
     max_climb_rate: float = 0.5  # m/s
     radius: float = 3.0  # m
-    mean_switch_time: float = 15.0  # s
-    straight_probability: float = 0.4
+    mean_switch_time: float = 30.0  # s
+    straight_probability: float = 0.5
     wind: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s, NED
 
     def __post_init__(self) -> None:

@@ -73,7 +73,7 @@ def step_double_integrator(
         # can never leave |v| above V_max.
         scale = np.where(over, (max_speed * (1.0 - 1e-12)) / np.sqrt(np.maximum(speed2, 1e-300)), 1.0)
         new_vel *= scale[..., None]
-        accel = (new_vel - vel) / dt
+        accel = np.where(over[..., None], (new_vel - vel) / dt, accel)
     # Exact double-integrator position update with the applied (constant) acceleration.
     pos += 0.5 * dt * (vel + new_vel)
     vel[...] = new_vel

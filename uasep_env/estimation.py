@@ -124,4 +124,4 @@ class KalmanModel:
 
     def steady_state_position_std(self) -> float:
         """Posterior position standard deviation once the filter has converged (m)."""
-        return float(np.sqrt(self.covariances[-1, 0, 0]))
+        return float(np.sqrt(max(0.0, self.covariances[-1, 0, 0])))

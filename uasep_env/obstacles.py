@@ -43,6 +43,7 @@ class ObstacleState:
         active: Whether the obstacle slot is in use.
         switch_prob: Per-step command-change probability.
         straight_prob: Probability of a straight-and-level command.
+        hold_until: Time before which the pilot keeps the initial commands (s).
         wind: ``(E, 3)`` steady wind (m/s, NED).
     """
 
@@ -61,6 +62,7 @@ class ObstacleState:
         self.active = np.zeros(shape, dtype=bool)
         self.switch_prob = np.zeros(shape)
         self.straight_prob = np.zeros(shape)
+        self.hold_until = np.zeros(shape)
         self.wind = np.zeros((n_envs, 3))
 
 
@@ -77,15 +79,20 @@ def obstacle_velocity(obs: ObstacleState) -> np.ndarray:
     return vel + obs.wind[:, None, :]
 
 
-def step_obstacles(obs: ObstacleState, uniforms: np.ndarray, dt: float) -> None:
+def step_obstacles(
+    obs: ObstacleState, uniforms: np.ndarray, dt: float, time: np.ndarray | None = None
+) -> None:
     """Advance every obstacle one physics step, in place.
 
     Args:
         obs: The batched obstacle state.
         uniforms: ``(E, M, N_UNIFORMS)`` uniforms in ``[0, 1)`` for the pilot's commands.
         dt: Physics step (s).
+        time: ``(E,)`` current time (s), compared with ``hold_until``; ``None``: no hold.
     """
     switch = uniforms[..., 0] < obs.switch_prob
+    if time is not None:
+        switch &= time[:, None] >= obs.hold_until
     straight = uniforms[..., 1] < obs.straight_prob
     new_turn = np.where(straight, 0.0, (2.0 * uniforms[..., 2] - 1.0) * obs.max_turn_rate)
     new_climb = np.where(straight, 0.0, (2.0 * uniforms[..., 3] - 1.0) * obs.max_climb_rate)

@@ -131,7 +131,11 @@ _MODES = ("swept", "terminal")
 FloatArray = NDArray[np.float64]
 
 #: Intervals of the enclosure certificate on ``[0, pi]`` (even, so that pi/2 is a node).
-_N_CERT = 256
+_N_CERT = 128
+#: Geometrically spaced parameter nodes at each end of the ellipse's axes.
+_N_GEO = 16
+#: Nodes uniform in the normal angle, merged with those uniform in the ellipse's parameter.
+_UNIFORM_NODES = np.linspace(0.0, np.pi, 65)[1:-1]
 #: Relative absolute margin (of ``v t + r``) that absorbs floating-point rounding.
 _EPS_ABS = 1e-12
 #: Newton iterations of the point-to-ellipsoid distance.
@@ -173,17 +177,25 @@ def _wrap_abs(theta: FloatArray) -> FloatArray:
     return np.abs(np.remainder(theta + np.pi, 2.0 * np.pi) - np.pi)
 
 
-def _h_unit(a: FloatArray, phi: FloatArray, swept: bool) -> FloatArray:
+def _h_unit(
+    a: FloatArray,
+    phi: FloatArray,
+    swept: bool,
+    sin_a: FloatArray | None = None,
+    cos_a: FloatArray | None = None,
+) -> FloatArray:
     """Support of the ``r = 0`` set in units of ``v t``, direction ``a = |theta|`` in [0, pi].
 
     ``1 - (a - sin a) / phi`` where the heading ``a`` can be reached (``a <= phi``), else the
     support of the corner ``F(phi)``: ``sin a (1 - cos phi) / phi + cos a sin(phi) / phi``;
-    clipped at 0 (the origin) for the swept set.
+    clipped at 0 (the origin) for the swept set. ``sin_a``/``cos_a`` may be passed if known.
     """
+    sa = np.sin(a) if sin_a is None else sin_a
+    ca = np.cos(a) if cos_a is None else cos_a
     ip = _inv(phi)
-    reach = 1.0 - (a - np.sin(a)) * ip
+    reach = 1.0 - (a - sa) * ip
     omc = 2.0 * np.sin(0.5 * phi) ** 2 * ip  # (1 - cos phi) / phi
-    corner = np.sin(a) * omc + np.cos(a) * np.sinc(phi / np.pi)
+    corner = sa * omc + ca * np.sinc(phi / np.pi)
     if swept:
         corner = np.maximum(corner, 0.0)
     return np.where(a <= phi, reach, corner)
@@ -528,48 +540,65 @@ def _build_table(
 
 
 # ---------------------------------------------------------------------------- ellipse fit
-def _margins(
-    th: FloatArray, lat: FloatArray, lon: FloatArray, r: FloatArray, eps_abs: FloatArray
-) -> FloatArray:
-    """Certificate margins at the nodes ``th`` (``(..., K)``, sorted, 0 and pi included)."""
-    s2 = np.sin(th) ** 2
-    c2 = np.cos(th) ** 2
-    a2 = (lat**2)[..., None]
-    b2 = (lon**2)[..., None]
-    den = np.maximum(a2 * s2 + b2 * c2, 1e-300)
-    rho_e = a2 * b2 / den**1.5
-    m_int = np.maximum(np.maximum(rho_e[..., 1:], rho_e[..., :-1]) - r[..., None], 0.0)
-    m_int = m_int * np.diff(th, axis=-1) ** 2 / 8.0
-    pad = np.zeros_like(th[..., :1])
-    left = np.concatenate([pad, m_int], axis=-1)
-    right = np.concatenate([m_int, pad], axis=-1)
-    return np.maximum(left, right) + eps_abs[..., None]
+class _Nodes:
+    """Certificate nodes on ``[0, pi]`` with their trigonometry and the set's support there."""
+
+    def __init__(self, th: FloatArray, vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool) -> None:
+        self.th = th
+        self.cos = np.cos(th)
+        self.c2 = self.cos**2
+        sin = np.sin(th)
+        self.s2 = sin**2
+        self.d2 = np.diff(th, axis=-1) ** 2 / 8.0
+        self.h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept, sin, self.cos)
+
+    def take(self, idx: NDArray[np.intp]) -> _Nodes:
+        """The nodes of the rows ``idx``."""
+        sub = object.__new__(_Nodes)
+        for name in ("th", "cos", "c2", "s2", "d2", "h"):
+            setattr(sub, name, getattr(self, name)[idx])
+        return sub
+
+
+def _margins(nd: _Nodes, lat: FloatArray, lon: FloatArray, r: FloatArray, eps_abs: FloatArray) -> FloatArray:
+    """Certificate margins ``max(max rho_E - r, 0) Delta^2 / 8`` at the nodes, ``(..., K)``."""
+    a2 = (lat * lat)[..., None]
+    b2 = (lon * lon)[..., None]
+    den = np.maximum(a2 * nd.s2 + b2 * nd.c2, 1e-300)
+    rho_e = (a2 * b2) / (den * np.sqrt(den))
+    m_int = np.maximum(np.maximum(rho_e[..., 1:], rho_e[..., :-1]) - r[..., None], 0.0) * nd.d2
+    out = np.empty_like(rho_e)
+    out[..., 0] = m_int[..., 0]
+    out[..., -1] = m_int[..., -1]
+    np.maximum(m_int[..., 1:], m_int[..., :-1], out=out[..., 1:-1])
+    return out + eps_abs[..., None]
 
 
 def _fit_axes(
-    th: FloatArray,
-    h: FloatArray,
+    nd: _Nodes,
     c: FloatArray,
     lat: FloatArray,
     lon: FloatArray,
     r: FloatArray,
     eps_abs: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
-    """Smallest axes ``(A, B >= lon)`` that meet the node constraints with margins for ``A``."""
-    delta = _margins(th, lat, lon, r, eps_abs)
+    """Smallest axes meeting the node constraints, margins taken at the given ``(A, B)``.
+
+    ``B`` only grows (to meet the tip constraints at 0 and pi); ``A`` is the least value with
+    ``c cos theta_k + sqrt(A^2 sin^2 + B^2 cos^2) >= h_k + delta_k`` at the inner nodes.
+    """
+    delta = 1.25 * _margins(nd, lat, lon, r, eps_abs)
+    h = nd.h
     lon = np.maximum(lon, h[..., 0] + delta[..., 0] - c)
     lon = np.maximum(lon, h[..., -1] + delta[..., -1] + c)
-    ti = th[..., 1:-1]
-    s2 = np.sin(ti) ** 2
-    c2 = np.cos(ti) ** 2
-    need = np.maximum(h[..., 1:-1] + delta[..., 1:-1] - c[..., None] * np.cos(ti), 0.0)
-    a2 = (need**2 - (lon**2)[..., None] * c2) / s2
+    need = h[..., 1:-1] + delta[..., 1:-1] - c[..., None] * nd.cos[..., 1:-1]
+    need = np.maximum(need, 0.0)
+    a2 = (need * need - (lon * lon)[..., None] * nd.c2[..., 1:-1]) / nd.s2[..., 1:-1]
     return np.sqrt(np.maximum(np.max(a2, axis=-1), 0.0)), lon
 
 
 def _certified(
-    th: FloatArray,
-    h: FloatArray,
+    nd: _Nodes,
     c: FloatArray,
     lat: FloatArray,
     lon: FloatArray,
@@ -577,11 +606,11 @@ def _certified(
     eps_abs: FloatArray,
 ) -> NDArray[np.bool_]:
     """Whether ``(c, A, B)`` passes the enclosure certificate (see the module docstring)."""
-    delta = _margins(th, lat, lon, r, eps_abs)
-    he = c[..., None] * np.cos(th) + np.sqrt(
-        (lat**2)[..., None] * np.sin(th) ** 2 + (lon**2)[..., None] * np.cos(th) ** 2
+    delta = _margins(nd, lat, lon, r, eps_abs)
+    he = c[..., None] * nd.cos + np.sqrt(
+        (lat * lat)[..., None] * nd.s2 + (lon * lon)[..., None] * nd.c2
     )
-    return np.all(he - h >= delta, axis=-1)
+    return np.all(he - nd.h >= delta, axis=-1)
 
 
 def _ellipse_core(
@@ -603,36 +632,53 @@ def _ellipse_core(
     lon = frac[..., 1] * ext
     lat = frac[..., 2] * hx
     eps_abs = _EPS_ABS * scale
-    tpar = np.linspace(0.0, np.pi, _N_CERT + 1)
+    # Nodes: uniform in the parametric angle of the table's ellipse, merged with nodes uniform
+    # in the normal angle, pi/2 and the kink of the swept set's support.
+    # Near the ends of a thin ellipse the normal turns fast, so the parameter is also refined
+    # geometrically towards 0, pi/2 and pi, down to a fifth of the aspect ratio.
+    lat_g = np.maximum(lat, 1e-9 * scale)
+    lon_g = np.maximum(lon, 1e-9 * scale)
+    step = np.pi / _N_CERT
+    t_lo = np.minimum(0.2 * np.minimum(lat_g, lon_g) / np.maximum(lat_g, lon_g), step)
+    geo = t_lo[..., None] * (step / t_lo)[..., None] ** np.linspace(0.0, 1.0, _N_GEO)
+    tpar = np.concatenate(
+        [
+            np.broadcast_to(np.linspace(0.0, np.pi, _N_CERT + 1), (*vt.shape, _N_CERT + 1)),
+            geo,
+            0.5 * np.pi - geo,
+            0.5 * np.pi + geo,
+            np.pi - geo,
+        ],
+        axis=-1,
+    )
+    th = np.arctan2(lon_g[..., None] * np.sin(tpar), lat_g[..., None] * np.cos(tpar))
+    th[..., 0] = 0.0
+    th[..., _N_CERT // 2] = 0.5 * np.pi
+    th[..., _N_CERT] = np.pi
     kink = np.where(swept & (phi < np.pi), 0.5 * (np.pi + phi), 0.5 * np.pi)
+    uni = np.broadcast_to(_UNIFORM_NODES, (*th.shape[:-1], _UNIFORM_NODES.size))
+    th = np.sort(np.concatenate([th, uni, kink[..., None]], axis=-1), axis=-1)
+    nd = _Nodes(th, vt, phi, r, swept)
+    # The margins depend on (A, B): fit twice, taking the margins at the previous axes with a
+    # 25% allowance, then certify; rows that still fail grow until they pass.
+    lat = lat_g
     for _ in range(2):
-        # Nodes uniform in the parametric angle of the current ellipse (+ pi/2 and the kinks).
-        lat_g = np.maximum(lat, 1e-9 * scale)
-        lon_g = np.maximum(lon, 1e-9 * scale)
-        th = np.arctan2(lon_g[..., None] * np.sin(tpar), lat_g[..., None] * np.cos(tpar))
-        th[..., 0] = 0.0
-        th[..., _N_CERT // 2] = 0.5 * np.pi
-        th[..., -1] = np.pi
-        th = np.sort(np.concatenate([th, kink[..., None]], axis=-1), axis=-1)
-        h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept)
-        for _ in range(2):
-            lat, lon = _fit_axes(th, h, c, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)
-    ok = _certified(th, h, c, lat, lon, r, eps_abs)
-    grow = 1.0
-    for _ in range(40):
-        if np.all(ok | ~live):
+        lat, lon = _fit_axes(nd, c, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)
+    ok = _certified(nd, c, lat, lon, r, eps_abs) | ~live
+    grow = 1e-6
+    for _ in range(30):
+        if np.all(ok):
             break
-        grow *= 1.5
-        bad = ~ok
-        fac = 1.0 + 1e-9 * grow
-        lat = np.where(bad, lat * fac + 1e-12 * grow * scale, lat)
-        lon = np.where(bad, lon * fac + 1e-12 * grow * scale, lon)
-        ok = ok | _certified(th, h, c, lat, lon, r, eps_abs)
-    fallback = ~ok & live
+        bad = np.flatnonzero(~ok)
+        lat[bad] *= 1.0 + grow
+        lon[bad] *= 1.0 + grow
+        ok[bad] = _certified(nd.take(bad), c[bad], lat[bad], lon[bad], r[bad], eps_abs[bad])
+        grow *= 8.0
+    fallback = ~ok
     c = np.where(fallback, 0.0, c)
     lat = np.where(fallback, scale, lat)
     lon = np.where(fallback, scale, lon)
-    # Exact special cases: a disc (v t = 0), a segment (phi = 0, r = 0), a point.
+    # Exact special cases: a disc (v t = 0, includes a point) and a segment (phi = 0, r = 0).
     disc = vt <= 0.0
     seg = (phi <= 0.0) & (r <= 0.0) & ~disc
     c = np.where(disc, 0.0, np.where(seg, 0.5 * vt, c))

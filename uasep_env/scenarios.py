@@ -10,9 +10,10 @@ Families (``EnvConfig.scenario``):
 * ``paper`` -- section 4: three UAVs in line abreast (slots ``[-20,0,0], [20,0,0],
   [0,0,0]``) set out from scattered positions with different velocities, form up, and fly
   north at 100 m altitude; an obstacle (4 m/s, ``w_max`` = 0.013 rad/s, the paper's values)
-  crosses their path from the east, a little below them, aimed at the middle UAV's
-  planned position at t = 115 s (the paper's encounter is at 100-130 s). Only the
-  obstacle's random commands and the noise depend on the seed.
+  comes towards them from the north-north-east and crosses their track, 5 m below them,
+  aimed at the middle UAV's planned position at t = 115 s (the paper's encounter is at
+  100-130 s). Its pilot flies straight until 25 s before the encounter and manoeuvres at
+  random from then on; only those manoeuvres and the noise depend on the seed.
 * ``crossing`` / ``head_on`` / ``overtaking`` / ``climbing`` -- one obstacle aimed at a random
   UAV's planned position at a random time, from the side, the front, behind (faster than
   the formation) or from above/below while climbing or descending.
@@ -55,7 +56,9 @@ _START_SPEED_SCATTER_MPS = 1.0
 
 # The paper's encounter (section 4; constants chosen here, the paper gives none).
 _PAPER_MEET_TIME_S = 115.0
-_PAPER_OBSTACLE_BELOW_M = 6.0
+_PAPER_OBSTACLE_BELOW_M = 10.0
+_PAPER_REACTION_LEAD_S = 25.0  # the obstacle's pilot starts manoeuvring 25 s before
+_PAPER_OBSTACLE_HEADING_RAD = np.pi + 0.35  # south-south-west: crosses the track east to west
 _PAPER_START = np.array(  # initial positions relative to the planned slots (m, NED)
     [[-12.0, -9.0, 4.0], [-4.0, 7.0, -5.0], [-18.0, 6.0, 2.0]]
 )
@@ -83,6 +86,7 @@ class ScenarioSpec:
         obs_radius: ``(M,)`` safety radii (m).
         obs_alt_band: ``(M, 2)`` altitude bands (m, positive up).
         obs_active: ``(M,)`` slots in use.
+        obs_hold_until: ``(M,)`` time before which the pilot keeps the initial commands (s).
         wind: ``(3,)`` steady wind (m/s, NED).
     """
 
@@ -102,6 +106,7 @@ class ScenarioSpec:
     obs_radius: np.ndarray
     obs_alt_band: np.ndarray
     obs_active: np.ndarray
+    obs_hold_until: np.ndarray
     wind: np.ndarray
 
 
@@ -210,16 +215,19 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
     obs_speed = np.full(m, ob.speed)
     obs_turn = np.zeros(m)
     obs_climb = np.zeros(m)
+    obs_hold = np.zeros(m)
     obs_wmax = np.full(m, ob.max_turn_rate)
     obs_vzmax = np.full(m, ob.max_climb_rate)
     for k in range(m):
         if k == 0 and family == "paper":
             meet = min(_PAPER_MEET_TIME_S, 0.575 * config.episode_duration)
             target = _planned_uav(plan, meet, slots)[n - 1 if n == 3 else n // 2]
-            heading = -math.pi / 2  # flying west, across the northbound formation
+            heading = _PAPER_OBSTACLE_HEADING_RAD
             start = target + np.array([0.0, 0.0, _PAPER_OBSTACLE_BELOW_M])
-            start[1] += ob.speed * meet
+            start[:2] -= ob.speed * meet * np.array([math.cos(heading), math.sin(heading)])
             obs_pos[k], obs_heading[k] = start, heading
+            # The pilot flies straight until the encounter draws near, then reacts at random.
+            obs_hold[k] = max(0.0, meet - _PAPER_REACTION_LEAD_S)
             continue
         if k == 0 and family in ("crossing", "head_on", "overtaking", "climbing"):
             sub = family
@@ -264,5 +272,6 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
         obs_radius=np.full(m, ob.radius),
         obs_alt_band=alt_band,
         obs_active=np.ones(m, dtype=bool),
+        obs_hold_until=obs_hold,
         wind=np.asarray(ob.wind, dtype=float),
     )

@@ -208,6 +208,7 @@ class World:
             ob.switch_prob[mask] = min(1.0, cfg.dt / cfg.obstacle.mean_switch_time)
             ob.straight_prob[mask] = cfg.obstacle.straight_probability
             ob.wind[mask] = stack("wind")
+            ob.hold_until[mask] = stack("obs_hold_until")
             # The ellipsoid's shape is fixed by the obstacle's performance; only its pose moves.
             # Inflations keep the true obstacle inside despite wind drift and the track error.
             pred = cfg.prediction
@@ -332,7 +333,9 @@ class World:
         )
         self.uav_acc[...] = applied
         if m:
-            step_obstacles(self.obstacles, unifs.reshape(self.n_envs, m, N_UNIFORMS), cfg.dt)
+            step_obstacles(
+                self.obstacles, unifs.reshape(self.n_envs, m, N_UNIFORMS), cfg.dt, self.time
+            )
         self.time += cfg.dt
         self._sense(None, initialise=False, normals=normals, known_accel=applied - acc_noise)
         self._update_safety()

@@ -46,12 +46,12 @@ def validate_actions(actions: np.ndarray, shape: tuple[int, ...], where: str = "
     finite = np.isfinite(a)
     if not finite.all():
         idx = tuple(int(i) for i in np.argwhere(~finite)[0])
-        raise ValueError(f"{where} contains a non-finite value {a[idx]!r} at index {idx}")
+        raise ValueError(f"{where} contains a non-finite value {float(a[idx])} at index {idx}")
     over = np.abs(a) > 1.0 + ACTION_TOLERANCE
     if over.any():
         idx = tuple(int(i) for i in np.argwhere(over)[0])
         raise ValueError(
-            f"{where} value {a[idx]!r} at index {idx} is outside the action space [-1, 1]"
+            f"{where} value {float(a[idx])} at index {idx} is outside the action space [-1, 1]"
         )
     return np.clip(a, -1.0, 1.0)
 

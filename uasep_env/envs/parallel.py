@@ -130,17 +130,14 @@ class UAVSeparationParallelEnv(ParallelEnv):
         Args:
             seed: Seeds the episode's generator (all randomness flows from it).
             options: ``{"config": {...}}`` to change config fields for this and later
-                episodes (not those that change the spaces).
+                episodes (not those that change the spaces). Other keys are ignored.
 
         Returns:
             ``(observations, infos)`` keyed by agent.
         """
-        if options:
-            unknown = sorted(set(options) - {"config"})
-            if unknown:
-                raise ValueError(f"unknown reset option(s) {unknown}; supported: ['config']")
-            if options.get("config"):
-                self._reconfigure(options["config"])
+        # Other option keys are ignored, as PettingZoo's API test expects.
+        if options and options.get("config"):
+            self._reconfigure(options["config"])
         obs = self.core.reset(seed=seed)
         self.agents = list(self.possible_agents)
         self._last = None

@@ -1,0 +1,285 @@
+"""Tests of the headless evaluation tool (``uasep-eval`` / ``uasep_env.evaluation``)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import uasep_env
+from uasep_env.config import make_config
+from uasep_env.evaluation import (
+    build_config,
+    evaluate,
+    main,
+    parse_config_overrides,
+    result_to_json,
+    summary_rows,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Short episodes keep the tests fast; statistics start after 5 s.
+SHORT = ["--config", "episode_duration=12", "--settle-time", "5"]
+
+
+def _strict_json(text: str):
+    def reject(name):
+        raise ValueError(f"non-strict JSON constant {name}")
+
+    return json.loads(text, parse_constant=reject)
+
+
+def _short_config(**kw):
+    return make_config({"scenario": "paper", "episode_duration": 12.0, **kw})
+
+
+def test_cli_end_to_end_json_csv_plots(tmp_path, capsys):
+    out_json = tmp_path / "out" / "res.json"
+    out_csv = tmp_path / "res.csv"
+    plots = tmp_path / "figs"
+    rc = main(
+        [
+            "--policy",
+            "apf,zero",
+            "--policy",
+            "traditional-apf",
+            "--episodes",
+            "2",
+            "--seed",
+            "3",
+            *SHORT,
+            "--config",
+            "noise.accel_std=0",
+            "--json",
+            str(out_json),
+            "--csv",
+            str(out_csv),
+            "--plot",
+            str(plots),
+        ]
+    )
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    # side-by-side summary on stdout
+    header = next(line for line in captured.out.splitlines() if line.startswith("metric"))
+    for label in ("apf", "zero", "traditional-apf"):
+        assert label in header
+    assert "min UAV-UAV separation" in captured.out
+    assert "acc std z" in captured.out
+
+    data = _strict_json(out_json.read_text())
+    assert data["version"] == uasep_env.__version__
+    assert data["config"]["episode_duration"] == 12.0
+    assert data["config"]["noise"]["accel_std"] == 0
+    assert data["config"]["scenario"] == "paper"
+    assert data["policies"] == ["apf", "zero", "traditional-apf"]
+    assert data["seeds"] == [3, 4]
+    assert "episodes" not in data
+    for label in data["policies"]:
+        res = data["results"][label]
+        assert [e["seed"] for e in res["episodes"]] == [3, 4]
+        for e in res["episodes"]:
+            assert set(e["metrics"]) >= {"episode", "uavs", "config"}
+            assert len(e["metrics"]["uavs"]) == 3
+        agg = res["aggregate"]
+        assert agg["episode.min_uav_separation"]["n"] == 2
+        assert agg["episode.collision"]["kind"] == "rate"
+        assert "uav.uav_2.fluctuation.acc_std.z" in agg
+
+    with out_csv.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 3 * 2
+    assert {(r["policy"], r["seed"]) for r in rows} == {
+        (p, s) for p in ("apf", "zero", "traditional-apf") for s in ("3", "4")
+    }
+    assert "episode.min_obstacle_distance" in rows[0]
+    assert "uav.uav_2.timeline.t_leave" in rows[0]
+    first = data["results"]["apf"]["episodes"][0]["metrics"]["episode"]
+    assert float(rows[0]["episode.min_uav_separation"]) == pytest.approx(
+        first["min_uav_separation"]
+    )
+
+    pngs = sorted(plots.glob("*.png"))
+    assert len(pngs) == 5 * 3 + 1
+    assert (plots / "acceleration_z_comparison.png").exists()
+    assert (plots / "deviation_traditional-apf.png").exists()
+    assert all(p.stat().st_size > 1000 for p in pngs)
+
+
+def test_policies_share_the_scenario():
+    cfg = _short_config()
+    res = evaluate(["apf", "zero", "random"], cfg, [0, 1], keep_episodes=2)
+    eps = res["episodes"]
+    for k in range(2):
+        ref = eps["apf"][k].record
+        for label in ("zero", "random"):
+            other = eps[label][k].record
+            assert eps[label][k].seed == eps["apf"][k].seed
+            assert eps[label][k].family == eps["apf"][k].family
+            np.testing.assert_array_equal(other.obstacle_pos, ref.obstacle_pos)
+            np.testing.assert_array_equal(other.obstacle_active, ref.obstacle_active)
+            np.testing.assert_array_equal(other.uav_pos[0], ref.uav_pos[0])
+    # different seeds give different encounters
+    assert not np.array_equal(eps["apf"][0].record.obstacle_pos, eps["apf"][1].record.obstacle_pos)
+    # the policies themselves behave differently
+    assert not np.array_equal(eps["apf"][0].record.uav_acc, eps["zero"][0].record.uav_acc)
+
+
+def test_workers_do_not_change_results(tmp_path):
+    def run(workers, path):
+        rc = main(
+            [
+                "--policy",
+                "apf,random",
+                "--episodes",
+                "3",
+                *SHORT,
+                "--workers",
+                str(workers),
+                "--json",
+                str(path),
+                "--quiet",
+            ]
+        )
+        assert rc == 0
+        return _strict_json(path.read_text())
+
+    one = run(1, tmp_path / "w1.json")
+    two = run(2, tmp_path / "w2.json")
+    assert one["results"] == two["results"]
+    assert one["seeds"] == two["seeds"] == [0, 1, 2]
+
+
+def test_batch_size_does_not_change_results():
+    cfg = _short_config()
+    a = evaluate(["apf"], cfg, [5, 6, 7], batch_size=3)
+    b = evaluate(["apf"], cfg, [5, 6, 7], batch_size=1)
+    assert a["results"] == b["results"]
+
+
+def test_result_json_is_strict_and_nan_becomes_null():
+    cfg = _short_config()
+    res = evaluate("zero", cfg, [0], settle_time=5.0, keep_episodes=1)
+    assert "episodes" in res
+    data = _strict_json(result_to_json(res))
+    assert "episodes" not in data
+    tl = data["results"]["zero"]["episodes"][0]["metrics"]["uavs"][0]["timeline"]
+    # a coasting formation in 12 s: some timeline fields are undefined -> null, never NaN
+    assert all(v is None or isinstance(v, (int, float, bool)) for v in tl.values())
+
+
+def test_summary_single_episode_shows_timeline_per_uav():
+    res = evaluate(["apf", "zero"], _short_config(), [0], settle_time=5.0)
+    rows = summary_rows(res)
+    assert rows[0] == ["metric", "apf", "zero"]
+    titles = [r[0] for r in rows]
+    for name in ("uav_0", "uav_1", "uav_2"):
+        assert f"{name} leave / resolved / back (s)" in titles
+    assert all(len(r) == 3 for r in rows)
+
+
+def test_parse_config_overrides():
+    got = parse_config_overrides(
+        ["noise.accel_std=0", "dt=0.1", "scenario=crossing", "obstacle.wind=[1, 0, 0]",
+         "prediction.kalman=false", "noise.position_std=0.25"]
+    )
+    assert got == {
+        "noise": {"accel_std": 0, "position_std": 0.25},
+        "dt": 0.1,
+        "scenario": "crossing",
+        "obstacle": {"wind": [1, 0, 0]},
+        "prediction": {"kalman": False},
+    }
+    cfg = build_config("paper", ["noise.accel_std=0", "obstacle.wind=[1, 0, 0]"])
+    assert cfg.noise.accel_std == 0.0
+    assert cfg.obstacle.wind == (1.0, 0.0, 0.0)
+    assert cfg.noise.position_std == make_config().noise.position_std
+    with pytest.raises(ValueError, match="KEY=VALUE"):
+        parse_config_overrides(["dt"])
+    with pytest.raises(ValueError, match="already set"):
+        parse_config_overrides(["noise=false", "noise.accel_std=0"])
+    with pytest.raises(ValueError, match="bogus"):
+        build_config("paper", ["noise.bogus=1"])
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--policy", "no-such-policy"], "no-such-policy"),
+        (["--policy", "apf,nope"], "nope"),
+        (["--config", "not_a_key=3"], "not_a_key"),
+        (["--config", "noise.nope=3"], "noise.nope"),
+        (["--config", "dt=-1"], "dt=-1"),
+        (["--config", "dt"], "dt"),
+        (["--episodes", "0"], "'0'"),
+        (["--episodes", "many"], "many"),
+        (["--workers", "0"], "--workers"),
+        (["--scenario", "moon"], "moon"),
+        (["--seed", "-3"], "-3"),
+    ],
+)
+def test_bad_arguments_exit_2_naming_the_value(args, needle, capsys):
+    rc = main([*args, "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert needle in err
+
+
+def test_evaluate_rejects_bad_input():
+    cfg = _short_config()
+    with pytest.raises(ValueError, match="unknown policy 'nope'"):
+        evaluate(["nope"], cfg, [0])
+    with pytest.raises(ValueError, match="seeds"):
+        evaluate(["apf"], cfg, [])
+    with pytest.raises(ValueError, match="workers"):
+        evaluate(["apf"], cfg, [0], workers=0)
+
+
+def test_help_and_version(capsys):
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert "--policy" in out and "--config" in out
+    assert main(["--version"]) == 0
+    assert uasep_env.__version__ in capsys.readouterr().out
+
+
+def _env():
+    return dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
+
+
+def test_module_help_subprocess():
+    out = subprocess.run(
+        [sys.executable, "-m", "uasep_env.evaluation", "--help"],
+        cwd=ROOT,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "usage: uasep-eval" in out.stdout
+
+
+def test_console_script_help():
+    script = Path(sys.executable).parent / "uasep-eval"
+    if not script.exists():
+        pytest.skip("uasep-eval console script not installed in this environment")
+    out = subprocess.run(
+        [str(script), "--help"], cwd=ROOT, env=_env(), capture_output=True, text=True,
+        timeout=60,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "--episodes" in out.stdout
+    bad = subprocess.run(
+        [str(script), "--policy", "nope", "--quiet"], cwd=ROOT, env=_env(),
+        capture_output=True, text=True, timeout=60,
+    )
+    assert bad.returncode == 2
+    assert "nope" in bad.stderr
