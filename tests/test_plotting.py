@@ -99,11 +99,15 @@ def test_plot_paper_figures_writes_every_png(tmp_path):
         data = p.read_bytes()
         assert len(data) > 10_000
         assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    if "matplotlib.pyplot" in sys.modules:  # no pyplot figure was left open
+        import matplotlib.pyplot as plt
+
+        assert plt.get_fignums() == []
 
 
 def test_plot_sanitises_model_path_labels_and_many_uavs(tmp_path):
     ep = _episode(1, n_uavs=6)
-    paths = plot_paper_figures({"runs/model v1.zip": ep}, tmp_path)
+    paths = plot_paper_figures({"runs/model v1.zip": ep}, tmp_path, dpi=50)
     assert all(p.exists() and p.stat().st_size > 0 for p in paths)
     assert all(" " not in p.name and "/" not in p.name for p in paths)
 
@@ -149,16 +153,12 @@ def test_import_does_not_import_matplotlib():
     code = "import sys, uasep_env.plotting; print('matplotlib' in sys.modules)"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
         timeout=60,
     )
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
-
-
-def test_no_pyplot_figures_left_open(tmp_path):
-    plot_paper_figures({"apf": _episode(2)}, tmp_path)
-    if "matplotlib.pyplot" in sys.modules:
-        import matplotlib.pyplot as plt
-
-        assert plt.get_fignums() == []

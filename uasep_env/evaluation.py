@@ -16,10 +16,12 @@ Python::
     result = evaluate(["apf", "traditional-apf"], {"scenario": "crossing"}, range(10))
     result["results"]["apf"]["aggregate"]["episode.min_obstacle_distance"]["mean"]
 
-Reproducibility: the seeds are split into chunks of ``batch_size`` episodes that depend only
-on the seeds and ``batch_size``, never on ``workers``; each chunk is played by a fresh policy
-(built from its name) in one batched simulator, in-process (``workers=1``) or in a
-``spawn`` process pool. The results are therefore identical for any worker count.
+Reproducibility: the seeds are split into chunks (one batched simulator each) whose size
+depends only on the number of episodes and ``batch_size`` (:func:`default_batch_size`), never
+on ``workers``. Each chunk is played by a fresh policy built from its name (the ``random``
+policy's generator is seeded with the chunk's first seed), in-process (``workers=1``) or in a
+``spawn`` process pool, and the chunks are reassembled in seed order. The results are
+therefore identical for any worker count, for stochastic policies too.
 """
 
 from __future__ import annotations
@@ -30,9 +32,10 @@ import json
 import math
 import multiprocessing
 import sys
+import textwrap
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +43,7 @@ import numpy as np
 
 from uasep_env.config import SCENARIOS, EnvConfig, make_config
 from uasep_env.metrics import aggregate, episode_metrics, flatten_metrics
-from uasep_env.policies import POLICIES, Policy, make_policy
+from uasep_env.policies import POLICIES, Policy, RandomPolicy, make_policy
 from uasep_env.rollout import (
     DEFAULT_DEVIATION_THRESHOLD_M,
     DEFAULT_SETTLE_TIME_S,
@@ -51,7 +54,9 @@ from uasep_env.rollout import (
 __all__ = [
     "DEFAULT_BATCH_SIZE",
     "DEFAULT_HOLD_TIME_S",
+    "MIN_DEFAULT_BATCH_SIZE",
     "build_config",
+    "default_batch_size",
     "evaluate",
     "format_summary",
     "main",
@@ -62,8 +67,10 @@ __all__ = [
     "write_json",
 ]
 
-#: Largest number of episodes simulated together in one batched simulator.
+#: Largest number of episodes simulated together in one batched simulator (by default).
 DEFAULT_BATCH_SIZE = 64
+#: Smallest default chunk: batching many episodes is much cheaper per episode.
+MIN_DEFAULT_BATCH_SIZE = 16
 #: Hold time of the conflict-resolution timeline (s), see :func:`metrics.conflict_timelines`.
 DEFAULT_HOLD_TIME_S = 2.0
 
@@ -211,6 +218,22 @@ def _normalise_policies(
 # --------------------------------------------------------------------------------------------
 
 
+def default_batch_size(n_episodes: int) -> int:
+    """Default chunk size: about 8 chunks, each of 16 to 64 episodes (never above ``n``).
+
+    It depends on the number of episodes only, so that results do not depend on the number
+    of workers; 8 chunks per policy keep up to 8 workers busy on long runs.
+
+    Args:
+        n_episodes: Episodes per policy.
+
+    Returns:
+        Episodes per batched simulator.
+    """
+    size = min(DEFAULT_BATCH_SIZE, max(MIN_DEFAULT_BATCH_SIZE, math.ceil(n_episodes / 8)))
+    return max(1, min(size, n_episodes))
+
+
 def _chunks(seeds: Sequence[int], size: int) -> list[list[int]]:
     return [list(seeds[i : i + size]) for i in range(0, len(seeds), size)]
 
@@ -239,6 +262,8 @@ def _run_chunk(
         Per-episode JSON-able entries, and the first ``keep`` :class:`Episode` objects.
     """
     policy = make_policy(spec, config) if isinstance(spec, str) else spec
+    if isinstance(spec, str) and isinstance(policy, RandomPolicy):
+        policy = RandomPolicy(config, seed=seeds[0])  # independent draws per chunk
     episodes = run_episodes(
         policy,
         config,
@@ -303,8 +328,9 @@ def evaluate(
         config: Environment config (or dict for :func:`make_config`, None for defaults).
         seeds: One seed per episode; every policy plays the same seeds.
         workers: Processes (``1``: in-process; more: a ``spawn`` process pool).
-        batch_size: Episodes per batched simulator (a chunk). None:
-            ``min(DEFAULT_BATCH_SIZE, ceil(len(seeds) / workers))``.
+        batch_size: Episodes per batched simulator (a chunk); None:
+            :func:`default_batch_size`. Results do not depend on ``workers``; they may depend
+            on ``batch_size`` for the ``random`` policy (its draws are shared by a batch).
         deviation_threshold: Off-track threshold of the deviation timeline (m).
         settle_time: Start of the deviation / fluctuation statistics (s).
         hold_time: Hold time of the conflict-resolution timeline (s).
@@ -342,7 +368,7 @@ def evaluate(
         raise ValueError(f"workers: must be >= 1, got {workers}")
     workers = int(workers)
     if batch_size is None:
-        batch_size = max(1, min(DEFAULT_BATCH_SIZE, math.ceil(len(seed_list) / workers)))
+        batch_size = default_batch_size(len(seed_list))
     if int(batch_size) < 1:
         raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
     chunks = _chunks(seed_list, int(batch_size))
@@ -372,17 +398,20 @@ def evaluate(
                 progress(len(chunks[ci]))
     else:
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx) as pool:
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx)
+        try:
             futures: dict[Future[Any], tuple[str, int]] = {
                 pool.submit(_run_chunk, *args): (label, ci) for label, ci, args in tasks
             }
-            from concurrent.futures import as_completed
-
             for fut in as_completed(futures):
                 label, ci = futures[fut]
                 done[label, ci] = fut.result()
                 if progress is not None:
                     progress(len(chunks[ci]))
+        except BaseException:  # a failed chunk or Ctrl-C: do not wait for the rest
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
 
     results: dict[str, Any] = {}
     kept: dict[str, list[Episode]] = {}
@@ -532,14 +561,15 @@ def write_csv(result: Mapping[str, Any], path: str | Path) -> Path:
 
 _AXES = ("x", "y", "z")
 
-#: (label, dotted aggregate key, digits) of the episode-level rows of the summary.
+#: (label, dotted aggregate key, digits) of the episode-level rows of the summary; negative
+#: digits mark counts (no decimals for one episode, ``-digits`` decimals for a mean).
 _EPISODE_ROWS: tuple[tuple[str, str, int], ...] = (
     ("min UAV-UAV separation (m)", "episode.min_uav_separation", 2),
     ("min UAV-obstacle distance (m)", "episode.min_obstacle_distance", 2),
     ("min distance to reachable region (m)", "episode.min_region_distance", 2),
-    ("loss-of-separation events UAV-UAV", "episode.uav_los_events", 2),
-    ("loss-of-separation events UAV-obstacle", "episode.obstacle_los_events", 2),
-    ("collision events", "episode.collision_events", 2),
+    ("loss-of-separation events UAV-UAV", "episode.uav_los_events", -2),
+    ("loss-of-separation events UAV-obstacle", "episode.obstacle_los_events", -2),
+    ("collision events", "episode.collision_events", -2),
     ("max deviation (m)", "episode.max_deviation", 2),
     ("RMS deviation, worst UAV (m)", "episode.max_rms_deviation", 2),
     ("max conflict duration (s)", "episode.max_conflict_duration", 1),
@@ -570,6 +600,8 @@ def _cell(stats: Mapping[str, Any] | None, digits: int, single: bool, pm: str) -
         return "-"
     if stats.get("kind") == "rate":
         return f"{stats['successes']}/{stats['n_valid']}"
+    if digits < 0:
+        digits = 0 if single else -digits
     if single or stats.get("n_valid", 0) < 2:
         cell = _fmt_num(stats.get("mean"), digits)
         if not single and stats.get("n_valid", 0) < stats.get("n", 0):
@@ -625,7 +657,8 @@ def summary_rows(result: Mapping[str, Any]) -> list[list[str]]:
                     _fmt_num(aggs[lab].get(f"{pre}.timeline.{f}", {}).get("mean"), 1)
                     for f in ("t_leave", "t_resolved", "t_back")
                 ]
-                cells.append(" / ".join(parts))
+                left = aggs[lab].get(f"{pre}.timeline.left", {}).get("successes", 1)
+                cells.append(" / ".join(parts) if left else "never left")
             rows.append(cells)
         rows.append(row(f"{name} conflict duration (s)", f"{pre}.timeline.conflict_duration", 1))
         rows.append(row(f"{name} max deviation (m)", f"{pre}.deviation.max_norm", 2))
@@ -675,7 +708,8 @@ def format_summary(result: Mapping[str, Any]) -> str:
         f"{uav['separation_distance']:g} m / UAV-obstacle {uav['obstacle_separation']:g} m; "
         f"deviation and fluctuation after t = {result['settings']['settle_time']:g} s, "
         f"off-track beyond {result['settings']['deviation_threshold']:g} m; "
-        f"'-' = undefined (e.g. never left the track)."
+        f"'-' = undefined (e.g. never left the track)"
+        + ("; (n=k): only k episodes had a value." if n > 1 else ".")
     )
     return "\n".join([head, "", _render_rows(summary_rows(result)), "", foot])
 
@@ -779,7 +813,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive_int,
         default=None,
         metavar="N",
-        help="episodes per batched simulator (default: min(64, ceil(episodes / workers)))",
+        help="episodes per batched simulator (default: ceil(episodes / 8) clipped to "
+        "[16, 64], at most episodes; independent of --workers)",
     )
     p.add_argument(
         "--config",
@@ -905,7 +940,13 @@ def _run(argv: Sequence[str] | None) -> int:
         first = {label: eps[0] for label, eps in result["episodes"].items()}
         figs = plot_paper_figures(first, args.plot, accel_limit=cfg.uav.max_accel)
         if not args.quiet:
-            print(f"\n{len(figs)} figures in {args.plot}: {', '.join(f.name for f in figs)}")
+            names = textwrap.fill(
+                ", ".join(f.name for f in figs),
+                width=100,
+                initial_indent="  ",
+                subsequent_indent="  ",
+            )
+            print(f"\n{len(figs)} figures (seed {seeds[0]}) in {args.plot}:\n{names}")
     if not args.quiet:
         for path in written:
             print(f"wrote {path}")

@@ -171,6 +171,12 @@ def _obstacle_dist(episode: Episode) -> np.ndarray:
     return np.where(np.isfinite(d), d, np.nan)
 
 
+def _nearest(values: np.ndarray) -> np.ndarray:
+    """(T, N, M) -> (T, N, 1): minimum over the finite values of the last axis, else NaN."""
+    low = np.where(np.isfinite(values), values, np.inf).min(axis=2, keepdims=True)
+    return np.where(np.isfinite(low), low, np.nan)
+
+
 def closest_approach(episode: Episode) -> list[tuple[int, int, float]]:
     """Sample of closest approach between the formation and each obstacle.
 
@@ -254,11 +260,18 @@ def _shade_region(ax: Axes, episode: Episode, label: bool = False) -> None:
 
 def _fig_legend(fig: Figure, axes: Sequence[Axes], ncol: int = 6) -> None:
     """One legend below the axes, with every labelled artist of ``axes`` once."""
+    from matplotlib.patches import Patch
+
     handles: dict[str, Any] = {}
     for ax in axes:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             handles.setdefault(lab, h)
-    if handles:
+    # lines and markers first, shaded spans last
+    handles = dict(sorted(handles.items(), key=lambda kv: isinstance(kv[1], Patch)))
+    if handles:  # as many columns as fit in the figure's width
+        per_row = fig.get_figwidth() * 72.0 / (9 * 0.6)
+        widest = max(len(lab) for lab in handles) + 6
+        ncol = max(1, min(ncol, int(per_row // widest)))
         fig.legend(
             list(handles.values()),
             list(handles),
@@ -285,9 +298,11 @@ def _finish_time_axes(axes: Sequence[Axes], episode: Episode) -> None:
 def plot_trajectory_3d(episode: Episode, label: str = "") -> Figure:
     """Figure 7: 3D trajectories, planned trajectories, obstacle and reachable ellipsoid.
 
-    Left: the whole flight in 3D (east, north, altitude), with the UAVs' positions, the
-    obstacle (red dot) and its predicted reachable ellipsoid at the moment of closest
-    approach. Right: a plan view and the altitude over time around the encounter.
+    Top left: the whole flight in 3D (east, north, altitude), with the UAVs' positions (dots),
+    the obstacle (red dot) and its predicted reachable ellipsoid at the moment of closest
+    approach. Top right: plan view at that moment, zoomed on the formation and the region
+    (the arrow gives the obstacle's direction). Bottom: altitude over time, with the
+    ellipsoid's vertical extent at closest approach.
 
     Args:
         episode: The episode.
@@ -305,21 +320,22 @@ def plot_trajectory_3d(episode: Episode, label: str = "") -> Figure:
     approaches = closest_approach(episode)
     k_star = approaches[0][1] if approaches else r.n_steps - 1
 
-    fig = _new_figure((15.0, 7.5), constrained=False)
+    fig = _new_figure((14.0, 10.0), constrained=False)
     gs = fig.add_gridspec(
         2,
         2,
-        width_ratios=(1.35, 1.0),
-        left=0.02,
+        width_ratios=(1.5, 1.0),
+        height_ratios=(2.2, 1.0),
+        left=0.06,
         right=0.97,
-        bottom=0.08,
-        top=0.9,
-        wspace=0.12,
-        hspace=0.32,
+        bottom=0.12,
+        top=0.91,
+        wspace=0.08,
+        hspace=0.18,
     )
-    ax = fig.add_subplot(gs[:, 0], projection="3d")
+    ax = fig.add_subplot(gs[0, 0], projection="3d")
     top = fig.add_subplot(gs[0, 1])
-    side = fig.add_subplot(gs[1, 1])
+    side = fig.add_subplot(gs[1, :])
 
     def enu(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return p[..., 1], p[..., 0], -p[..., 2]
@@ -367,13 +383,23 @@ def plot_trajectory_3d(episode: Episode, label: str = "") -> Figure:
             label="obstacle trajectory" if first else None,
         )
         top.scatter(obs[k, m, 1], obs[k, m, 0], color=_OBSTACLE_COLOUR, s=60, zorder=6)
+        step = obs[min(k + 1, r.n_steps - 1), m] - obs[max(k - 1, 0), m]
+        if np.all(np.isfinite(step[:2])) and np.hypot(step[0], step[1]) > 0:
+            head = obs[k, m, :2] + 15.0 * step[:2] / np.hypot(step[0], step[1])
+            top.annotate(
+                "",
+                xy=(head[1], head[0]),
+                xytext=(obs[k, m, 1], obs[k, m, 0]),
+                arrowprops={"arrowstyle": "->", "color": _OBSTACLE_COLOUR, "lw": 1.5},
+                zorder=7,
+            )
         side.plot(
             t,
             -obs[:, m, 2],
             color=_OBSTACLE_COLOUR,
             lw=1.2,
             ls=":",
-            label="obstacle" if first else None,
+            label="obstacle trajectory" if first else None,
         )
         centre = episode.pred_center[k, m]
         axes_m = episode.obstacle_axes[m]
@@ -390,7 +416,7 @@ def plot_trajectory_3d(episode: Episode, label: str = "") -> Figure:
             on,
             color=_OBSTACLE_COLOUR,
             lw=1.0,
-            label=f"reachable region at t = {t[k]:.0f} s" if first else None,
+            label=f"reachable region at t = {t[k]:.1f} s" if first else None,
         )
         side.errorbar(
             t[k],
@@ -403,40 +429,49 @@ def plot_trajectory_3d(episode: Episode, label: str = "") -> Figure:
         )
         side.axvline(t[k], color="0.5", lw=0.8, ls=":")
         zoom_pts.append(np.stack([on, oe], axis=-1))
-        window = np.abs(t - t[k]) <= 25.0
-        zoom_pts.append(pos[window][..., :2].reshape(-1, 2))
-        zoom_pts.append(obs[window, m, :2])
+        zoom_pts.append(pos[k, :, :2])
+        zoom_pts.append(obs[k, m, None, :2])
 
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     ax.set_zlabel("altitude (m)")
-    ax.set_box_aspect((1.0, 1.6, 0.7))
+    ax.set_box_aspect((1.0, 1.6, 0.7), zoom=1.2)
     ax.view_init(elev=22.0, azim=-60.0)
-    ax.legend(loc="upper left", fontsize=8)
     ax.set_title("3D trajectories", fontsize=11)
 
     top.set_xlabel("east (m)")
     top.set_ylabel("north (m)")
     top.set_aspect("equal", adjustable="box")
-    if zoom_pts:
+    if zoom_pts:  # a square window on the formation and the region at closest approach
+        mid = pos[k_star, :, :2].mean(axis=0)
         zp = np.concatenate([z for z in zoom_pts if z.size])
         zp = zp[np.all(np.isfinite(zp), axis=1)]
-        lo, hi = zp.min(axis=0), zp.max(axis=0)
-        pad = 0.08 * float(np.max(hi - lo)) + 5.0
-        top.set_xlim(lo[1] - pad, hi[1] + pad)
-        top.set_ylim(lo[0] - pad, hi[0] + pad)
-        top.set_title(f"plan view around the encounter (t = {t[k_star]:.0f} s ± 25 s)", fontsize=11)
+        half = 1.2 * float(np.abs(zp - mid).max()) + 10.0
+        top.set_xlim(mid[1] - half, mid[1] + half)
+        top.set_ylim(mid[0] - half, mid[0] + half)
+        top.set_title(f"plan view at closest approach (t = {t[k_star]:.1f} s)", fontsize=11)
     else:
         top.set_title("plan view", fontsize=11)
     top.grid(True, alpha=0.3)
-    top.legend(loc="best", fontsize=8)
 
     side.set_xlabel("time (s)")
     side.set_ylabel("altitude (m)")
     side.set_xlim(t[0], t[-1])
     side.grid(True, alpha=0.3)
-    side.set_title("altitude", fontsize=11)
-    side.legend(loc="best", fontsize=8, ncol=2)
+    side.set_title("altitude over time", fontsize=11)
+
+    handles: dict[str, Any] = {}
+    for a in (ax, top, side):
+        for h, lab in zip(*a.get_legend_handles_labels(), strict=True):
+            handles.setdefault(lab, h)
+    fig.legend(
+        list(handles.values()),
+        list(handles),
+        loc="lower center",
+        ncol=min(6, len(handles)),
+        fontsize=9,
+        frameon=False,
+    )
 
     if approaches:
         m, k, dist = approaches[0]
@@ -463,6 +498,7 @@ def plot_obstacle_distances(episode: Episode, label: str = "") -> Figure:
     Top: centre distances with the collision distance (red dashed) and the UAV-obstacle
     separation distance; log scale, so that both the far field and the close approach read.
     Bottom: signed distance to the obstacle's predicted reachable region (negative inside).
+    With several obstacles each UAV's line is its distance to the nearest active one.
 
     Args:
         episode: The episode.
@@ -475,19 +511,15 @@ def plot_obstacle_distances(episode: Episode, label: str = "") -> Figure:
     d = _obstacle_dist(episode)
     reg = np.where(r.obstacle_active[:, None, :], r.region_distance, np.nan)
     reg = np.where(np.abs(reg) < 1e8, reg, np.nan)
+    nearest = r.n_obstacles > 1
+    if nearest:  # one line per UAV: its nearest active obstacle / region
+        d, reg = _nearest(d), _nearest(reg)
     fig = _new_figure((11.0, 7.5))
     ax, bx = fig.subplots(2, 1, sharex=True, height_ratios=(1.2, 1.0))
-    styles = ("-", "--", "-.", ":")
-    for m in range(r.n_obstacles):
-        if not np.isfinite(d[:, :, m]).any():
-            continue
+    if np.isfinite(d).any():
         for i in range(r.n_uavs):
-            suffix = "" if r.n_obstacles == 1 else f" – obstacle {m}"
-            ls = styles[m % len(styles)]
-            ax.plot(r.time, d[:, i, m], color=_colour(i), ls=ls, lw=1.4, label=r.names[i] + suffix)
-            bx.plot(
-                r.time, reg[:, i, m], color=_colour(i), ls=ls, lw=1.4, label=r.names[i] + suffix
-            )
+            ax.plot(r.time, d[:, i, 0], color=_colour(i), lw=1.4, label=r.names[i])
+            bx.plot(r.time, reg[:, i, 0], color=_colour(i), lw=1.4, label=r.names[i])
     ax.axhline(
         r.collision_distance,
         color=_COLLISION_COLOUR,
@@ -506,13 +538,16 @@ def plot_obstacle_distances(episode: Episode, label: str = "") -> Figure:
         ax.set_yscale("log")
         ax.set_ylim(max(0.5, 0.5 * r.collision_distance), None)
     ax.set_ylabel("UAV–obstacle distance (m, log)")
-    ax.set_title("centre distance", fontsize=11)
+    ax.set_title("centre distance" + (" to the nearest obstacle" if nearest else ""), fontsize=11)
     bx.axhline(0.0, color="k", lw=1.0, label="region boundary")
     _shade_region(bx, episode, label=True)
     _shade_region(ax, episode)
     bx.set_ylabel("distance to reachable region (m)")
     bx.set_title(
-        "distance to the obstacle's predicted reachable region (negative: inside)", fontsize=11
+        "distance to the "
+        + ("nearest obstacle's" if nearest else "obstacle's")
+        + " predicted reachable region (negative: inside)",
+        fontsize=11,
     )
     fin = reg[np.isfinite(reg)]
     if fin.size:  # keep the encounter readable: clip the far field
@@ -638,6 +673,10 @@ def plot_deviation(episode: Episode, label: str = "") -> Figure:
         _timeline_lines(ax, tl, r.names[worst], label=a == 0)
         ax.axhline(0.0, color="0.3", lw=0.6)
         ax.set_ylabel(f"{_AXIS_NAMES[_AXES[a]]} deviation (m)")
+        settled = dev[r.settled_mask(), :, a]
+        if settled.size:  # scale on the statistics period: forming-up transients may clip
+            lim = max(1.15 * float(np.abs(settled).max()), 0.5 * r.deviation_threshold)
+            ax.set_ylim(-lim, lim)
     duration = tl.conflict_duration
     extra = (
         f"; {r.names[worst]} in conflict resolution for {duration:.1f} s"
@@ -649,7 +688,7 @@ def plot_deviation(episode: Episode, label: str = "") -> Figure:
     fig.suptitle(
         f"Deviation from the planned trajectory — {_title(label)}{extra}\n"
         f"(off track: deviation > {r.deviation_threshold:g} m; back: within it for "
-        f"{tl.hold_time:g} s)",
+        f"{tl.hold_time:g} s; y scaled to the period after forming up)",
         fontsize=12,
     )
     return fig
@@ -706,14 +745,22 @@ def plot_velocity_acceleration(
 
 
 def plot_acceleration_comparison(
-    episodes_by_policy: Mapping[str, Episode], uav: int | None = None, axis: int = 2
+    episodes_by_policy: Mapping[str, Episode],
+    uav: int | None = None,
+    axis: int = 2,
+    window: float = 30.0,
 ) -> Figure:
     """Acceleration of one UAV along one axis under every policy, on one axes.
+
+    Top: the whole episode, every policy on the same axes. Bottom: the same, zoomed on the
+    encounter (``window`` seconds either side of the closest approach in the first episode).
+    The legend gives each policy's standard deviation after ``settle_time``.
 
     Args:
         episodes_by_policy: One episode per policy (the same seed, for a fair comparison).
         uav: UAV index; None: the most deviated UAV over all the episodes.
         axis: 0, 1 or 2 for x (north), y (east), z (down).
+        window: Half-width of the zoom (s).
 
     Returns:
         The figure.
@@ -723,32 +770,39 @@ def plot_acceleration_comparison(
         uav = most_deviated_uav(eps)
     name = eps[0].record.names[uav]
     ax_name = _AXIS_NAMES[_AXES[axis]]
-    fig = _new_figure((11.0, 5.0))
-    ax = fig.subplots()
-    for p, (label, ep) in enumerate(episodes_by_policy.items()):
-        r = ep.record
-        colour, ls = _POLICY_STYLES[p % len(_POLICY_STYLES)]
-        sel = r.settled_mask()
-        std = float(np.std(r.uav_acc[sel, uav, axis])) if sel.any() else math.nan
-        ax.plot(
-            r.time,
-            r.uav_acc[:, uav, axis],
-            color=colour,
-            ls=ls,
-            lw=1.4,
-            label=f"{_title(label)} (std {std:.3f} m/s²)",
-        )
-    _shade_settle(ax, eps[0], label=True)
-    ax.axhline(0.0, color="0.3", lw=0.6)
-    ax.set_ylabel(f"a {ax_name} of {name} (m/s²)")
-    ax.legend(loc="best", fontsize=8)
-    times = [ep.record.time for ep in eps]
-    ax.set_xlim(min(t[0] for t in times), max(t[-1] for t in times))
-    ax.grid(True, alpha=0.3)
-    ax.set_xlabel("time (s)")
-    ax.set_title(
-        f"Acceleration along {ax_name} of {name} (most deviated UAV), all methods; "
-        "std after forming up",
+    approaches = closest_approach(eps[0])
+    fig = _new_figure((11.0, 7.5 if approaches else 5.0))
+    axs = fig.subplots(2, 1, height_ratios=(1.0, 1.0)) if approaches else [fig.subplots()]
+    t_lo = min(float(ep.record.time[0]) for ep in eps)
+    t_hi = max(float(ep.record.time[-1]) for ep in eps)
+    for ax in axs:
+        for p, (label, ep) in enumerate(episodes_by_policy.items()):
+            r = ep.record
+            colour, ls = _POLICY_STYLES[p % len(_POLICY_STYLES)]
+            sel = r.settled_mask()
+            std = float(np.std(r.uav_acc[sel, uav, axis])) if sel.any() else math.nan
+            ax.plot(
+                r.time,
+                r.uav_acc[:, uav, axis],
+                color=colour,
+                ls=ls,
+                lw=1.4,
+                label=f"{_title(label)} (std {std:.3f} m/s²)",
+            )
+        _shade_settle(ax, eps[0], label=True)
+        ax.axhline(0.0, color="0.3", lw=0.6)
+        ax.set_ylabel(f"a {ax_name} (m/s²)")
+        ax.grid(True, alpha=0.3)
+        ax.set_xlim(t_lo, t_hi)
+    axs[0].set_title("whole episode", fontsize=11)
+    if approaches:
+        t_star = float(eps[0].record.time[approaches[0][1]])
+        axs[1].set_xlim(max(t_lo, t_star - window), min(t_hi, t_star + window))
+        axs[1].set_title(f"around the closest approach (t = {t_star:.1f} s)", fontsize=11)
+    axs[-1].set_xlabel("time (s)")
+    _fig_legend(fig, axs[:1], ncol=2)
+    fig.suptitle(
+        f"Acceleration along {ax_name} of {name} (the most deviated UAV) — all methods, same seed",
         fontsize=12,
     )
     return fig

@@ -131,13 +131,16 @@ _MODES = ("swept", "terminal")
 FloatArray = NDArray[np.float64]
 
 #: Intervals of the enclosure certificate on ``[0, pi]`` (even, so that pi/2 is a node).
-_N_CERT = 128
+_N_CERT = 96
 #: Geometrically spaced parameter nodes at each end of the ellipse's axes.
-_N_GEO = 16
+_N_GEO = 14
 #: Nodes uniform in the normal angle, merged with those uniform in the ellipse's parameter.
-_UNIFORM_NODES = np.linspace(0.0, np.pi, 65)[1:-1]
+_UNIFORM_NODES = np.linspace(0.0, np.pi, 49)[1:-1]
 #: Relative absolute margin (of ``v t + r``) that absorbs floating-point rounding.
 _EPS_ABS = 1e-12
+#: Half-width (fraction of the set's length) and iterations of the centre's polishing search.
+_C_SEARCH = 0.02
+_C_ITERS = 8
 #: Newton iterations of the point-to-ellipsoid distance.
 _N_NEWTON = 8
 
@@ -381,7 +384,7 @@ def _table_coords(phi: FloatArray, eps: FloatArray) -> tuple[FloatArray, FloatAr
     """Table coordinates for ``phi = w t`` and ``eps = r / (v t)`` (may be inf)."""
     finite = np.isfinite(eps)
     e = np.where(finite, eps, 0.0)
-    alpha = np.where(finite, np.arctan2(2.0 * e, phi) * (2.0 / np.pi), 1.0)
+    alpha = np.sqrt(np.where(finite, np.arctan2(2.0 * e, phi) * (2.0 / np.pi), 1.0))
     rad = np.where(finite, np.hypot(phi, 2.0 * e), np.inf)
     with np.errstate(divide="ignore"):
         logr = np.log10(rad)
@@ -526,7 +529,7 @@ def _build_table(
     swept: bool, alpha: FloatArray, logr: FloatArray, **kwargs: int
 ) -> FloatArray:
     """Shape table ``(len(alpha), len(logr), 3)``: (c, B) over the y-extent, A over max |x|."""
-    al, lr = np.meshgrid(alpha, logr, indexing="ij")
+    al, lr = np.meshgrid(np.asarray(alpha) ** 2, logr, indexing="ij")
     rad = 10.0**lr
     phi = np.where(al >= 1.0, 0.0, rad * np.cos(0.5 * np.pi * al))
     eps = 0.5 * rad * np.sin(0.5 * np.pi * al)
@@ -574,6 +577,19 @@ def _margins(nd: _Nodes, lat: FloatArray, lon: FloatArray, r: FloatArray, eps_ab
     return out + eps_abs[..., None]
 
 
+def _axes_for(
+    nd: _Nodes, delta: FloatArray, c: FloatArray, lon: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Least axes ``(A, B >= lon)`` with ``h_E(theta_k) >= h_k + delta_k`` at every node."""
+    h = nd.h
+    lon = np.maximum(lon, h[..., 0] + delta[..., 0] - c)
+    lon = np.maximum(lon, h[..., -1] + delta[..., -1] + c)
+    need = h[..., 1:-1] + delta[..., 1:-1] - c[..., None] * nd.cos[..., 1:-1]
+    need = np.maximum(need, 0.0)
+    a2 = (need * need - (lon * lon)[..., None] * nd.c2[..., 1:-1]) / nd.s2[..., 1:-1]
+    return np.sqrt(np.maximum(np.max(a2, axis=-1), 0.0)), lon
+
+
 def _fit_axes(
     nd: _Nodes,
     c: FloatArray,
@@ -582,19 +598,12 @@ def _fit_axes(
     r: FloatArray,
     eps_abs: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
-    """Smallest axes meeting the node constraints, margins taken at the given ``(A, B)``.
+    """Least axes for the centre ``c`` with the margins of ``(lat, lon)`` plus 25%.
 
     ``B`` only grows (to meet the tip constraints at 0 and pi); ``A`` is the least value with
     ``c cos theta_k + sqrt(A^2 sin^2 + B^2 cos^2) >= h_k + delta_k`` at the inner nodes.
     """
-    delta = 1.25 * _margins(nd, lat, lon, r, eps_abs)
-    h = nd.h
-    lon = np.maximum(lon, h[..., 0] + delta[..., 0] - c)
-    lon = np.maximum(lon, h[..., -1] + delta[..., -1] + c)
-    need = h[..., 1:-1] + delta[..., 1:-1] - c[..., None] * nd.cos[..., 1:-1]
-    need = np.maximum(need, 0.0)
-    a2 = (need * need - (lon * lon)[..., None] * nd.c2[..., 1:-1]) / nd.s2[..., 1:-1]
-    return np.sqrt(np.maximum(np.max(a2, axis=-1), 0.0)), lon
+    return _axes_for(nd, 1.25 * _margins(nd, lat, lon, r, eps_abs), c, lon)
 
 
 def _certified(
@@ -661,6 +670,15 @@ def _ellipse_core(
     nd = _Nodes(th, vt, phi, r, swept)
     # The margins depend on (A, B): fit twice, taking the margins at the previous axes with a
     # 25% allowance, then certify; rows that still fail grow until they pass.
+    delta = 1.25 * _margins(nd, lat_g, lon, r, eps_abs)
+    # Polish the centre by a short golden-section search on the area (margins held fixed).
+    half = _C_SEARCH * ext
+
+    def neg_area(cc: FloatArray) -> FloatArray:
+        a_, b_ = _axes_for(nd, delta, cc, lon)
+        return -(a_ * b_)
+
+    c = _golden_max(neg_area, c - half, c + half, _C_ITERS)
     lat = lat_g
     for _ in range(2):
         lat, lon = _fit_axes(nd, c, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)

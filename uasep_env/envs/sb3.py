@@ -49,11 +49,10 @@ class UAVSharedVecEnv(VecEnv):
         clip = self.config.observation.clip
         obs_space = gymnasium.spaces.Box(-clip, clip, (self.core.obs_dim,), np.float32)
         act_space = gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self.render_mode = None
         super().__init__(n_envs * self.n_uavs, obs_space, act_space)
         self._seed = seed
         self._actions: np.ndarray | None = None
-        self.episode_returns = np.zeros(self.num_envs)
-        self.render_mode = None
 
     def seed(self, seed: int | None = None) -> Sequence[None | int]:
         """Seed the next reset (environment ``e`` gets ``seed + e``)."""
