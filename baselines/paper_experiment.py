@@ -1,5 +1,7 @@
-"""Reproduce the paper's experiment: the three controllers on the paper's scenario and on a
-fixed bank of seeded random encounters.
+"""Reproduce the paper's experiment: three controllers, paper scenario and a random bank.
+
+The three controllers run on the paper's scenario and on a fixed bank of seeded random
+encounters.
 
     python baselines/paper_experiment.py [--paper-episodes 20] [--bank-episodes 200] [--workers 2]
 
@@ -73,8 +75,11 @@ def table(result: dict[str, Any]) -> str:
 
 def timeline(result: dict[str, Any], uav: str = "uav_2") -> str:
     """Seed-0 conflict timeline of one UAV per controller (the paper's 103/122/130 s)."""
-    lines = ["| controller | leaves plan (s) | conflict resolved (s) | back on plan (s) | duration (s) |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "| controller | leaves plan (s) | conflict resolved (s) | back on plan (s) "
+        "| duration (s) |",
+        "|---|---|---|---|---|",
+    ]
     for label, res in result["results"].items():
         m = res["episodes"][0]["metrics"]
         u = next(x for x in m["uavs"] if x["name"] == uav)
@@ -91,6 +96,7 @@ def timeline(result: dict[str, Any], uav: str = "uav_2") -> str:
 
 
 def main() -> None:
+    """Run both experiments and write the results."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--paper-episodes", type=int, default=20)
     parser.add_argument("--bank-episodes", type=int, default=200)

@@ -184,7 +184,9 @@ def bench_ppo(timesteps: int, n_envs: int) -> tuple[float, float] | None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawTextHelpFormatter
+    )
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 64, 1024, 4096])
     parser.add_argument("--ppo-timesteps", type=int, default=200_000)
@@ -199,8 +201,10 @@ def main() -> None:
     print(f"MPE2 simple_spread_v3     {mpe:>12,.0f} steps/s" if mpe else "MPE2: not installed")
 
     print("\n== batched (env-steps/s; agent-steps/s = x3) ==")
-    print(f"{'n_envs':>7} {'uasep vector':>14} {'VMAS nav':>14} {'bare numpy':>14} "
-          f"{'uasep/VMAS':>10} {'uasep/bare':>10} {'agent-steps/s':>14}")
+    print(
+        f"{'n_envs':>7} {'uasep vector':>14} {'VMAS nav':>14} {'bare numpy':>14} "
+        f"{'uasep/VMAS':>10} {'uasep/bare':>10} {'agent-steps/s':>14}"
+    )
     rows = {}
     for n in args.sizes:
         ours = bench_vector(n, s)
@@ -209,8 +213,10 @@ def main() -> None:
         rows[n] = (ours, vm, bare)
         vm_txt = f"{vm:>14,.0f}" if vm else f"{'n/a':>14}"
         ratio = f"{ours / vm:>10.1f}" if vm else f"{'n/a':>10}"
-        print(f"{n:>7} {ours:>14,.0f} {vm_txt} {bare:>14,.0f} {ratio} {ours / bare:>10.2%} "
-              f"{ours * 3:>14,.0f}")
+        print(
+            f"{n:>7} {ours:>14,.0f} {vm_txt} {bare:>14,.0f} {ratio} {ours / bare:>10.2%} "
+            f"{ours * 3:>14,.0f}"
+        )
 
     big = max(args.sizes)
     apf = bench_apf(big, s)

@@ -106,5 +106,5 @@ def test_kalman_gain_table_converges():
 
 @pytest.mark.parametrize("sp,sv", [(0.0, 0.3), (0.5, 0.0)])
 def test_kalman_partially_noise_free_is_finite(sp, sv):
-    kf_err, raw_err, _ = _simulate_tracks(sigma_p=sp, sigma_v=sv, sigma_a=0.1, steps=100)
+    kf_err, _raw_err, _ = _simulate_tracks(sigma_p=sp, sigma_v=sv, sigma_a=0.1, steps=100)
     assert np.isfinite(kf_err)

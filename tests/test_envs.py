@@ -67,7 +67,10 @@ def test_registration_survives_spawned_subprocesses():
 
 
 def test_import_registers_ids_in_a_fresh_interpreter():
-    code = "import gymnasium, uasep_env; e = gymnasium.make('uasep/PaperEncounter-v0'); print(e.reset(seed=0)[0].shape)"
+    code = (
+        "import gymnasium, uasep_env; e = gymnasium.make('uasep/PaperEncounter-v0'); "
+        "print(e.reset(seed=0)[0].shape)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip().startswith("(")
 
@@ -82,7 +85,7 @@ def _random_rollout(seed, steps, cfg):
         if not env.agents:
             obs, _ = env.reset()
         acts = {a: rng.uniform(-1, 1, 3).astype(np.float32) for a in env.agents}
-        obs, rew, term, trunc, info = env.step(acts)
+        obs, rew, _term, _trunc, _info = env.step(acts)
         out.append(np.stack([obs[a] for a in env.possible_agents]))
         rewards.append([rew[a] for a in env.possible_agents])
     return np.array(out), np.array(rewards), env.state()
@@ -157,7 +160,7 @@ def test_reset_options_config():
     assert env.world.families[0] == "crossing"
     with pytest.raises(ValueError, match="n_uavs"):
         env.reset(options={"config": {"n_uavs": 4}})
-    with pytest.raises(ValueError, match="noise.nope"):
+    with pytest.raises(ValueError, match=r"noise\.nope"):
         env.reset(options={"config": {"noise": {"nope": 1}}})
 
 

@@ -56,7 +56,7 @@ def test_exact_circle_with_constant_turn():
     ob.turn_rate[...] = 0.1
     ob.pos[...] = 0.0
     ob.heading[...] = 0.0
-    steps = int(round(2 * np.pi / 0.1 / 0.5))  # one full circle with dt = 0.5
+    steps = round(2 * np.pi / 0.1 / 0.5)  # one full circle with dt = 0.5
     for _ in range(steps):
         step_obstacles(ob, np.zeros((1, 1, N_UNIFORMS)), 0.5)
     # After a full turn (up to rounding of the step count) the obstacle is back near start.

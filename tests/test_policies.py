@@ -1,4 +1,4 @@
-"""Reference controllers: interface, bounds, repulsion direction, behaviour on the paper scenario."""
+"""Reference controllers: interface, bounds, repulsion direction, paper-scenario behaviour."""
 
 import numpy as np
 import pytest
@@ -34,7 +34,9 @@ def test_every_policy_batched_and_in_bounds(name):
         act = policy(obs)
         assert act.shape == (6, 4, 3) and np.all(np.abs(act) <= 1.0) and np.all(np.isfinite(act))
         # The same policy on a single agent's observation gives that agent's action.
-        np.testing.assert_allclose(policy(obs[2, 1]), act[2, 1], atol=1e-6) if name != "random" else None
+        np.testing.assert_allclose(
+            policy(obs[2, 1]), act[2, 1], atol=1e-6
+        ) if name != "random" else None
         obs = core.step(act).obs
 
 

@@ -125,7 +125,11 @@ def _brute_distance(p, axes, n=400):
     v = np.linspace(0, 2 * np.pi, 2 * n)
     uu, vv = np.meshgrid(u, v)
     surf = np.stack(
-        [axes[0] * np.sin(uu) * np.cos(vv), axes[1] * np.sin(uu) * np.sin(vv), axes[2] * np.cos(uu)],
+        [
+            axes[0] * np.sin(uu) * np.cos(vv),
+            axes[1] * np.sin(uu) * np.sin(vv),
+            axes[2] * np.cos(uu),
+        ],
         -1,
     ).reshape(-1, 3)
     d = np.linalg.norm(surf - p, axis=1).min()

@@ -1,5 +1,7 @@
 """Each named reward term reacts as documented in uasep_env.rewards."""
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -37,9 +39,11 @@ def test_moving_into_reachable_region_lowers_region_term(core):
     # From well outside, through the surface, to the centre of the ellipsoid (laterally).
     lateral = np.array([-np.sin(w.pred_heading[0, 0]), np.cos(w.pred_heading[0, 0]), 0.0])
     for k in np.linspace(3.0, 0.0, 13):
-        values.append(_terms_with_uav2_at(core, center + lateral * axes[1] * k)["separation_region"])
+        values.append(
+            _terms_with_uav2_at(core, center + lateral * axes[1] * k)["separation_region"]
+        )
     assert values[0] == 0.0
-    assert all(b <= a for a, b in zip(values, values[1:], strict=False))
+    assert all(b <= a for a, b in itertools.pairwise(values))
     assert values[-1] < values[6] < 0.0
 
 

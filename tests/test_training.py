@@ -30,8 +30,15 @@ def test_ppo_parameter_sharing_reduces_deviation():
     )
     venv = UAVSharedVecEnv(n_envs=16, config=cfg, seed=0)
     model = PPO(
-        "MlpPolicy", venv, n_steps=64, batch_size=512, n_epochs=5, learning_rate=1e-3,
-        gamma=0.95, seed=0, device="cpu",
+        "MlpPolicy",
+        venv,
+        n_steps=64,
+        batch_size=512,
+        n_epochs=5,
+        learning_rate=1e-3,
+        gamma=0.95,
+        seed=0,
+        device="cpu",
     )
     seeds = list(range(1000, 1016))  # held-out encounters
 

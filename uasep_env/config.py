@@ -399,7 +399,7 @@ class EnvConfig:
     @property
     def max_steps(self) -> int:
         """Environment steps before truncation."""
-        return max(1, int(round(self.episode_duration / self.step_duration)))
+        return max(1, round(self.episode_duration / self.step_duration))
 
     def replace(self, **changes: Any) -> EnvConfig:
         """Return a copy with ``changes`` applied (validated like :func:`make_config`)."""
@@ -439,7 +439,8 @@ def _build(cls: type[T], base: T | None, values: Mapping[str, Any], prefix: str)
                 value = _build(sub, current.get(key, sub()), value, prefix + key + ".")
             elif not isinstance(value, sub):
                 raise ValueError(
-                    f"invalid config value {prefix}{key}={value!r}: must be a dict or {sub.__name__}"
+                    f"invalid config value {prefix}{key}={value!r}: "
+                    f"must be a dict or {sub.__name__}"
                 )
         current[key] = value
     try:

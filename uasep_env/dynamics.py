@@ -71,7 +71,9 @@ def step_double_integrator(
     if np.any(over):
         # Scale the new velocity onto the V_max sphere; slightly inside so that rounding
         # can never leave |v| above V_max.
-        scale = np.where(over, (max_speed * (1.0 - 1e-12)) / np.sqrt(np.maximum(speed2, 1e-300)), 1.0)
+        scale = np.where(
+            over, (max_speed * (1.0 - 1e-12)) / np.sqrt(np.maximum(speed2, 1e-300)), 1.0
+        )
         new_vel *= scale[..., None]
         accel = np.where(over[..., None], (new_vel - vel) / dt, accel)
     # Exact double-integrator position update with the applied (constant) acceleration.

@@ -190,7 +190,9 @@ class ObservationLayout:
         return names
 
 
-def build_observations(world: World, layout: ObservationLayout, out: np.ndarray | None = None) -> np.ndarray:
+def build_observations(
+    world: World, layout: ObservationLayout, out: np.ndarray | None = None
+) -> np.ndarray:
     """Every agent's observation, ``(n_envs, n_uavs, layout.dim)`` float32.
 
     Args:
@@ -317,4 +319,3 @@ def global_state(world: World) -> np.ndarray:
 def state_dim(config: EnvConfig) -> int:
     """Width of :func:`global_state` for ``config``."""
     return config.n_uavs * 6 + config.n_obstacles * 7 + 1
-

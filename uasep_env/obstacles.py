@@ -113,4 +113,6 @@ def step_obstacles(
     obs.pos[..., 0] += np.where(active, chord * np.cos(mid) + obs.wind[:, None, 0] * dt, 0.0)
     obs.pos[..., 1] += np.where(active, chord * np.sin(mid) + obs.wind[:, None, 1] * dt, 0.0)
     obs.pos[..., 2] += np.where(active, -obs.climb_rate * dt + obs.wind[:, None, 2] * dt, 0.0)
-    obs.heading = np.where(active, np.mod(obs.heading + 2.0 * half + np.pi, 2 * np.pi) - np.pi, obs.heading)
+    obs.heading = np.where(
+        active, np.mod(obs.heading + 2.0 * half + np.pi, 2 * np.pi) - np.pi, obs.heading
+    )

@@ -108,9 +108,8 @@ axis 2 down. ``semi_axes[..., :]`` is ordered (longitudinal, lateral, vertical).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Literal
-
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -142,8 +141,7 @@ _UNIFORM_NODES = np.linspace(0.0, np.pi, 49)[1:-1]
 _EPS_ABS = 1e-12
 #: Half-width (fraction of the set's length) and iterations of the centre's polishing search.
 _C_SEARCH = 0.02
-_C_ITERS = 10
-_C_NODES = 24
+_C_ITERS = 8
 #: Newton iterations of the point-to-ellipsoid distance.
 _N_NEWTON = 8
 
@@ -533,9 +531,7 @@ def _optimal_shape(
     return c, 1.0 / np.sqrt(p), 1.0 / np.sqrt(q)
 
 
-def _build_table(
-    swept: bool, alpha: FloatArray, logr: FloatArray, **kwargs: int
-) -> FloatArray:
+def _build_table(swept: bool, alpha: FloatArray, logr: FloatArray, **kwargs: int) -> FloatArray:
     """Shape table ``(len(alpha), len(logr), 3)``: (c, B) over the y-extent, A over max |x|."""
     al, lr = np.meshgrid(np.asarray(alpha) ** 2, logr, indexing="ij")
     rad = 10.0**lr
@@ -554,35 +550,50 @@ def _build_table(
 class _Nodes:
     """Certificate nodes on ``[0, pi]`` with their trigonometry and the set's support there."""
 
-    def __init__(self, th: FloatArray, vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool) -> None:
+    def __init__(
+        self, th: FloatArray, vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
+    ) -> None:
         self.th = th
         self.cos = np.cos(th)
         self.c2 = self.cos**2
         sin = np.sin(th)
         self.s2 = sin**2
         self.d2 = np.diff(th, axis=-1) ** 2 / 8.0
+        self.cos_in = self.cos[..., 1:-1]
+        self.c2_in = self.c2[..., 1:-1]
+        self.inv_s2_in = 1.0 / self.s2[..., 1:-1]
         self.h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept, sin, self.cos)
 
     def take(self, idx: NDArray[np.intp]) -> _Nodes:
         """The nodes of the rows ``idx``."""
         sub = object.__new__(_Nodes)
-        for name in ("th", "cos", "c2", "s2", "d2", "h"):
+        for name in ("th", "cos", "c2", "s2", "d2", "h", "cos_in", "c2_in", "inv_s2_in"):
             setattr(sub, name, getattr(self, name)[idx])
         return sub
 
 
-def _margins(nd: _Nodes, lat: FloatArray, lon: FloatArray, r: FloatArray, eps_abs: FloatArray) -> FloatArray:
+def _margins(
+    nd: _Nodes, lat: FloatArray, lon: FloatArray, r: FloatArray, eps_abs: FloatArray
+) -> FloatArray:
     """Certificate margins ``max(max rho_E - r, 0) Delta^2 / 8`` at the nodes, ``(..., K)``."""
     a2 = (lat * lat)[..., None]
     b2 = (lon * lon)[..., None]
-    den = np.maximum(a2 * nd.s2 + b2 * nd.c2, 1e-300)
-    rho_e = (a2 * b2) / (den * np.sqrt(den))
-    m_int = np.maximum(np.maximum(rho_e[..., 1:], rho_e[..., :-1]) - r[..., None], 0.0) * nd.d2
-    out = np.empty_like(rho_e)
+    den = a2 * nd.s2
+    den += b2 * nd.c2
+    np.maximum(den, 1e-300, out=den)
+    rho = np.sqrt(den)
+    rho *= den
+    np.divide(a2 * b2, rho, out=rho)  # radius of curvature of the ellipse at the nodes
+    m_int = np.maximum(rho[..., 1:], rho[..., :-1])
+    m_int -= r[..., None]
+    np.maximum(m_int, 0.0, out=m_int)
+    m_int *= nd.d2
+    out = rho
     out[..., 0] = m_int[..., 0]
     out[..., -1] = m_int[..., -1]
     np.maximum(m_int[..., 1:], m_int[..., :-1], out=out[..., 1:-1])
-    return out + eps_abs[..., None]
+    out += eps_abs[..., None]
+    return out
 
 
 def _axes_for(
@@ -592,10 +603,14 @@ def _axes_for(
     h = nd.h
     lon = np.maximum(lon, h[..., 0] + delta[..., 0] - c)
     lon = np.maximum(lon, h[..., -1] + delta[..., -1] + c)
-    need = h[..., 1:-1] + delta[..., 1:-1] - c[..., None] * nd.cos[..., 1:-1]
-    need = np.maximum(need, 0.0)
-    a2 = (need * need - (lon * lon)[..., None] * nd.c2[..., 1:-1]) / nd.s2[..., 1:-1]
-    return np.sqrt(np.maximum(np.max(a2, axis=-1), 0.0)), lon
+    need = c[..., None] * nd.cos_in
+    np.subtract(h[..., 1:-1], need, out=need)
+    need += delta[..., 1:-1]
+    np.maximum(need, 0.0, out=need)
+    need *= need
+    need -= (lon * lon)[..., None] * nd.c2_in
+    need *= nd.inv_s2_in
+    return np.sqrt(np.maximum(np.max(need, axis=-1), 0.0)), lon
 
 
 def _fit_axes(
@@ -682,26 +697,9 @@ def _ellipse_core(
     # Polish the centre by a short golden-section search on the area (margins held fixed).
     half = _C_SEARCH * ext
 
-    # The search only looks at the inner nodes that bind at the ends or the middle of its range.
-    hd = nd.h + delta
-    inner = slice(1, -1)
-    cos_i, c2_i, s2_i = nd.cos[..., inner], nd.c2[..., inner], nd.s2[..., inner]
-    score = np.zeros_like(cos_i)
-    for cc in (c - half, c, c + half):
-        need = np.maximum(hd[..., inner] - cc[..., None] * cos_i, 0.0)
-        score = np.maximum(score, (need * need - (lon * lon)[..., None] * c2_i) / s2_i)
-    k = min(_C_NODES, score.shape[-1])
-    pick = np.argpartition(-score, k - 1, axis=-1)[..., :k]
-    hd_p = np.take_along_axis(hd[..., inner], pick, axis=-1)
-    cos_p = np.take_along_axis(cos_i, pick, axis=-1)
-    c2_p = np.take_along_axis(c2_i, pick, axis=-1)
-    s2_p = np.take_along_axis(s2_i, pick, axis=-1)
-
     def neg_area(cc: FloatArray) -> FloatArray:
-        b_ = np.maximum(lon, np.maximum(hd[..., 0] - cc, hd[..., -1] + cc))
-        need = np.maximum(hd_p - cc[..., None] * cos_p, 0.0)
-        a2 = np.max((need * need - (b_ * b_)[..., None] * c2_p) / s2_p, axis=-1)
-        return -np.sqrt(np.maximum(a2, 0.0)) * b_
+        a_, b_ = _axes_for(nd, delta, cc, lon)
+        return -(a_ * b_)
 
     c = _golden_max(neg_area, c - half, c + half, _C_ITERS)
     lat = lat_g
@@ -871,7 +869,9 @@ def _nearest_body(q: FloatArray, ax: FloatArray) -> tuple[FloatArray, FloatArray
     cq = a * qs
     # Lower bounds of sigma = t + a_m^2 at the root (t: the Lagrange multiplier).
     sig = np.max(cq - a * a + am * am, axis=-1)
-    sig = np.maximum(sig, np.sqrt(np.sum(cq * cq, axis=-1)) - np.max(a, axis=-1) ** 2 + am[..., 0] ** 2)
+    sig = np.maximum(
+        sig, np.sqrt(np.sum(cq * cq, axis=-1)) - np.max(a, axis=-1) ** 2 + am[..., 0] ** 2
+    )
     sig = np.maximum(sig, 0.0)
     for _ in range(_N_NEWTON):
         s = sig[..., None] + off

@@ -77,9 +77,12 @@ def compute_rewards(
     cmd = world.accel_cmd / u.max_accel
     dcmd = (world.accel_cmd - world.prev_accel_cmd) / u.max_accel
     terms = {
-        "separation_inner": -np.maximum(0.0, 1.0 - world.min_uav_dist / u.separation_distance) ** 2,
-        "separation_obstacle": -np.maximum(0.0, 1.0 - world.min_obs_dist / u.obstacle_separation)
-        ** 2,
+        "separation_inner": -(
+            np.maximum(0.0, 1.0 - world.min_uav_dist / u.separation_distance) ** 2
+        ),
+        "separation_obstacle": -(
+            np.maximum(0.0, 1.0 - world.min_obs_dist / u.obstacle_separation) ** 2
+        ),
         "separation_region": -np.minimum(
             2.0, np.maximum(0.0, 1.0 - d_region / u.obstacle_separation)
         ),

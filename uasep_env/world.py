@@ -298,9 +298,22 @@ class World:
             self._restore(~active, frozen)
 
     _STATE = (
-        "time", "steps", "_kf_count", "uav_pos", "uav_vel", "uav_acc", "accel_cmd",
-        "prev_accel_cmd", "est_pos", "est_vel", "obs_est_pos", "obs_est_vel", "pred_center",
-        "pred_heading", "min_uav_dist", "min_obs_dist",
+        "time",
+        "steps",
+        "_kf_count",
+        "uav_pos",
+        "uav_vel",
+        "uav_acc",
+        "accel_cmd",
+        "prev_accel_cmd",
+        "est_pos",
+        "est_vel",
+        "obs_est_pos",
+        "obs_est_vel",
+        "pred_center",
+        "pred_heading",
+        "min_uav_dist",
+        "min_obs_dist",
     )
     _OBSTACLE_STATE = ("pos", "heading", "turn_rate", "climb_rate")
 
@@ -424,7 +437,10 @@ class World:
         return np.where(self.obstacles.active[:, None, :], d, np.inf)
 
     def region_distances(self, pos: np.ndarray | None = None) -> np.ndarray:
-        """``(E, N, M)`` signed distance to each predicted reachable ellipsoid (m), inf if inactive."""
+        """``(E, N, M)`` signed distance to each predicted reachable ellipsoid (m).
+
+        Inactive obstacles give ``inf``.
+        """
         p = self.uav_pos if pos is None else pos
         if not self.n_obstacles:
             return np.zeros((self.n_envs, self.n_uavs, 0))
@@ -455,7 +471,10 @@ class World:
         center, mean_vel = formation_center(pos, vel)
         _, plan_vel = self.plan.center(self.time)
         fallback = self.plan.heading_velocity(self.time)
-        rot = formation_rotation(mean_vel, np.where(np.linalg.norm(plan_vel, axis=-1, keepdims=True) > 0, plan_vel, fallback))
+        rot = formation_rotation(
+            mean_vel,
+            np.where(np.linalg.norm(plan_vel, axis=-1, keepdims=True) > 0, plan_vel, fallback),
+        )
         return center[:, None, :] + np.einsum("eij,enj->eni", rot, self.slots)
 
     def plan_finished(self) -> np.ndarray:

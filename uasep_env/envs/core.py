@@ -25,7 +25,9 @@ __all__ = ["ACTION_TOLERANCE", "EnvCore", "StepResult", "validate_actions"]
 ACTION_TOLERANCE = 1e-6
 
 
-def validate_actions(actions: np.ndarray, shape: tuple[int, ...], where: str = "action") -> np.ndarray:
+def validate_actions(
+    actions: np.ndarray, shape: tuple[int, ...], where: str = "action"
+) -> np.ndarray:
     """Check normalised actions: shape, finiteness and the ``[-1, 1]`` box.
 
     Args:

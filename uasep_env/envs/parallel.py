@@ -96,13 +96,13 @@ class UAVSeparationParallelEnv(ParallelEnv):
         self._renderer: Any = None
         self._last: StepResult | None = None
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019 - spaces must be the same object per agent
+    @functools.cache  # noqa: B019 - spaces must be the same object per agent
     def observation_space(self, agent: str) -> gymnasium.spaces.Box:
         """The observation space of ``agent``."""
         self._check_agent(agent)
         return self._obs_space
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019
+    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> gymnasium.spaces.Box:
         """The action space of ``agent``."""
         self._check_agent(agent)

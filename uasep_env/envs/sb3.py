@@ -54,7 +54,7 @@ class UAVSharedVecEnv(VecEnv):
         self._seed = seed
         self._actions: np.ndarray | None = None
 
-    def seed(self, seed: int | None = None) -> Sequence[None | int]:
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
         """Seed the next reset (environment ``e`` gets ``seed + e``)."""
         self._seed = seed
         return [seed] * self.num_envs
@@ -118,7 +118,11 @@ class UAVSharedVecEnv(VecEnv):
         setattr(self, attr_name, value)
 
     def env_method(
-        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+        self,
+        method_name: str,
+        *method_args: Any,
+        indices: VecEnvIndices = None,
+        **method_kwargs: Any,
     ) -> list[Any]:
         """Call a method of the adapter once per requested index."""
         method = getattr(self, method_name)

@@ -47,14 +47,19 @@ class FormationVectorEnv(VectorEnv):
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
         **kwargs: Any,
     ) -> None:
-        if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
+        if (
+            not isinstance(num_envs, (int, np.integer))
+            or isinstance(num_envs, bool)
+            or num_envs < 1
+        ):
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.config = make_config(config, **kwargs)
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError as err:
             raise ValueError(
-                f"autoreset_mode {autoreset_mode!r} must be one of {[m.value for m in AutoresetMode]}"
+                f"autoreset_mode {autoreset_mode!r} must be one of "
+                f"{[m.value for m in AutoresetMode]}"
             ) from err
         self.metadata = {
             "render_modes": ["rgb_array"],
@@ -102,13 +107,17 @@ class FormationVectorEnv(VectorEnv):
             self._needs_reset[mask] = False
         return obs.reshape(self.num_envs, -1), {}
 
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+    def step(
+        self, actions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
         """Step every environment with ``actions`` of shape ``(num_envs, 3 N)``."""
         n = self.config.n_uavs
         a = validate_actions(actions, (self.num_envs, n * 3), "actions").reshape(
             self.num_envs, n, 3
         )
-        pending = self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
+        pending = (
+            self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
+        )
         res = self.core.step(a, validate=False, active=None if pending is None else ~pending)
         obs = res.obs.reshape(self.num_envs, -1)
         rewards = res.rewards.mean(axis=1)

@@ -1,5 +1,8 @@
-"""Policies: the paper's APF (reference), its comparison methods, simple baselines, and
-learned SB3 models, all behind one interface: ``actions = policy(observations)``."""
+"""Policies behind one interface: ``actions = policy(observations)``.
+
+The paper's APF (the reference), its two comparison methods, simple baselines, and learned
+SB3 models.
+"""
 
 from __future__ import annotations
 

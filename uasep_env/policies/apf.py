@@ -275,7 +275,9 @@ class TraditionalAPF(_APFBase):
         away, dist = _unit(-o["obstacle_rel_pos"])
         rho = np.maximum(dist - self.config.obstacle.radius, 0.5)
         active = o["obstacle_mask"] & (rho < g.traditional_range)
-        mag = np.where(active, g.traditional_eta * (1.0 / rho - 1.0 / g.traditional_range) / rho**2, 0.0)
+        mag = np.where(
+            active, g.traditional_eta * (1.0 / rho - 1.0 / g.traditional_range) / rho**2, 0.0
+        )
         return _cap_norm(mag[..., None] * away, g.max_repulsion).sum(axis=-2)
 
     def inner_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:

@@ -50,9 +50,7 @@ class SB3Policy:
         """MLP policies are memoryless."""
 
 
-def load_sb3_policy(
-    path: str | Path, config: EnvConfig, algorithm: str | None = None
-) -> SB3Policy:
+def load_sb3_policy(path: str | Path, config: EnvConfig, algorithm: str | None = None) -> SB3Policy:
     """Load a saved stable-baselines3 model (``.zip``) as a policy.
 
     Args:
@@ -80,7 +78,7 @@ def load_sb3_policy(
             raise ValueError(f"unknown SB3 algorithm {name!r}; choose from {_ALGORITHMS}")
         try:
             model = cls.load(str(p), device="cpu")
-        except Exception as err:  # noqa: BLE001 - try the next algorithm
+        except Exception as err:
             errors.append(f"{name}: {err}")
             continue
         return SB3Policy(model, config)
