@@ -50,14 +50,13 @@ def _cell(agg: dict[str, Any], key: str, stat: str, fmt: str) -> str:
     s = agg.get(key)
     if not s:
         return "n/a"
+    lo, hi = s.get("ci_low"), s.get("ci_high")
     if stat == "rate":
-        lo, hi = s.get("ci", (None, None))
         txt = format(s["rate"], fmt)
         return f"{txt} [{format(lo, fmt)}, {format(hi, fmt)}]" if lo is not None else txt
     mean = s.get("mean")
     if mean is None:
         return "n/a"
-    lo, hi = s.get("ci", (None, None))
     if s.get("n_valid", 0) > 1 and lo is not None and hi is not None:
         return f"{format(mean, fmt)} [{format(lo, fmt)}, {format(hi, fmt)}]"
     return format(mean, fmt)

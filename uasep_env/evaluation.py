@@ -945,6 +945,8 @@ def _run(argv: Sequence[str] | None) -> int:
                 width=100,
                 initial_indent="  ",
                 subsequent_indent="  ",
+                break_on_hyphens=False,
+                break_long_words=False,
             )
             print(f"\n{len(figs)} figures (seed {seeds[0]}) in {args.plot}:\n{names}")
     if not args.quiet:

@@ -23,7 +23,9 @@ Families (``EnvConfig.scenario``):
 * ``random`` -- a family drawn uniformly per episode from the five above.
 
 In every family, obstacle slots beyond the first are background traffic aimed at the
-formation at other times. Random planned trajectories have a random heading and up to two
+formation at other times. Every obstacle holds its initial course until 10-40 s before its
+encounter (drawn per obstacle; 25 s in ``paper``) and then manoeuvres at random, so that
+encounters happen and their outcome is uncertain. Random planned trajectories have a random heading and up to two
 turns of at most 45 degrees.
 """
 
@@ -49,6 +51,7 @@ _SPEED_RANGE_MPS = (3.0, 12.0)
 _TURN_RATE_RANGE_RADPS = (0.01, 0.15)
 _CLIMB_RATE_RANGE_MPS = (0.2, 2.0)
 _MEET_TIME_RANGE_S = (0.3, 0.7)  # fraction of the episode
+_REACTION_LEAD_RANGE_S = (10.0, 40.0)  # the pilot starts manoeuvring this long before
 _ALTITUDE_M = 100.0
 _ALT_BAND_HALF_WIDTH_M = 60.0
 _START_SCATTER_M = 8.0
@@ -248,6 +251,8 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
         )
         obs_pos[k], obs_heading[k], obs_speed[k] = start, heading, speed
         obs_wmax[k], obs_vzmax[k], obs_climb[k] = w_max, vz_max, climb
+        # As in the paper's encounter: the pilot holds course until the encounter nears.
+        obs_hold[k] = max(0.0, meet - rng.uniform(*_REACTION_LEAD_RANGE_S))
     alt_band = np.tile(
         [_ALTITUDE_M - _ALT_BAND_HALF_WIDTH_M, _ALTITUDE_M + _ALT_BAND_HALF_WIDTH_M], (m, 1)
     )
