@@ -25,8 +25,8 @@ Families (``EnvConfig.scenario``):
 In every family, obstacle slots beyond the first are background traffic aimed at the
 formation at other times. Every obstacle holds its initial course until 10-40 s before its
 encounter (drawn per obstacle; 25 s in ``paper``) and then manoeuvres at random, so that
-encounters happen and their outcome is uncertain. Random planned trajectories have a random heading and up to two
-turns of at most 45 degrees.
+encounters happen and their outcome is uncertain. Random planned trajectories have a random
+heading and up to two turns of at most 45 degrees.
 """
 
 from __future__ import annotations
