@@ -107,8 +107,6 @@ axis 2 down. ``semi_axes[..., :]`` is ordered (longitudinal, lateral, vertical).
 
 from __future__ import annotations
 
-import base64
-import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
@@ -375,169 +373,25 @@ def ellipsoid_volume(semi_axes: ArrayLike) -> FloatArray:
 
 
 # ---------------------------------------------------------------------------- shape table
-# Shape table: the minimum-area enclosing ellipse's centre c and longitudinal semi-axis B as
-# fractions of the set's extent along the heading (c from the back end), and its lateral
-# semi-axis A as a fraction of the set's half-width, for the swept and the terminal set, on a
-# grid of u = sqrt((2/pi) atan2(2 r / (v t), phi)) (0: r = 0, 1: phi = 0; 33 nodes) and
-# log10(hypot(phi, 2 r / (v t))) (-3..3, 49 nodes). Computed by
-# ``_build_table(swept, _TAB_U, _TAB_LOGR)`` (about a minute), quantised to 16 bits, delta-coded
-# along the second axis, zlib-compressed. It only steers the fit towards the minimum area:
-# whatever it holds, the returned ellipse passes the enclosure certificate.
-_TAB_U = np.linspace(0.0, 1.0, 33)
-_TAB_LOGR = np.linspace(-3.0, 3.0, 49)
-_TAB_SCALE = 1.5 / 65535.0
-_TAB_DATA = (
-    "eNrtfHd8FdX2/ZlbkgDSi9JEaYICShNEkSKCFAWBAKJIfxQRCIgBpINIkaKigFQRROm9i6GEKr33kFASQkL6LTNn7+86"
-    "ZxIIIu89f+8988/vno/HYe7cO2fWrL322mfOzf6Q/SF5w8W/8WK8/myP3RMTeost9D72oU/hFPSxHIv+Il9E/yv/in4i"
-    "T0RfiSuhn0yTSYgQGSKx35xoCtHa29qLbe9Eb29PYVlYuhLTOI27ui/Gli3QlJ8NvOadZzV2bTZn0UJHJ1mQtxkNqTu/"
-    "ZuylNXxKVOSNvEB05gs8QEzlG9xarOA7XFvs4USuKE5hRM+Ka+zhwuI2+zm/iGOTc4kkjDq7SGPJQcKL6wgQflyTC1dD"
-    "7BQS49wVsiukaLhbuHGUIYx/icyj79r4PA6lOxhlBko7eAf6CTwBn6uAJsQkmkTM/WV/yaxQktzO285r8VTvVG9Pz1Py"
-    "KZlbo9TFnRSbq0AjLhJ4y7vAetO1HSjNd3SRhXir0QgovWqE09p0lOaLLvdRaiVW/gGlkuIqUHpKRN9HKadITkeJ0lFy"
-    "CxO9Qok1Ssz7/oRL/xqZR1GSrDA3cVaBM3nRJ3My+hiOQX+Oz+HYbWhCfM6fY7s8GvF4Gk+S+8q+0uRJ5iQzlTt7O3vj"
-    "eJ53nreLp5AsJKtqlD5w17h7MH8ddgea3sVWdddhcxotcHSWz/JGoyn14JrGAaB0QrzIm3ie6AqUQsQ0oNRSrAKXXxXh"
-    "QKmCOA2UnhERGN2TGJef84gEjPcJ3M9HWcTswJXZvRDhQCnfv0TJjqwH2GSONRsfu/fj3EKo6xIiESNjvoUmxBk+g+2N"
-    "aMyj0YhLoVk8mkaTj3vJXjKZJ5uTzTvc39vfe5a3eLd423nyyXzy48RUTuV33Qvvdspfju8EFPJtsvK4Esy+9JOjvWzA"
-    "64x36GN+yThOyzVKO3m26AHm9hVfA6XmYi3f5ZriACdxedyrVC4mbgClAuJuOoskZxMe9I/Dx9BXuTvkQEgBjZIhMiPx"
-    "MD72v+1tSu/Vi/R/qs/MInVdzPFoQkRxFLaPoTGvQSMeimZxMTQfD6EhlMzdZDd5h6eYU8yLPN473ruJf/f+Dl0qKovK"
-    "+Ykqcmu7A+L8+Y5RbEBBX06Z6MxtdacpjoGyMu8wGtAMLmlcpQV8Emp3hGeIPnyJe4pZuD9NxCaO46riCFAqLS7fjzWb"
-    "RTkwUuJAKAQ9Fh8bhR0hh0OKhD+MT2ZMHsVHpvfq35buzXSUJDDy4N9JaMxKkZivoTEfQmP+BU1yCJqf86GlcH/qT3Hc"
-    "QXaQV3m6Od3cy4u8i7xfcZQ3yjveU06Wk2cTVeQ+7f46rm++iXQ+oJyvrTzrfN7qQ8Mc42Q1Xm28S99xYeM2/ciHxMu4"
-    "G1+KT/gKdxYL+Da/gYwRz5XESZzraRGJ8RVEPrGjzNIsslUoQ38MfaU2VjYe9p51IcdCSoY/HGuZ8aFH8LE0iywdZYql"
-    "ChuFVJreSsO+JMSaqWONoRAX8O4eNOJFaD7ugeZhN1oyd6fudIPbyDbyOM80Z5q/cJg3zNubg3xBvhmeirKirJCkMI93"
-    "vRe/NO8kGhYwzveSPOWsaP1MPRyzZS1eaHSiWZzTSKafOEzU5RM8VgzHnXlPLIUivib2YizlxHmwW+U1H+cV9+5ntD+y"
-    "KIM/RqZYsrcXhZwNeekPKFEmlOQj/PFrxbbx8Wi8VHbw4VrUv+/hnWSwPBUY3cS/T6FJVtnN4ploPv4ALYX95KcYbkNt"
-    "6Bq3lq3lFp5nzjOn8E3vTe/rXMVXxfeTp5KsJL9NSuAE/tn1wr0zeWZTuYDzvhJyl7OOdYLedayWdXiqMYDmsLqY5bxB"
-    "NMPZBiOLRvK7YjV0u7o4jHGVElcwkkLIt/70jPYoix6NssxYTQ65HtIg/GEWUSasMvijelOj5NMssvFJ1bGWiL1eMFsC"
-    "rxi8nwjdTMXWdSjnCbQUXo/m58loHm6OlsBxFEdR/Da9TUe5sWwsl/NSc6nZhwv4CvgCONgX7DvreVm+LNOS4oD5W66w"
-    "e3XzvEllAy76lsg5zu7WBarpOCDf5IHGFJrGfhHAv/FS8R5yaT+BiOXGYjNG9KI4gXtWHOroTc/7SotsFvFDud7G5HEo"
-    "9QlJCOkYnoFMZpQe4ENamVmzyMZHAgXljlQW86fjc1vvjdJ4XdRcOoO7eZFPIuaUIvl4FFoq10W7y1fpKl3iulSXdvMb"
-    "8g35HW80N5qNuJ6vnu8SDfMN8wV568v6sl1yNEfzIefChE65u9F5dzn/MTnQOcW6Tk87ImUz/tBYRNM5TuTn/TxXdMO5"
-    "uos5OHc98Rt4bee1IuIWzq4UO4NFKqPRn7DoAVYP5/j6Ic4BY8MfjrXMUWamx5fqvRqlVM2iJO2O4jW3otGnguUS9+0i"
-    "UIzl4+BPFB+Afp/j3fhvHa/kszwQLZkro0XzUTpKp7gqVaUNXEfWkSN4v7nfLMEjfCN8s2m+b76vubeZbCZ/Tb6EjFXL"
-    "OT+xS64vqYd7tj87NXDusK7QE44U2YmbGhuh3ldFSeSHaSIEx34gFoPHyiMlpOc12x1ljrXMLPrnsWa/coUUG7A2/M/w"
-    "se7zx44y0i7IwnUq7O5pd3RHx9oNfCIF+EiM6wRGFcP7cFQEb8HWKWT/03AxKxBzvbgn8CmJFsU7aScd5rJUlhZzbVlb"
-    "dudL5iXTS1t9W33daLdvt2+Bt51sJ4unHOWjPNZxNKlKzmd4jauFeVUWc96wIkilojH8irGf5vIxURke4HPxGV9Nr0qq"
-    "id9xJ1U9kuGOVKxZmWIto/p4nGJnfh3t/8qAO+GPZ5GNT+YoS9Asuos9Puizwu6qZtFpVtzaj1HdBD7JyMbLEIXHeB6Y"
-    "tY2/AVpDeACwehLtJK+hNbSTC1AB+ByFUjOOM+PMS5TqS/W9QuQj315vK9lKzk3Zztt5vbEjucETbbi865xZmHI6k618"
-    "fNsoTOO5nHGefuBdog7O8hl8fQQ3ExswupeE4rOtSHZesxXpr8aa/RrTv8OASvsezyI7ytJ0nxFl6r1o9F7os4q18/hc"
-    "Ih9mhd1OIBqFfJME7s/B+4d4PPi1kT+DMs3k4fwRG2hn+Af6gdZzfspPI7iGrCFrc3Yru7WWavlr+QMpmz+bv62vt+wt"
-    "L6UoTdsuzqY8nyOFRztHWhUo1lFQFuZjRmWazE8aMfAAm0QTsFZVJVHcUGyD3qt6JEORcqMOsB7y2P9+rNmv5/qPHzBq"
-    "3+O0mtLxsbXIZlGsrmdvsGLYZexPBgoq1vawisD1ODYC/EmEjk4Gyw5Aiw7yWu4Mr/QNd+ROXJDz8Az+mr6mpewgBw3l"
-    "t+RbMgeXscpY02m4f7g/Sr7kf8m/TaNUL/Ur/go8vJ5aIvtEcdlRWral3x3VUMGtMVrQZ5zPiAcnl4k20L3e4juMS+l2"
-    "Aj8nLmAkttO2q/4HlezjPfbjUPqt38YBEfsys8jWar7PIvVeko61eK1F0Rql6zoCz+LdJPBF4r3tWseXYu81ng5WneZP"
-    "sbWH30cUruHGPIuncR1uy9X5Ga6t69zZ7JVe2UejxNTUamp1oV/9vyKLdfB38Bfx95Q95cLUwTyYv6IcntSgDoZS7Ma0"
-    "1tFcluO5RjcaxW7DpF38g+iIHNFFzEeMKyeZodsPPNLDHvJB9v9XimS/GvWLHdB8/wNHlFmLVJ+ZRXc1Sjd0vXYFZ0wB"
-    "iwis2YMxxIEvHrz3vdapMdDt49wVR+3iBvhvBb8A/kwBPk24C3LcWRqKNolTZaoM5vayvTxD7a32Vk/KZ+Yz58hQf6h/"
-    "hV/Vd1ZqB+6ASq+k92pgoKOe8Rt9SN87/iEr8hRjIH3OPhHIe3mm6AXudhA/4j6p2jZRz5DYHsmfXvX/+077T7jUt+zA"
-    "Y/sfZpEvU6zZLLqn81qMZlEktj3QIkKsHcKeBPhqP+LwZ4wqiqcCu0uo1GL4d34HEbmTK+D95ZyXJ/BEtqg+6pO8HEaz"
-    "6RuqzIIEPcedZWcZTkOtoVYb6m52Nz+R8/3z/S+YqnLpkVaLa3FD63nf2YBPHMpXz6IvHENkFR5ljKKJfE/k5XCeLvrj"
-    "XO3Ezziv7bdLiOv3nWTmeuSv6rb9KtO3x8CuB2xfnVmx6b5vVH2c5tItrdhX9dzIaY3SXvT3eINGcD6wi+CRQPcC+HIL"
-    "KNVCRG7n/Mh4SzkZWXsSX6ZqcAN3aRVdpDBaQh7pkSW5h+wht9EKa4VVnlaYK8ze8oz/jP97U3nvlLRCXIirmL3937mf"
-    "dPYCawbSUMd4WZ0HGZPpS74tCiOiJ4tB4K0951ZFHFX1sa5tVXYz02fY7Oxmc+lxVe3jXkM+XjUwx0FOV+wHsSb1TKMd"
-    "axaYohCM0rF2UaN0TKvVbzhvHJhigenfAJ9r0OoU8Oxd7SnLIJdtZR9tBEpnKRRqvoPKcD8+TDOoNN+iPBQv4+UzPEQO"
-    "kYso0oq00mSKmWJ2labf9NewSsgSMtQTTdHUzL/Q7ORq5gym5cYQGuCYKmtyX+NrmsLXRQlkh/FiKFCyazfbA9jzSLYH"
-    "+E+ym/3a0scaeOQg/9NYs+4rtkJJKXYq8r7Ka1uwHceL8enb/AXQvcLdcR/PQKUVSnmgW9s4kpbxj7yBPoUufU9P8iD+"
-    "mUYg8k7RKVmRytMCGi1Hy4Wk5tzOyTpWHet92dRsak6w4tDqeTfRJlrui7AKOJ92PiMjHOMoxDFN1uCPjG9RwV0RpYDS"
-    "ODEMd+gdsQ4o2fMkCqXMVYn8C7Xto6+Ij1p8suJQBkqe+7Em9RxR5ljz6VhTVb6aZwvXmr4O++9CsU2gNFIrUhv0Z7gS"
-    "xhwOFp1AxB2G61vM31EfsG0YOeEtR1E/asWrab38ikIpUn6JNpfKyrIySc6wZlj15BZzi7nUWon2pm8cjaOPfS/QL0ZH"
-    "x17zNdccCnVMlC9zH2MGULosSgMle7bkbbEeo7Hnt4uKm39wSv8JSvd6L/tk5WE7r2WglKJRsmPtrtbtG5pLl7CtYk2h"
-    "FIbz3kOsKZRmaL89AOhe4abYe4qLQaH28U3UIJt5OVzfL8DnAxzXlvw0nNtQN+oILzBXulGp5JMb0TpTW9lWXpCHrcNW"
-    "Z1nMKmYdt0ahtfR3ok7U0bcEqIcZr/n3ultRY8dm+SoPMKYi4lQFZ6N0NRNKmf2k+ZfnSR59XeuVfdD53xVTDB1rzBko"
-    "3dMoxWguRWouXdCKdFg/H9mhubQYR8dClf1AqSfGdplfB/tOcw7gdYBP0F7exNNRqa3kTtQCnHuZYuGXX6ZGNJA702fy"
-    "Lf6VllokffKeHIF2UqrnJq3ldGu6dcrqjDbMrEbVqKuvP/fn2jTT7OWKFQdETX6ORxhjkONuiGI4k13BqYh7lEv/DZRW"
-    "9AwZVPMop+e1NN0naZTiNUrRGqUIjdJZzaX9mktbWGnWfJz9LtyRqug6QpEuI9buIeJMuoDjttE+6PsomoqKria1hyPP"
-    "SzfhJQtROdQllam//Jjn0kBrPg2iCGuJXCIPScWojjLWirWk5tJ7VhLicL+vBJdgh1VGnnMkGrk4SRTlb4yPaRzHi3xg"
-    "7STxKc5tq7eaU8pA6b+lSy16XB106Rhnyv6ks7/yiUqXbmmUrmmUTmpdCtfqvR73KAF+WqH0mY64ljringW65ziOzsJL"
-    "/Uy/wVF2R1ys5qL0Li/he/Iiqts78ln6mp+gFnISD6C3rSZ8mnabFxFvi+W3aN2k8pmJ1jW0I9ZIOVJ6/efpPL1inqQI"
-    "8YbhsbI5C/IGoxkqFBYGzvGN+Bh6ECyW33cC/90ct6f7u5+eOmFnf9axplAy8F13NUo3NEpXNErHdY7bxeq4Vay81Nfa"
-    "CXyC8URDkRKAZiHczVPIX7cQd/OR3Xbw67QEfXaqgZr3otyI+Nsmy2LfDVlVzuLq1NgazWtopLkH2e4Za5vcBi3fhOaz"
-    "1EyvkI3Q3rZU3ZfNHMtj+W3KLtMcB0UnsRBVYRHjFm1Pr1Bs753ZVeYT8feflWR+FvlXUfJ23f9p3dP8EEoJmkuxGqUo"
-    "HXeXtF86qlHaqVH6WT+XnAbs4vljPadUF3sjoUgx8EvhFAVMR6LCOgo1GcK7OU5WBko/y6O0jX+SKXIlL5OvyTAuRpY5"
-    "m3vTUHMU++muvy69RtGWD0pVXB5HC5LD0crI0lSajpgq7npZVyhWJIkSdN3ozbWMfTSPN4vGYHovMRN31X6Sq+a60zLN"
-    "LMmHXOVf9d43OtcNbXKOtSJloHRPc+mOrnMjNUoX9FOS37HfB14o/VqssZoM7BJRc6hZ7mraNTkRo9eQudRzyt7QpVNc"
-    "BnGxnw/L2lDZOfBFv3E/mY0O8kzptfbxSZnH2sv1qaq5DnXLBv9n/Dwf8VeiSlRXVqAK9IJUsysvyli0qjIMjr2BNQie"
-    "6xiq3vVGtNjAzcSsdNc0XIyFgjYSW8FvNZebpucEfOnVrj0n8P9W7Q7quDG02qUMLiXp/p7GKkYzKlJjdV4/ezuoUdqq"
-    "GbVIz3V/zmrusgu24rminjnx0m1gtZGOIUo/pDD0T9LHcJdr5Wu420PkYrzzLvT4DHeH8lwFo66ZVzknOcxoeM5m/u3w"
-    "5FP9U7kZR/tD4abqyVE0ilpJ9UxqpuxAHeg7mQd+NbtcwAv4a5pEnxpzhbrWVbxIfIi4UzO60elzlQ/qlP9MnWZ/UGJw"
-    "pwiV4f+IUrTevq5ROgeUJLigNGqz7hfqp29j9HOm9uBZMqraJPvZCO7kSjqCz7eirUA5RX6FO7xUlsZ3/UNOoWtcRUbK"
-    "G/yavGYl8mQ5z0zgU/KyP5kb0Wv+NN4L83aVC3J//xFwJsFfiHPzVescnaMdMpIiKUYeoSNUlcpxOb4g1dOrPtSOvxZD"
-    "xD/4e7GNvxBDcG/sGcsXxJn0J3EPzzL9VUbVfq/v4I9v2ygJYaMUr3sbpQjdnwMmpFEiqIuKwXmaaWOAlJ/bsVofUA4Y"
-    "QZ/oDsa1CBGXzM1QwSXwXTke/UxZHKOuLVdTAheX+2Uyl5IbrBR+XYabQuyUvfxOKM1Zn1uMp5U+5vMU4HeLetzRfw9V"
-    "T3szBlVOLmsDIr2UfIff4Z6kZlQW6/4K9eW+8LBb4E/SKELr0fu8BDFXX+wEv+3KTnkDbyY3/ldm5IKDpw1+P1E5IPWv"
-    "ZN3H6T5a9xG6P6tn6Q7o7Y26n6v70TpSW+vt57SDuEVqLnMJ7UHflFagvyJnoB8jX0JfXc4iIYLkZilEXjnaEqKAXAOU"
-    "ZsoX/EJclHt9QnSlmuhX0lz0RfkK+lf4Bt4dyHNw5Hxui0+t4mfxDQd5NfrfwUHoK89AfxMoqTVT1bXz7axd8AStED/p"
-    "6mGnvsNH9B2+qPsozYI797OWrc22TqvZNHvWNqrmv7vKK2teu/VoK3qaBW3wVEzLqlVe3mYX+1gJX8mpuEOG/A1+ZZjl"
-    "NJKSJ5nCJRJT/aarSMqHtMhwyMddh6G185+9DH2MI/04+3h7j3o59DyPS+9x6m23UGNzCzXOA3rMr3qaB631NEzLqlVe"
-    "+VsNHxR5ryHqd0PkglsWYi/VR9+bdgMXU5ZGHyp7A8M7VjtZHBXDSiMmqavZ0vV+4hV/YffuFKUAVygzKuqbA9IxsXv7"
-    "2jP36phsejsofVuhkUuoceYVauRPCaUh5/UVdfO0CVrm+Totq1Z5tWhdI7RU/HL+AtvT4GWF+Ag5HarOd3HlBs8hH/J6"
-    "RWy3o6XSEDekG30H2cAyxCmrDJX3V7KaOF5MamhOcsnEUuY5V7Y0O2OoM+bEORRj1N15QnMjh8Yku2ZOkFB+r5hQc60F"
-    "hRptCaGydhmh6ouqQkVHir7G1Z5WQSs9qWlZtsqr9bnQtbHHeDv2hKHSEmIZj8dVZiBWCdu1ORZMM3gm+k1weg7Rln6S"
-    "TiCWQ6ZwB1nfcovT1nNU3V8RiLXViJVLqmnucb2TJsFZ1iMpqNHIr7HKK5QalNJ7iml8SgtVUzTU+LwuyoqL3Fi8DlUq"
-    "JdQaG8tTOeiYp6Enq1Z5eVrnHnw4OgJVlwGsw3UmW4vtzahkDbGAQ9GP4ibo23E+fL40n4QjiqTe5BRTKVm6RVnqKAPF"
-    "MrnNSuKiso0VxHOtt8XK1E3mPOeIxNzmJZcjZY7s5lhiqtgvrpEpItTdrK7xKS9UNREs1HPYt4W64x2EevI4VrwvlqDO"
-    "nyAG8yded5DpWeLJqlVe+YOLDB58M1bP1kbxWRx3AdW8AfQ3o98Bf+sQP8Fje3kiPHYcvEtJ4F4VHsUtUmksBYqfqABl"
-    "E2/SLBnHR+VVK494Q1aw7nCY9QzX9kozxvFUUhVzmeu95JHWCGcXn1KAUpozb2lG1RTKzwwU6jljD/GyOMQjhKpb14lP"
-    "xSQeKfaAy0G+hMA83kberFrlVSY4aPDv1xN0PXIHThnKAw9pgPGH8Mmj8GkOOLPNUNGfUY+7xJdw2m7Rk8vgHDU4Avj4"
-    "aSI9IVbRS3QL9fp0WUhckNJK5ndkNUvyYeswFffltbY4Jie9bn7vGpj8qTUeWCn+dxCqZm8k1LV8o7EaJ9TdX6jxiRLf"
-    "id68RajZyFBfTOCT3kK+rFrl9VJwZOjlKyngpSEUVga+KwKfUbxyAKuD6I8gc7g0r9y4Q3NQ7U/iNjhTd1ToOUQ1vki5"
-    "RRrNQe3xC+WioqIhzZXxfELGWxY3lJWAWLhVnft62Ux1rEx61fzB9VzKe3KJo7Gp4i5YqBVZm0QtsQ/4dBQ/oHYdIcaw"
-    "KdTT/yRRwLhLJf2DAid7X/Fl1SqvmsHLQn+94AHiBlCOByb3EM8OZMqr6COhV07wNRz4HOJ1yARbeTbO8SMPx70Yx73A"
-    "sQ/VSlLxAu+nwiKWptBVno0q/g5XpxHSxzvkQSuneFHWtabweutZcTntpPmZ80hSBXObqw3EUxijSOn2MI3VPjEKKljS"
-    "UKtHHIZab1PGUGtvwvyvBO737vPFu/NlySqv14NrhJ4648V3GYjVBPRJyJ1ORMJNfD6aLwPxa2CPG3VjGPDZD2ZnQyU5"
-    "Ddydyx/h3MO4J1BsyZKKi+Kov87xBXqLqoqxlCDTuDC1kDnFHLnJusZ55FNyjJxiVTE+Sp1jOl2Tk9NMy/mmV+Wy7aKH"
-    "AP6GUl1LKAV+3jgnynNtQ+HQ14wJeNL3in+3+/UsWeVVP/iXTz0n/PguBz6fDJRScQ+c8HMx6O8iwt2ojs4B/St8GCid"
-    "AG6HeTevx1EroVT5xTdQqsKiP7/He7gBX6cKIjtvB6PCqAklcXfaDpRSZS15jgfAZbUQidZwmuN/wxrkeDUlxOzkqpI6"
-    "hfoZe6Wq4m+LPmIGFzUUK1oaiSI3DzbU08ns1sqAVr5j/g7uH/1ZscrrzeDcnxY/auK71NxRqsYqCb1aZ+sER2/jG+/g"
-    "3AGIvlM4xwXwJjuUai3uzTb+DjljCc/EHZzAb8INduGaOLYyH6LyIpFmwDMsooLQ9nq0Wh7ig/KO5RT15SIrH1S9t2js"
-    "uWlOcLZJ6WWNcr7oU1fHWrdrGitFK/7MUE+3PzXeN5bQEOvdgNW+F81X3Pv9WbHK663gmoOWHzL1kyY/KmEnsEpBrxjl"
-    "QvTdAZfiwagg5NHz4Os1/h34qFUCc3gfKu28GNPn8MzfcweowGfcj3dwc86F94vwUqoizkKpNvBIuNAxogB1kQn8ndxl"
-    "HYezKkUXzRHWU46Q1CXms64KaX3hdEbzaDGS2xpqPdIo464owN/oiCsi49z5/WNMh5v8WbHKq0nwk59s329p9piaPT6g"
-    "E6PWreM+qN9KeBHft4BSLFiSHdF3EtXWJURXfnGMV8PL7uTF+MQyXoMsM5XfgCL05mAg+Cq71OwUz6cAsZ5eoEKiDZ2R"
-    "+zhKPiELis7ykpWLk60moqY3t9XD+XlqhAxy9LaUIg00vhL9uKsRIZ7haUY/4yu6Lvu4Z/h/MiNcz5hZscqrWXD7gZX3"
-    "WkDIgVj1ASdTM8oLjVK/BrsH9JOhUdnAqOtgbTQ0KrdQKwELiLPA7QK8wmko1SYejby7ANVNHI/kGmB8O/ZQXajqEcop"
-    "rtMaVBBTEH23uBwNQ+5bKU/AJ9SSg+iAOcuq46ibhvrM2cfXAI7Daai52YlGFLLBT0ZPYxYcWaDb5xfWEtf7Zlas8no7"
-    "+HqI3CUzoWSBPS4dd26NlQNuPhDsSQRSRxHxan73JlSgIPQ8jIsi/pdDkXYhEg9Az6fhs1/xGNSb/TgPvyPqc27FRF5P"
-    "kndSHSoiupKb5nOqfFpWFENlazmC8kjUqd7KVi/nK56LuLJgMUUM5BBDzYTMM9oYy6gEj3cNNataY13DzaxY5fVOcFx/"
-    "c6ea1VbPTWys/FqjPFqjUtErh+DCme5qjbqJ88Ug02WHnh/HfToHrPLC465Axt0ClEqIRfwF8B4LTxXOH/CLGHN56Hk5"
-    "cYeW0z6eRU56UVSnMLmCf5MJ8OcdZEs+619g/ego59lJTxklaaCYghy/W7zO0426Rhit4zRndqu9Ndw11syKVV7Ng4P7"
-    "VfpVPSFxaJTUtyhlMrUy+VnxyIu4yybUTGc0zh8EN3AXsbdb/zogD+7ZDqjASV6C8akVqGOgVh1xX7/jubydBwKl50Qj"
-    "dsJ55uYl0PMDwAoqT8dleeGmf8jL/L00aLEsJUONFt510u2YYoaKifyesUW8xV8apY3LVE2EOidam6yGrm1mVqzyahH8"
-    "TN8j29Rv3NRqCkszykqPPodQDsGhGeVChkhErxxCgLD1/A7uXw6M5jywvQCsSsCjrEJe2Y7Y2w/URgHDL4BYNjiEIXDq"
-    "lflXek8k07eUVyymxvCfDWmHjOFzsr9sxePky6K8v7js5pjpq4Wc4BFKw4MNpc9bRJIjlywpy7nOm1mxyuvd4O59Pt6q"
-    "Is6h1zA7da8QN4GYwisJ/HAh0pRa3QZeAXADilGnWTmE7Nh3CFX3Neh3dezLgVjZx99CHdZDL3bw94i5mmIIPwcf0xyI"
-    "TYJDOE6B4jTVo25iNL1I67kYTZIXea90cVeriTxntPT15AHiI33tzY00uNT8RjvHz3KiDHT5zKxY5dUyuNZH5TbbXGKt"
-    "ThkaZaVrVAajlJtyac/pRvTdQswnQKOfhkOIxrE3MUoJd7kPqn6Md+H43/hLuIJlcJ4WHMJgMLEPh0C9XkPW6yYcnIZr"
-    "3EzVqIb4kJLlQRb0FH1Bq2SkqOQPpVpGXTlVDOCeupp71VBrJ3zyqrOklRWrvFoG9+mVY5P9+1vW7FF4mbr3aYalaU1P"
-    "0Ty7p9cF5MG+aKChfmtSDPtOQ3ligORleIW8qOnPw3G2Q3XsRWW8hSdyVej55xjrOH6ZW4gPwKjV/AKfhNrE0mY6zHOp"
-    "Jt3jenRCbmYpj/IxM1aONiaYDcRGThQbRVNoVCtjJSVQZ+cCqxV96fjkb17l1So4ssf4DWptl0NzyanVyY47t177Hah/"
-    "7ZUN50hBPCk9zyYyR18you8M1MoLft1GjNXHvtvwwKf5V7i6fbyIy2L0cxGbs+GpBKKoH7xEc27CW7ko/0LtxTmaDh/1"
-    "BRWnKH4VuDnAmieMkuZMrgsuqme1lXRNd5AvOcrInvrpyd+7yqtV8Lv/yLP+wa9QDf37OENk6Lkdg7ZDMNOjz6l9ggtY"
-    "JQEnNTcViNHEYhxxGGt+jO8sMtoVHP8bn4CKv4Z8uAZjXQXtOskzUBfXRiyFAqU3uQofg6NaQC3FIRoLPR9Kb9FH3Ah+"
-    "vYUVTqfEctlNzOUAY5+oxct1WupNKx2t5N+7yqt18NBuBdbZfxcgozfSo0/qPabmmV/j5dFqlapXh/v0WvinhPp1zjNC"
-    "/T6uuFAzL1e1TwhDrbAben4Zx4XBV23AMWG8DOgth1d4Hs7zW1TxfYHYba7LeXGebLybXGIvUEgCr9xcBVthYpCloryu"
-    "+BZq7jSqGEfJQzMcfeTfu8qrdfDWLjfX2M/NWLsuO/qUTrk0iwL0Ly8C9Wr5bPoc5n2s1AyLyoB3tbu6yarqvgudjsC9"
-    "jAVOgdh3Ac7zMu53MWTo24iOXWCUhIoP5xrAahQ+2ZcH8E5UgNlwVU/w7+TFfzNoOf9Eh7iXLIIM1pbUmq7bYpVoqa7W"
-    "CKBEumyUpr9rlVfr4NROP64WmZ7PPvh1vHH/L5k8HIMOQekZ0EyvaOwYdOsZqgBd/WXTM1Q5EIMp+NctoPMSWJZbzEPt"
-    "vhkVjVqXGiTW8lJ8biYPBT6h3B7f3ZxL41uLcCTBk5GkZ+Eb6ooBcg+yxSkehgxwUpjCDe+VZOSiv2uVV+vgmA/DVv3x"
-    "L1Jkrm8ejcRH86BHrx/Mr1eGl8Y+j86Nak4qWc9JJSDmXoYLNeEdIqFVRcR5+M6CcKGXcXXbeSOuaAmU6mUxAe7zPHfj"
-    "pmDFK0w4bR6ug4gsxE1FXtTNUciSQ+BVe4nnjbNUkUONifS/X+UVHBz/wYSVD/9FiofxsiPRJdRqDbf+dViQ/pVBNv3r"
-    "sJx6zWpeYf8tGNs52PMwfr3uQ/n2QOxLxKdUJfgEYkDNXcVAzQKBYiSOOM+H8T2H9Ur7rbwO3/qjrponwGExEHsTkdoA"
-    "7rQ9N0MGmwisbvAbQql6LeEwiPpyQSOW/pervIKDZ7VfvuLxf/vl4b/mYT/5dzwSlQ9nRtZoyfTer2djlOPy6/l09Su6"
-    "p4Wqom+wmuXLiX3q70/cBq/ywkWcx5WcQeYzxH7ehvuyEVVPIi9AbrwJnnVBBH+m5nDAxbziFz2//YF+srmKT4sK/L9Z"
-    "5RUcXKrdwuV/fcXMw/g9wNDe8sMdsXYq9m/u6X60mul/GyWjsrb0Po+u2NWTCfXXLdTcezxYl4htxT9VM94EtinwGcdx"
-    "tScRXQzmbceebfj/NuSGIPE13omH4ikWJXN/MR28agO/9d9Z5RUcvGyZ+P+vf/r6P0O9u64="
-)
+# Shape table (``data/ellipse_table.npz``): the minimum-area enclosing ellipse's centre c and
+# longitudinal semi-axis B as fractions of the set's extent along the heading (c from the back
+# end), and its lateral semi-axis A as a fraction of the set's half-width, for the swept ("s")
+# and the terminal ("t") set, on a grid of u = sqrt((2/pi) atan2(2 r / (v t), phi)) ("al";
+# 0: r = 0, 1: phi = 0; 33 nodes) and log10(hypot(phi, 2 r / (v t))) ("lr"; -3..3, 49 nodes).
+# Made by ``_build_table(swept, u, logr)`` (about a minute). It only steers the fit towards the
+# minimum area: whatever it holds, the returned ellipse passes the enclosure certificate.
+def _load_table() -> tuple[FloatArray, FloatArray, dict[bool, FloatArray]]:
+    """The shipped shape table: ``(u nodes, log10 radius nodes, {swept: (33, 49, 3)})``."""
+    path = Path(__file__).with_name("data") / "ellipse_table.npz"
+    with np.load(path) as data:
+        return (
+            np.asarray(data["al"], dtype=np.float64),
+            np.asarray(data["lr"], dtype=np.float64),
+            {True: np.asarray(data["s"], np.float64), False: np.asarray(data["t"], np.float64)},
+        )
 
 
-def _decode_table() -> dict[bool, FloatArray]:
-    """Unpack ``_TAB_DATA`` into ``{swept: (33, 49, 3) array}``."""
-    raw = np.frombuffer(zlib.decompress(base64.b64decode("".join(_TAB_DATA))), dtype="<u2")
-    q = np.cumsum(raw.reshape(2, _TAB_U.size, _TAB_LOGR.size, 3).astype(np.int64), axis=2)
-    vals = (q % 65536).astype(np.float64) * _TAB_SCALE
-    return {True: vals[0], False: vals[1]}
-
-
-_TAB = _decode_table()
+_TAB_U, _TAB_LOGR, _TAB = _load_table()
 
 
 def _table_coords(phi: FloatArray, eps: FloatArray) -> tuple[FloatArray, FloatArray]:
