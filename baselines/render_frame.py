@@ -1,6 +1,6 @@
 """Render the README's frame: the paper scenario under the APF, near the encounter.
 
-    python baselines/render_frame.py [--time 112] [--out docs/frame.png]
+Usage: ``python baselines/render_frame.py [--time 112] [--out docs/frame.png]``.
 """
 
 from __future__ import annotations
