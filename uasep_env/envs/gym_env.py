@@ -8,13 +8,14 @@ import gymnasium
 import numpy as np
 
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.envs._render import RenderMixin
 from uasep_env.envs.core import EnvCore, validate_actions
 from uasep_env.rewards import REWARD_TERMS
 
 __all__ = ["FormationEnv"]
 
 
-class FormationEnv(gymnasium.Env):
+class FormationEnv(RenderMixin, gymnasium.Env):
     """All UAVs of the formation controlled by one (centralised) agent.
 
     The same world, observations and rewards as
@@ -86,20 +87,3 @@ class FormationEnv(gymnasium.Env):
             bool(res.truncated[0]),
             info,
         )
-
-    def render(self) -> np.ndarray | None:
-        """Render with matplotlib (lazily imported)."""
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() called without a render_mode; returning None")
-            return None
-        if self._renderer is None:
-            from uasep_env.rendering import Renderer
-
-            self._renderer = Renderer(self.config, mode=self.render_mode)
-        return self._renderer.render(self.core.world, env=0)
-
-    def close(self) -> None:
-        """Close the renderer, if any."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None

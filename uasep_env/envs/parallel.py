@@ -10,6 +10,7 @@ import numpy as np
 from pettingzoo import ParallelEnv
 
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.envs._render import RenderMixin
 from uasep_env.envs.core import EnvCore, StepResult, validate_actions
 from uasep_env.observation import state_dim
 
@@ -19,7 +20,7 @@ __all__ = ["UAVSeparationParallelEnv", "parallel_env"]
 _SPACE_KEYS = ("n_uavs", "n_obstacles", "observation")
 
 
-class UAVSeparationParallelEnv(ParallelEnv):
+class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
     """A formation of UAVs keeping separation from each other and non-cooperative obstacles.
 
     ## Description
@@ -207,23 +208,6 @@ class UAVSeparationParallelEnv(ParallelEnv):
     def state(self) -> np.ndarray:
         """The global true state (normalised), shape ``state_space.shape``."""
         return self.core.state()[0]
-
-    def render(self) -> np.ndarray | None:
-        """Render with matplotlib (imported lazily): an RGB array or a window."""
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() called without a render_mode; returning None")
-            return None
-        if self._renderer is None:
-            from uasep_env.rendering import Renderer
-
-            self._renderer = Renderer(self.config, mode=self.render_mode)
-        return self._renderer.render(self.core.world, env=0)
-
-    def close(self) -> None:
-        """Close the renderer, if any."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
 
 
 def parallel_env(config: EnvConfig | dict | None = None, **kwargs: Any) -> UAVSeparationParallelEnv:
