@@ -159,7 +159,8 @@ def test_distance_matches_brute_force(p, axes, heading, center):
     if d > 0.5:
         moved = R.distance_to_ellipsoid(world + 0.1 * normal, center, axes, heading)
         assert moved > d
-    assert bool(R.contains(world, center, axes, heading)) == (float(d) < 0)
+    if abs(float(d)) > 1e-9:  # on the surface either answer is right
+        assert bool(R.contains(world, center, axes, heading)) == (float(d) < 0)
 
 
 def test_extreme_inputs_finite():
