@@ -19,7 +19,7 @@ Feature                Size  Meaning (before scaling)
 ``plan_velocity``      3     planned velocity of the formation (m/s)
 ``formation_velocity`` 3     formation mean velocity ``v_o`` (eq. 5) (m/s)
 ``goal_offset``        3     planned formation centre minus the estimated centre (m)
-``waypoint_dir``       3     unit vector from the centre towards the next way-point
+``waypoint_dir``       3     unit direction of the planned path now
 ``waypoint_dist``      1     distance from the centre to the final way-point (m)
 ``last_accel``         3     own last commanded acceleration (m/s^2)
 ``progress``           1     elapsed fraction of the episode
@@ -28,8 +28,9 @@ per nearest UAV (K_u)  8     relative position (3, m), relative velocity (3, m/s
 per nearest obstacle   16    reachable-ellipsoid centre relative to the UAV (3, m),
 (K_o)                        semi-axes (longitudinal, lateral, vertical) (3, m),
                              heading (cos, sin) (2), obstacle position relative to the
-                             UAV (3, m), obstacle velocity (3, m/s), signed distance from
-                             the UAV to the ellipsoid (1, m), presence mask (1)
+                             UAV (3, m), obstacle velocity relative to the UAV (3, m/s),
+                             signed distance from the UAV to the ellipsoid (1, m),
+                             presence mask (1)
 =====================  ====  ==========================================================
 
 UAVs are sorted by estimated distance, obstacles by distance to their reachable region;
@@ -71,7 +72,7 @@ OBSTACLE_FIELDS: tuple[tuple[str, int, str], ...] = (
     ("axes", 3, "pos"),
     ("heading_cs", 2, "unit"),
     ("rel_pos", 3, "pos"),
-    ("vel", 3, "vel"),
+    ("rel_vel", 3, "vel"),
     ("region_dist", 1, "pos"),
     ("mask", 1, "unit"),
 )
@@ -273,7 +274,7 @@ def build_observations(
                 np.broadcast_to(world.pred_axes[:, None, :, :], center_rel.shape) / ps,
                 np.broadcast_to(np.stack([np.cos(hd), np.sin(hd)], axis=-1), (e, n, m, 2)),
                 obs_rel / ps,
-                np.broadcast_to(world.obs_est_vel[:, None, :, :], center_rel.shape) / vs,
+                (world.obs_est_vel[:, None, :, :] - vel[:, :, None, :]) / vs,
                 np.where(np.isfinite(region), region, 0.0)[..., None] / ps,
                 np.ones((e, n, m, 1)),
             ],

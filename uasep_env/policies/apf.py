@@ -255,7 +255,7 @@ class MotionStateAPF(_APFBase):
         away, dist = _unit(-rel)
         radius = self.config.obstacle.radius
         d = dist - radius
-        relv = o["obstacle_vel"] - o["velocity"][..., None, :]  # v_obs - v_i
+        relv = o["obstacle_rel_vel"]  # v_obs - v_i
         closing = np.maximum(0.0, np.einsum("...ki,...ki->...k", relv, away))
         r_safe = g.obs_safe_min + g.obs_time * closing
         dd = np.maximum(d, 0.5)
