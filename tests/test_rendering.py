@@ -296,6 +296,7 @@ def test_parallel_env_human_headless():
     env.close()
 
 
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # pettingzoo.test's own imports
 def test_pettingzoo_render_test():
     from pettingzoo.test import render_test
     from pettingzoo.utils.conversions import parallel_to_aec
@@ -354,14 +355,16 @@ def test_gymnasium_record_video(tmp_path):
     from gymnasium.wrappers import RecordVideo
 
     env = gymnasium.make("uasep/PaperEncounter-v0", render_mode="rgb_array", episode_duration=4.0)
-    env = RecordVideo(env, video_folder=str(tmp_path), episode_trigger=lambda ep: True)
+    videos = tmp_path / "videos"
+    env = RecordVideo(env, video_folder=str(videos), episode_trigger=lambda ep: True)
     env.reset(seed=0)
     done = False
     while not done:
         _, _, term, trunc, _ = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         done = term or trunc
     env.close()
-    assert list(tmp_path.glob("*.mp4"))
+    mp4s = list(videos.glob("*.mp4"))
+    assert mp4s and mp4s[0].stat().st_size > 1000
 
 
 def test_vector_env_render():
