@@ -75,13 +75,21 @@ Enclosing ellipse (replaces the paper's eq. 17, which does not enclose)
     last resort the circle of radius ``v t + r`` about the obstacle (which trivially contains
     everything within reach) is returned.
 
-    Measured area factors (``_area_ratio`` in the tests, speeds 0.5-60 m/s, ``w_max`` 0-1
-    rad/s, horizons 1-60 s, radii 0-20 m): ellipse area over the minimum enclosing ellipse
-    (the best this family can do) at most 1.02 (swept) / 1.05 (terminal), median 1.001;
-    ellipse area over the area of the set itself between 1.0 and 2.45 (any convex set has a
-    minimum enclosing ellipse at most ``4 pi / (3 sqrt 3) = 2.418`` times its area; the worst
-    cases are the thin triangle-like swept sets of small ``phi`` and ``r``), 1.55 at the paper's
-    example (``w_max = 0.013``, ``v = 4``, ``t = 10``, ``r = 3``).
+    Nodes: uniform in ``theta`` (48 intervals), uniform in the parametric angle of the
+    table's ellipse (96 intervals), geometrically refined towards the ends of its axes (where a
+    thin ellipse's normal turns fast), plus ``pi/2`` and the kink. Before the final fit the
+    centre is polished by a short golden-section search on the area.
+
+    Measured area factors (3000 random parameter sets with speeds 0.5-60 m/s, ``w_max`` 0-1
+    rad/s, horizons 1-60 s, radii 0-20 m, compared with :func:`_optimal_shape`): ellipse area
+    over the minimum-area enclosing ellipse (the best any ellipse can do) median 1.0004,
+    99th percentile 1.002, max 1.007 (swept) / 1.03 (terminal). Ellipse area over the set's
+    own area: median 1.11, max 2.42 (swept) / median 1.03, max 1.81 (terminal); no ellipse
+    does better than ``4 pi / (3 sqrt 3) = 2.418`` on a triangle, which is what a swept set
+    with small ``phi`` and ``r`` looks like. At the paper's example (``w_max = 0.013``,
+    ``v = 4``, ``t = 10``, ``r = 3``): 1.54 (swept: ``c = 24.76``, ``A = 6.64``, ``B = 28.55``)
+    and 1.12 (terminal), both within 0.06 % of the minimum enclosing ellipse.
+    Cost: about 0.3 s for 10,000 parameter sets on one core.
 
 Enclosing ellipsoid (eq. 18, corrected)
     The 3D swept set lies in ``(swept 2D set (+) disc(r)) x [-(vz_max t + r), vz_max t + r]``
@@ -94,11 +102,20 @@ Enclosing ellipsoid (eq. 18, corrected)
 
 Distances
     :func:`distance_to_ellipsoid` computes the true Euclidean distance from points to the
-    ellipsoid surface (negative inside) with Newton's method on the Lagrange multiplier of the
-    nearest-point problem, written as the concave increasing function
-    ``1 / ||(a_i q_i / (t + a_i^2))_i|| - 1`` so that Newton from a lower bound of the root
-    converges monotonically; the nearest point is then projected onto the surface, which
-    makes the distance error second order in the multiplier's error.
+    ellipsoid surface (negative inside). With ``q`` the point in the body frame (by symmetry in
+    the positive octant) the nearest point is ``x_i = a_i^2 q_i / (a_i^2 + t)`` where the
+    Lagrange multiplier ``t >= -a_min^2`` is the largest root of ``F(t) = 1``,
+    ``F = ||(a_i q_i / (t + a_i^2))_i||``; ``1/F`` is concave and increasing in ``t`` (a power
+    mean of affine functions), so Newton's method on ``1/F - 1`` never passes the root from the
+    left and, started right of it, lands left of it in one step. It starts at the radial
+    projection's multiplier (exact on the surface and for spheres), clamped to lower bounds of
+    the root, and also takes the Newton step of the equation without the smallest axis while
+    that one is left of its own root (this avoids crawling up the pole of a nearly flat axis).
+    Eight iterations give about 1e-12 of the size in the tests. When the root would lie below
+    ``-a_min^2`` (a point inside, on the plane of the smallest axis) the nearest point leaves
+    that plane: ``t = -a_min^2``. The smallest axis's coordinate is always taken from the
+    surface equation, so the point lies on the surface and the distance error is second order
+    in the multiplier's error. About 0.15 s for 100,000 points on one core.
 
 Frames for ellipsoids: world NED (x north, y east, z down); heading ``psi`` from north towards
 east; the body frame has axis 0 along the heading, axis 1 to the right (``psi + pi/2``) and
@@ -398,18 +415,18 @@ def _table_coords(phi: FloatArray, eps: FloatArray) -> tuple[FloatArray, FloatAr
     """Table coordinates for ``phi = w t`` and ``eps = r / (v t)`` (may be inf)."""
     finite = np.isfinite(eps)
     e = np.where(finite, eps, 0.0)
-    alpha = np.sqrt(np.where(finite, np.arctan2(2.0 * e, phi) * (2.0 / np.pi), 1.0))
+    u = np.sqrt(np.where(finite, np.arctan2(2.0 * e, phi) * (2.0 / np.pi), 1.0))
     rad = np.where(finite, np.hypot(phi, 2.0 * e), np.inf)
     with np.errstate(divide="ignore"):
         logr = np.log10(rad)
-    return alpha, logr
+    return u, logr
 
 
-def _interp_table(swept: bool, alpha: FloatArray, logr: FloatArray) -> FloatArray:
+def _interp_table(swept: bool, u: FloatArray, logr: FloatArray) -> FloatArray:
     """Bilinear interpolation of the shape table, ``(..., 3)`` = (c, B, A) fractions."""
     tab = _TAB[swept]
     na, nl = tab.shape[:2]
-    fa = np.clip((alpha - _TAB_U[0]) / (_TAB_U[1] - _TAB_U[0]), 0.0, na - 1.0)
+    fa = np.clip((u - _TAB_U[0]) / (_TAB_U[1] - _TAB_U[0]), 0.0, na - 1.0)
     fl = np.clip((logr - _TAB_LOGR[0]) / (_TAB_LOGR[1] - _TAB_LOGR[0]), 0.0, nl - 1.0)
     fl = np.where(np.isnan(fl), 0.0, fl)
     i0 = np.minimum(fa.astype(np.intp), na - 2)
@@ -661,8 +678,8 @@ def _ellipse_core(
     live = scale > 0.0
     with np.errstate(divide="ignore", invalid="ignore"):
         eps = np.where(vt > 0.0, r / np.where(vt > 0.0, vt, 1.0), np.inf)
-    alpha, logr = _table_coords(phi, eps)
-    frac = _interp_table(swept, alpha, logr)
+    u, logr = _table_coords(phi, eps)
+    frac = _interp_table(swept, u, logr)
     zero = np.zeros_like(vt)
     h0 = r + vt * _h_unit(zero, phi, swept)
     hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
@@ -723,7 +740,9 @@ def _ellipse_core(
         lon[bad] *= 1.0 + grow
         ok[bad] = _certified(nd.take(bad), c[bad], lat[bad], lon[bad], r[bad], eps_abs[bad])
         grow *= 8.0
-    fallback = ~ok
+    # The circle of radius v t + r about the obstacle holds everything within reach; use it
+    # if the certificate never passed, or if it is smaller (sets that are nearly discs).
+    fallback = ~ok | (lat * lon > scale * scale)
     c = np.where(fallback, 0.0, c)
     lat = np.where(fallback, scale, lat)
     lon = np.where(fallback, scale, lon)
@@ -747,7 +766,8 @@ def ellipse(
 
     Replaces the paper's eq. 17 (whose axes are read off the figure and do not enclose).
     See the module docstring for the enclosure certificate and the measured area factors
-    (at most ~1.02-1.05 times the minimum enclosing ellipse).
+    (median 1.0004, at most 1.007 / 1.03 times the minimum enclosing ellipse for the swept /
+    terminal set).
 
     Args:
         speed: Horizontal speed ``v`` (m/s).
@@ -773,7 +793,8 @@ def ellipse(
     shape = v.shape
     vt = (v * t).ravel()
     phi = (w * t).ravel()
-    c, lat, lon = _ellipse_core(vt, phi, r.ravel().astype(np.float64), swept)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        c, lat, lon = _ellipse_core(vt, phi, r.ravel().astype(np.float64), swept)
     return _out(c.reshape(shape)), _out(lat.reshape(shape)), _out(lon.reshape(shape))
 
 
@@ -817,7 +838,10 @@ def ellipsoid(
     r = _nonneg("radius", radius)
     v, w, vz, t, r = np.broadcast_arrays(v, w, vz, t, r)
     shape = v.shape
-    c, lat, lon = _ellipse_core((v * t).ravel(), (w * t).ravel(), r.ravel().astype(float), swept)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        c, lat, lon = _ellipse_core(
+            (v * t).ravel(), (w * t).ravel(), r.ravel().astype(float), swept
+        )
     z = (vz * t + r).ravel()
     flat = z <= 0.0
     lam = np.where(flat, 1.0, np.sqrt(1.5))
@@ -880,15 +904,37 @@ def _nearest_body(q: FloatArray, ax: FloatArray) -> tuple[FloatArray, FloatArray
     sig = np.maximum(
         sig, np.sqrt(np.sum(cq * cq, axis=-1)) - np.max(a, axis=-1) ** 2 + am[..., 0] ** 2
     )
-    sig = np.maximum(sig, 0.0)
+    sig_lo = np.maximum(sig, 0.0)
+    # Start from the radial projection's multiplier (exact on the surface and for spheres),
+    # never below the lower bound: a first step from the right of the root lands left of it
+    # (the tangent of a concave function lies above it), after which Newton climbs
+    # monotonically to the root.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(a > 0.0, qs / np.where(a > 0.0, a, 1.0), np.where(qs > 0.0, np.inf, 0.0))
+    level = np.sqrt(np.sum(ratio * ratio, axis=-1))
+    am0 = am[..., 0]
+    guess = np.where(am0 > 0.0, am0 * am0 * np.where(np.isfinite(level), level, 0.0), 0.0)
+    sig = np.maximum(sig_lo, guess)
+    # Each iteration also takes the Newton step of the equation without the smallest axis when
+    # that one is still left of its own root: it bounds the full root from below too, and it
+    # does not crawl up the steep pole of a nearly flat axis.
     for _ in range(_N_NEWTON):
         s = sig[..., None] + off
-        w = np.where(s > 0.0, cq / np.where(s > 0.0, s, 1.0), 0.0)
-        f2 = np.sum(w * w, axis=-1)
-        g = np.sum(np.where(s > 0.0, w * w / np.where(s > 0.0, s, 1.0), 0.0), axis=-1)
+        pos = s > 0.0
+        w = np.where(pos, cq / np.where(pos, s, 1.0), 0.0)
+        w2 = w * w
+        w2s = np.where(pos, w2 / np.where(pos, s, 1.0), 0.0)
+        f2 = np.sum(w2, axis=-1)
+        g = np.sum(w2s, axis=-1)
+        wm2 = np.take_along_axis(w2, m, axis=-1)[..., 0]
+        f2r = f2 - wm2
+        gr = g - np.take_along_axis(w2s, m, axis=-1)[..., 0]
         f = np.sqrt(f2)
+        fr = np.sqrt(np.maximum(f2r, 0.0))
         step = np.where(g > 0.0, f2 * (f - 1.0) / np.where(g > 0.0, g, 1.0), 0.0)
-        sig = np.maximum(sig, sig + step)
+        live = (gr > 0.0) & (fr > 1.0)
+        step_r = np.where(live, f2r * (fr - 1.0) / np.where(live, gr, 1.0), -np.inf)
+        sig = np.maximum(sig_lo, sig + np.maximum(step, step_r))
     s = sig[..., None] + off
     w = np.where(s > 0.0, cq / np.where(s > 0.0, s, 1.0), 0.0)
     w = np.where(is_m, 0.0, w)
@@ -904,9 +950,6 @@ def _nearest_body(q: FloatArray, ax: FloatArray) -> tuple[FloatArray, FloatArray
     ng = np.where(is_m & (am <= 0.0), np.where(rest < 1.0, 1.0, 0.0)[..., None], ng)
     diff = qs - x
     dist = np.sqrt(np.sum(diff * diff, axis=-1))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(a > 0.0, qs / np.where(a > 0.0, a, 1.0), np.where(qs > 0.0, np.inf, 0.0))
-    level = np.sum(ratio * ratio, axis=-1)
     inside = level < 1.0
     ngn = np.sqrt(np.sum(ng * ng, axis=-1))
     dirn = np.where(
