@@ -43,24 +43,28 @@ def _rate(fn: Callable[[], None], seconds: float, warmup: int = 3) -> float:
             return n / elapsed
 
 
-def bench_pettingzoo(seconds: float) -> float:
-    """Steps/s of the PettingZoo env at one environment."""
-    import uasep_env
-
-    env = uasep_env.parallel_env(n_uavs=3, n_obstacles=1, scenario="random")
+def _bench_parallel(env: object, pool: np.ndarray, seconds: float) -> float:
+    """Steps/s of a PettingZoo parallel env fed pre-drawn actions, reset when done."""
     env.reset(seed=0)
-    rng = np.random.default_rng(0)
-    pool = rng.uniform(-1, 1, size=(1024, 3, 3)).astype(np.float32)
     k = [0]
 
     def step() -> None:
         if not env.agents:
             env.reset()
-        a = pool[k[0] % 1024]
+        a = pool[k[0] % len(pool)]
         k[0] += 1
         env.step({agent: a[i] for i, agent in enumerate(env.agents)})
 
     return _rate(step, seconds)
+
+
+def bench_pettingzoo(seconds: float) -> float:
+    """Steps/s of the PettingZoo env at one environment."""
+    import uasep_env
+
+    env = uasep_env.parallel_env(n_uavs=3, n_obstacles=1, scenario="random")
+    pool = np.random.default_rng(0).uniform(-1, 1, size=(1024, 3, 3)).astype(np.float32)
+    return _bench_parallel(env, pool, seconds)
 
 
 def bench_mpe2(seconds: float) -> float | None:
@@ -70,19 +74,8 @@ def bench_mpe2(seconds: float) -> float | None:
     except ImportError:
         return None
     env = simple_spread_v3.parallel_env(N=3, continuous_actions=True, max_cycles=10**9)
-    env.reset(seed=0)
-    rng = np.random.default_rng(0)
-    pool = rng.uniform(0, 1, size=(1024, 3, 5)).astype(np.float32)
-    k = [0]
-
-    def step() -> None:
-        if not env.agents:
-            env.reset()
-        a = pool[k[0] % 1024]
-        k[0] += 1
-        env.step({agent: a[i] for i, agent in enumerate(env.agents)})
-
-    return _rate(step, seconds)
+    pool = np.random.default_rng(0).uniform(0, 1, size=(1024, 3, 5)).astype(np.float32)
+    return _bench_parallel(env, pool, seconds)
 
 
 def bench_vector(n: int, seconds: float) -> float:
