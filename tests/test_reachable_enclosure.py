@@ -163,6 +163,14 @@ def test_distance_matches_brute_force(p, axes, heading, center):
         assert bool(R.contains(world, center, axes, heading)) == (float(d) < 0)
 
 
+def test_subnormal_turn_angle_is_a_straight_line():
+    # Found by hypothesis in CI: w t subnormal made 1 / (w t) overflow and 0 * inf NaN.
+    h = R.support(np.linspace(0, np.pi, 7), 0.0, 1.0, 5e-324, 0.0)
+    assert np.isfinite(h).all()
+    h = R.support(np.array([0.0, np.pi / 2, np.pi]), 4.0, 1e-250, 10.0, 1.0)
+    np.testing.assert_allclose(h, [41.0, 1.0, 1.0])
+
+
 def test_extreme_inputs_finite():
     off, axes = R.ellipsoid(
         np.array([1e-3, 60.0, 4.0]), np.array([1e-12, 1.0, 0.0]), 5.0, np.array([1e4, 1.0, 10]), 0.0

@@ -188,9 +188,14 @@ def _out(x: FloatArray) -> FloatArray:
 
 # ---------------------------------------------------------------------------- core maths
 def _inv(phi: FloatArray) -> FloatArray:
-    """``1 / phi`` with ``1 / 0 := 0`` (every use multiplies a quantity that is 0 there)."""
-    safe = np.where(phi > 0.0, phi, 1.0)
-    return np.where(phi > 0.0, 1.0 / safe, 0.0)
+    """``1 / phi`` with ``1 / 0 := 0`` (every use multiplies a quantity that is 0 there).
+
+    ``phi`` below 1e-200 counts as 0 (a straight line): ``1 / phi`` would overflow to inf
+    for subnormal ``phi`` and turn ``0 * inf`` into NaN.
+    """
+    tiny = phi > 1e-200
+    safe = np.where(tiny, phi, 1.0)
+    return np.where(tiny, 1.0 / safe, 0.0)
 
 
 def _wrap_abs(theta: FloatArray) -> FloatArray:
