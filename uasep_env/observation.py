@@ -47,7 +47,7 @@ from uasep_env.config import EnvConfig
 from uasep_env.formation import formation_center
 from uasep_env.world import World
 
-__all__ = ["ObservationLayout", "build_observations", "global_state"]
+__all__ = ["ObservationLayout", "build_observations", "global_state", "state_dim"]
 
 SELF_FIELDS: tuple[tuple[str, int, str], ...] = (
     ("slot_offset", 3, "pos"),

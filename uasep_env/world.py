@@ -90,7 +90,6 @@ class World:
         self.noise_block = int(noise_block)
         nz = cfg.noise
         self._uav_kf = KalmanModel(cfg.dt, nz.accel_std, nz.position_std, nz.velocity_std)
-        self._obs_kf: KalmanModel | None = None  # built per obstacle speed class at reset
         self._n_normal = n * 9 + m * 6
         self._n_unif = m * N_UNIFORMS
         self._rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(e)]
@@ -120,12 +119,14 @@ class World:
         self.min_uav_dist = np.full((e, n), np.inf)
         self.min_obs_dist = np.full((e, n), np.inf)
         self.families: list[str] = [""] * e
-        self._obs_kf_std = (
+        # Obstacle tracks: zero known input; process noise covers a full-rate turn's
+        # lateral acceleration v * w_max (at least 0.1 m/s^2).
+        self._obs_kf = KalmanModel(
+            cfg.dt,
             max(cfg.obstacle.speed * cfg.obstacle.max_turn_rate, 0.1),
             nz.obstacle_position_std,
             nz.obstacle_velocity_std,
         )
-        self._obs_kf = KalmanModel(cfg.dt, *self._obs_kf_std)
         self._offdiag = ~np.eye(n, dtype=bool)
         self._has_reset = False
 
