@@ -219,6 +219,24 @@ def most_deviated_uav(episodes: Episode | Sequence[Episode]) -> int:
     return int(np.argmax(best))
 
 
+def _threshold_lines(ax: Axes, collision: float, separation: float) -> None:
+    """The collision (red dashed) and loss-of-separation (dotted) distances (m)."""
+    ax.axhline(
+        collision,
+        color=_COLLISION_COLOUR,
+        ls="--",
+        lw=1.3,
+        label=f"collision distance ({collision:g} m)",
+    )
+    ax.axhline(
+        separation,
+        color=_SEPARATION_COLOUR,
+        ls=":",
+        lw=1.3,
+        label=f"separation distance ({separation:g} m)",
+    )
+
+
 def _shade_settle(ax: Axes, episode: Episode, label: bool = False) -> None:
     """Grey band over the forming-up period excluded from deviation statistics."""
     r = episode.record
@@ -520,20 +538,7 @@ def plot_obstacle_distances(episode: Episode, label: str = "") -> Figure:
         for i in range(r.n_uavs):
             ax.plot(r.time, d[:, i, 0], color=_colour(i), lw=1.4, label=r.names[i])
             bx.plot(r.time, reg[:, i, 0], color=_colour(i), lw=1.4, label=r.names[i])
-    ax.axhline(
-        r.collision_distance,
-        color=_COLLISION_COLOUR,
-        ls="--",
-        lw=1.3,
-        label=f"collision distance ({r.collision_distance:g} m)",
-    )
-    ax.axhline(
-        r.obstacle_separation,
-        color=_SEPARATION_COLOUR,
-        ls=":",
-        lw=1.3,
-        label=f"separation distance ({r.obstacle_separation:g} m)",
-    )
+    _threshold_lines(ax, r.collision_distance, r.obstacle_separation)
     if np.isfinite(d).any():
         ax.set_yscale("log")
         ax.set_ylim(max(0.5, 0.5 * r.collision_distance), None)
@@ -599,20 +604,7 @@ def plot_uav_distances(episode: Episode, label: str = "") -> Figure:
                 lw=1.0,
                 label=f"{r.names[i]} nearest" if i < 10 else None,
             )
-    ax.axhline(
-        r.collision_distance,
-        color=_COLLISION_COLOUR,
-        ls="--",
-        lw=1.3,
-        label=f"collision distance ({r.collision_distance:g} m)",
-    )
-    ax.axhline(
-        r.uav_separation,
-        color=_SEPARATION_COLOUR,
-        ls=":",
-        lw=1.3,
-        label=f"separation distance ({r.uav_separation:g} m)",
-    )
+    _threshold_lines(ax, r.collision_distance, r.uav_separation)
     _shade_region(ax, episode, label=True)
     ax.set_ylim(0.0, None)
     ax.set_ylabel("UAV–UAV distance (m)")
