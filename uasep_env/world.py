@@ -470,12 +470,8 @@ class World:
         pos = self.est_pos if estimated else self.uav_pos
         vel = self.est_vel if estimated else self.uav_vel
         center, mean_vel = formation_center(pos, vel)
-        _, plan_vel = self.plan.center(self.time)
-        fallback = self.plan.heading_velocity(self.time)
-        rot = formation_rotation(
-            mean_vel,
-            np.where(np.linalg.norm(plan_vel, axis=-1, keepdims=True) > 0, plan_vel, fallback),
-        )
+        # Only the planned path's direction matters for the low-speed fallback.
+        rot = formation_rotation(mean_vel, self.plan.heading_velocity(self.time))
         return center[:, None, :] + np.einsum("eij,enj->eni", rot, self.slots)
 
     def plan_finished(self) -> np.ndarray:
