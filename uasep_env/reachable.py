@@ -131,6 +131,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from uasep_env import _numba
+
 __all__ = [
     "boundary",
     "contains",
@@ -1006,6 +1008,10 @@ def distance_to_ellipsoid(
         ValueError: If a semi-axis is negative or not finite.
     """
     ax = _check_axes(semi_axes)
+    fast = _compiled(points, centers, ax, headings)
+    if fast is not None:
+        _, dist, normal = fast
+        return (dist, normal) if return_normal else dist
     q, cp, sp = _to_body(points, centers, headings)
     _, dist, n = _nearest_body(q, ax)
     if not return_normal:
@@ -1034,12 +1040,42 @@ def nearest_point_on_ellipsoid(
         ValueError: If a semi-axis is negative or not finite.
     """
     ax = _check_axes(semi_axes)
+    ctr = np.asarray(centers, dtype=np.float64)
+    fast = _compiled(points, ctr, ax, headings)
+    if fast is not None:
+        offset, dist, normal = fast
+        return offset + ctr, dist, normal
     q, cp, sp = _to_body(points, centers, headings)
     x, dist, n = _nearest_body(q, ax)
     cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
-    ctr = np.asarray(centers, dtype=np.float64)
     xw = _to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp) + ctr
     return xw, dist, _to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+
+
+def _compiled(
+    points: ArrayLike, centers: ArrayLike, ax: FloatArray, headings: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """The compiled kernel's ``(offset from centre, distance, normal)``, or None without numba.
+
+    Same numbers as the numpy path (:func:`_to_body`, :func:`_nearest_body`, :func:`_to_world`)
+    bit for bit; see :mod:`uasep_env._kernels`.
+    """
+    if not _numba.available():
+        return None
+    from uasep_env import _kernels
+
+    p = np.asarray(points, dtype=np.float64)
+    c = np.asarray(centers, dtype=np.float64)
+    psi = np.asarray(headings, dtype=np.float64)
+    shape = np.broadcast_shapes(p.shape[:-1], c.shape[:-1], ax.shape[:-1], psi.shape)
+    flat = (int(np.prod(shape)), 3)
+    x, dist, normal = _kernels.nearest_on_ellipsoids(
+        np.broadcast_to(p, (*shape, 3)).reshape(flat),
+        np.broadcast_to(c, (*shape, 3)).reshape(flat),
+        np.broadcast_to(ax, (*shape, 3)).reshape(flat),
+        np.broadcast_to(psi, shape).reshape(-1),
+    )
+    return x.reshape(*shape, 3), dist.reshape(shape), normal.reshape(*shape, 3)
 
 
 def contains(

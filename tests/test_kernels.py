@@ -1,0 +1,83 @@
+"""The compiled kernels return the numpy forms' numbers bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from uasep_env import _numba, reachable
+
+pytestmark = pytest.mark.skipif(not _numba.available(), reason="numba not installed")
+
+
+def _numpy_nearest(points, centers, axes, headings):
+    q, cp, sp = reachable._to_body(points, centers, headings)
+    x, dist, n = reachable._nearest_body(q, axes)
+    cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
+    offset = reachable._to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp)
+    return offset, dist, reachable._to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+
+
+def _cases(rng: np.random.Generator, k: int) -> tuple[np.ndarray, ...]:
+    """Random points and ellipsoids plus the degenerate ones the numpy tests cover."""
+    axes = rng.uniform(0.0, 40.0, size=(k, 3))
+    axes[: k // 8, rng.integers(0, 3)] = 0.0  # flat and needle-like ellipsoids
+    axes[k // 8 : k // 4] = axes[k // 8 : k // 4, :1]  # spheres (equal axes)
+    axes[k // 4 : k // 4 + 5] = 0.0  # points
+    centers = rng.normal(0.0, 30.0, size=(k, 3))
+    pts = centers + rng.normal(0.0, 1.0, size=(k, 3)) * rng.choice([0.1, 5.0, 50.0, 1e7], (k, 1))
+    pts[k // 2 : k // 2 + 20] = centers[k // 2 : k // 2 + 20]  # at the centre
+    on_axis = slice(k // 2 + 20, k // 2 + 60)
+    pts[on_axis, 1:] = centers[on_axis, 1:]  # on an axis (heading 0 below)
+    heading = rng.uniform(-np.pi, np.pi, size=k)
+    heading[on_axis] = 0.0
+    return pts, centers, axes, heading
+
+
+def test_nearest_point_kernel_matches_numpy_bit_for_bit():
+    from uasep_env import _kernels
+
+    assert reachable._N_NEWTON == _kernels._N_NEWTON
+    pts, ctr, ax, hd = _cases(np.random.default_rng(0), 4000)
+    want = _numpy_nearest(pts, ctr, ax, hd)
+    got = _kernels.nearest_on_ellipsoids(pts, ctr, ax, hd)
+    for w, g in zip(want, got, strict=True):
+        assert np.all(np.isfinite(g))
+        np.testing.assert_array_equal(g, w)
+
+
+def test_parallel_and_serial_loops_agree():
+    from uasep_env import _kernels
+
+    pts, ctr, ax, hd = _cases(np.random.default_rng(1), 2 * _kernels.PARALLEL_MIN)
+    big = _kernels.nearest_on_ellipsoids(pts, ctr, ax, hd)
+    small = [_kernels.nearest_on_ellipsoids(*(a[:100] for a in (pts, ctr, ax, hd)))]
+    for b, s in zip(big, small[0], strict=True):
+        np.testing.assert_array_equal(b[:100], s)
+
+
+def test_public_functions_use_the_kernel_with_broadcasting(monkeypatch):
+    rng = np.random.default_rng(2)
+    pts = rng.normal(0, 20, size=(5, 4, 1, 3))
+    ctr = rng.normal(0, 5, size=(1, 4, 2, 3))
+    ax = rng.uniform(1, 30, size=(2, 3))
+    hd = rng.uniform(-3, 3, size=(4, 2))
+    fast = reachable.distance_to_ellipsoid(pts, ctr, ax, hd, return_normal=True)
+    near_fast = reachable.nearest_point_on_ellipsoid(pts, ctr, ax, hd)
+    monkeypatch.setitem(_numba._state, "numba", None)
+    assert not _numba.available()
+    slow = reachable.distance_to_ellipsoid(pts, ctr, ax, hd, return_normal=True)
+    near_slow = reachable.nearest_point_on_ellipsoid(pts, ctr, ax, hd)
+    assert fast[0].shape == (5, 4, 2) and fast[1].shape == (5, 4, 2, 3)
+    for f, s in zip((*fast, *near_fast), (*slow, *near_slow), strict=True):
+        np.testing.assert_array_equal(f, s)
+
+
+def test_disabled_by_environment_variable(monkeypatch):
+    monkeypatch.setenv("UASEP_NUMBA", "0")
+    monkeypatch.delitem(_numba._state, "numba", raising=False)
+    assert not _numba.available()
+    assert _numba.jit() is None
+    monkeypatch.delitem(_numba._state, "numba")
+    monkeypatch.setenv("UASEP_NUMBA", "1")
+    assert _numba.available()
