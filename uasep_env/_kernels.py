@@ -16,142 +16,164 @@ import math
 import numba
 import numpy as np
 
-from uasep_env import _numba
 
 _N_NEWTON = 8  # must equal uasep_env.reachable._N_NEWTON (checked by the tests)
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton, out):  # noqa: ANN001, ANN202
-    """Nearest point of one ellipsoid (body frame); writes x(3), dist, normal(3) to ``out``."""
-    qv = (q0, q1, q2)
-    av = (a0, a1, a2)
-    sg = np.empty(3)
-    qa = np.empty(3)
-    for i in range(3):
-        sg[i] = -1.0 if qv[i] < 0.0 else 1.0
-        qa[i] = abs(qv[i])
-    scale = max(max(a0, a1, a2), max(qa[0], qa[1], qa[2]))
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+@numba.njit(inline="always", **_JIT)
+def _newton_terms(sig, off, cq):  # noqa: ANN001, ANN202
+    """``w^2`` and ``w^2 / s`` of one axis at multiplier ``sig`` (0 where ``s <= 0``)."""
+    s = sig + off
+    if s > 0.0:
+        w = cq / s
+        w2 = w * w
+        return w2, w2 / s
+    return 0.0, 0.0
+
+
+@numba.njit(**_JIT)
+def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202, C901, PLR0912, PLR0915
+    """Nearest point of one ellipsoid, body frame: ``(x0, x1, x2, dist, n0, n1, n2)``.
+
+    Scalars only (no temporary arrays): allocation would dominate the arithmetic.
+    """
+    g0 = -1.0 if q0 < 0.0 else 1.0
+    g1 = -1.0 if q1 < 0.0 else 1.0
+    g2 = -1.0 if q2 < 0.0 else 1.0
+    qa0, qa1, qa2 = abs(q0), abs(q1), abs(q2)
+    scale = max(max(a0, a1, a2), max(qa0, qa1, qa2))
     if not scale > 0.0:
         scale = 1.0
-    qs = np.empty(3)
-    a = np.empty(3)
-    for i in range(3):
-        qs[i] = qa[i] / scale
-        a[i] = av[i] / scale
+    qs0, qs1, qs2 = qa0 / scale, qa1 / scale, qa2 / scale
+    b0, b1, b2 = a0 / scale, a1 / scale, a2 / scale
     m = 0
-    for i in range(1, 3):
-        if a[i] < a[m]:
-            m = i
-    am = a[m]
-    off = np.empty(3)
-    cq = np.empty(3)
-    for i in range(3):
-        off[i] = a[i] * a[i] - am * am
-        cq[i] = a[i] * qs[i]
-    sig = max(cq[0] - a[0] * a[0] + am * am, cq[1] - a[1] * a[1] + am * am)
-    sig = max(sig, cq[2] - a[2] * a[2] + am * am)
-    amax = max(a[0], a[1], a[2])
-    sig = max(sig, math.sqrt(cq[0] * cq[0] + cq[1] * cq[1] + cq[2] * cq[2]) - amax**2 + am**2)
+    am = b0
+    if b1 < am:
+        m, am = 1, b1
+    if b2 < am:
+        m, am = 2, b2
+    am2 = am * am
+    off0, off1, off2 = b0 * b0 - am2, b1 * b1 - am2, b2 * b2 - am2
+    cq0, cq1, cq2 = b0 * qs0, b1 * qs1, b2 * qs2
+    sig = max(cq0 - b0 * b0 + am2, cq1 - b1 * b1 + am2, cq2 - b2 * b2 + am2)
+    bmax = max(b0, b1, b2)
+    sig = max(sig, math.sqrt(cq0 * cq0 + cq1 * cq1 + cq2 * cq2) - bmax * bmax + am * am)
     sig_lo = max(sig, 0.0)
-    rr = 0.0
-    for i in range(3):
-        if a[i] > 0.0:
-            ratio = qs[i] / a[i]
-        elif qs[i] > 0.0:
-            ratio = np.inf
-        else:
-            ratio = 0.0
-        rr = rr + ratio * ratio if i else ratio * ratio
-    level = math.sqrt(rr)
+    r0 = qs0 / b0 if b0 > 0.0 else (np.inf if qs0 > 0.0 else 0.0)
+    r1 = qs1 / b1 if b1 > 0.0 else (np.inf if qs1 > 0.0 else 0.0)
+    r2 = qs2 / b2 if b2 > 0.0 else (np.inf if qs2 > 0.0 else 0.0)
+    level = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
     guess = am * am * (level if math.isfinite(level) else 0.0) if am > 0.0 else 0.0
     sig = max(sig_lo, guess)
-    w = np.empty(3)
-    w2 = np.empty(3)
-    w2s = np.empty(3)
     for _ in range(n_newton):
-        for i in range(3):
-            s = sig + off[i]
-            if s > 0.0:
-                w[i] = cq[i] / s
-                w2[i] = w[i] * w[i]
-                w2s[i] = w2[i] / s
-            else:
-                w[i] = 0.0
-                w2[i] = 0.0
-                w2s[i] = 0.0
-        f2 = w2[0] + w2[1] + w2[2]
-        g = w2s[0] + w2s[1] + w2s[2]
-        f2r = f2 - w2[m]
-        gr = g - w2s[m]
+        w20, w2s0 = _newton_terms(sig, off0, cq0)
+        w21, w2s1 = _newton_terms(sig, off1, cq1)
+        w22, w2s2 = _newton_terms(sig, off2, cq2)
+        f2 = w20 + w21 + w22
+        g = w2s0 + w2s1 + w2s2
+        if m == 0:
+            f2r, gr = f2 - w20, g - w2s0
+        elif m == 1:
+            f2r, gr = f2 - w21, g - w2s1
+        else:
+            f2r, gr = f2 - w22, g - w2s2
         f = math.sqrt(f2)
         fr = math.sqrt(max(f2r, 0.0))
         step = f2 * (f - 1.0) / g if g > 0.0 else 0.0
         step_r = f2r * (fr - 1.0) / gr if (gr > 0.0 and fr > 1.0) else -np.inf
-        sig = max(sig_lo, sig + max(step, step_r))
-    for i in range(3):
-        s = sig + off[i]
-        w[i] = cq[i] / s if s > 0.0 else 0.0
-    w[m] = 0.0
-    rest = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+        nxt = max(sig_lo, sig + max(step, step_r))
+        if nxt == sig:
+            break  # a fixed point: the remaining iterations would not change a bit
+        sig = nxt
+    s0, s1, s2 = sig + off0, sig + off1, sig + off2
+    w0 = cq0 / s0 if s0 > 0.0 and m != 0 else 0.0
+    w1 = cq1 / s1 if s1 > 0.0 and m != 1 else 0.0
+    w2 = cq2 / s2 if s2 > 0.0 and m != 2 else 0.0
+    rest = w0 * w0 + w1 * w1 + w2 * w2
     shrink = 1.0 / math.sqrt(max(rest, 1.0)) if rest > 1.0 else 1.0
-    for i in range(3):
-        w[i] = w[i] * shrink
-    w[m] = math.sqrt(max(1.0 - rest, 0.0))
-    x = np.empty(3)
-    ng = np.empty(3)
-    diff = np.empty(3)
-    for i in range(3):
-        x[i] = a[i] * w[i]
-        ng[i] = w[i] * am / a[i] if a[i] > 0.0 else 0.0
-        diff[i] = qs[i] - x[i]
+    w0, w1, w2 = w0 * shrink, w1 * shrink, w2 * shrink
+    wm = math.sqrt(max(1.0 - rest, 0.0))
+    if m == 0:
+        w0 = wm
+    elif m == 1:
+        w1 = wm
+    else:
+        w2 = wm
+    x0, x1, x2 = b0 * w0, b1 * w1, b2 * w2
+    n0 = w0 * am / b0 if b0 > 0.0 else 0.0
+    n1 = w1 * am / b1 if b1 > 0.0 else 0.0
+    n2 = w2 * am / b2 if b2 > 0.0 else 0.0
     if am <= 0.0:
-        ng[m] = 1.0 if rest < 1.0 else 0.0
-    dist = math.sqrt(diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2])
+        pole = 1.0 if rest < 1.0 else 0.0
+        if m == 0:
+            n0 = pole
+        elif m == 1:
+            n1 = pole
+        else:
+            n2 = pole
+    e0, e1, e2 = qs0 - x0, qs1 - x1, qs2 - x2
+    dist = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     inside = level < 1.0
-    ngn = math.sqrt(ng[0] * ng[0] + ng[1] * ng[1] + ng[2] * ng[2])
-    dirn = np.empty(3)
+    ngn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
     if (inside or dist <= 1e-12) and ngn > 0.0:
-        for i in range(3):
-            dirn[i] = ng[i] / ngn
+        d0, d1, d2 = n0 / ngn, n1 / ngn, n2 / ngn
     else:
         den = dist if dist > 0.0 else 1.0
-        for i in range(3):
-            dirn[i] = diff[i] / den
-    dn = math.sqrt(dirn[0] * dirn[0] + dirn[1] * dirn[1] + dirn[2] * dirn[2])
-    if not dn > 0.0:
-        for i in range(3):
-            dirn[i] = 1.0 if i == m else 0.0
-    for i in range(3):
-        out[i] = x[i] * scale * sg[i]
-        out[4 + i] = dirn[i] * sg[i]
-    out[3] = (-dist if inside else dist) * scale
+        d0, d1, d2 = e0 / den, e1 / den, e2 / den
+    if not math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > 0.0:
+        d0 = 1.0 if m == 0 else 0.0
+        d1 = 1.0 if m == 1 else 0.0
+        d2 = 1.0 if m == 2 else 0.0
+    signed = (-dist if inside else dist) * scale
+    return (
+        x0 * scale * g0,
+        x1 * scale * g1,
+        x2 * scale * g2,
+        signed,
+        d0 * g0,
+        d1 * g1,
+        d2 * g2,
+    )
 
 
-def _loop(points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out):  # noqa: ANN001, ANN202
-    """Every point of a flat batch: rotate into the body frame, solve, rotate back."""
+@numba.njit(inline="always", **_JIT)
+def _solve_point(k, points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out):  # noqa: ANN001, ANN202
+    """Point ``k`` of a flat batch: rotate into the body frame, solve, rotate back."""
+    cp = cos_h[k]
+    sp = sin_h[k]
+    d0 = points[k, 0] - centers[k, 0]
+    d1 = points[k, 1] - centers[k, 1]
+    d2 = points[k, 2] - centers[k, 2]
+    q0 = d0 * cp + d1 * sp
+    q1 = -d0 * sp + d1 * cp
+    x0, x1, x2, dist, n0, n1, n2 = _nearest_one(
+        q0, q1, d2, axes[k, 0], axes[k, 1], axes[k, 2], n_newton
+    )
+    d_out[k] = dist
+    x_out[k, 0] = x0 * cp - x1 * sp
+    x_out[k, 1] = x0 * sp + x1 * cp
+    x_out[k, 2] = x2
+    n_out[k, 0] = n0 * cp - n1 * sp
+    n_out[k, 1] = n0 * sp + n1 * cp
+    n_out[k, 2] = n2
+
+
+# Two loops, not one function compiled twice: numba's disk cache keys on the function only.
+@numba.njit(**_JIT)
+def _serial(points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out):  # noqa: ANN001, ANN202
+    for k in range(points.shape[0]):
+        _solve_point(k, points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out)
+
+
+@numba.njit(parallel=True, **_JIT)
+def _parallel(points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out):  # noqa: ANN001, ANN202
     for k in numba.prange(points.shape[0]):
-        buf = np.empty(7)
-        cp = cos_h[k]
-        sp = sin_h[k]
-        d0 = points[k, 0] - centers[k, 0]
-        d1 = points[k, 1] - centers[k, 1]
-        d2 = points[k, 2] - centers[k, 2]
-        q0 = d0 * cp + d1 * sp
-        q1 = -d0 * sp + d1 * cp
-        _nearest_one(q0, q1, d2, axes[k, 0], axes[k, 1], axes[k, 2], n_newton, buf)
-        d_out[k] = buf[3]
-        x_out[k, 0] = buf[0] * cp - buf[1] * sp
-        x_out[k, 1] = buf[0] * sp + buf[1] * cp
-        x_out[k, 2] = buf[2]
-        n_out[k, 0] = buf[4] * cp - buf[5] * sp
-        n_out[k, 1] = buf[4] * sp + buf[5] * cp
-        n_out[k, 2] = buf[6]
+        _solve_point(k, points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out)
 
 
-_serial = numba.njit(cache=True, nogil=True, error_model="numpy")(_loop)
-_parallel = _numba.jit(parallel=True)
-_parallel_loop = _parallel(_loop) if _parallel is not None else _serial
 #: Points per call above which the loop is spread over the cores (thread start-up costs).
 PARALLEL_MIN = 2048
 
@@ -175,7 +197,7 @@ def nearest_on_ellipsoids(
     x = np.empty((k, 3))
     d = np.empty(k)
     n = np.empty((k, 3))
-    fn = _parallel_loop if k >= PARALLEL_MIN else _serial
+    fn = _parallel if k >= PARALLEL_MIN else _serial
     # numpy's cos/sin, not libm's: the rotation must match the numpy form to the last bit.
     fn(points, centers, axes, np.cos(headings), np.sin(headings), _N_NEWTON, x, d, n)
     return x, d, n
