@@ -81,3 +81,28 @@ def test_disabled_by_environment_variable(monkeypatch):
     monkeypatch.delitem(_numba._state, "numba")
     monkeypatch.setenv("UASEP_NUMBA", "1")
     assert _numba.available()
+
+
+def test_episodes_are_bit_identical_with_and_without_numba(monkeypatch):
+    """The whole transition (world, observations, rewards, APF) does not depend on numba."""
+    from uasep_env import make_config
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.policies import APF
+
+    def rollout() -> list[np.ndarray]:
+        cfg = make_config(n_uavs=3, n_obstacles=2, scenario="random")
+        core = EnvCore(cfg, n_envs=6)
+        obs = core.reset(seed=11)
+        apf = APF(cfg)
+        out = []
+        for _ in range(60):
+            res = core.step(apf(obs))
+            out += [res.obs, res.rewards, res.safety["min_region_distance"]]
+            obs = res.obs
+        return out
+
+    fast = rollout()
+    monkeypatch.setitem(_numba._state, "numba", None)
+    slow = rollout()
+    for f, s in zip(fast, slow, strict=True):
+        np.testing.assert_array_equal(f, s)

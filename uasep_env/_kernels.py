@@ -16,7 +16,6 @@ import math
 import numba
 import numpy as np
 
-
 _N_NEWTON = 8  # must equal uasep_env.reachable._N_NEWTON (checked by the tests)
 
 
@@ -35,7 +34,7 @@ def _newton_terms(sig, off, cq):  # noqa: ANN001, ANN202
 
 
 @numba.njit(**_JIT)
-def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202, C901, PLR0912, PLR0915
+def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202
     """Nearest point of one ellipsoid, body frame: ``(x0, x1, x2, dist, n0, n1, n2)``.
 
     Scalars only (no temporary arrays): allocation would dominate the arithmetic.

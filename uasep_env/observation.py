@@ -196,6 +196,9 @@ def build_observations(
 ) -> np.ndarray:
     """Every agent's observation, ``(n_envs, n_uavs, layout.dim)`` float32.
 
+    Each field is computed once in float64 and written straight into its columns of
+    ``out`` (no concatenation of temporaries); neighbours are gathered by flat indices.
+
     Args:
         world: The batched world.
         layout: The layout for the world's config.
@@ -206,87 +209,85 @@ def build_observations(
     """
     e, n, m = world.n_envs, world.n_uavs, world.n_obstacles
     if out is None:
-        out = np.zeros((e, n, layout.dim), dtype=np.float32)
+        out = np.empty((e, n, layout.dim), dtype=np.float32)
     ps, vs, acs = layout.pos_scale, layout.vel_scale, layout.acc_scale
     pos, vel = world.est_pos, world.est_vel
     center, mean_vel = formation_center(pos, vel)
-    slots = world.desired_slots(estimated=True)
-    plan_pos, plan_vel = world.planned()
-    plan_center, _ = world.plan.center(world.time)
-    last_wp = world.plan.waypoints[:, -1]
-    to_end = last_wp - center
-    wp_dist = np.linalg.norm(to_end, axis=-1)
-    wp_dir = world.plan.heading_velocity(world.time)
+    plan_center, wp_dir = world.plan_center, world.plan_dir
+    slots = world.desired_slots(estimated=True, center=center, mean_vel=mean_vel)
+    plan_pos, plan_vel = world.plan_pos, world.plan_vel
+    wp_dist = np.linalg.norm(world.plan.waypoints[:, -1] - center, axis=-1)
     progress = np.minimum(world.time / world.config.episode_duration, 1.0)
 
-    cols: list[np.ndarray] = [
-        (slots - pos) / ps,
-        (plan_pos - pos) / ps,
-        vel / vs,
-        plan_vel / vs,
-        np.broadcast_to(mean_vel[:, None, :], (e, n, 3)) / vs,
-        np.broadcast_to((plan_center - center)[:, None, :], (e, n, 3)) / ps,
-        np.broadcast_to(wp_dir[:, None, :], (e, n, 3)),
-        np.broadcast_to((wp_dist / ps)[:, None, None], (e, n, 1)),
-        world.accel_cmd / acs,
-        np.broadcast_to(progress[:, None, None], (e, n, 1)),
-    ]
+    # Own state (SELF_FIELDS order); broadcast fields are shared by the formation.
+    out[..., 0:3] = (slots - pos) / ps
+    out[..., 3:6] = (plan_pos - pos) / ps
+    out[..., 6:9] = vel / vs
+    out[..., 9:12] = plan_vel / vs
+    out[..., 12:15] = (mean_vel / vs)[:, None, :]
+    out[..., 15:18] = ((plan_center - center) / ps)[:, None, :]
+    out[..., 18:21] = wp_dir[:, None, :]
+    out[..., 21] = (wp_dist / ps)[:, None]
+    out[..., 22:25] = world.accel_cmd / acs
+    out[..., 25] = progress[:, None]
+    col = layout.self_dim
 
     k_u = layout.k_uavs
     if k_u:
         rel = pos[:, None, :, :] - pos[:, :, None, :]  # (E, N(i), N(j), 3): j relative to i
-        relv = vel[:, None, :, :] - vel[:, :, None, :]
         dist = np.sqrt(np.einsum("...i,...i->...", rel, rel))
-        dist_sort = np.where(np.eye(n, dtype=bool), np.inf, dist)
-        order = np.argsort(dist_sort, axis=-1, kind="stable")[..., :k_u]  # (E, N, K)
-        d_sel = np.take_along_axis(dist_sort, order, axis=-1)
-        present = d_sel <= layout.sensing_range
-        r_sel = np.take_along_axis(rel, order[..., None], axis=-2)
-        v_sel = np.take_along_axis(relv, order[..., None], axis=-2)
-        pm = present[..., None]
-        block = np.concatenate(
-            [
-                np.where(pm, r_sel / ps, 0.0),
-                np.where(pm, v_sel / vs, 0.0),
-                np.where(pm, d_sel[..., None] / ps, 0.0),
-                pm.astype(float),
-            ],
-            axis=-1,
-        )
-        cols.append(block.reshape(e, n, -1))
+        dist[:, np.arange(n), np.arange(n)] = np.inf  # never one's own neighbour
+        order = np.argsort(dist, axis=-1, kind="stable")[..., :k_u]  # (E, N, K)
+        # Flat index of pair (e, i, order) in (E * N * N) and of UAV (e, order) in (E * N).
+        pair = (np.arange(e * n) * n).reshape(e, n, 1) + order
+        other = (np.arange(e) * n).reshape(e, 1, 1) + order
+        d_sel = dist.reshape(-1)[pair]
+        present = (d_sel <= layout.sensing_range)[..., None]
+        w = _width(UAV_FIELDS)
+        block = np.reshape(out[..., col : col + k_u * w], (e, n, k_u, w), copy=False)
+        block[..., 0:3] = np.where(present, rel.reshape(-1, 3)[pair] / ps, 0.0)
+        relv = vel.reshape(-1, 3)[other] - vel[:, :, None, :]
+        block[..., 3:6] = np.where(present, relv / vs, 0.0)
+        block[..., 6] = np.where(present[..., 0], d_sel / ps, 0.0)
+        block[..., 7] = present[..., 0]
+        col += k_u * w
 
     k_o = layout.k_obstacles
-    block_o = np.zeros((e, n, k_o, _width(OBSTACLE_FIELDS)))
-    if m:
+    w = _width(OBSTACLE_FIELDS)
+    block = np.reshape(out[..., col : col + k_o * w], (e, n, k_o, w), copy=False)
+    kk = min(k_o, m)
+    block[:, :, kk:] = 0.0
+    if kk:
         region = world.region_distances(pos)  # estimated UAV pos vs predicted ellipsoids
-        obs_rel = world.obs_est_pos[:, None, :, :] - pos[:, :, None, :]
+        obs_rel = world.obs_est_pos[:, None, :, :] - pos[:, :, None, :]  # (E, N, M, 3)
         obs_dist = np.sqrt(np.einsum("...i,...i->...", obs_rel, obs_rel))
         active = world.obstacles.active[:, None, :]
         key = np.where(active & (obs_dist <= layout.sensing_range), region, np.inf)
-        order = np.argsort(key, axis=-1, kind="stable")[..., :k_o]  # (E, N, <=K)
-        kk = order.shape[-1]
-        present = np.isfinite(np.take_along_axis(key, order, axis=-1))
-        center_rel = world.pred_center[:, None, :, :] - pos[:, :, None, :]
-        hd = world.pred_heading[:, None, :]
-        feats = np.concatenate(
-            [
-                center_rel / ps,
-                np.broadcast_to(world.pred_axes[:, None, :, :], center_rel.shape) / ps,
-                np.broadcast_to(np.stack([np.cos(hd), np.sin(hd)], axis=-1), (e, n, m, 2)),
-                obs_rel / ps,
-                (world.obs_est_vel[:, None, :, :] - vel[:, :, None, :]) / vs,
-                np.where(np.isfinite(region), region, 0.0)[..., None] / ps,
-                np.ones((e, n, m, 1)),
-            ],
-            axis=-1,
+        order = (
+            np.argsort(key, axis=-1, kind="stable")[..., :kk]
+            if m > 1
+            else np.zeros((e, n, 1), dtype=np.intp)
         )
-        sel = np.take_along_axis(feats, order[..., None], axis=-2)
-        block_o[:, :, :kk] = np.where(present[..., None], sel, 0.0)
-    cols.append(block_o.reshape(e, n, -1))
+        pair = (np.arange(e * n) * m).reshape(e, n, 1) + order  # into (E * N * M)
+        ob = (np.arange(e) * m).reshape(e, 1, 1) + order  # into (E * M)
+        present = np.isfinite(key.reshape(-1)[pair])[..., None]
+        hd = world.pred_heading.reshape(-1)[ob]
+        reg = region.reshape(-1)[pair]
+        feats = (
+            (world.pred_center.reshape(-1, 3)[ob] - pos[:, :, None, :]) / ps,
+            world.pred_axes.reshape(-1, 3)[ob] / ps,
+            np.stack([np.cos(hd), np.sin(hd)], axis=-1),
+            obs_rel.reshape(-1, 3)[pair] / ps,
+            (world.obs_est_vel.reshape(-1, 3)[ob] - vel[:, :, None, :]) / vs,
+            (np.where(np.isfinite(reg), reg, 0.0) / ps)[..., None],
+        )
+        j = 0
+        for f in feats:
+            block[:, :, :kk, j : j + f.shape[-1]] = np.where(present, f, 0.0)
+            j += f.shape[-1]
+        block[:, :, :kk, j] = present[..., 0]
 
-    full = np.concatenate(cols, axis=-1)
-    np.clip(full, -layout.clip, layout.clip, out=full)
-    out[...] = full
+    np.clip(out, -layout.clip, layout.clip, out=out)
     return out
 
 
@@ -299,7 +300,7 @@ def global_state(world: World) -> np.ndarray:
     """
     cfg = world.config
     ps, vs = cfg.observation.position_scale, cfg.uav.max_speed
-    plan_center, _ = world.plan.center(world.time)
+    plan_center = world.plan_center
     e = world.n_envs
     parts = [
         ((world.uav_pos - plan_center[:, None, :]) / ps).reshape(e, -1),

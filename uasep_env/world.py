@@ -35,7 +35,12 @@ from uasep_env import reachable
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.dynamics import measure, step_double_integrator
 from uasep_env.estimation import KalmanModel
-from uasep_env.formation import PlannedTrajectory, formation_center, formation_rotation
+from uasep_env.formation import (
+    PlannedTrajectory,
+    formation_center,
+    formation_rotation,
+    rotate,
+)
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, sample_scenario
 
@@ -72,6 +77,11 @@ class World:
         pred_heading: ``(E, M)`` their headings (rad).
         slots: ``(E, N, 3)`` formation pattern (m, formation frame).
         plan: The planned trajectories (:class:`PlannedTrajectory`).
+        plan_center: ``(E, 3)`` planned formation centre now (m); read-only, refreshed
+            with the time by every step and reset, like the three below.
+        plan_dir: ``(E, 3)`` unit direction of the planned path now.
+        plan_pos: ``(E, N, 3)`` each UAV's planned position now (m).
+        plan_vel: ``(E, N, 3)`` each UAV's planned velocity now (m/s).
         min_uav_dist: ``(E, N)`` smallest distance to another UAV over the last env step (m).
         min_obs_dist: ``(E, N)`` smallest distance to an active obstacle over it (m).
         families: Scenario family of each environment's episode.
@@ -116,6 +126,7 @@ class World:
         self.pred_heading = np.zeros((e, m))
         self.slots = np.zeros((e, n, 3))
         self.plan = PlannedTrajectory(np.tile(np.eye(N_WAYPOINTS, 3)[None], (e, 1, 1)), 1.0)
+        self._refresh_plan()
         self.min_uav_dist = np.full((e, n), np.inf)
         self.min_obs_dist = np.full((e, n), np.inf)
         self.families: list[str] = [""] * e
@@ -229,6 +240,7 @@ class World:
         self._sense(mask, initialise=True)
         self._predict_regions()
         self._update_safety(reset_mask=mask)
+        self._refresh_plan()
 
     # ------------------------------------------------------------------ noise
     def _draw(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -245,9 +257,15 @@ class World:
             self._normal_buf[i] = rng.standard_normal((self.noise_block, self._n_normal))
             self._unif_buf[i] = rng.random((self.noise_block, self._n_unif))
             self._buf_pos[i] = 0
-        rows = np.arange(self.n_envs)
-        normals = self._normal_buf[rows, np.minimum(self._buf_pos, self.noise_block - 1)]
-        unifs = self._unif_buf[rows, np.minimum(self._buf_pos, self.noise_block - 1)]
+        at = np.minimum(self._buf_pos, self.noise_block - 1)
+        if (at == at[0]).all():
+            # Environments in lockstep (the usual case): a view, no gather.
+            normals = self._normal_buf[:, at[0]]
+            unifs = self._unif_buf[:, at[0]]
+        else:
+            rows = np.arange(self.n_envs)
+            normals = self._normal_buf[rows, at]
+            unifs = self._unif_buf[rows, at]
         if active is None:
             self._buf_pos += 1
         else:
@@ -297,6 +315,25 @@ class World:
         self._predict_regions()
         if frozen is not None:
             self._restore(~active, frozen)
+        self._refresh_plan()
+
+    def _refresh_plan(self) -> None:
+        """Recompute the plan at the current time (once per step; every reader shares it).
+
+        New arrays each time, read-only: what a caller keeps stays as it was.
+        """
+        plan = self.plan
+        center, center_vel = plan.center(self.time)
+        direction = plan.heading_velocity(self.time)
+        pos, vel = plan.uav_positions(self.time, self.slots, (center, center_vel), direction)
+        for name, arr in (
+            ("plan_center", center),
+            ("plan_dir", direction),
+            ("plan_pos", pos),
+            ("plan_vel", vel),
+        ):
+            arr.flags.writeable = False
+            setattr(self, name, arr)
 
     _STATE = (
         "time",
@@ -458,21 +495,29 @@ class World:
         return obstacle_velocity(self.obstacles)
 
     def planned(self) -> tuple[np.ndarray, np.ndarray]:
-        """Each UAV's planned position and velocity now, ``(E, N, 3)`` each."""
-        return self.plan.uav_positions(self.time, self.slots)
+        """Each UAV's planned position and velocity now, ``(E, N, 3)`` each (read-only)."""
+        return self.plan_pos, self.plan_vel
 
-    def desired_slots(self, estimated: bool = True) -> np.ndarray:
+    def desired_slots(
+        self,
+        estimated: bool = True,
+        center: np.ndarray | None = None,
+        mean_vel: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Eq. 7: each UAV's slot in the current formation frame, ``(E, N, 3)`` (m).
 
         Args:
             estimated: Use the estimates (what the UAVs know) rather than the truth.
+            center: The formation centre of those positions, if the caller has it.
+            mean_vel: Their mean velocity, if the caller has it (given with ``center``).
         """
-        pos = self.est_pos if estimated else self.uav_pos
-        vel = self.est_vel if estimated else self.uav_vel
-        center, mean_vel = formation_center(pos, vel)
+        if center is None or mean_vel is None:
+            pos = self.est_pos if estimated else self.uav_pos
+            vel = self.est_vel if estimated else self.uav_vel
+            center, mean_vel = formation_center(pos, vel)
         # Only the planned path's direction matters for the low-speed fallback.
-        rot = formation_rotation(mean_vel, self.plan.heading_velocity(self.time))
-        return center[:, None, :] + np.einsum("eij,enj->eni", rot, self.slots)
+        rot = formation_rotation(mean_vel, self.plan_dir)
+        return center[:, None, :] + rotate(rot, self.slots)
 
     def plan_finished(self) -> np.ndarray:
         """``(E,)`` whether the planned trajectory has been flown to its end."""

@@ -118,17 +118,19 @@ class FormationVectorEnv(VectorEnv):
         pending = (
             self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
         )
-        res = self.core.step(a, validate=False, active=None if pending is None else ~pending)
+        some_pending = pending is not None and bool(pending.any())
+        if some_pending:
+            # Environments that ended last step: reset now and hold them still during the
+            # step (their action is ignored), so one observation pass serves both.
+            self.core.world.reset(mask=pending)
+        res = self.core.step(a, validate=False, active=~pending if some_pending else None)
         obs = res.obs.reshape(self.num_envs, -1)
         rewards = res.rewards.mean(axis=1)
         terminated = res.terminated.copy()
         truncated = res.truncated.copy()
         infos = self._infos(res)
         done = terminated | truncated
-        if pending is not None and pending.any():
-            # Environments that ended last step: reset now, ignoring their action.
-            obs_reset = self.core.reset(mask=pending).reshape(self.num_envs, -1)
-            obs[pending] = obs_reset[pending]
+        if some_pending:
             rewards[pending] = 0.0
             terminated[pending] = False
             truncated[pending] = False
