@@ -13,15 +13,15 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# Core + plotting: what the evaluation needs (no torch).
+# Core + plotting + compiled kernels: what the evaluation needs (no torch).
 $(VENV)/.core: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e ".[viz]"
+	$(BIN)/python -m pip install --quiet -e ".[viz,fast]"
 	touch $@
 
 # Everything: torch first, then the package with every extra the tests use.
 $(VENV)/.all: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet $(TORCH)
-	$(BIN)/python -m pip install --quiet -e ".[dev,train,viz]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,train,viz,fast]"
 	touch $@ $(VENV)/.core
 
 eval: $(VENV)/.core
@@ -35,7 +35,8 @@ test: lint
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(VENV)/.all
-	$(BIN)/python benchmarks/bench_core.py
+	$(BIN)/python -m pip install --quiet -e ".[bench]"
+	$(BIN)/python benchmarks/bench_peers.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis

@@ -216,24 +216,25 @@ class APF(_APFBase):
         d, normal = reachable.distance_to_ellipsoid(
             origin, center, axes, heading, return_normal=True
         )
-        # Straight-line prediction: does the UAV come within r_min of the region?
-        vel = o["velocity"][..., None, :]  # (..., 1, 3)
-        taus = _PREDICTION_SAMPLES * g.horizon
-        future = vel[..., None, :] * taus[:, None]  # (..., 1, S, 3)
-        d_future = reachable.distance_to_ellipsoid(
-            future,
-            center[..., None, :],
-            axes[..., None, :],
-            heading[..., None],
-        )
-        will_enter = d_future.min(axis=-1) < g.obs_safe_min
         # Approach speed towards the region: velocity against the outward normal.
         v_hat, speed = _unit(o["velocity"])
         cos_delta = np.einsum("...ki,...i->...k", -normal, v_hat)
         approach = np.where(cos_delta > 0.0, speed[..., None] * cos_delta, 0.0)
         r_safe = g.obs_safe_min + g.obs_time * approach
         dd = np.maximum(d, 0.5)  # inside the region: the strongest push, outwards
-        active = mask & will_enter & (d < r_safe)
+        near = mask & (d < r_safe)
+        # Straight-line prediction: does the UAV come within r_min of the region? Only asked
+        # where the force could act at all (usually a few UAVs of a batch).
+        will_enter = np.zeros_like(near)
+        if near.any():
+            idx = np.nonzero(near)
+            vel = np.broadcast_to(o["velocity"][..., None, :], center.shape)[idx]  # (P, 3)
+            future = vel[:, None, :] * (_PREDICTION_SAMPLES * g.horizon)[:, None]  # (P, S, 3)
+            d_future = reachable.distance_to_ellipsoid(
+                future, center[idx][:, None, :], axes[idx][:, None, :], heading[idx][:, None]
+            )
+            will_enter[idx] = d_future.min(axis=-1) < g.obs_safe_min
+        active = near & will_enter
         mag = np.where(active, g.k_obs * (1.0 / dd - 1.0 / r_safe), 0.0)
         f = mag[..., None] * normal
         return _cap_norm(f, g.max_repulsion).sum(axis=-2)
