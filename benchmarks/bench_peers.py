@@ -3,7 +3,8 @@
 Usage::
 
     pip install -e ".[bench]"        # MPE2 and VMAS (torch==2.13.0 installed first)
-    python benchmarks/bench_peers.py [--seconds 3] [--sizes 1 64 1024 4096] [--skip-ppo]
+    python benchmarks/bench_peers.py [--seconds 3] [--sizes 1 64 1024 4096]
+                                     [--ppo-envs 64 256] [--skip-ppo]
 
 Prints steps/s and agent-steps/s of
 
@@ -15,7 +16,7 @@ Prints steps/s and agent-steps/s of
   integrator at the same shapes (the ceiling);
 * batched APF decisions/s;
 * SB3 PPO training env-steps/s through the parameter-sharing adapter, and the share of
-  its wall time spent inside the environment;
+  its wall time spent inside the environment, for each ``--ppo-envs`` batch size;
 
 followed by the ratios the project's targets are stated in. Peers are optional: a missing
 one is reported and skipped.
@@ -183,10 +184,13 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 64, 1024, 4096])
     parser.add_argument("--ppo-timesteps", type=int, default=200_000)
+    parser.add_argument("--ppo-envs", type=int, nargs="+", default=[64, 256])
     parser.add_argument("--skip-ppo", action="store_true")
     args = parser.parse_args()
     s = args.seconds
+    from uasep_env import _numba
 
+    print(f"compiled kernels (numba): {'on' if _numba.available() else 'off'}\n")
     print("== one environment, PettingZoo parallel API (3 agents) ==")
     pz = bench_pettingzoo(s)
     mpe = bench_mpe2(s)
@@ -215,9 +219,17 @@ def main() -> None:
     apf = bench_apf(big, s)
     print(f"\nbatched APF at {big} envs: {apf:,.0f} decisions/s")
 
-    ppo = None if args.skip_ppo else bench_ppo(args.ppo_timesteps, n_envs=64)
-    if ppo:
-        print(f"SB3 PPO (64 envs x 3 UAVs): {ppo[0]:,.0f} agent-steps/s, env share {ppo[1]:.1%}")
+    ppo = {}
+    for n_envs in [] if args.skip_ppo else args.ppo_envs:
+        res = bench_ppo(args.ppo_timesteps, n_envs=n_envs)
+        if res is None:
+            print("SB3 PPO: stable-baselines3/torch not installed")
+            break
+        ppo[n_envs] = res
+        print(
+            f"SB3 PPO ({n_envs} envs x 3 UAVs): {res[0]:,.0f} agent-steps/s, "
+            f"env share {res[1]:.1%}"
+        )
 
     print("\n== targets (ratios from this run) ==")
     if mpe:
@@ -228,8 +240,8 @@ def main() -> None:
         print(f"vector env vs VMAS at {big}: {ours / vm:.1f}x (target >= 5x)")
     print(f"vector env vs bare numpy at {big}: {ours / bare:.1%} (target >= 60%)")
     print(f"batched APF: {apf:,.0f} decisions/s (target >= 1M)")
-    if ppo:
-        print(f"env share of PPO wall time: {ppo[1]:.1%} (target < 15%)")
+    for n_envs, (_, share) in ppo.items():
+        print(f"env share of PPO wall time, {n_envs} envs: {share:.1%} (target < 15%)")
 
 
 if __name__ == "__main__":

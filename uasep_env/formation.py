@@ -134,10 +134,20 @@ def rotation_from_velocity(
     phi = np.arctan2(-use[..., 2], np.maximum(horiz, 1e-12))  # climb angle (NED z down)
     phi = np.where((horiz <= 1e-9) & (np.abs(use[..., 2]) <= 1e-9), 0.0, phi)
     ct, st, cp, sp = np.cos(theta), np.sin(theta), np.cos(phi), np.sin(phi)
-    x_f = np.stack([-st, ct, np.zeros_like(ct)], axis=-1)  # starboard, horizontal
-    y_f = np.stack([cp * ct, cp * st, -sp], axis=-1)  # along the velocity
-    z_f = np.stack([-ct * sp, -st * sp, -cp], axis=-1)  # X_f x Y_f (up when level)
-    return np.stack([x_f, y_f, z_f], axis=-1)
+    rot = np.empty((*ct.shape, 3, 3))
+    # Column X_f: starboard, horizontal.
+    np.negative(st, out=rot[..., 0, 0])
+    rot[..., 1, 0] = ct
+    rot[..., 2, 0] = 0.0
+    # Column Y_f: along the velocity.
+    np.multiply(cp, ct, out=rot[..., 0, 1])
+    np.multiply(cp, st, out=rot[..., 1, 1])
+    np.negative(sp, out=rot[..., 2, 1])
+    # Column Z_f = X_f x Y_f (up when level).
+    np.multiply(-ct, sp, out=rot[..., 0, 2])
+    np.multiply(-st, sp, out=rot[..., 1, 2])
+    np.negative(cp, out=rot[..., 2, 2])
+    return rot
 
 
 def rotate(rot: np.ndarray, vectors: np.ndarray) -> np.ndarray:
