@@ -7,7 +7,9 @@ import pytest
 
 from uasep_env import _numba, reachable
 
-pytestmark = pytest.mark.skipif(not _numba.available(), reason="numba not installed")
+pytestmark = pytest.mark.skipif(
+    not _numba.available(), reason="numba not installed or UASEP_NUMBA=0"
+)
 
 
 def _numpy_nearest(points, centers, axes, headings):
