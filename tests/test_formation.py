@@ -80,3 +80,15 @@ def test_planned_trajectory_flown_at_cruise_speed():
     slots = pattern_slots("paper", 3, 20.0)[None]
     upos, _ = plan.uav_positions(np.array([10.0]), slots)
     np.testing.assert_allclose(upos[0, 1], [50, 20, -100])  # +20 slot is starboard (east)
+
+
+def test_center_and_direction_agree_with_the_separate_queries():
+    rng = np.random.default_rng(4)
+    wp = np.cumsum(rng.normal(0, 50, size=(5, 4, 3)), axis=1)
+    plan = PlannedTrajectory(wp, rng.uniform(5, 15, size=5))
+    for t in (0.0, 3.0, 40.0, 1e4):
+        times = np.full(5, t)
+        pos, vel, d = plan.center_and_direction(times)
+        np.testing.assert_array_equal(pos, plan.center(times)[0])
+        np.testing.assert_array_equal(vel, plan.center(times)[1])
+        np.testing.assert_array_equal(d, plan.heading_velocity(times))

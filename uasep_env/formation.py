@@ -227,6 +227,11 @@ class PlannedTrajectory:
 
     def center(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Planned centre position and velocity at times ``t`` (``(n_envs,)``, s)."""
+        pos, vel, _ = self.center_and_direction(t)
+        return pos, vel
+
+    def center_and_direction(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`center` and :meth:`heading_velocity` at once (one segment lookup)."""
         s = np.minimum(self.cruise_speed * np.maximum(t, 0.0), self.length)
         n_seg = self.direction.shape[1]
         idx = np.clip((self.cum[:, 1:-1] <= s[:, None]).sum(axis=1), 0, n_seg - 1)
@@ -236,7 +241,7 @@ class PlannedTrajectory:
         pos = start + (s - self.cum[rows, idx])[:, None] * d
         moving = (self.cruise_speed * t < self.length)[:, None]
         vel = np.where(moving, self.cruise_speed[:, None] * d, 0.0)
-        return pos, vel
+        return pos, vel, d
 
     def heading_velocity(self, t: np.ndarray) -> np.ndarray:
         """Unit direction of the planned path at ``t`` (kept after the end)."""

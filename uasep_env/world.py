@@ -323,8 +323,7 @@ class World:
         New arrays each time, read-only: what a caller keeps stays as it was.
         """
         plan = self.plan
-        center, center_vel = plan.center(self.time)
-        direction = plan.heading_velocity(self.time)
+        center, center_vel, direction = plan.center_and_direction(self.time)
         pos, vel = plan.uav_positions(self.time, self.slots, (center, center_vel), direction)
         for name, arr in (
             ("plan_center", center),
