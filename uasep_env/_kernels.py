@@ -16,8 +16,7 @@ import math
 import numba
 import numpy as np
 
-_N_NEWTON = 8  # must equal uasep_env.reachable._N_NEWTON (checked by the tests)
-
+from uasep_env.reachable import _N_NEWTON
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 

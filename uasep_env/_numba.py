@@ -1,8 +1,8 @@
 """Optional numba support: the package runs without it, faster with it.
 
-numba is not a dependency (``pip install "uasep-env[fast]"`` adds it). Kernels that have a
-compiled form ask :func:`jit` for a decorator; when numba is missing, or disabled with the
-environment variable ``UASEP_NUMBA=0``, they get ``None`` and the callers use their numpy
+numba is not a dependency (``pip install "uasep-env[fast]"`` adds it). Callers of a kernel
+that has a compiled form (:mod:`uasep_env._kernels`) ask :func:`available`; when numba is
+missing, or disabled with the environment variable ``UASEP_NUMBA=0``, they use its numpy
 form. Compiled kernels are cached on disk (``cache=True``), so only the first run of a
 new installation pays the compilation (a few seconds).
 """
@@ -10,10 +10,9 @@ new installation pays the compilation (a few seconds).
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from typing import Any
 
-__all__ = ["available", "jit"]
+__all__ = ["available"]
 
 _state: dict[str, Any] = {}
 
@@ -33,15 +32,3 @@ def _numba() -> Any:
 def available() -> bool:
     """Whether compiled kernels are in use (numba importable and not disabled)."""
     return _numba() is not None
-
-
-def jit(parallel: bool = False) -> Callable[[Callable], Callable] | None:
-    """Numba's ``njit`` with this project's options, or ``None`` without numba.
-
-    Args:
-        parallel: Compile ``prange`` loops to run on all cores.
-    """
-    nb = _numba()
-    if nb is None:
-        return None
-    return nb.njit(cache=True, nogil=True, parallel=parallel, error_model="numpy")
