@@ -106,3 +106,86 @@ def test_episodes_are_bit_identical_with_and_without_numba(monkeypatch):
     slow = rollout()
     for f, s in zip(fast, slow, strict=True):
         np.testing.assert_array_equal(f, s)
+
+
+def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
+    from uasep_env import _kernels
+
+    rng = np.random.default_rng(4)
+    for e, n, m in ((1, 3, 1), (7, 4, 3), (600, 3, 2)):  # the last runs the parallel loop
+        pts = rng.normal(0, 40, size=(e, n, 3))
+        ctr = rng.normal(0, 20, size=(e, m, 3))
+        ax = rng.uniform(0, 30, size=(e, m, 3))
+        ax[0, 0, 1] = 0.0  # a flat one
+        hd = rng.uniform(-np.pi, np.pi, size=(e, m))
+        want = _numpy_nearest(pts[:, :, None], ctr[:, None], ax[:, None], hd[:, None])[1]
+        got = _kernels.pairwise_distances(pts, ctr, ax, hd)
+        assert got.shape == (e, n, m)
+        np.testing.assert_array_equal(got, want)
+    assert e * n * m >= _kernels.PARALLEL_MIN
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        {"n_uavs": 3, "n_obstacles": 1, "scenario": "random"},
+        {"n_uavs": 6, "n_obstacles": 3, "scenario": "random"},
+        # Short sensing range (absent neighbours), more obstacle slots than obstacles.
+        {
+            "n_uavs": 5,
+            "n_obstacles": 2,
+            "observation": {"k_uavs": 2, "k_obstacles": 4, "sensing_range": 60.0},
+        },
+        {"n_uavs": 4, "n_obstacles": 0},
+    ],
+)
+def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
+    from uasep_env import _kernels, observation
+    from uasep_env.envs.core import EnvCore
+
+    core = EnvCore(config, n_envs=700)  # 2,100+ agents: the parallel loop
+    core.reset(seed=5)
+    rng = np.random.default_rng(6)
+    absent = 0
+    for _ in range(15):
+        core.step(rng.uniform(-1, 1, size=(700, core.n_uavs, 3)))
+        x = observation._gather_inputs(core.world, core.layout)
+        want = np.full(core._obs.shape, np.nan, dtype=np.float32)
+        got = want.copy()
+        observation._assemble(x, core.layout, want)
+        _kernels.assemble_observations(x, core.layout, got)
+        assert not np.isnan(want).any()  # NaN-filled: every entry was written
+        np.testing.assert_array_equal(got, want)
+        small = want[:2].copy()
+        _kernels.assemble_observations(type(x)(*(a[:2] for a in x)), core.layout, small)
+        np.testing.assert_array_equal(small, want[:2])  # the serial loop
+        absent += int(np.sum(core.layout.decode(want)["uav_mask"] == 0))
+    if "observation" in config:
+        assert absent > 0  # the short range did hide some neighbours
+
+
+def test_norm_adds_in_einsum_order():
+    """The kernels' distance is numpy's ``sqrt(einsum)`` to the bit (its summation order)."""
+    from uasep_env import _kernels
+
+    d = np.random.default_rng(8).normal(0, 100, size=(5000, 3))
+    want = np.sqrt(np.einsum("...i,...i->...", d, d))
+    got = np.array([_kernels._dist3(*row) for row in d])
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize(("n_envs", "n_obstacles"), [(5, 3), (800, 2), (3, 0)])
+def test_separations_kernel_matches_numpy(monkeypatch, n_envs, n_obstacles):
+    from uasep_env import World
+
+    world = World({"n_uavs": 4, "n_obstacles": n_obstacles, "scenario": "random"}, n_envs)
+    world.reset(seed=9)
+    world.obstacles.active[::2] = False  # inactive obstacles do not count
+    fast = world.separations()
+    monkeypatch.setitem(_numba._state, "numba", None)
+    slow = world.separations()
+    for f, s in zip(fast, slow, strict=True):
+        assert f.shape == (n_envs, 4)
+        np.testing.assert_array_equal(f, s)
+    if n_obstacles:
+        assert np.isinf(fast[1][::2]).all() and np.isfinite(fast[1][1::2]).all()

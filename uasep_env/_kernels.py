@@ -6,7 +6,11 @@ same operations in the same order, no ``fastmath``. The numpy forms stay the ref
 the fallback when numba is missing (see :mod:`uasep_env._numba`).
 
 * :func:`nearest_on_ellipsoids` -- :func:`uasep_env.reachable._nearest_body` with the
-  heading rotation of :func:`uasep_env.reachable.distance_to_ellipsoid` around it.
+  heading rotation of :func:`uasep_env.reachable.distance_to_ellipsoid` around it;
+* :func:`pairwise_distances` -- the same solve for every point against every ellipsoid of
+  its batch row (:func:`uasep_env.reachable.pairwise_distances`), without broadcast copies;
+* :func:`separations` -- :meth:`uasep_env.world.World.separations`;
+* :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`.
 """
 
 from __future__ import annotations
@@ -199,3 +203,259 @@ def nearest_on_ellipsoids(
     # numpy's cos/sin, not libm's: the rotation must match the numpy form to the last bit.
     fn(points, centers, axes, np.cos(headings), np.sin(headings), _N_NEWTON, x, d, n)
     return x, d, n
+
+
+@numba.njit(inline="always", **_JIT)
+def _pair_distance(k, points, centers, axes, cos_h, sin_h, n_newton, out):  # noqa: ANN001, ANN202
+    """Pair ``k`` of the flat ``(E, N, M)`` grid: point ``(e, i)`` against ellipsoid ``(e, j)``."""
+    n, m = points.shape[1], centers.shape[1]
+    e = k // (n * m)
+    i = (k // m) % n
+    j = k % m
+    cp = cos_h[e, j]
+    sp = sin_h[e, j]
+    d0 = points[e, i, 0] - centers[e, j, 0]
+    d1 = points[e, i, 1] - centers[e, j, 1]
+    d2 = points[e, i, 2] - centers[e, j, 2]
+    q0 = d0 * cp + d1 * sp
+    q1 = -d0 * sp + d1 * cp
+    res = _nearest_one(q0, q1, d2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2], n_newton)
+    out[e, i, j] = res[3]
+
+
+@numba.njit(**_JIT)
+def _pairs_serial(points, centers, axes, cos_h, sin_h, n_newton, out):  # noqa: ANN001, ANN202
+    for k in range(out.size):
+        _pair_distance(k, points, centers, axes, cos_h, sin_h, n_newton, out)
+
+
+@numba.njit(parallel=True, **_JIT)
+def _pairs_parallel(points, centers, axes, cos_h, sin_h, n_newton, out):  # noqa: ANN001, ANN202
+    for k in numba.prange(out.size):
+        _pair_distance(k, points, centers, axes, cos_h, sin_h, n_newton, out)
+
+
+def pairwise_distances(
+    points: np.ndarray, centers: np.ndarray, axes: np.ndarray, headings: np.ndarray
+) -> np.ndarray:
+    """Signed distance of every point to every ellipsoid of the same batch row.
+
+    Args:
+        points: ``(E, N, 3)`` positions (m).
+        centers: ``(E, M, 3)`` ellipsoid centres (m).
+        axes: ``(E, M, 3)`` semi-axes (m), already validated.
+        headings: ``(E, M)`` headings (rad).
+
+    Returns:
+        ``(E, N, M)`` signed distances (m), as :func:`nearest_on_ellipsoids` on the pairs.
+    """
+    e, n, _ = points.shape
+    out = np.empty((e, n, centers.shape[1]))
+    fn = _pairs_parallel if out.size >= PARALLEL_MIN else _pairs_serial
+    c = np.ascontiguousarray
+    fn(c(points), c(centers), c(axes), np.cos(headings), np.sin(headings), _N_NEWTON, out)
+    return out
+
+
+# ---------------------------------------------------------------------------- separations
+@numba.njit(inline="always", **_JIT)
+def _dist3(a, b, c):  # noqa: ANN001, ANN202
+    """Euclidean norm in the order numpy's ``einsum("...i,...i")`` adds (two SIMD lanes)."""
+    return math.sqrt((a * a + c * c) + b * b)
+
+
+@numba.njit(inline="always", **_JIT)
+def _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001, ANN202
+    n, m = uav_pos.shape[1], obs_pos.shape[1]
+    e = k // n
+    i = k % n
+    best = np.inf
+    for j in range(n):
+        if j != i:
+            d = _dist3(
+                uav_pos[e, j, 0] - uav_pos[e, i, 0],
+                uav_pos[e, j, 1] - uav_pos[e, i, 1],
+                uav_pos[e, j, 2] - uav_pos[e, i, 2],
+            )
+            best = min(best, d)
+    d_uav[e, i] = best
+    best = np.inf
+    for j in range(m):
+        if active[e, j]:
+            d = _dist3(
+                uav_pos[e, i, 0] - obs_pos[e, j, 0],
+                uav_pos[e, i, 1] - obs_pos[e, j, 1],
+                uav_pos[e, i, 2] - obs_pos[e, j, 2],
+            )
+            best = min(best, d)
+    d_obs[e, i] = best
+
+
+@numba.njit(**_JIT)
+def _separations_serial(uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001, ANN202
+    for k in range(d_uav.size):
+        _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs)
+
+
+@numba.njit(parallel=True, **_JIT)
+def _separations_parallel(uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001, ANN202
+    for k in numba.prange(d_uav.size):
+        _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs)
+
+
+def separations(
+    uav_pos: np.ndarray, obs_pos: np.ndarray, active: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Compiled :meth:`uasep_env.world.World.separations`: nearest UAV and obstacle distances.
+
+    Args:
+        uav_pos: ``(E, N, 3)`` positions (m).
+        obs_pos: ``(E, M, 3)`` obstacle positions (m).
+        active: ``(E, M)`` bool, which obstacles count.
+
+    Returns:
+        ``(E, N)`` distance to the nearest other UAV and to the nearest active obstacle (m),
+        ``inf`` where there is none.
+    """
+    e, n, _ = uav_pos.shape
+    d_uav = np.empty((e, n))
+    d_obs = np.empty((e, n))
+    fn = _separations_parallel if d_uav.size >= PARALLEL_MIN else _separations_serial
+    c = np.ascontiguousarray
+    fn(c(uav_pos), c(obs_pos), c(active), d_uav, d_obs)
+    return d_uav, d_obs
+
+
+# ---------------------------------------------------------------------------- observations
+@numba.njit(inline="always", **_JIT)
+def _put(out, e, i, col, value, clip):  # noqa: ANN001, ANN202
+    """Store as float32, then clip in float32 (the numpy form's cast-then-``np.clip``)."""
+    v = np.float32(value)
+    if v < -clip:
+        v = -clip
+    elif v > clip:
+        v = clip
+    out[e, i, col] = v
+
+
+@numba.njit(inline="always", **_JIT)
+def _observe_agent(k, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+    """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.observation._assemble`.
+
+    ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays.
+    """
+    pos, vel = x.pos, x.vel
+    n = pos.shape[1]
+    m = x.region.shape[2]
+    e = k // n
+    i = k % n
+    ps, vs, acs, sensing, clip = scales[0], scales[1], scales[2], scales[3], np.float32(scales[4])
+    for a in range(3):
+        p = pos[e, i, a]
+        _put(out, e, i, a, (x.slots[e, i, a] - p) / ps, clip)
+        _put(out, e, i, 3 + a, (x.plan_pos[e, i, a] - p) / ps, clip)
+        _put(out, e, i, 6 + a, vel[e, i, a] / vs, clip)
+        _put(out, e, i, 9 + a, x.plan_vel[e, i, a] / vs, clip)
+        _put(out, e, i, 12 + a, x.mean_vel[e, a] / vs, clip)
+        _put(out, e, i, 15 + a, (x.plan_center[e, a] - x.center[e, a]) / ps, clip)
+        _put(out, e, i, 18 + a, x.wp_dir[e, a], clip)
+        _put(out, e, i, 22 + a, x.accel_cmd[e, i, a] / acs, clip)
+    _put(out, e, i, 21, x.wp_dist[e] / ps, clip)
+    _put(out, e, i, 25, x.progress[e], clip)
+    col = self_dim
+
+    # Nearest UAVs: the k smallest (distance, index) pairs in order, i.e. a stable argsort.
+    prev_d, prev_j = -np.inf, -1
+    for s in range(k_u):
+        best_d, best_j = np.inf, n
+        for j in range(n):
+            if j == i:
+                continue
+            d = _dist3(
+                pos[e, j, 0] - pos[e, i, 0],
+                pos[e, j, 1] - pos[e, i, 1],
+                pos[e, j, 2] - pos[e, i, 2],
+            )
+            after = d > prev_d or (d == prev_d and j > prev_j)
+            if after and (d < best_d or (d == best_d and j < best_j)):
+                best_d, best_j = d, j
+        if best_j == n:  # only oneself left (an infinite distance): stable order puts it here
+            best_d, best_j = np.inf, i
+        prev_d, prev_j = best_d, best_j
+        c = col + s * 8
+        if best_d <= sensing:
+            for a in range(3):
+                _put(out, e, i, c + a, (pos[e, best_j, a] - pos[e, i, a]) / ps, clip)
+                _put(out, e, i, c + 3 + a, (vel[e, best_j, a] - vel[e, i, a]) / vs, clip)
+            _put(out, e, i, c + 6, best_d / ps, clip)
+            _put(out, e, i, c + 7, 1.0, clip)
+        else:
+            for a in range(8):
+                out[e, i, c + a] = 0.0
+    col += k_u * 8
+
+    # Nearest obstacles by distance to their reachable region (stable, like the UAVs).
+    kk = min(k_o, m)
+    prev_d, prev_j = -np.inf, -1
+    for s in range(kk):
+        best_d, best_j = np.inf, m
+        for j in range(m):
+            key = np.inf
+            if x.active[e, j]:
+                od = _dist3(
+                    x.obs_pos[e, j, 0] - pos[e, i, 0],
+                    x.obs_pos[e, j, 1] - pos[e, i, 1],
+                    x.obs_pos[e, j, 2] - pos[e, i, 2],
+                )
+                if od <= sensing:
+                    key = x.region[e, i, j]
+            after = key > prev_d or (key == prev_d and j > prev_j)
+            if after and (key < best_d or (key == best_d and j < best_j)):
+                best_d, best_j = key, j
+        prev_d, prev_j = best_d, best_j
+        c = col + s * 16
+        if math.isfinite(best_d):
+            j = best_j
+            for a in range(3):
+                _put(out, e, i, c + a, (x.pred_center[e, j, a] - pos[e, i, a]) / ps, clip)
+                _put(out, e, i, c + 3 + a, x.pred_axes[e, j, a] / ps, clip)
+                _put(out, e, i, c + 8 + a, (x.obs_pos[e, j, a] - pos[e, i, a]) / ps, clip)
+                _put(out, e, i, c + 11 + a, (x.obs_vel[e, j, a] - vel[e, i, a]) / vs, clip)
+            _put(out, e, i, c + 6, x.cos_h[e, j], clip)
+            _put(out, e, i, c + 7, x.sin_h[e, j], clip)
+            _put(out, e, i, c + 14, x.region[e, i, j] / ps, clip)
+            _put(out, e, i, c + 15, 1.0, clip)
+        else:
+            for a in range(16):
+                out[e, i, c + a] = 0.0
+    for a in range(col + kk * 16, col + k_o * 16):
+        out[e, i, a] = 0.0
+
+
+@numba.njit(**_JIT)
+def _observe_serial(x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+    for k in range(out.shape[0] * out.shape[1]):
+        _observe_agent(k, x, scales, k_u, k_o, self_dim, out)
+
+
+@numba.njit(parallel=True, **_JIT)
+def _observe_parallel(x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+    for k in numba.prange(out.shape[0] * out.shape[1]):
+        _observe_agent(k, x, scales, k_u, k_o, self_dim, out)
+
+
+def assemble_observations(inputs: tuple, layout: object, out: np.ndarray) -> None:
+    """Compiled :func:`uasep_env.observation._assemble`: fills ``out`` in place.
+
+    Args:
+        inputs: The :class:`uasep_env.observation._Inputs` of one call.
+        layout: Its :class:`uasep_env.observation.ObservationLayout`.
+        out: ``(E, N, dim)`` float32, C-contiguous.
+    """
+    scales = np.array(
+        [layout.pos_scale, layout.vel_scale, layout.acc_scale, layout.sensing_range, layout.clip]
+    )
+    # Contiguous arrays only: one compiled signature, whatever views the caller passes.
+    x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
+    fn = _observe_parallel if out.shape[0] * out.shape[1] >= PARALLEL_MIN else _observe_serial
+    fn(x, scales, layout.k_uavs, layout.k_obstacles, layout.self_dim, out)

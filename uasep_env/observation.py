@@ -40,9 +40,11 @@ absent entries (fewer than K, or beyond ``sensing_range``) are zero with mask 0.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from uasep_env import _numba
 from uasep_env.config import EnvConfig
 from uasep_env.formation import formation_center
 from uasep_env.world import World
@@ -191,13 +193,44 @@ class ObservationLayout:
         return names
 
 
+class _Inputs(NamedTuple):
+    """What an observation is assembled from: the world's estimates plus derived geometry.
+
+    Shapes: ``E`` environments, ``N`` UAVs, ``M`` obstacles. Obstacle fields are empty
+    (``M = 0`` rows are never read) when no obstacle is observed.
+    """
+
+    pos: np.ndarray  # (E, N, 3) estimated UAV positions (m)
+    vel: np.ndarray  # (E, N, 3) estimated UAV velocities (m/s)
+    slots: np.ndarray  # (E, N, 3) desired slots, eq. 7 (m)
+    plan_pos: np.ndarray  # (E, N, 3) planned positions (m)
+    plan_vel: np.ndarray  # (E, N, 3) planned velocities (m/s)
+    accel_cmd: np.ndarray  # (E, N, 3) last commanded accelerations (m/s^2)
+    center: np.ndarray  # (E, 3) estimated formation centre (m)
+    mean_vel: np.ndarray  # (E, 3) formation mean velocity (m/s)
+    plan_center: np.ndarray  # (E, 3) planned centre (m)
+    wp_dir: np.ndarray  # (E, 3) unit direction of the planned path
+    wp_dist: np.ndarray  # (E,) centre to final way-point (m)
+    progress: np.ndarray  # (E,) elapsed fraction of the episode
+    region: np.ndarray  # (E, N, M) signed distance to each reachable ellipsoid (m), inf if off
+    obs_pos: np.ndarray  # (E, M, 3) estimated obstacle positions (m)
+    obs_vel: np.ndarray  # (E, M, 3) estimated obstacle velocities (m/s)
+    pred_center: np.ndarray  # (E, M, 3) ellipsoid centres (m)
+    pred_axes: np.ndarray  # (E, M, 3) ellipsoid semi-axes (m)
+    cos_h: np.ndarray  # (E, M) cosine of the ellipsoid heading
+    sin_h: np.ndarray  # (E, M) sine of the ellipsoid heading
+    active: np.ndarray  # (E, M) bool, obstacle present
+
+
 def build_observations(
     world: World, layout: ObservationLayout, out: np.ndarray | None = None
 ) -> np.ndarray:
     """Every agent's observation, ``(n_envs, n_uavs, layout.dim)`` float32.
 
-    Each field is computed once in float64 and written straight into its columns of
-    ``out`` (no concatenation of temporaries); neighbours are gathered by flat indices.
+    The formation geometry (eq. 5-7), the plan and the distances to the reachable
+    ellipsoids are computed batched in numpy; the per-agent assembly (relative vectors,
+    neighbour sorting, masks, scaling, clipping) is :func:`_assemble`, or its compiled form
+    in :mod:`uasep_env._kernels` when numba is in use (the same numbers bit for bit).
 
     Args:
         world: The batched world.
@@ -207,29 +240,75 @@ def build_observations(
     Returns:
         The observations (``out`` if given).
     """
-    e, n, m = world.n_envs, world.n_uavs, world.n_obstacles
+    e, n = world.n_envs, world.n_uavs
     if out is None:
         out = np.empty((e, n, layout.dim), dtype=np.float32)
-    ps, vs, acs = layout.pos_scale, layout.vel_scale, layout.acc_scale
+    inputs = _gather_inputs(world, layout)
+    if _numba.available():
+        from uasep_env import _kernels
+
+        _kernels.assemble_observations(inputs, layout, out)
+    else:
+        _assemble(inputs, layout, out)
+    return out
+
+
+def _gather_inputs(world: World, layout: ObservationLayout) -> _Inputs:
     pos, vel = world.est_pos, world.est_vel
     center, mean_vel = formation_center(pos, vel)
-    plan_center, wp_dir = world.plan_center, world.plan_dir
     slots = world.desired_slots(estimated=True, center=center, mean_vel=mean_vel)
-    plan_pos, plan_vel = world.plan_pos, world.plan_vel
     wp_dist = np.linalg.norm(world.plan.waypoints[:, -1] - center, axis=-1)
     progress = np.minimum(world.time / world.config.episode_duration, 1.0)
+    m = world.n_obstacles if layout.k_obstacles else 0
+    if m:
+        region = world.region_distances(pos)  # estimated UAV pos vs predicted ellipsoids
+        heading = world.pred_heading
+    else:
+        region = np.zeros((world.n_envs, world.n_uavs, 0))
+        heading = np.zeros((world.n_envs, 0))
+    ob = world.obstacles
+    return _Inputs(
+        pos,
+        vel,
+        slots,
+        world.plan_pos,
+        world.plan_vel,
+        world.accel_cmd,
+        center,
+        mean_vel,
+        world.plan_center,
+        world.plan_dir,
+        wp_dist,
+        progress,
+        region,
+        world.obs_est_pos[:, :m],
+        world.obs_est_vel[:, :m],
+        world.pred_center[:, :m],
+        world.pred_axes[:, :m],
+        np.cos(heading),
+        np.sin(heading),
+        ob.active[:, :m],
+    )
+
+
+def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
+    """The numpy assembly of :func:`build_observations` (reference of the compiled form)."""
+    e, n, _ = x.pos.shape
+    m = x.region.shape[-1]
+    ps, vs, acs = layout.pos_scale, layout.vel_scale, layout.acc_scale
+    pos, vel, center = x.pos, x.vel, x.center
 
     # Own state (SELF_FIELDS order); broadcast fields are shared by the formation.
-    out[..., 0:3] = (slots - pos) / ps
-    out[..., 3:6] = (plan_pos - pos) / ps
+    out[..., 0:3] = (x.slots - pos) / ps
+    out[..., 3:6] = (x.plan_pos - pos) / ps
     out[..., 6:9] = vel / vs
-    out[..., 9:12] = plan_vel / vs
-    out[..., 12:15] = (mean_vel / vs)[:, None, :]
-    out[..., 15:18] = ((plan_center - center) / ps)[:, None, :]
-    out[..., 18:21] = wp_dir[:, None, :]
-    out[..., 21] = (wp_dist / ps)[:, None]
-    out[..., 22:25] = world.accel_cmd / acs
-    out[..., 25] = progress[:, None]
+    out[..., 9:12] = x.plan_vel / vs
+    out[..., 12:15] = (x.mean_vel / vs)[:, None, :]
+    out[..., 15:18] = ((x.plan_center - center) / ps)[:, None, :]
+    out[..., 18:21] = x.wp_dir[:, None, :]
+    out[..., 21] = (x.wp_dist / ps)[:, None]
+    out[..., 22:25] = x.accel_cmd / acs
+    out[..., 25] = x.progress[:, None]
     col = layout.self_dim
 
     k_u = layout.k_uavs
@@ -258,10 +337,10 @@ def build_observations(
     kk = min(k_o, m)
     block[:, :, kk:] = 0.0
     if kk:
-        region = world.region_distances(pos)  # estimated UAV pos vs predicted ellipsoids
-        obs_rel = world.obs_est_pos[:, None, :, :] - pos[:, :, None, :]  # (E, N, M, 3)
+        region = x.region
+        obs_rel = x.obs_pos[:, None, :, :] - pos[:, :, None, :]  # (E, N, M, 3)
         obs_dist = np.sqrt(np.einsum("...i,...i->...", obs_rel, obs_rel))
-        active = world.obstacles.active[:, None, :]
+        active = x.active[:, None, :]
         key = np.where(active & (obs_dist <= layout.sensing_range), region, np.inf)
         order = (
             np.argsort(key, axis=-1, kind="stable")[..., :kk]
@@ -271,14 +350,13 @@ def build_observations(
         pair = (np.arange(e * n) * m).reshape(e, n, 1) + order  # into (E * N * M)
         ob = (np.arange(e) * m).reshape(e, 1, 1) + order  # into (E * M)
         present = np.isfinite(key.reshape(-1)[pair])[..., None]
-        hd = world.pred_heading.reshape(-1)[ob]
         reg = region.reshape(-1)[pair]
         feats = (
-            (world.pred_center.reshape(-1, 3)[ob] - pos[:, :, None, :]) / ps,
-            world.pred_axes.reshape(-1, 3)[ob] / ps,
-            np.stack([np.cos(hd), np.sin(hd)], axis=-1),
+            (x.pred_center.reshape(-1, 3)[ob] - pos[:, :, None, :]) / ps,
+            x.pred_axes.reshape(-1, 3)[ob] / ps,
+            np.stack([x.cos_h.reshape(-1)[ob], x.sin_h.reshape(-1)[ob]], axis=-1),
             obs_rel.reshape(-1, 3)[pair] / ps,
-            (world.obs_est_vel.reshape(-1, 3)[ob] - vel[:, :, None, :]) / vs,
+            (x.obs_vel.reshape(-1, 3)[ob] - vel[:, :, None, :]) / vs,
             (np.where(np.isfinite(reg), reg, 0.0) / ps)[..., None],
         )
         j = 0
@@ -288,7 +366,6 @@ def build_observations(
         block[:, :, :kk, j] = present[..., 0]
 
     np.clip(out, -layout.clip, layout.clip, out=out)
-    return out
 
 
 def global_state(world: World) -> np.ndarray:

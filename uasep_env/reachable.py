@@ -143,6 +143,7 @@ __all__ = [
     "ellipsoid_volume",
     "front_curve",
     "nearest_point_on_ellipsoid",
+    "pairwise_distances",
     "support",
 ]
 
@@ -1018,6 +1019,37 @@ def distance_to_ellipsoid(
         return dist
     cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
     return dist, _to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+
+
+def pairwise_distances(
+    points: ArrayLike, centers: ArrayLike, semi_axes: ArrayLike, headings: ArrayLike
+) -> FloatArray:
+    """Signed distance of every point to every ellipsoid of the same batch row.
+
+    :func:`distance_to_ellipsoid` on ``points[:, :, None]`` against ``centers[:, None]``,
+    the shape every env step asks for (UAVs against obstacles' regions).
+
+    Args:
+        points: ``(E, N, 3)`` positions, NED (m).
+        centers: ``(E, M, 3)`` ellipsoid centres, NED (m).
+        semi_axes: ``(E, M, 3)`` semi-axes (m).
+        headings: ``(E, M)`` headings (rad).
+
+    Returns:
+        ``(E, N, M)`` signed distances (m, negative inside).
+
+    Raises:
+        ValueError: If a semi-axis is negative or not finite.
+    """
+    ax = _check_axes(semi_axes)
+    p = np.asarray(points, dtype=np.float64)
+    c = np.asarray(centers, dtype=np.float64)
+    psi = np.asarray(headings, dtype=np.float64)
+    if _numba.available():
+        from uasep_env import _kernels
+
+        return _kernels.pairwise_distances(p, c, ax, psi)
+    return distance_to_ellipsoid(p[:, :, None], c[:, None], ax[:, None], psi[:, None])
 
 
 def nearest_point_on_ellipsoid(

@@ -31,7 +31,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from uasep_env import reachable
+from uasep_env import _numba, reachable
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.dynamics import measure, step_double_integrator
 from uasep_env.estimation import KalmanModel
@@ -77,8 +77,8 @@ class World:
         pred_heading: ``(E, M)`` their headings (rad).
         slots: ``(E, N, 3)`` formation pattern (m, formation frame).
         plan: The planned trajectories (:class:`PlannedTrajectory`).
-        plan_center: ``(E, 3)`` planned formation centre now (m); read-only, refreshed
-            with the time by every step and reset, like the three below.
+        plan_center: ``(E, 3)`` planned formation centre now (m); read-only, new arrays
+            after every step and reset (computed on first read), like the three below.
         plan_dir: ``(E, 3)`` unit direction of the planned path now.
         plan_pos: ``(E, N, 3)`` each UAV's planned position now (m).
         plan_vel: ``(E, N, 3)`` each UAV's planned velocity now (m/s).
@@ -101,10 +101,20 @@ class World:
         nz = cfg.noise
         self._uav_kf = KalmanModel(cfg.dt, nz.accel_std, nz.position_std, nz.velocity_std)
         self._n_normal = n * 9 + m * 6
+        # Each standard normal's standard deviation, by column: the buffers hold the noise
+        # itself, scaled once per refill rather than once per use.
+        self._normal_std = np.concatenate(
+            [
+                np.full(n * 3, nz.accel_std),
+                np.tile(np.repeat([nz.position_std, nz.velocity_std], 3), n),
+                np.tile(np.repeat([nz.obstacle_position_std, nz.obstacle_velocity_std], 3), m),
+            ]
+        )
         self._n_unif = m * N_UNIFORMS
         self._rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(e)]
-        self._normal_buf = np.zeros((e, self.noise_block, self._n_normal))
-        self._unif_buf = np.zeros((e, self.noise_block, self._n_unif))
+        # Step-major: one physics step's noise for the whole batch is one contiguous slab.
+        self._normal_buf = np.zeros((self.noise_block, e, self._n_normal))
+        self._unif_buf = np.zeros((self.noise_block, e, self._n_unif))
         self._buf_pos = np.full(e, self.noise_block, dtype=np.int64)
 
         self.time = np.zeros(e)
@@ -244,7 +254,7 @@ class World:
 
     # ------------------------------------------------------------------ noise
     def _draw(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """This physics step's standard normals and uniforms, per environment.
+        """This physics step's Gaussian noise (scaled by ``_normal_std``) and uniforms.
 
         Environments outside ``active`` consume nothing (their values are discarded).
         """
@@ -254,18 +264,22 @@ class World:
         refill = np.flatnonzero(due)
         for i in refill:
             rng = self._rngs[i]
-            self._normal_buf[i] = rng.standard_normal((self.noise_block, self._n_normal))
-            self._unif_buf[i] = rng.random((self.noise_block, self._n_unif))
+            np.multiply(
+                rng.standard_normal((self.noise_block, self._n_normal)),
+                self._normal_std,
+                out=self._normal_buf[:, i],
+            )
+            self._unif_buf[:, i] = rng.random((self.noise_block, self._n_unif))
             self._buf_pos[i] = 0
         at = np.minimum(self._buf_pos, self.noise_block - 1)
         if (at == at[0]).all():
             # Environments in lockstep (the usual case): a view, no gather.
-            normals = self._normal_buf[:, at[0]]
-            unifs = self._unif_buf[:, at[0]]
+            normals = self._normal_buf[at[0]]
+            unifs = self._unif_buf[at[0]]
         else:
             rows = np.arange(self.n_envs)
-            normals = self._normal_buf[rows, at]
-            unifs = self._unif_buf[rows, at]
+            normals = self._normal_buf[at, rows]
+            unifs = self._unif_buf[at, rows]
         if active is None:
             self._buf_pos += 1
         else:
@@ -318,21 +332,45 @@ class World:
         self._refresh_plan()
 
     def _refresh_plan(self) -> None:
-        """Recompute the plan at the current time (once per step; every reader shares it).
+        """Mark the plan stale; the next read of a ``plan_*`` attribute recomputes it.
+
+        Lazy, so that a reset followed by a step (the vector envs) evaluates it once.
+        """
+        self._plan_now: tuple[np.ndarray, ...] | None = None
+
+    def _plan_arrays(self) -> tuple[np.ndarray, ...]:
+        """``(center, direction, pos, vel)`` of the plan now, computed once per step.
 
         New arrays each time, read-only: what a caller keeps stays as it was.
         """
-        plan = self.plan
-        center, center_vel, direction = plan.center_and_direction(self.time)
-        pos, vel = plan.uav_positions(self.time, self.slots, (center, center_vel), direction)
-        for name, arr in (
-            ("plan_center", center),
-            ("plan_dir", direction),
-            ("plan_pos", pos),
-            ("plan_vel", vel),
-        ):
-            arr.flags.writeable = False
-            setattr(self, name, arr)
+        if self._plan_now is None:
+            plan = self.plan
+            center, center_vel, direction = plan.center_and_direction(self.time)
+            pos, vel = plan.uav_positions(self.time, self.slots, (center, center_vel), direction)
+            for arr in (center, direction, pos, vel):
+                arr.flags.writeable = False
+            self._plan_now = (center, direction, pos, vel)
+        return self._plan_now
+
+    @property
+    def plan_center(self) -> np.ndarray:
+        """``(E, 3)`` planned formation centre now (m), read-only."""
+        return self._plan_arrays()[0]
+
+    @property
+    def plan_dir(self) -> np.ndarray:
+        """``(E, 3)`` unit direction of the planned path now, read-only."""
+        return self._plan_arrays()[1]
+
+    @property
+    def plan_pos(self) -> np.ndarray:
+        """``(E, N, 3)`` each UAV's planned position now (m), read-only."""
+        return self._plan_arrays()[2]
+
+    @property
+    def plan_vel(self) -> np.ndarray:
+        """``(E, N, 3)`` each UAV's planned velocity now (m/s), read-only."""
+        return self._plan_arrays()[3]
 
     _STATE = (
         "time",
@@ -370,8 +408,7 @@ class World:
         cfg = self.config
         n, m = self.n_uavs, self.n_obstacles
         normals, unifs = self._draw(active)
-        nz = cfg.noise
-        acc_noise = normals[:, : n * 3].reshape(self.n_envs, n, 3) * nz.accel_std
+        acc_noise = normals[:, : n * 3].reshape(self.n_envs, n, 3)
         applied = step_double_integrator(
             self.uav_pos,
             self.uav_vel,
@@ -400,27 +437,16 @@ class World:
         known_accel: np.ndarray | None = None,
     ) -> None:
         cfg = self.config
-        nz = cfg.noise
         e, n, m = self.n_envs, self.n_uavs, self.n_obstacles
         if normals is None:
             # Initial measurements use the next noise draw too (consumed only by those envs).
             normals, _ = self._draw(mask)
         z_meas = normals[:, n * 3 : n * 9].reshape(e, n, 6)
-        mp, mv = measure(
-            self.uav_pos,
-            self.uav_vel,
-            z_meas[..., :3] * nz.position_std,
-            z_meas[..., 3:] * nz.velocity_std,
-        )
+        mp, mv = measure(self.uav_pos, self.uav_vel, z_meas[..., :3], z_meas[..., 3:])
         obs_vel = obstacle_velocity(self.obstacles)
         if m:
             z_obs = normals[:, n * 9 :].reshape(e, m, 6)
-            omp, omv = measure(
-                self.obstacles.pos,
-                obs_vel,
-                z_obs[..., :3] * nz.obstacle_position_std,
-                z_obs[..., 3:] * nz.obstacle_velocity_std,
-            )
+            omp, omv = measure(self.obstacles.pos, obs_vel, z_obs[..., :3], z_obs[..., 3:])
         if initialise or not cfg.prediction.kalman:
             sel = mask if mask is not None else np.ones(e, dtype=bool)
             self.est_pos[sel], self.est_vel[sel] = mp[sel], mv[sel]
@@ -449,9 +475,7 @@ class World:
 
     # ------------------------------------------------------------------ safety
     def _update_safety(self, reset_mask: np.ndarray | None = None) -> None:
-        d_uav = self.uav_distances()
-        d_uav = np.where(self._offdiag, d_uav, np.inf).min(axis=-1)
-        d_obs = self.obstacle_distances().min(axis=-1, initial=np.inf)
+        d_uav, d_obs = self.separations()
         if reset_mask is not None:
             self.min_uav_dist[reset_mask] = d_uav[reset_mask]
             self.min_obs_dist[reset_mask] = d_obs[reset_mask]
@@ -460,6 +484,23 @@ class World:
             np.minimum(self.min_obs_dist, d_obs, out=self.min_obs_dist)
 
     # ------------------------------------------------------------------ queries
+    def separations(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each UAV's distance to the nearest other UAV and to the nearest active obstacle.
+
+        True positions; ``inf`` where there is none. Compiled when numba is in use (the same
+        numbers bit for bit).
+
+        Returns:
+            ``(uav, obstacle)``, each ``(E, N)`` (m).
+        """
+        ob = self.obstacles
+        if _numba.available():
+            from uasep_env import _kernels
+
+            return _kernels.separations(self.uav_pos, ob.pos, ob.active)
+        d_uav = np.where(self._offdiag, self.uav_distances(), np.inf).min(axis=-1)
+        return d_uav, self.obstacle_distances().min(axis=-1, initial=np.inf)
+
     def uav_distances(self, pos: np.ndarray | None = None) -> np.ndarray:
         """``(E, N, N)`` distances between UAVs (true positions unless ``pos`` given) (m)."""
         p = self.uav_pos if pos is None else pos
@@ -481,12 +522,7 @@ class World:
         p = self.uav_pos if pos is None else pos
         if not self.n_obstacles:
             return np.zeros((self.n_envs, self.n_uavs, 0))
-        d = reachable.distance_to_ellipsoid(
-            p[:, :, None, :],
-            self.pred_center[:, None, :, :],
-            self.pred_axes[:, None, :, :],
-            self.pred_heading[:, None, :],
-        )
+        d = reachable.pairwise_distances(p, self.pred_center, self.pred_axes, self.pred_heading)
         return np.where(self.obstacles.active[:, None, :], d, np.inf)
 
     def obstacle_velocities(self) -> np.ndarray:
