@@ -241,6 +241,26 @@ def test_save_frame(tmp_path):
     r.close()
 
 
+def test_readme_frame_script(tmp_path):
+    """``baselines/render_frame.py`` (the one frame-making script) flies the APF and saves."""
+    out = tmp_path / "frame.png"
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
+    res = subprocess.run(
+        [sys.executable, "baselines/render_frame.py", "--time", "35", "--out", str(out)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 0, res.stderr
+    assert "t = 35" in res.stdout
+    import matplotlib.image
+
+    frame = (matplotlib.image.imread(out)[..., :3] * 255).astype(np.uint8)
+    _check_frame(frame)
+
+
 def test_human_mode_headless_does_not_crash():
     res = _run_python(
         """

@@ -21,12 +21,12 @@ does not import it. ``"rgb_array"`` frames are drawn on a non-interactive Agg ca
 pyplot, no window; safe in threads and subprocesses). ``"human"`` opens a pyplot window;
 with a non-interactive backend (headless machines) it warns once and shows nothing.
 
-Regenerate the README's frame with ``python -m uasep_env.rendering docs/frame.png``.
+The README's frame (the paper scenario under the APF) is written by
+``python baselines/render_frame.py``.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import warnings
 from collections import deque
@@ -717,42 +717,3 @@ def save_frame(
     finally:
         if own:
             r.close()
-
-
-def _track_plan(world: World, gain: float = 0.08, damping: float = 0.6) -> np.ndarray:
-    """A plain PD tracker of the planned positions (no avoidance), for demonstration frames."""
-    planned, planned_vel = world.planned()
-    acc = gain * (planned - world.est_pos) + damping * (planned_vel - world.est_vel)
-    limit = world.config.uav.max_accel
-    return np.clip(acc, -limit, limit)
-
-
-def main(argv: list[str] | None = None) -> None:
-    """Write one frame of the paper scenario (``python -m uasep_env.rendering out.png``).
-
-    The UAVs track their planned positions with a PD controller (no avoidance); the frame
-    shows the obstacle approaching with its reachable ellipsoid.
-    """
-    from uasep_env.world import World
-
-    parser = argparse.ArgumentParser(description=main.__doc__)
-    parser.add_argument("path", nargs="?", default="docs/frame.png", help="output PNG")
-    parser.add_argument("--time", type=float, default=100.0, help="simulated time (s)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--scenario", default="paper")
-    args = parser.parse_args(argv)
-    world = World({"scenario": args.scenario}, n_envs=1)
-    world.reset(seed=args.seed)
-    renderer = Renderer(world.config, mode="rgb_array")
-    try:
-        while world.time[0] < args.time - 1e-6:
-            world.step(_track_plan(world))
-            if world.time[0] >= args.time - renderer.trail_length - 1e-6:
-                renderer._update_history(world, 0)  # trails without drawing every step
-        print(save_frame(world, args.path, renderer=renderer))
-    finally:
-        renderer.close()
-
-
-if __name__ == "__main__":
-    main()
