@@ -5,7 +5,7 @@ encounters.
 
     python baselines/paper_experiment.py [--paper-episodes 20] [--bank-episodes 200] [--workers 2]
 
-Writes ``baselines/results/paper.json``, ``baselines/results/random_bank.json`` (every metric
+Writes ``baselines/results/paper.json``, ``baselines/results/random_bank.json.gz`` (every metric
 of every episode, the config and the package version), ``baselines/results/summary.md`` (the
 side-by-side tables quoted in the README) and the paper's figure set for seed 0 in
 ``docs/figures/``. Every controller plays the same seeds, so they meet the same encounters.
@@ -122,7 +122,7 @@ def main() -> None:
         range(BANK_FIRST_SEED, BANK_FIRST_SEED + args.bank_episodes),
         workers=args.workers,
     )
-    write_json(bank, args.out / "random_bank.json")
+    write_json(bank, args.out / "random_bank.json.gz")
 
     text = "\n\n".join(
         [

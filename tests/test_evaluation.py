@@ -202,6 +202,19 @@ def test_result_json_is_strict_and_nan_becomes_null():
     assert all(v is None or isinstance(v, (int, float, bool)) for v in tl.values())
 
 
+def test_write_json_gzips_by_suffix_reproducibly(tmp_path):
+    import gzip
+
+    from uasep_env.evaluation import write_json
+
+    res = evaluate("zero", _short_config(), [0], settle_time=5.0)
+    plain = write_json(res, tmp_path / "r.json").read_bytes()
+    packed = write_json(res, tmp_path / "sub" / "r.json.gz").read_bytes()
+    assert packed[:2] == b"\x1f\x8b" and len(packed) < len(plain)
+    assert gzip.decompress(packed) == plain
+    assert write_json(res, tmp_path / "sub" / "r.json.gz").read_bytes() == packed  # same bytes
+
+
 def test_summary_single_episode_shows_timeline_per_uav():
     res = evaluate(["apf", "zero"], _short_config(), [0], settle_time=5.0)
     rows = summary_rows(res)

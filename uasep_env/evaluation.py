@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import gzip
 import json
 import math
 import multiprocessing
@@ -492,6 +493,9 @@ def result_to_json(result: Mapping[str, Any], **kwargs: Any) -> str:
 def write_json(result: Mapping[str, Any], path: str | Path) -> Path:
     """Write :func:`result_to_json` (indented) to ``path``, creating parent folders.
 
+    A path ending in ``.gz`` is gzip-compressed (with a zero time stamp, so the same result
+    gives the same bytes): per-episode results of large banks shrink about tenfold.
+
     Args:
         result: The result dict.
         path: Output file.
@@ -501,7 +505,12 @@ def write_json(result: Mapping[str, Any], path: str | Path) -> Path:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(result_to_json(result, indent=2) + "\n", encoding="utf-8")
+    data = (result_to_json(result, indent=2) + "\n").encode("utf-8")
+    if path.suffix == ".gz":
+        with path.open("wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz:
+            gz.write(data)
+    else:
+        path.write_bytes(data)
     return path
 
 
@@ -844,7 +853,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--json",
         type=Path,
         metavar="PATH",
-        help="write everything machine-readable (strict JSON) to PATH",
+        help="write everything machine-readable (strict JSON; gzipped if it ends in .gz) to PATH",
     )
     p.add_argument(
         "--csv", type=Path, metavar="PATH", help="write one row per (policy, episode) to PATH"
