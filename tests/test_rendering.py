@@ -32,9 +32,14 @@ def _agg_backend():
 
 
 def _run_python(code: str) -> subprocess.CompletedProcess:
+    return _run("-c", textwrap.dedent(code))
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    """``python *args`` in the repository, headless."""
     env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
     return subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(code)],
+        [sys.executable, *args],
         cwd=ROOT,
         env=env,
         capture_output=True,
@@ -244,15 +249,7 @@ def test_save_frame(tmp_path):
 def test_readme_frame_script(tmp_path):
     """``baselines/render_frame.py`` (the one frame-making script) flies the APF and saves."""
     out = tmp_path / "frame.png"
-    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
-    res = subprocess.run(
-        [sys.executable, "baselines/render_frame.py", "--time", "35", "--out", str(out)],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    res = _run("baselines/render_frame.py", "--time", "35", "--out", str(out))
     assert res.returncode == 0, res.stderr
     assert "t = 35" in res.stdout
     import matplotlib.image

@@ -265,6 +265,12 @@ def _dist3(a, b, c):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
+def _gap(p, e, i, q, j):  # noqa: ANN001, ANN202
+    """Distance from ``p[e, i]`` to ``q[e, j]`` (3-vectors), as :func:`_dist3`."""
+    return _dist3(q[e, j, 0] - p[e, i, 0], q[e, j, 1] - p[e, i, 1], q[e, j, 2] - p[e, i, 2])
+
+
+@numba.njit(inline="always", **_JIT)
 def _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001, ANN202
     n, m = uav_pos.shape[1], obs_pos.shape[1]
     e = k // n
@@ -272,22 +278,12 @@ def _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001,
     best = np.inf
     for j in range(n):
         if j != i:
-            d = _dist3(
-                uav_pos[e, j, 0] - uav_pos[e, i, 0],
-                uav_pos[e, j, 1] - uav_pos[e, i, 1],
-                uav_pos[e, j, 2] - uav_pos[e, i, 2],
-            )
-            best = min(best, d)
+            best = min(best, _gap(uav_pos, e, i, uav_pos, j))
     d_uav[e, i] = best
     best = np.inf
     for j in range(m):
         if active[e, j]:
-            d = _dist3(
-                uav_pos[e, i, 0] - obs_pos[e, j, 0],
-                uav_pos[e, i, 1] - obs_pos[e, j, 1],
-                uav_pos[e, i, 2] - obs_pos[e, j, 2],
-            )
-            best = min(best, d)
+            best = min(best, _gap(uav_pos, e, i, obs_pos, j))
     d_obs[e, i] = best
 
 
@@ -371,11 +367,7 @@ def _observe_agent(k, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN2
         for j in range(n):
             if j == i:
                 continue
-            d = _dist3(
-                pos[e, j, 0] - pos[e, i, 0],
-                pos[e, j, 1] - pos[e, i, 1],
-                pos[e, j, 2] - pos[e, i, 2],
-            )
+            d = _gap(pos, e, i, pos, j)
             after = d > prev_d or (d == prev_d and j > prev_j)
             if after and (d < best_d or (d == best_d and j < best_j)):
                 best_d, best_j = d, j
@@ -401,14 +393,8 @@ def _observe_agent(k, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN2
         best_d, best_j = np.inf, m
         for j in range(m):
             key = np.inf
-            if x.active[e, j]:
-                od = _dist3(
-                    x.obs_pos[e, j, 0] - pos[e, i, 0],
-                    x.obs_pos[e, j, 1] - pos[e, i, 1],
-                    x.obs_pos[e, j, 2] - pos[e, i, 2],
-                )
-                if od <= sensing:
-                    key = x.region[e, i, j]
+            if x.active[e, j] and _gap(pos, e, i, x.obs_pos, j) <= sensing:
+                key = x.region[e, i, j]
             after = key > prev_d or (key == prev_d and j > prev_j)
             if after and (key < best_d or (key == best_d and j < best_j)):
                 best_d, best_j = key, j
