@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from uasep_env import reachable as R
 
 PAPER = (4.0, 0.013, 10.0, 3.0)  # v (m/s), w_max (rad/s), t (s), r (m): the paper's example
+THIN = (60.0, 0.001, 60.0, 0.0, 0.0)  # thin triangle, r = 0: the least ellipse-like set
 
 SPECIAL = [
     # (v, w_max, t, r, vz_max)
@@ -21,7 +22,7 @@ SPECIAL = [
     (12.0, 0.7, 9.0, 4.0, 1.0),  # phi = 6.3 (just above 2 pi)
     (30.0, 0.05, 30.0, 10.0, 3.0),
     (1.0, 0.0, 15.0, 1.0, 0.3),  # straight flight only
-    (60.0, 0.001, 60.0, 0.0, 0.0),  # thin triangle, r = 0
+    THIN,
     (0.5, 1.0, 1.0, 20.0, 0.0),  # radius dominates
 ]
 
@@ -133,6 +134,12 @@ def test_ellipsoid_encloses_monte_carlo_world_frame(params, mode):
     # Place the obstacle in the world (NED) at a random pose: body = (ahead, right, down).
     psi = rng.uniform(-np.pi, np.pi)
     p0 = rng.normal(size=3) * 100.0
+    # A denser batch, the radius in a random direction of the sphere at each position (not
+    # just the 14 above): it reaches closer to the surface for several of the cases.
+    dense = dubins(v, w, vz, t, 3000, rng, n_steps=60)
+    dense = dense.reshape(-1, 3) if mode == "swept" else dense[-1]
+    u = rng.normal(size=dense.shape)
+    pts = np.concatenate([pts, dense + r * u / np.linalg.norm(u, axis=1, keepdims=True)])
     fwd = np.array([np.cos(psi), np.sin(psi), 0.0])
     right = np.array([-np.sin(psi), np.cos(psi), 0.0])
     world = p0 + pts[:, 1:2] * fwd + pts[:, 0:1] * right + pts[:, 2:3] * np.array([0, 0, 1.0])
@@ -232,6 +239,20 @@ def test_printed_eqs_13_14_miss_reachable_points():
     end = dubins(v, w, 0.0, t, 400, rng)[-1, :, :2]
     low = (end[:, None, :] + r * _circle(32)[None]).reshape(-1, 2)[:, 1].min()
     assert _printed_region_min_y(v, w, t, r) - low > 1.0
+    # Not only straight back: the point r from F(phi) towards (0.5, -sqrt(3)/2) is reachable
+    # (a full-rate turn, then the radius outwards and backwards). The printed S4 disc (centre
+    # S2(phi), which already includes r) misses it by more than 1 m, and it lies below the
+    # bottom of that disc (where the printed S5 runs); the corrected S5 chord
+    # (y = rho sin(phi) - r) and the corrected boundary include it.
+    rho, phi = v / w, w * t
+    f_phi = np.array([rho * (1 - np.cos(phi)), rho * np.sin(phi)])  # F(phi), r = 0
+    s2_phi = f_phi + r * np.array([np.sin(phi), np.cos(phi)])  # printed S2(phi), with r
+    oblique = f_phi + r * np.array([0.5, -np.sqrt(3) / 2])
+    assert np.linalg.norm(oblique - f_phi) <= r + 1e-9
+    assert np.linalg.norm(oblique - s2_phi) > r + 1.0
+    assert oblique[1] < s2_phi[1] - r - 1.0
+    assert oblique[1] >= rho * np.sin(phi) - r - 1e-9
+    assert _point_in_convex_polygon(poly, oblique[None], 1e-6)[0]
 
 
 def test_front_curve_formula_and_limits():
@@ -307,6 +328,37 @@ def test_area_ratio_paper_example():
         true = _polygon_area(R.boundary(*PAPER, n=20001, mode=mode))
         ratio = np.pi * lat * lon / true
         assert lo <= ratio <= hi
+
+
+def _support_area(v, w, t, r, mode="swept"):
+    """Area of the convex set from its support function alone (independent of boundary()):
+    the polygon of boundary points h u + h' u' over 2001 directions u = (sin, cos)."""
+    th = np.linspace(-np.pi, np.pi, 2001)
+    h = R.support(th, v, w, t, r, mode=mode)
+    dh = np.gradient(h, th)
+    x = h * np.sin(th) + dh * np.cos(th)
+    y = h * np.cos(th) - dh * np.sin(th)
+    return 0.5 * abs(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+@pytest.mark.parametrize("params", SPECIAL)
+@pytest.mark.parametrize("mode", ["swept", "terminal"])
+def test_area_ratio_special_cases(params, mode):
+    """The ellipse is at most 1.6 times the set's area for every special case (measured up to
+    1.57) but the thin triangle, which gets the general bound for convex sets."""
+    v, w, t, r, _ = params
+    _c, lat, lon = R.ellipse(v, w, t, r, mode=mode)
+    ratio = np.pi * lat * lon / _support_area(v, w, t, r, mode)
+    assert 1.0 <= ratio < (2.45 if params == THIN else 1.6), ratio
+
+
+def test_paper_example_extents():
+    v, w, t, r = PAPER
+    c, lat, lon = R.ellipse(*PAPER)
+    # Along the heading the set reaches v t + r = 43 m ahead and r = 3 m behind.
+    assert c + lon >= v * t + r - 1e-9 and c - lon <= -r + 1e-9
+    # Laterally: rho (1 - cos phi) + r, about 2.6 + 3 m.
+    assert lat >= r + v / w * (1 - np.cos(w * t)) - 1e-6
 
 
 @pytest.mark.parametrize("mode", ["swept", "terminal"])
@@ -401,6 +453,23 @@ def test_finite_for_extreme_inputs(v, w, t, r, mode):
     assert np.all(h_e >= h - 1e-9 * (v * t + r + 1))
     off, axes = R.ellipsoid(v, w, 1.0, t, r, mode=mode)
     assert np.isfinite(axes).all() and np.isfinite(off)
+
+
+def test_subnormal_turn_angle_is_a_straight_line():
+    # Found by hypothesis in CI: w t subnormal made 1 / (w t) overflow and 0 * inf NaN.
+    h = R.support(np.linspace(0, np.pi, 7), 0.0, 1.0, 5e-324, 0.0)
+    assert np.isfinite(h).all()
+    h = R.support(np.array([0.0, np.pi / 2, np.pi]), 4.0, 1e-250, 10.0, 1.0)
+    np.testing.assert_allclose(h, [41.0, 1.0, 1.0])
+
+
+def test_extreme_vectorised_ellipsoid_and_thin_distance_finite():
+    off, axes = R.ellipsoid(
+        np.array([1e-3, 60.0, 4.0]), np.array([1e-12, 1.0, 0.0]), 5.0, np.array([1e4, 1.0, 10]), 0.0
+    )
+    assert np.all(np.isfinite(off)) and np.all(np.isfinite(axes)) and np.all(axes >= 0)
+    d = R.distance_to_ellipsoid(np.zeros(3), np.zeros(3), np.array([5.0, 1e-3, 2.0]), 0.3)
+    assert np.isfinite(d) and d < 0
 
 
 # ----------------------------------------------------------------------------- validation
