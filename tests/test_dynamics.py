@@ -108,3 +108,22 @@ def test_kalman_gain_table_converges():
 def test_kalman_partially_noise_free_is_finite(sp, sv):
     kf_err, _raw_err, _ = _simulate_tracks(sigma_p=sp, sigma_v=sv, sigma_a=0.1, steps=100)
     assert np.isfinite(kf_err)
+
+
+def test_kalman_converged_tracks_share_one_gain_exactly():
+    """Once every track has converged one gain is used; the result is the per-env gather's."""
+    kf = KalmanModel(0.2, 0.05, 0.5, 0.1)
+    last = len(kf.gains) - 1
+    rng = np.random.default_rng(3)
+    est = [rng.normal(0, 5, size=(4, 2, 3)) for _ in range(2)]
+    acc, mp, mv = (rng.normal(0, 1, size=(4, 2, 3)) for _ in range(3))
+    results = []
+    for count in (np.array([last, last + 5, last, 10**6]), np.array([last, last + 5, 1, 10**6])):
+        p, v = est[0].copy(), est[1].copy()
+        kf.update(p, v, acc, mp, mv, count)
+        results.append((p, v))
+    (p1, v1), (p2, v2) = results
+    keep = [0, 1, 3]  # the converged rows of the mixed batch (env 2 still uses an early gain)
+    np.testing.assert_array_equal(p1[keep], p2[keep])
+    np.testing.assert_array_equal(v1[keep], v2[keep])
+    assert not np.array_equal(p1[2], p2[2])

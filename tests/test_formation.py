@@ -92,3 +92,26 @@ def test_center_and_direction_agree_with_the_separate_queries():
         np.testing.assert_array_equal(pos, plan.center(times)[0])
         np.testing.assert_array_equal(vel, plan.center(times)[1])
         np.testing.assert_array_equal(d, plan.heading_velocity(times))
+
+
+def test_segment_offsets_give_uav_positions_bit_for_bit():
+    """The world's lookup of rotated slots per segment is uav_positions' rotation, exactly."""
+    from uasep_env.formation import segment_offsets
+
+    rng = np.random.default_rng(9)
+    wp = np.cumsum(rng.normal(0, 50, size=(6, 5, 3)), axis=1)
+    wp[0, 3:] = wp[0, 2]  # padding segments at the end
+    wp[1, 1:, :2] = wp[1, 0, :2]  # vertical segments
+    plan = PlannedTrajectory(wp, rng.uniform(5, 15, size=6))
+    slots = rng.normal(0, 20, size=(6, 3, 3))
+    offsets = segment_offsets(plan.direction, slots)
+    assert offsets.shape == (6, 4, 3, 3)
+    seen = set()
+    for t in np.linspace(0.0, 80.0, 161):
+        times = np.full(6, t)
+        _, idx = plan.locate(times)
+        seen.update(idx.tolist())
+        center, _ = plan.center(times)
+        want, _ = plan.uav_positions(times, slots)
+        np.testing.assert_array_equal(center[:, None] + offsets[np.arange(6), idx], want)
+    assert seen == {0, 1, 2, 3}

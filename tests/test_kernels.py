@@ -189,3 +189,50 @@ def test_separations_kernel_matches_numpy(monkeypatch, n_envs, n_obstacles):
         np.testing.assert_array_equal(f, s)
     if n_obstacles:
         assert np.isinf(fast[1][::2]).all() and np.isfinite(fast[1][1::2]).all()
+
+
+def test_formation_frame_kernel_matches_numpy_including_fallbacks():
+    """The compiled frame (eq. 6) is rotation_from_velocity's, slow and vertical cases too."""
+    from uasep_env import _kernels
+    from uasep_env.formation import MIN_FRAME_SPEED, rotation_from_velocity
+
+    rng = np.random.default_rng(12)
+    vel = rng.normal(0, 3, size=(3000, 3)) * rng.choice([1e-3, 0.2, 1.0, 10.0], (3000, 1))
+    fallback = rng.normal(0, 1, size=(3000, 3))
+    vel[:50, :2] = 0.0  # vertical
+    vel[50:60] = 0.0  # still: the fallback decides
+    fallback[50:55] = [0.0, 0.0, 1.0]  # a vertical fallback has no heading
+    fallback[55:58] = 0.0  # no fallback direction at all: level, north
+    fallback[58:60, :2] = 1e-10  # almost vertical
+    want = rotation_from_velocity(vel, fallback)
+    assert (np.linalg.norm(vel, axis=-1) < MIN_FRAME_SPEED).sum() > 100
+    for v, f, w in zip(vel, fallback, want, strict=True):
+        ct, st, cp, sp = _kernels._frame(*v, *f, MIN_FRAME_SPEED)
+        got = [[-st, cp * ct, -ct * sp], [ct, cp * st, -st * sp], [0.0, -sp, -cp]]
+        np.testing.assert_array_equal(np.array(got), w)
+
+
+@pytest.mark.parametrize(("n_envs", "shared"), [(3, 0.0), (800, 0.4)])  # serial, parallel
+def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shared):
+    from uasep_env import make_config, rewards
+    from uasep_env.envs.core import EnvCore
+
+    cfg = make_config(n_uavs=4, n_obstacles=2, scenario="random", reward={"shared": shared})
+    core = EnvCore(cfg, n_envs)
+    core.reset(seed=2)
+    rng = np.random.default_rng(3)
+    w = core.world
+    for step in range(12):
+        core.step(rng.uniform(-1, 1, size=(n_envs, 4, 3)))
+        w.obstacles.active[::3] = step % 2 == 0  # inactive obstacles: infinite distances
+        w.min_uav_dist[::5, 0] = 0.5 * cfg.uav.collision_distance  # a collision
+        w.uav_pos[1::4, 1] = w.pred_center[1::4, 0]  # inside a reachable region
+        fast = rewards.compute_rewards(w, cfg.reward)
+        monkeypatch.setitem(_numba._state, "numba", None)
+        slow = rewards.compute_rewards(w, cfg.reward)
+        monkeypatch.undo()
+        np.testing.assert_array_equal(fast[0], slow[0])
+        assert list(fast[1]) == list(slow[1]) == list(rewards.REWARD_TERMS)
+        for name in rewards.REWARD_TERMS:
+            np.testing.assert_array_equal(fast[1][name], slow[1][name], err_msg=name)
+    assert (fast[1]["collision"] < 0).any() and (fast[1]["separation_region"] < 0).any()

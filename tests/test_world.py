@@ -222,3 +222,29 @@ def test_planned_state_follows_time_and_is_read_only():
         kept[0, 0, 0] = 1.0
     w.step(_actions(rng, 4, cfg.n_uavs))
     np.testing.assert_array_equal(kept, snapshot)  # a later step does not rewrite it
+
+
+def test_noise_drawn_on_several_threads_is_bit_identical(monkeypatch):
+    """Large batches refill their noise on a thread pool: the same numbers as one thread."""
+    import uasep_env.world as world_mod
+
+    def run(chunk):
+        monkeypatch.setattr(world_mod, "REFILL_CHUNK", chunk)
+        w = World(make_config(scenario="random", n_obstacles=2), 9, noise_block=8)
+        w.reset(seed=4)
+        return _run(w, 30)
+
+    calls = []
+    real = world_mod._run_chunked
+
+    def spy(fn, envs):
+        calls.append(len(envs))
+        real(fn, envs)
+
+    monkeypatch.setattr(world_mod, "_run_chunked", spy)
+    serial = run(10**9)
+    threaded = run(2)
+    assert max(calls) == 9 and len(calls) >= 4  # several refills of the whole batch
+    for s, t in zip(serial, threaded, strict=True):
+        for k in s:
+            np.testing.assert_array_equal(s[k], t[k], err_msg=k)

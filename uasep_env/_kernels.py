@@ -10,7 +10,9 @@ the fallback when numba is missing (see :mod:`uasep_env._numba`).
 * :func:`pairwise_distances` -- the same solve for every point against every ellipsoid of
   its batch row (:func:`uasep_env.reachable.pairwise_distances`), without broadcast copies;
 * :func:`separations` -- :meth:`uasep_env.world.World.separations`;
-* :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`.
+* :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
+* :func:`reward_terms` -- :func:`uasep_env.rewards._terms` and the weighted sum of
+  :func:`uasep_env.rewards.compute_rewards`.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import math
 import numba
 import numpy as np
 
+from uasep_env.formation import MIN_FRAME_SPEED
 from uasep_env.reachable import _N_NEWTON
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -335,6 +338,40 @@ def _put(out, e, i, col, value, clip):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
+def _norm3(a, b, c):  # noqa: ANN001, ANN202
+    """Euclidean norm in the order ``np.linalg.norm(axis=-1)`` adds (left to right)."""
+    return math.sqrt((a * a + b * b) + c * c)
+
+
+@numba.njit(inline="always", **_JIT)
+def _mean(x, e, a):  # noqa: ANN001, ANN202
+    """``x[e, :, a].mean()`` as :func:`uasep_env.formation._mean_over_uavs` adds it."""
+    total = x[e, 0, a]
+    for j in range(1, x.shape[1]):
+        total += x[e, j, a]
+    return total / x.shape[1]
+
+
+@numba.njit(**_JIT)
+def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
+    """:func:`uasep_env.formation.rotation_from_velocity` of one velocity: ``(ct, st, cp, sp)``.
+
+    ``f`` is the fallback used below ``min_speed``.
+    """
+    if not _norm3(v0, v1, v2) >= min_speed:
+        v0, v1, v2 = f0, f1, f2
+    horiz = math.hypot(v0, v1)
+    level = horiz > 1e-9
+    ct = v0 / horiz if level else 1.0
+    st = v1 / horiz if level else 0.0
+    h = max(horiz, 1e-12)
+    if not level and abs(v2) <= 1e-9:
+        return ct, st, 1.0, 0.0
+    r = math.hypot(h, v2)
+    return ct, st, h / r, -v2 / r
+
+
+@numba.njit(inline="always", **_JIT)
 def _observe_agent(k, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
     """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.observation._assemble`.
 
@@ -346,17 +383,34 @@ def _observe_agent(k, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN2
     e = k // n
     i = k % n
     ps, vs, acs, sensing, clip = scales[0], scales[1], scales[2], scales[3], np.float32(scales[4])
+    # The estimated formation (eqs. 5-7): centre, mean velocity, frame, this UAV's slot.
+    c0, c1, c2 = _mean(pos, e, 0), _mean(pos, e, 1), _mean(pos, e, 2)
+    mv0, mv1, mv2 = _mean(vel, e, 0), _mean(vel, e, 1), _mean(vel, e, 2)
+    d = x.wp_dir
+    ct, st, cp, sp = _frame(mv0, mv1, mv2, d[e, 0], d[e, 1], d[e, 2], scales[5])
+    p0, p1, p2 = x.pattern[e, i, 0], x.pattern[e, i, 1], x.pattern[e, i, 2]
+    # Rows of the rotation as formation.rotate multiplies them (the zero included).
+    slot0 = c0 + ((-st * p0 + (cp * ct) * p1) + (-ct * sp) * p2)
+    slot1 = c1 + ((ct * p0 + (cp * st) * p1) + (-st * sp) * p2)
+    slot2 = c2 + ((0.0 * p0 + (-sp) * p1) + (-cp) * p2)
+    wp_dist = _norm3(x.final_wp[e, 0] - c0, x.final_wp[e, 1] - c1, x.final_wp[e, 2] - c2)
+    _put(out, e, i, 0, (slot0 - pos[e, i, 0]) / ps, clip)
+    _put(out, e, i, 1, (slot1 - pos[e, i, 1]) / ps, clip)
+    _put(out, e, i, 2, (slot2 - pos[e, i, 2]) / ps, clip)
+    _put(out, e, i, 12, mv0 / vs, clip)
+    _put(out, e, i, 13, mv1 / vs, clip)
+    _put(out, e, i, 14, mv2 / vs, clip)
+    _put(out, e, i, 15, (x.plan_center[e, 0] - c0) / ps, clip)
+    _put(out, e, i, 16, (x.plan_center[e, 1] - c1) / ps, clip)
+    _put(out, e, i, 17, (x.plan_center[e, 2] - c2) / ps, clip)
     for a in range(3):
         p = pos[e, i, a]
-        _put(out, e, i, a, (x.slots[e, i, a] - p) / ps, clip)
         _put(out, e, i, 3 + a, (x.plan_pos[e, i, a] - p) / ps, clip)
         _put(out, e, i, 6 + a, vel[e, i, a] / vs, clip)
         _put(out, e, i, 9 + a, x.plan_vel[e, i, a] / vs, clip)
-        _put(out, e, i, 12 + a, x.mean_vel[e, a] / vs, clip)
-        _put(out, e, i, 15 + a, (x.plan_center[e, a] - x.center[e, a]) / ps, clip)
         _put(out, e, i, 18 + a, x.wp_dir[e, a], clip)
         _put(out, e, i, 22 + a, x.accel_cmd[e, i, a] / acs, clip)
-    _put(out, e, i, 21, x.wp_dist[e] / ps, clip)
+    _put(out, e, i, 21, wp_dist / ps, clip)
     _put(out, e, i, 25, x.progress[e], clip)
     col = self_dim
 
@@ -439,9 +493,93 @@ def assemble_observations(inputs: tuple, layout: object, out: np.ndarray) -> Non
         out: ``(E, N, dim)`` float32, C-contiguous.
     """
     scales = np.array(
-        [layout.pos_scale, layout.vel_scale, layout.acc_scale, layout.sensing_range, layout.clip]
+        [
+            layout.pos_scale,
+            layout.vel_scale,
+            layout.acc_scale,
+            layout.sensing_range,
+            layout.clip,
+            MIN_FRAME_SPEED,
+        ]
     )
     # Contiguous arrays only: one compiled signature, whatever views the caller passes.
     x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
     fn = _observe_parallel if out.shape[0] * out.shape[1] >= PARALLEL_MIN else _observe_serial
     fn(x, scales, layout.k_uavs, layout.k_obstacles, layout.self_dim, out)
+
+
+# ---------------------------------------------------------------------------- rewards
+@numba.njit(inline="always", **_JIT)
+def _reward_agent(k, x, c, weights, own, terms):  # noqa: ANN001, ANN202
+    """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.rewards._terms`.
+
+    ``x`` is the :class:`uasep_env.rewards._Inputs` named tuple; ``c`` holds
+    ``(max_accel, separation_distance, obstacle_separation, collision_distance,
+    deviation_scale)``. Terms in :data:`uasep_env.rewards.REWARD_TERMS` order.
+    """
+    n = x.uav_pos.shape[1]
+    e = k // n
+    i = k % n
+    max_acc, d_sep, d_obs_sep, d_col, dev_scale = c[0], c[1], c[2], c[3], c[4]
+    d_uav, d_obs = x.min_uav_dist[e, i], x.min_obs_dist[e, i]
+    d_region = np.inf
+    for j in range(x.region.shape[2]):
+        d_region = min(d_region, x.region[e, i, j])
+    t = max(0.0, 1.0 - d_uav / d_sep)
+    terms[0, e, i] = -(t * t)
+    t = max(0.0, 1.0 - d_obs / d_obs_sep)
+    terms[1, e, i] = -(t * t)
+    terms[2, e, i] = -min(2.0, max(0.0, 1.0 - d_region / d_obs_sep))
+    dev = _norm3(
+        x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0],
+        x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
+        x.uav_pos[e, i, 2] - x.plan_pos[e, i, 2],
+    )
+    terms[3, e, i] = -min(10.0, dev / dev_scale)
+    a0, a1, a2 = x.cmd[e, i, 0], x.cmd[e, i, 1], x.cmd[e, i, 2]
+    u0, u1, u2 = a0 / max_acc, a1 / max_acc, a2 / max_acc
+    terms[4, e, i] = -((u0 * u0 + u2 * u2) + u1 * u1) / 3.0  # einsum's order
+    u0 = (a0 - x.prev_cmd[e, i, 0]) / max_acc
+    u1 = (a1 - x.prev_cmd[e, i, 1]) / max_acc
+    u2 = (a2 - x.prev_cmd[e, i, 2]) / max_acc
+    terms[5, e, i] = -((u0 * u0 + u2 * u2) + u1 * u1) / 3.0
+    terms[6, e, i] = -1.0 if (d_uav < d_col or d_obs < d_col) else -0.0
+    terms[7, e, i] = 1.0
+    total = 0.0
+    for t_idx in range(terms.shape[0]):
+        total += weights[t_idx] * terms[t_idx, e, i]
+    own[e, i] = total
+
+
+@numba.njit(**_JIT)
+def _rewards_serial(x, c, weights, own, terms):  # noqa: ANN001, ANN202
+    for k in range(own.size):
+        _reward_agent(k, x, c, weights, own, terms)
+
+
+@numba.njit(parallel=True, **_JIT)
+def _rewards_parallel(x, c, weights, own, terms):  # noqa: ANN001, ANN202
+    for k in numba.prange(own.size):
+        _reward_agent(k, x, c, weights, own, terms)
+
+
+def reward_terms(
+    inputs: tuple, constants: np.ndarray, weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Compiled reward terms and their weighted sum (before any team sharing).
+
+    Args:
+        inputs: The :class:`uasep_env.rewards._Inputs` of one call.
+        constants: See :func:`_reward_agent`.
+        weights: One weight per term, in :data:`uasep_env.rewards.REWARD_TERMS` order.
+
+    Returns:
+        ``(own, terms)``: ``(E, N)`` weighted sums and ``(T, E, N)`` unweighted terms.
+    """
+    x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
+    e, n = x.min_uav_dist.shape
+    own = np.empty((e, n))
+    terms = np.empty((len(weights), e, n))
+    fn = _rewards_parallel if own.size >= PARALLEL_MIN else _rewards_serial
+    fn(x, constants, weights, own, terms)
+    return own, terms

@@ -115,12 +115,17 @@ class KalmanModel:
         else:
             pred_p = est_pos + dt * est_vel + (0.5 * dt * dt) * accel
             pred_v = est_vel + dt * accel
-        k = self.gains[np.minimum(count, len(self.gains) - 1)]  # (n_envs, 2, 2)
-        k = k[:, None, None, :, :]  # broadcast over (n, 3)
+        last = len(self.gains) - 1
+        if count.min() >= last:
+            # Every track has converged (the usual case): one gain, no gather.
+            k00, k01, k10, k11 = (float(g) for g in self.gains[last].ravel())
+        else:
+            k = self.gains[np.minimum(count, last)][:, None, None]  # (n_envs, 1, 1, 2, 2)
+            k00, k01, k10, k11 = k[..., 0, 0], k[..., 0, 1], k[..., 1, 0], k[..., 1, 1]
         ip = meas_pos - pred_p
         iv = meas_vel - pred_v
-        est_pos[...] = pred_p + k[..., 0, 0] * ip + k[..., 0, 1] * iv
-        est_vel[...] = pred_v + k[..., 1, 0] * ip + k[..., 1, 1] * iv
+        est_pos[...] = pred_p + k00 * ip + k01 * iv
+        est_vel[...] = pred_v + k10 * ip + k11 * iv
 
     def steady_state_position_std(self) -> float:
         """Posterior position standard deviation once the filter has converged (m)."""

@@ -32,6 +32,8 @@ __all__ = [
     "formation_rotation",
     "pattern_slots",
     "rotation_from_velocity",
+    "segment_offsets",
+    "slot_positions",
 ]
 
 
@@ -80,6 +82,10 @@ def pattern_slots(
     return slots - slots.mean(axis=0, keepdims=True)
 
 
+#: Below this formation speed (m/s) the frame follows the planned path (notes' fallback).
+MIN_FRAME_SPEED = 0.5
+
+
 def formation_center(pos: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 5: mean position and velocity over the UAV axis (``axis=-2``).
 
@@ -109,7 +115,7 @@ def _mean_over_uavs(x: np.ndarray) -> np.ndarray:
 
 
 def rotation_from_velocity(
-    vel: np.ndarray, fallback: np.ndarray | None = None, min_speed: float = 0.5
+    vel: np.ndarray, fallback: np.ndarray | None = None, min_speed: float = MIN_FRAME_SPEED
 ) -> np.ndarray:
     """Eq. 6: rotation ``C`` from the formation frame to NED, from a velocity.
 
@@ -127,13 +133,19 @@ def rotation_from_velocity(
     if fallback is None:
         fallback = np.broadcast_to(np.array([1.0, 0.0, 0.0]), vel.shape)
     use = np.where((speed >= min_speed)[..., None], vel, fallback)
-    horiz = np.hypot(use[..., 0], use[..., 1])
-    theta = np.arctan2(use[..., 1], use[..., 0])  # heading from north towards east
-    # A vertical fallback velocity has no heading: keep north there.
-    theta = np.where(horiz > 1e-9, theta, 0.0)
-    phi = np.arctan2(-use[..., 2], np.maximum(horiz, 1e-12))  # climb angle (NED z down)
-    phi = np.where((horiz <= 1e-9) & (np.abs(use[..., 2]) <= 1e-9), 0.0, phi)
-    ct, st, cp, sp = np.cos(theta), np.sin(theta), np.cos(phi), np.sin(phi)
+    # Heading theta (from north towards east) and climb angle phi (NED z down) as their
+    # cosines and sines, straight from the components: no atan2, cos or sin.
+    ux, uy, uz = use[..., 0], use[..., 1], use[..., 2]
+    horiz = np.hypot(ux, uy)
+    level = horiz > 1e-9  # a vertical fallback velocity has no heading: keep north there
+    safe_h = np.where(level, horiz, 1.0)
+    ct = np.where(level, ux / safe_h, 1.0)
+    st = np.where(level, uy / safe_h, 0.0)
+    h = np.maximum(horiz, 1e-12)
+    still = ~level & (np.abs(uz) <= 1e-9)  # no velocity at all: level flight
+    r = np.where(still, 1.0, np.hypot(h, uz))
+    cp = np.where(still, 1.0, h / r)
+    sp = np.where(still, 0.0, -uz / r)
     rot = np.empty((*ct.shape, 3, 3))
     # Column X_f: starboard, horizontal.
     np.negative(st, out=rot[..., 0, 0])
@@ -164,10 +176,42 @@ def rotate(rot: np.ndarray, vectors: np.ndarray) -> np.ndarray:
 
 
 def formation_rotation(
-    mean_vel: np.ndarray, planned_vel: np.ndarray, min_speed: float = 0.5
+    mean_vel: np.ndarray, planned_vel: np.ndarray, min_speed: float = MIN_FRAME_SPEED
 ) -> np.ndarray:
     """Eq. 6 with the notes' fallback to the planned heading at low speed."""
     return rotation_from_velocity(mean_vel, planned_vel, min_speed)
+
+
+def slot_positions(
+    center: np.ndarray, mean_vel: np.ndarray, planned_dir: np.ndarray, pattern: np.ndarray
+) -> np.ndarray:
+    """Eq. 7: each UAV's desired slot in NED, ``(E, N, 3)`` (m).
+
+    Args:
+        center: ``(E, 3)`` formation centre (eq. 5) (m).
+        mean_vel: ``(E, 3)`` formation mean velocity (m/s); orients the frame (eq. 6).
+        planned_dir: ``(E, 3)`` planned direction, the frame below ``MIN_FRAME_SPEED``.
+        pattern: ``(E, N, 3)`` the pattern's slots in the formation frame (m).
+    """
+    return center[:, None, :] + rotate(formation_rotation(mean_vel, planned_dir), pattern)
+
+
+def segment_offsets(direction: np.ndarray, slots: np.ndarray) -> np.ndarray:
+    """Each UAV's slot rotated into NED along each planned segment (m).
+
+    The planned frame is fixed along a segment, so :meth:`PlannedTrajectory.uav_positions`
+    is the centre plus the current segment's offsets: the same numbers, bit for bit.
+
+    Args:
+        direction: ``(E, S, 3)`` unit segment directions (:attr:`PlannedTrajectory.direction`).
+        slots: ``(E, N, 3)`` pattern slots in the formation frame (m).
+
+    Returns:
+        ``(E, S, N, 3)`` offsets from the planned centre (m).
+    """
+    e, n_seg = direction.shape[:2]
+    rot = rotation_from_velocity(direction).reshape(e * n_seg, 3, 3)
+    return rotate(rot, np.repeat(slots, n_seg, axis=0)).reshape(e, n_seg, *slots.shape[1:])
 
 
 class PlannedTrajectory:
@@ -230,11 +274,22 @@ class PlannedTrajectory:
         pos, vel, _ = self.center_and_direction(t)
         return pos, vel
 
-    def center_and_direction(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`center` and :meth:`heading_velocity` at once (one segment lookup)."""
+    def locate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Planned arc length (m) and segment index at times ``t``, ``(n_envs,)`` each."""
         s = np.minimum(self.cruise_speed * np.maximum(t, 0.0), self.length)
         n_seg = self.direction.shape[1]
-        idx = np.clip((self.cum[:, 1:-1] <= s[:, None]).sum(axis=1), 0, n_seg - 1)
+        return s, np.clip((self.cum[:, 1:-1] <= s[:, None]).sum(axis=1), 0, n_seg - 1)
+
+    def center_and_direction(
+        self, t: np.ndarray, located: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`center` and :meth:`heading_velocity` at once (one segment lookup).
+
+        Args:
+            t: ``(n_envs,)`` times (s).
+            located: ``self.locate(t)`` if the caller has it already.
+        """
+        s, idx = self.locate(t) if located is None else located
         rows = np.arange(len(s))
         start = self.waypoints[rows, idx]
         d = self.direction[rows, idx]
@@ -245,10 +300,8 @@ class PlannedTrajectory:
 
     def heading_velocity(self, t: np.ndarray) -> np.ndarray:
         """Unit direction of the planned path at ``t`` (kept after the end)."""
-        s = np.minimum(self.cruise_speed * np.maximum(t, 0.0), self.length)
-        n_seg = self.direction.shape[1]
-        idx = np.clip((self.cum[:, 1:-1] <= s[:, None]).sum(axis=1), 0, n_seg - 1)
-        return self.direction[np.arange(len(s)), idx]
+        _, idx = self.locate(t)
+        return self.direction[np.arange(len(idx)), idx]
 
     def uav_positions(
         self,

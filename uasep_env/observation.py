@@ -46,7 +46,7 @@ import numpy as np
 
 from uasep_env import _numba
 from uasep_env.config import EnvConfig
-from uasep_env.formation import formation_center
+from uasep_env.formation import formation_center, slot_positions
 from uasep_env.world import World
 
 __all__ = ["ObservationLayout", "build_observations", "global_state", "state_dim"]
@@ -202,15 +202,13 @@ class _Inputs(NamedTuple):
 
     pos: np.ndarray  # (E, N, 3) estimated UAV positions (m)
     vel: np.ndarray  # (E, N, 3) estimated UAV velocities (m/s)
-    slots: np.ndarray  # (E, N, 3) desired slots, eq. 7 (m)
+    pattern: np.ndarray  # (E, N, 3) the formation pattern, formation frame (m)
     plan_pos: np.ndarray  # (E, N, 3) planned positions (m)
     plan_vel: np.ndarray  # (E, N, 3) planned velocities (m/s)
     accel_cmd: np.ndarray  # (E, N, 3) last commanded accelerations (m/s^2)
-    center: np.ndarray  # (E, 3) estimated formation centre (m)
-    mean_vel: np.ndarray  # (E, 3) formation mean velocity (m/s)
     plan_center: np.ndarray  # (E, 3) planned centre (m)
     wp_dir: np.ndarray  # (E, 3) unit direction of the planned path
-    wp_dist: np.ndarray  # (E,) centre to final way-point (m)
+    final_wp: np.ndarray  # (E, 3) the plan's final way-point (m)
     progress: np.ndarray  # (E,) elapsed fraction of the episode
     region: np.ndarray  # (E, N, M) signed distance to each reachable ellipsoid (m), inf if off
     obs_pos: np.ndarray  # (E, M, 3) estimated obstacle positions (m)
@@ -227,9 +225,9 @@ def build_observations(
 ) -> np.ndarray:
     """Every agent's observation, ``(n_envs, n_uavs, layout.dim)`` float32.
 
-    The formation geometry (eq. 5-7), the plan and the distances to the reachable
-    ellipsoids are computed batched in numpy; the per-agent assembly (relative vectors,
-    neighbour sorting, masks, scaling, clipping) is :func:`_assemble`, or its compiled form
+    The plan and the distances to the reachable ellipsoids come from the world; the
+    estimated formation geometry (eqs. 5-7) and the per-agent assembly (relative vectors,
+    neighbour sorting, masks, scaling, clipping) are :func:`_assemble`, or its compiled form
     in :mod:`uasep_env._kernels` when numba is in use (the same numbers bit for bit).
 
     Args:
@@ -254,10 +252,8 @@ def build_observations(
 
 
 def _gather_inputs(world: World, layout: ObservationLayout) -> _Inputs:
-    pos, vel = world.est_pos, world.est_vel
-    center, mean_vel = formation_center(pos, vel)
-    slots = world.desired_slots(estimated=True, center=center, mean_vel=mean_vel)
-    wp_dist = np.linalg.norm(world.plan.waypoints[:, -1] - center, axis=-1)
+    """The world's arrays an observation is made of (the formation geometry is derived)."""
+    pos = world.est_pos
     progress = np.minimum(world.time / world.config.episode_duration, 1.0)
     m = world.n_obstacles if layout.k_obstacles else 0
     if m:
@@ -269,16 +265,14 @@ def _gather_inputs(world: World, layout: ObservationLayout) -> _Inputs:
     ob = world.obstacles
     return _Inputs(
         pos,
-        vel,
-        slots,
+        world.est_vel,
+        world.slots,
         world.plan_pos,
         world.plan_vel,
         world.accel_cmd,
-        center,
-        mean_vel,
         world.plan_center,
         world.plan_dir,
-        wp_dist,
+        world.plan.waypoints[:, -1],
         progress,
         region,
         world.obs_est_pos[:, :m],
@@ -296,17 +290,21 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
     e, n, _ = x.pos.shape
     m = x.region.shape[-1]
     ps, vs, acs = layout.pos_scale, layout.vel_scale, layout.acc_scale
-    pos, vel, center = x.pos, x.vel, x.center
+    pos, vel = x.pos, x.vel
+    # The formation as the UAVs estimate it (eqs. 5-7).
+    center, mean_vel = formation_center(pos, vel)
+    slots = slot_positions(center, mean_vel, x.wp_dir, x.pattern)
+    wp_dist = np.linalg.norm(x.final_wp - center, axis=-1)
 
     # Own state (SELF_FIELDS order); broadcast fields are shared by the formation.
-    out[..., 0:3] = (x.slots - pos) / ps
+    out[..., 0:3] = (slots - pos) / ps
     out[..., 3:6] = (x.plan_pos - pos) / ps
     out[..., 6:9] = vel / vs
     out[..., 9:12] = x.plan_vel / vs
-    out[..., 12:15] = (x.mean_vel / vs)[:, None, :]
+    out[..., 12:15] = (mean_vel / vs)[:, None, :]
     out[..., 15:18] = ((x.plan_center - center) / ps)[:, None, :]
     out[..., 18:21] = x.wp_dir[:, None, :]
-    out[..., 21] = (x.wp_dist / ps)[:, None]
+    out[..., 21] = (wp_dist / ps)[:, None]
     out[..., 22:25] = x.accel_cmd / acs
     out[..., 25] = x.progress[:, None]
     col = layout.self_dim

@@ -26,9 +26,12 @@ Term                       Value per agent (unweighted)
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from uasep_env.config import RewardWeights
+from uasep_env import _numba
+from uasep_env.config import RewardWeights, UAVConfig
 from uasep_env.world import World
 
 __all__ = ["DEVIATION_SCALE_M", "REWARD_TERMS", "collisions", "compute_rewards"]
@@ -50,14 +53,32 @@ DEVIATION_SCALE_M = 10.0
 
 def collisions(world: World) -> np.ndarray:
     """``(E, N)`` whether each UAV collided during the last step (true state)."""
-    d_col = world.config.uav.collision_distance
-    return (world.min_uav_dist < d_col) | (world.min_obs_dist < d_col)
+    return _collided(world.min_uav_dist, world.min_obs_dist, world.config.uav.collision_distance)
+
+
+def _collided(d_uav: np.ndarray, d_obs: np.ndarray, d_col: float) -> np.ndarray:
+    return (d_uav < d_col) | (d_obs < d_col)
+
+
+class _Inputs(NamedTuple):
+    """The world's arrays the reward terms are computed from (``E`` envs, ``N`` UAVs)."""
+
+    uav_pos: np.ndarray  # (E, N, 3) true positions (m)
+    plan_pos: np.ndarray  # (E, N, 3) planned positions (m)
+    cmd: np.ndarray  # (E, N, 3) commanded accelerations (m/s^2)
+    prev_cmd: np.ndarray  # (E, N, 3) the previous command (m/s^2)
+    min_uav_dist: np.ndarray  # (E, N) closest UAV over the step (m)
+    min_obs_dist: np.ndarray  # (E, N) closest obstacle centre over the step (m)
+    region: np.ndarray  # (E, N, M) signed distance to each reachable ellipsoid (m), inf if off
 
 
 def compute_rewards(
     world: World, weights: RewardWeights, region: np.ndarray | None = None
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Rewards and their named terms after a step.
+
+    The terms and their weighted sum are :func:`_terms`, or its compiled form in
+    :mod:`uasep_env._kernels` when numba is in use (the same numbers bit for bit).
 
     Args:
         world: The batched world, just stepped.
@@ -67,21 +88,51 @@ def compute_rewards(
     Returns:
         ``(rewards, terms)``: ``(E, N)`` rewards and a dict of ``(E, N)`` unweighted terms.
     """
-    cfg = world.config
-    u = cfg.uav
-    plan_pos, _ = world.planned()
-    if region is None:
-        region = world.region_distances()
-    d_region = region.min(axis=-1, initial=np.inf)
-    dev = np.linalg.norm(world.uav_pos - plan_pos, axis=-1)
-    cmd = world.accel_cmd / u.max_accel
-    dcmd = (world.accel_cmd - world.prev_accel_cmd) / u.max_accel
-    terms = {
-        "separation_inner": -(
-            np.maximum(0.0, 1.0 - world.min_uav_dist / u.separation_distance) ** 2
-        ),
+    x = _Inputs(
+        world.uav_pos,
+        world.plan_pos,
+        world.accel_cmd,
+        world.prev_accel_cmd,
+        world.min_uav_dist,
+        world.min_obs_dist,
+        world.region_distances() if region is None else region,
+    )
+    u = world.config.uav
+    w = np.array([getattr(weights, name) for name in REWARD_TERMS])
+    if _numba.available():
+        from uasep_env import _kernels
+
+        c = np.array(
+            [
+                u.max_accel,
+                u.separation_distance,
+                u.obstacle_separation,
+                u.collision_distance,
+                DEVIATION_SCALE_M,
+            ]
+        )
+        own, stacked = _kernels.reward_terms(x, c, w)
+        terms = dict(zip(REWARD_TERMS, stacked, strict=True))
+    else:
+        terms = _terms(x, u)
+        own = np.zeros_like(x.min_uav_dist)
+        for k, name in enumerate(REWARD_TERMS):
+            own += w[k] * terms[name]
+    if weights.shared > 0.0:
+        own = (1.0 - weights.shared) * own + weights.shared * own.mean(axis=1, keepdims=True)
+    return own, terms
+
+
+def _terms(x: _Inputs, u: UAVConfig) -> dict[str, np.ndarray]:
+    """The unweighted terms in numpy (the reference of the compiled form)."""
+    d_region = x.region.min(axis=-1, initial=np.inf)
+    dev = np.linalg.norm(x.uav_pos - x.plan_pos, axis=-1)
+    cmd = x.cmd / u.max_accel
+    dcmd = (x.cmd - x.prev_cmd) / u.max_accel
+    return {
+        "separation_inner": -(np.maximum(0.0, 1.0 - x.min_uav_dist / u.separation_distance) ** 2),
         "separation_obstacle": -(
-            np.maximum(0.0, 1.0 - world.min_obs_dist / u.obstacle_separation) ** 2
+            np.maximum(0.0, 1.0 - x.min_obs_dist / u.obstacle_separation) ** 2
         ),
         "separation_region": -np.minimum(
             2.0, np.maximum(0.0, 1.0 - d_region / u.obstacle_separation)
@@ -89,12 +140,6 @@ def compute_rewards(
         "deviation": -np.minimum(10.0, dev / DEVIATION_SCALE_M),
         "control": -np.einsum("...i,...i->...", cmd, cmd) / 3.0,
         "smoothness": -np.einsum("...i,...i->...", dcmd, dcmd) / 3.0,
-        "collision": -collisions(world).astype(float),
-        "progress": np.ones((world.n_envs, world.n_uavs)),
+        "collision": -_collided(x.min_uav_dist, x.min_obs_dist, u.collision_distance).astype(float),
+        "progress": np.ones_like(x.min_uav_dist),
     }
-    own = np.zeros((world.n_envs, world.n_uavs))
-    for name in REWARD_TERMS:
-        own += getattr(weights, name) * terms[name]
-    if weights.shared > 0.0:
-        own = (1.0 - weights.shared) * own + weights.shared * own.mean(axis=1, keepdims=True)
-    return own, terms

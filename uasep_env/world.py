@@ -27,7 +27,9 @@ single environment seeded with ``seed + i``, bit for bit.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -38,13 +40,35 @@ from uasep_env.estimation import KalmanModel
 from uasep_env.formation import (
     PlannedTrajectory,
     formation_center,
-    formation_rotation,
-    rotate,
+    segment_offsets,
+    slot_positions,
 )
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, sample_scenario
 
 __all__ = ["World"]
+
+#: Environments refilled per task when noise is drawn on several threads; below twice
+#: this, one thread does it all (a task costs more than it saves).
+REFILL_CHUNK = 256
+_pool: list[ThreadPoolExecutor] = []
+
+
+def _run_chunked(fn: Callable[[np.ndarray], None], envs: np.ndarray) -> None:
+    """``fn(envs)``, split over the cores when ``envs`` is long.
+
+    Drawing noise is most of a large batch's step, and numpy's generators release the GIL
+    while they draw. Each environment's generator is used by one task only, in order, so
+    the numbers are the same as one thread's, bit for bit.
+    """
+    workers = min(os.cpu_count() or 1, len(envs) // REFILL_CHUNK)
+    if workers < 2:
+        fn(envs)
+        return
+    if not _pool:
+        _pool.append(ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="uasep-noise"))
+    for future in [_pool[0].submit(fn, part) for part in np.array_split(envs, workers)]:
+        future.result()
 
 
 class World:
@@ -136,6 +160,8 @@ class World:
         self.pred_heading = np.zeros((e, m))
         self.slots = np.zeros((e, n, 3))
         self.plan = PlannedTrajectory(np.tile(np.eye(N_WAYPOINTS, 3)[None], (e, 1, 1)), 1.0)
+        # Each UAV's planned offset from the centre along each segment (fixed per episode).
+        self._plan_offsets = segment_offsets(self.plan.direction, self.slots)
         self._refresh_plan()
         self.min_uav_dist = np.full((e, n), np.inf)
         self.min_obs_dist = np.full((e, n), np.inf)
@@ -210,6 +236,7 @@ class World:
         self._kf_count[mask] = 0
         self.plan.set_rows(mask, stack("waypoints"), np.array([s.cruise_speed for s in specs]))
         self.slots[mask] = stack("slots")
+        self._plan_offsets[mask] = segment_offsets(self.plan.direction[mask], self.slots[mask])
         self.uav_pos[mask] = stack("uav_pos")
         self.uav_vel[mask] = stack("uav_vel")
         self.uav_acc[mask] = 0.0
@@ -262,15 +289,9 @@ class World:
         if active is not None:
             due &= active
         refill = np.flatnonzero(due)
-        for i in refill:
-            rng = self._rngs[i]
-            np.multiply(
-                rng.standard_normal((self.noise_block, self._n_normal)),
-                self._normal_std,
-                out=self._normal_buf[:, i],
-            )
-            self._unif_buf[:, i] = rng.random((self.noise_block, self._n_unif))
-            self._buf_pos[i] = 0
+        if len(refill):
+            _run_chunked(self._refill, refill)
+            self._buf_pos[refill] = 0
         at = np.minimum(self._buf_pos, self.noise_block - 1)
         if (at == at[0]).all():
             # Environments in lockstep (the usual case): a view, no gather.
@@ -285,6 +306,15 @@ class World:
         else:
             self._buf_pos += active
         return normals, unifs
+
+    def _refill(self, envs: np.ndarray) -> None:
+        """Draw the next ``noise_block`` physics steps of noise for each of ``envs``."""
+        shape_n = (self.noise_block, self._n_normal)
+        shape_u = (self.noise_block, self._n_unif)
+        for i in envs:
+            rng = self._rngs[i]
+            np.multiply(rng.standard_normal(shape_n), self._normal_std, out=self._normal_buf[:, i])
+            self._unif_buf[:, i] = rng.random(shape_u)
 
     # ------------------------------------------------------------------ step
     def step(self, accel_cmd: np.ndarray, active: np.ndarray | None = None) -> None:
@@ -345,8 +375,12 @@ class World:
         """
         if self._plan_now is None:
             plan = self.plan
-            center, center_vel, direction = plan.center_and_direction(self.time)
-            pos, vel = plan.uav_positions(self.time, self.slots, (center, center_vel), direction)
+            located = plan.locate(self.time)
+            center, center_vel, direction = plan.center_and_direction(self.time, located)
+            # plan.uav_positions, with the segment's rotated slots looked up, not recomputed.
+            offsets = self._plan_offsets[np.arange(self.n_envs), located[1]]
+            pos = center[:, None, :] + offsets
+            vel = np.broadcast_to(center_vel[:, None, :], pos.shape)
             for arr in (center, direction, pos, vel):
                 arr.flags.writeable = False
             self._plan_now = (center, direction, pos, vel)
@@ -551,8 +585,7 @@ class World:
             vel = self.est_vel if estimated else self.uav_vel
             center, mean_vel = formation_center(pos, vel)
         # Only the planned path's direction matters for the low-speed fallback.
-        rot = formation_rotation(mean_vel, self.plan_dir)
-        return center[:, None, :] + rotate(rot, self.slots)
+        return slot_positions(center, mean_vel, self.plan_dir, self.slots)
 
     def plan_finished(self) -> np.ndarray:
         """``(E,)`` whether the planned trajectory has been flown to its end."""

@@ -155,7 +155,20 @@ class EnvCore:
     @staticmethod
     def agent_info(result: StepResult, env: int, uav: int) -> dict:
         """The ``info`` dict of one agent: reward terms and safety figures."""
-        return {
-            "reward_terms": {k: float(result.terms[k][env, uav]) for k in REWARD_TERMS},
-            **{k: (v[env, uav].item()) for k, v in result.safety.items()},
-        }
+        return EnvCore.env_infos(result, env)[uav]
+
+    @staticmethod
+    def env_infos(result: StepResult, env: int) -> list[dict]:
+        """The ``info`` dicts of every agent of environment ``env``, in agent order.
+
+        Reward terms as floats, safety figures as Python floats and bools.
+        """
+        terms = {k: result.terms[k][env].tolist() for k in REWARD_TERMS}
+        safety = {k: v[env].tolist() for k, v in result.safety.items()}
+        return [
+            {
+                "reward_terms": {k: v[i] for k, v in terms.items()},
+                **{k: v[i] for k, v in safety.items()},
+            }
+            for i in range(result.rewards.shape[1])
+        ]

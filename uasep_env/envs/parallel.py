@@ -187,10 +187,7 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         missing = sorted(set(self.agents) - set(actions))
         if unknown or missing:
             raise ValueError(f"bad action keys: missing {missing}, unknown {unknown}")
-        joint = np.empty((1, len(self.possible_agents), 3))
-        for agent, i in self._index.items():
-            joint[0, i] = validate_actions(actions[agent], (3,), f"action of {agent}")
-        res = self.core.step(joint, validate=False)
+        res = self.core.step(self._joint_action(actions), validate=False)
         self._last = res
         done_term = bool(res.terminated[0])
         done_trunc = bool(res.truncated[0])
@@ -198,12 +195,31 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         rewards = {a: float(res.rewards[0, i]) for a, i in self._index.items()}
         terminations = dict.fromkeys(self.agents, done_term)
         truncations = dict.fromkeys(self.agents, done_trunc)
-        infos = {a: self.core.agent_info(res, 0, i) for a, i in self._index.items()}
+        infos = dict(zip(self._index, self.core.env_infos(res, 0), strict=True))
         if done_term or done_trunc:
             self.agents = []
         if self.render_mode == "human":
             self.render()
         return observations, rewards, terminations, truncations, infos
+
+    def _joint_action(self, actions: dict[str, np.ndarray]) -> np.ndarray:
+        """The agents' actions as one validated ``(1, N, 3)`` array.
+
+        Checked as a whole (one pass); only a bad joint action is checked agent by agent,
+        so that the error names the agent.
+        """
+        joint = np.empty((1, len(self.possible_agents), 3))
+        try:
+            for agent, i in self._index.items():
+                a = actions[agent]
+                if np.shape(a) != (3,):
+                    raise ValueError
+                joint[0, i] = a
+            return validate_actions(joint, joint.shape)
+        except (ValueError, TypeError):
+            for agent, i in self._index.items():
+                joint[0, i] = validate_actions(actions[agent], (3,), f"action of {agent}")
+            raise  # pragma: no cover - the loop above names the bad action
 
     def state(self) -> np.ndarray:
         """The global true state (normalised), shape ``state_space.shape``."""
