@@ -85,3 +85,16 @@ def test_weights_and_sharing_combine_terms(core):
     shared = RewardWeights(**{**zeros, "deviation": 1.0, "shared": 1.0})
     team, _ = compute_rewards(w, shared)
     np.testing.assert_allclose(team, np.broadcast_to(terms["deviation"].mean(), (1, 3)))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 8, 12])
+def test_team_mean_is_numpy_mean_bit_for_bit(n):
+    from uasep_env.rewards import team_mean
+
+    x = (
+        np.random.default_rng(n).normal(0, 1, size=(5, 300, n))
+        * 10.0 ** np.arange(-3, 2)[:, None, None]
+    )
+    got = team_mean(x)
+    assert got.shape == (5, 300)
+    np.testing.assert_array_equal(got, x.mean(axis=-1))

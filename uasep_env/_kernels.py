@@ -39,11 +39,12 @@ def _newton_terms(sig, off, cq):  # noqa: ANN001, ANN202
     return 0.0, 0.0
 
 
-@numba.njit(**_JIT)
+@numba.njit(inline="always", **_JIT)
 def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202
     """Nearest point of one ellipsoid, body frame: ``(x0, x1, x2, dist, n0, n1, n2)``.
 
-    Scalars only (no temporary arrays): allocation would dominate the arithmetic.
+    Scalars only (no temporary arrays): allocation would dominate the arithmetic. Inlined,
+    so that a caller that keeps only the distance does not compute the rest.
     """
     g0 = -1.0 if q0 < 0.0 else 1.0
     g1 = -1.0 if q1 < 0.0 else 1.0
@@ -372,22 +373,31 @@ def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_agent(k, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
-    """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.observation._assemble`.
+def _observe_env(e, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+    """Environment ``e`` of :func:`uasep_env.observation._assemble`, every agent.
 
     ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays.
     """
     pos, vel = x.pos, x.vel
-    n = pos.shape[1]
-    m = x.region.shape[2]
-    e = k // n
-    i = k % n
-    ps, vs, acs, sensing, clip = scales[0], scales[1], scales[2], scales[3], np.float32(scales[4])
-    # The estimated formation (eqs. 5-7): centre, mean velocity, frame, this UAV's slot.
+    # The estimated formation (eqs. 5-7): centre, mean velocity and frame, once per env.
     c0, c1, c2 = _mean(pos, e, 0), _mean(pos, e, 1), _mean(pos, e, 2)
     mv0, mv1, mv2 = _mean(vel, e, 0), _mean(vel, e, 1), _mean(vel, e, 2)
     d = x.wp_dir
     ct, st, cp, sp = _frame(mv0, mv1, mv2, d[e, 0], d[e, 1], d[e, 2], scales[5])
+    frame = (c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp)
+    for i in range(pos.shape[1]):
+        _observe_agent(e, i, frame, x, scales, k_u, k_o, self_dim, out)
+
+
+@numba.njit(inline="always", **_JIT)
+def _observe_agent(e, i, frame, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+    """UAV ``i`` of environment ``e``; ``frame`` is the formation's, from :func:`_observe_env`."""
+    pos, vel = x.pos, x.vel
+    n = pos.shape[1]
+    m = x.region.shape[2]
+    ps, vs, acs, sensing, clip = scales[0], scales[1], scales[2], scales[3], np.float32(scales[4])
+    c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp = frame
+    # This UAV's slot (eq. 7).
     p0, p1, p2 = x.pattern[e, i, 0], x.pattern[e, i, 1], x.pattern[e, i, 2]
     # Rows of the rotation as formation.rotate multiplies them (the zero included).
     slot0 = c0 + ((-st * p0 + (cp * ct) * p1) + (-ct * sp) * p2)
@@ -474,14 +484,14 @@ def _observe_agent(k, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN2
 
 @numba.njit(**_JIT)
 def _observe_serial(x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
-    for k in range(out.shape[0] * out.shape[1]):
-        _observe_agent(k, x, scales, k_u, k_o, self_dim, out)
+    for e in range(out.shape[0]):
+        _observe_env(e, x, scales, k_u, k_o, self_dim, out)
 
 
 @numba.njit(parallel=True, **_JIT)
 def _observe_parallel(x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
-    for k in numba.prange(out.shape[0] * out.shape[1]):
-        _observe_agent(k, x, scales, k_u, k_o, self_dim, out)
+    for e in numba.prange(out.shape[0]):
+        _observe_env(e, x, scales, k_u, k_o, self_dim, out)
 
 
 def assemble_observations(inputs: tuple, layout: object, out: np.ndarray) -> None:

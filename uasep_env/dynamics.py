@@ -62,13 +62,13 @@ def step_double_integrator(
         The acceleration really applied over the step (m/s^2), shape ``(..., 3)``: the
         bounded command plus noise, reduced where the speed limit bit.
     """
-    accel = np.clip(accel_cmd, -max_accel, max_accel)
+    accel = np.minimum(np.maximum(accel_cmd, -max_accel), max_accel)  # np.clip, less overhead
     if accel_noise is not None:
         accel = accel + accel_noise
     new_vel = vel + dt * accel
     speed2 = np.einsum("...i,...i->...", new_vel, new_vel)
     over = speed2 > max_speed * max_speed
-    if np.any(over):
+    if over.any():
         # Scale the new velocity onto the V_max sphere; slightly inside so that rounding
         # can never leave |v| above V_max.
         scale = np.where(

@@ -68,6 +68,7 @@ class KalmanModel:
             if converged:
                 break
         self.gains = np.array(gains)
+        self._steady_gain = tuple(float(g) for g in self.gains[-1].ravel())
         self.covariances = np.array(covs)
         self._a = a
         self._b = b
@@ -118,7 +119,7 @@ class KalmanModel:
         last = len(self.gains) - 1
         if count.min() >= last:
             # Every track has converged (the usual case): one gain, no gather.
-            k00, k01, k10, k11 = (float(g) for g in self.gains[last].ravel())
+            k00, k01, k10, k11 = self._steady_gain
         else:
             k = self.gains[np.minimum(count, last)][:, None, None]  # (n_envs, 1, 1, 2, 2)
             k00, k01, k10, k11 = k[..., 0, 0], k[..., 0, 1], k[..., 1, 0], k[..., 1, 1]

@@ -278,7 +278,7 @@ class PlannedTrajectory:
         """Planned arc length (m) and segment index at times ``t``, ``(n_envs,)`` each."""
         s = np.minimum(self.cruise_speed * np.maximum(t, 0.0), self.length)
         n_seg = self.direction.shape[1]
-        return s, np.clip((self.cum[:, 1:-1] <= s[:, None]).sum(axis=1), 0, n_seg - 1)
+        return s, np.minimum((self.cum[:, 1:-1] <= s[:, None]).sum(axis=1), n_seg - 1)
 
     def center_and_direction(
         self, t: np.ndarray, located: tuple[np.ndarray, np.ndarray] | None = None

@@ -336,7 +336,7 @@ class World:
         expected = (self.n_envs, self.n_uavs, 3)
         if cmd.shape != expected:
             raise ValueError(f"accel_cmd must have shape {expected}, got {cmd.shape}")
-        if not np.all(np.isfinite(cmd)):
+        if not np.isfinite(cmd).all():
             bad = np.argwhere(~np.isfinite(cmd))[:3].tolist()
             raise ValueError(f"accel_cmd has non-finite values at (env, uav, axis) {bad}")
         cfg = self.config
@@ -350,7 +350,7 @@ class World:
             else:
                 frozen = self._snapshot(~active)
         self.prev_accel_cmd[...] = self.accel_cmd
-        self.accel_cmd[...] = np.clip(cmd, -cfg.uav.max_accel, cfg.uav.max_accel)
+        np.minimum(np.maximum(cmd, -cfg.uav.max_accel), cfg.uav.max_accel, out=self.accel_cmd)
         self.min_uav_dist.fill(np.inf)
         self.min_obs_dist.fill(np.inf)
         for _ in range(cfg.decision_interval):
@@ -380,7 +380,8 @@ class World:
             # plan.uav_positions, with the segment's rotated slots looked up, not recomputed.
             offsets = self._plan_offsets[np.arange(self.n_envs), located[1]]
             pos = center[:, None, :] + offsets
-            vel = np.broadcast_to(center_vel[:, None, :], pos.shape)
+            vel = np.empty_like(pos)
+            vel[...] = center_vel[:, None, :]
             for arr in (center, direction, pos, vel):
                 arr.flags.writeable = False
             self._plan_now = (center, direction, pos, vel)

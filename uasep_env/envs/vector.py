@@ -18,7 +18,7 @@ from gymnasium.vector.utils import batch_space
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.envs.core import EnvCore, validate_actions
-from uasep_env.rewards import REWARD_TERMS
+from uasep_env.rewards import REWARD_TERMS, team_mean
 
 __all__ = ["FormationVectorEnv"]
 
@@ -125,7 +125,7 @@ class FormationVectorEnv(VectorEnv):
             self.core.world.reset(mask=pending)
         res = self.core.step(a, validate=False, active=~pending if some_pending else None)
         obs = res.obs.reshape(self.num_envs, -1)
-        rewards = res.rewards.mean(axis=1)
+        rewards = team_mean(res.rewards)
         terminated = res.terminated.copy()
         truncated = res.truncated.copy()
         infos = self._infos(res)
@@ -150,11 +150,13 @@ class FormationVectorEnv(VectorEnv):
 
     def _infos(self, res: Any) -> dict[str, Any]:
         ones = np.ones(self.num_envs, dtype=bool)
-        infos: dict[str, Any] = {"rewards": res.rewards.copy(), "_rewards": ones}
-        infos["reward_terms"] = {k: res.terms[k].mean(axis=1) for k in REWARD_TERMS}
+        # The step's arrays are its own (fresh each step): no copies needed.
+        infos: dict[str, Any] = {"rewards": res.rewards, "_rewards": ones}
+        means = team_mean(np.stack([res.terms[k] for k in REWARD_TERMS]))
+        infos["reward_terms"] = dict(zip(REWARD_TERMS, means, strict=True))
         infos["_reward_terms"] = ones
         for k, v in res.safety.items():
-            infos[k] = v.copy()
+            infos[k] = v
             infos["_" + k] = ones
         return infos
 
