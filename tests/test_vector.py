@@ -122,3 +122,22 @@ def test_sb3_adapter_passes_sb3_checks_and_terminal_obs():
     with pytest.raises(ValueError, match=r"shape \(6, 3\)"):
         venv.step_async(np.zeros((5, 3)))
         venv.step_wait()
+
+
+@pytest.mark.parametrize("numba_on", [True, False])
+def test_reset_some_builds_only_the_reset_rows_exactly(monkeypatch, numba_on):
+    """Same-step autoresets rebuild the reset environments' observations only, exactly."""
+    from uasep_env import _numba
+    from uasep_env.envs.core import EnvCore
+
+    if not numba_on:
+        monkeypatch.setitem(_numba._state, "numba", None)
+    core = EnvCore({"n_uavs": 3, "n_obstacles": 2, "scenario": "random"}, n_envs=6)
+    core.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        core.step(rng.uniform(-1, 1, size=(6, 3, 3)))
+    mask = np.array([False, True, False, False, True, True])
+    got = core.reset_some(mask)
+    assert got.shape == (3, 3, core.obs_dim)
+    np.testing.assert_array_equal(got, core.observations()[mask])

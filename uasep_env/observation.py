@@ -221,7 +221,10 @@ class _Inputs(NamedTuple):
 
 
 def build_observations(
-    world: World, layout: ObservationLayout, out: np.ndarray | None = None
+    world: World,
+    layout: ObservationLayout,
+    out: np.ndarray | None = None,
+    rows: np.ndarray | None = None,
 ) -> np.ndarray:
     """Every agent's observation, ``(n_envs, n_uavs, layout.dim)`` float32.
 
@@ -234,14 +237,16 @@ def build_observations(
         world: The batched world.
         layout: The layout for the world's config.
         out: Optional preallocated output array.
+        rows: Only these environments (an index array): ``out`` is then
+            ``(len(rows), N, dim)``, one row per index.
 
     Returns:
         The observations (``out`` if given).
     """
-    e, n = world.n_envs, world.n_uavs
+    e = world.n_envs if rows is None else len(rows)
     if out is None:
-        out = np.empty((e, n, layout.dim), dtype=np.float32)
-    inputs = _gather_inputs(world, layout)
+        out = np.empty((e, world.n_uavs, layout.dim), dtype=np.float32)
+    inputs = _gather_inputs(world, layout, rows)
     if _numba.available():
         from uasep_env import _kernels
 
@@ -251,37 +256,43 @@ def build_observations(
     return out
 
 
-def _gather_inputs(world: World, layout: ObservationLayout) -> _Inputs:
-    """The world's arrays an observation is made of (the formation geometry is derived)."""
-    pos = world.est_pos
-    progress = np.minimum(world.time / world.config.episode_duration, 1.0)
+def _gather_inputs(
+    world: World, layout: ObservationLayout, rows: np.ndarray | None = None
+) -> _Inputs:
+    """The world's arrays an observation is made of (the formation geometry is derived).
+
+    All environments, or the ``rows`` (an index array) only.
+    """
+    r = slice(None) if rows is None else rows
+    pos = world.est_pos[r]
+    progress = np.minimum(world.time[r] / world.config.episode_duration, 1.0)
     m = world.n_obstacles if layout.k_obstacles else 0
     if m:
-        region = world.region_distances(pos)  # estimated UAV pos vs predicted ellipsoids
-        heading = world.pred_heading
+        # Estimated UAV positions against the predicted ellipsoids.
+        region = world.region_distances(pos, rows)
+        heading = world.pred_heading[r]
     else:
-        region = np.zeros((world.n_envs, world.n_uavs, 0))
-        heading = np.zeros((world.n_envs, 0))
-    ob = world.obstacles
+        region = np.zeros((*pos.shape[:2], 0))
+        heading = np.zeros((len(pos), 0))
     return _Inputs(
         pos,
-        world.est_vel,
-        world.slots,
-        world.plan_pos,
-        world.plan_vel,
-        world.accel_cmd,
-        world.plan_center,
-        world.plan_dir,
-        world.plan.waypoints[:, -1],
+        world.est_vel[r],
+        world.slots[r],
+        world.plan_pos[r],
+        world.plan_vel[r],
+        world.accel_cmd[r],
+        world.plan_center[r],
+        world.plan_dir[r],
+        world.plan.waypoints[r, -1],
         progress,
         region,
-        world.obs_est_pos[:, :m],
-        world.obs_est_vel[:, :m],
-        world.pred_center[:, :m],
-        world.pred_axes[:, :m],
+        world.obs_est_pos[r, :m],
+        world.obs_est_vel[r, :m],
+        world.pred_center[r, :m],
+        world.pred_axes[r, :m],
         np.cos(heading),
         np.sin(heading),
-        ob.active[:, :m],
+        world.obstacles.active[r, :m],
     )
 
 

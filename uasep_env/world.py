@@ -549,16 +549,26 @@ class World:
         d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
         return np.where(self.obstacles.active[:, None, :], d, np.inf)
 
-    def region_distances(self, pos: np.ndarray | None = None) -> np.ndarray:
+    def region_distances(
+        self, pos: np.ndarray | None = None, rows: np.ndarray | None = None
+    ) -> np.ndarray:
         """``(E, N, M)`` signed distance to each predicted reachable ellipsoid (m).
 
         Inactive obstacles give ``inf``.
+
+        Args:
+            pos: Positions to measure from (true UAV positions by default), ``(E, N, 3)``,
+                or ``(len(rows), N, 3)`` with ``rows``.
+            rows: Only these environments (an index array); the result has their rows.
         """
-        p = self.uav_pos if pos is None else pos
+        sel = slice(None) if rows is None else rows
+        p = self.uav_pos[sel] if pos is None else pos
         if not self.n_obstacles:
-            return np.zeros((self.n_envs, self.n_uavs, 0))
-        d = reachable.pairwise_distances(p, self.pred_center, self.pred_axes, self.pred_heading)
-        return np.where(self.obstacles.active[:, None, :], d, np.inf)
+            return np.zeros((*p.shape[:2], 0))
+        d = reachable.pairwise_distances(
+            p, self.pred_center[sel], self.pred_axes[sel], self.pred_heading[sel]
+        )
+        return np.where(self.obstacles.active[sel, None, :], d, np.inf)
 
     def obstacle_velocities(self) -> np.ndarray:
         """``(E, M, 3)`` true obstacle ground velocities (m/s)."""

@@ -107,6 +107,18 @@ class EnvCore:
         self.world.reset(seed=seed, mask=mask)
         return build_observations(self.world, self.layout, self._obs).copy()
 
+    def reset_some(self, mask: np.ndarray) -> np.ndarray:
+        """Reset the environments in ``mask``; returns their observations only.
+
+        For the same-step autoresets of the vector views: the other environments'
+        observations are not rebuilt.
+
+        Returns:
+            ``(mask.sum(), N, D)`` observations, in environment order.
+        """
+        self.world.reset(mask=mask)
+        return build_observations(self.world, self.layout, rows=np.flatnonzero(mask))
+
     def observations(self) -> np.ndarray:
         """Current observations ``(E, N, D)`` (a copy)."""
         return build_observations(self.world, self.layout, self._obs).copy()

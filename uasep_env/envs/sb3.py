@@ -90,8 +90,7 @@ class UAVSharedVecEnv(VecEnv):
                     k = e * self.n_uavs + i
                     infos[k]["terminal_observation"] = obs[k].copy()
                     infos[k]["TimeLimit.truncated"] = trunc
-            obs_new = self.core.reset(mask=done_env).reshape(self.num_envs, -1)
-            obs[dones] = obs_new[dones]
+            obs[dones] = self.core.reset_some(done_env).reshape(-1, obs.shape[1])
         return obs, rewards, dones, infos
 
     def close(self) -> None:

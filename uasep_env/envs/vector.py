@@ -142,8 +142,7 @@ class FormationVectorEnv(VectorEnv):
             infos["_final_obs"] = done.copy()
             infos["final_info"] = {k: v for k, v in infos.items() if not k.startswith("final")}
             infos["_final_info"] = done.copy()
-            obs_reset = self.core.reset(mask=done).reshape(self.num_envs, -1)
-            obs[done] = obs_reset[done]
+            obs[done] = self.core.reset_some(done).reshape(int(done.sum()), -1)
         elif self.autoreset_mode == AutoresetMode.DISABLED:
             self._needs_reset = self._needs_reset | done
         return obs, rewards, terminated, truncated, infos
