@@ -45,17 +45,17 @@ def validate_actions(
     if a.shape != shape:
         raise ValueError(f"{where} must have shape {shape}, got {a.shape}")
     a = a.astype(float, copy=False)
-    finite = np.isfinite(a)
-    if not finite.all():
-        idx = tuple(int(i) for i in np.argwhere(~finite)[0])
-        raise ValueError(f"{where} contains a non-finite value {float(a[idx])} at index {idx}")
-    over = np.abs(a) > 1.0 + ACTION_TOLERANCE
-    if over.any():
-        idx = tuple(int(i) for i in np.argwhere(over)[0])
+    # One pass in the usual case: NaN compares false, so it fails this test too.
+    if not (np.abs(a) <= 1.0 + ACTION_TOLERANCE).all():
+        finite = np.isfinite(a)
+        if not finite.all():
+            idx = tuple(int(i) for i in np.argwhere(~finite)[0])
+            raise ValueError(f"{where} contains a non-finite value {float(a[idx])} at index {idx}")
+        idx = tuple(int(i) for i in np.argwhere(np.abs(a) > 1.0 + ACTION_TOLERANCE)[0])
         raise ValueError(
             f"{where} value {float(a[idx])} at index {idx} is outside the action space [-1, 1]"
         )
-    return np.clip(a, -1.0, 1.0)
+    return np.minimum(np.maximum(a, -1.0), 1.0)  # np.clip, with less overhead
 
 
 @dataclass
