@@ -66,6 +66,9 @@ class ObstacleState:
         self.wind = np.zeros((n_envs, 3))
 
 
+_EPS = float(np.finfo(float).eps)  # np.sinc's guard against 0 / 0
+
+
 def obstacle_velocity(obs: ObstacleState) -> np.ndarray:
     """Ground velocity of every obstacle, NED (m/s), ``(E, M, 3)``."""
     vel = np.empty((*obs.heading.shape, 3))
@@ -107,13 +110,20 @@ def step_obstacles(
     # np.sinc(half / pi) written out, the same operations: its own overhead shows at one
     # environment. sin(y) / y with y = half, the chord factor of a circular arc.
     y = np.pi * (half / np.pi)
-    y = np.where(y, y, np.finfo(float).eps)
+    y = np.where(y, y, _EPS)
     chord = obs.speed * dt * (np.sin(y) / y)
     mid = obs.heading + half
-    active = obs.active
-    obs.pos[..., 0] += np.where(active, chord * np.cos(mid) + obs.wind[:, None, 0] * dt, 0.0)
-    obs.pos[..., 1] += np.where(active, chord * np.sin(mid) + obs.wind[:, None, 1] * dt, 0.0)
-    obs.pos[..., 2] += np.where(active, -obs.climb_rate * dt + obs.wind[:, None, 2] * dt, 0.0)
-    obs.heading = np.where(
-        active, np.mod(obs.heading + 2.0 * half + np.pi, 2 * np.pi) - np.pi, obs.heading
+    wind_step = obs.wind * dt
+    moves = (
+        chord * np.cos(mid) + wind_step[:, None, 0],
+        chord * np.sin(mid) + wind_step[:, None, 1],
+        -obs.climb_rate * dt + wind_step[:, None, 2],
     )
+    heading = np.mod(obs.heading + 2.0 * half + np.pi, 2 * np.pi) - np.pi
+    active = obs.active
+    if not active.all():  # inactive obstacles stay where they are
+        moves = tuple(np.where(active, move, 0.0) for move in moves)
+        heading = np.where(active, heading, obs.heading)
+    for axis, move in enumerate(moves):
+        obs.pos[..., axis] += move
+    obs.heading = heading

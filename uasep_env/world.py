@@ -140,6 +140,7 @@ class World:
         self._normal_buf = np.zeros((self.noise_block, e, self._n_normal))
         self._unif_buf = np.zeros((self.noise_block, e, self._n_unif))
         self._buf_pos = np.full(e, self.noise_block, dtype=np.int64)
+        self._sync_lockstep()
 
         self.time = np.zeros(e)
         self.steps = np.zeros(e, dtype=np.int64)
@@ -218,6 +219,7 @@ class World:
             if s is not None:
                 self._rngs[i] = np.random.default_rng(int(s))
                 self._buf_pos[i] = self.noise_block  # drop noise drawn from the old stream
+                self._lockstep = False  # until the next masked draw checks again
             specs.append(sample_scenario(self._rngs[i], self.config))
             self.families[i] = specs[-1].family
         if len(idx) == 0:
@@ -285,6 +287,16 @@ class World:
 
         Environments outside ``active`` consume nothing (their values are discarded).
         """
+        if active is None and self._lockstep:
+            # Every environment at the same place in its block (the usual case): a view,
+            # and no array checks (they show at small batches).
+            at = self._lock_pos
+            if at >= self.noise_block:
+                _run_chunked(self._refill, np.arange(self.n_envs))
+                self._buf_pos[:] = at = 0
+            self._lock_pos = at + 1
+            self._buf_pos += 1
+            return self._normal_buf[at], self._unif_buf[at]
         due = self._buf_pos >= self.noise_block
         if active is not None:
             due &= active
@@ -305,7 +317,13 @@ class World:
             self._buf_pos += 1
         else:
             self._buf_pos += active
+        self._sync_lockstep()
         return normals, unifs
+
+    def _sync_lockstep(self) -> None:
+        """Note whether every environment is at the same place in its noise block."""
+        self._lockstep = bool((self._buf_pos == self._buf_pos[0]).all())
+        self._lock_pos = int(self._buf_pos[0])
 
     def _refill(self, envs: np.ndarray) -> None:
         """Draw the next ``noise_block`` physics steps of noise for each of ``envs``."""
