@@ -69,13 +69,20 @@ class ObstacleState:
 _EPS = float(np.finfo(float).eps)  # np.sinc's guard against 0 / 0
 
 
-def obstacle_velocity(obs: ObstacleState) -> np.ndarray:
-    """Ground velocity of every obstacle, NED (m/s), ``(E, M, 3)``."""
-    vel = np.empty((*obs.heading.shape, 3))
-    wind = obs.wind[:, None, :]
-    np.add(obs.speed * np.cos(obs.heading), wind[..., 0], out=vel[..., 0])
-    np.add(obs.speed * np.sin(obs.heading), wind[..., 1], out=vel[..., 1])
-    np.add(-obs.climb_rate, wind[..., 2], out=vel[..., 2])
+def obstacle_velocity(obs: ObstacleState, rows: np.ndarray | None = None) -> np.ndarray:
+    """Ground velocity of every obstacle, NED (m/s), ``(E, M, 3)``.
+
+    Args:
+        obs: The batched obstacle state.
+        rows: Only these environments (a bool mask or index array).
+    """
+    r = slice(None) if rows is None else rows
+    speed, heading = obs.speed[r], obs.heading[r]
+    vel = np.empty((*heading.shape, 3))
+    wind = obs.wind[r, None, :]
+    np.add(speed * np.cos(heading), wind[..., 0], out=vel[..., 0])
+    np.add(speed * np.sin(heading), wind[..., 1], out=vel[..., 1])
+    np.add(-obs.climb_rate[r], wind[..., 2], out=vel[..., 2])
     return vel
 
 

@@ -277,7 +277,7 @@ class World:
             self.pred_axes[mask] = axes
         # First measurements start the tracks.
         self._sense(mask, initialise=True)
-        self._predict_regions()
+        self._predict_regions(mask)
         self._update_safety(reset_mask=mask)
         self._refresh_plan()
 
@@ -490,23 +490,25 @@ class World:
         known_accel: np.ndarray | None = None,
     ) -> None:
         cfg = self.config
-        e, n, m = self.n_envs, self.n_uavs, self.n_obstacles
+        n, m = self.n_uavs, self.n_obstacles
         if normals is None:
             # Initial measurements use the next noise draw too (consumed only by those envs).
             normals, _ = self._draw(mask)
-        z_meas = normals[:, n * 3 : n * 9].reshape(e, n, 6)
-        mp, mv = measure(self.uav_pos, self.uav_vel, z_meas[..., :3], z_meas[..., 3:])
-        obs_vel = obstacle_velocity(self.obstacles)
+        # The environments measured: all, or those in ``mask`` (a partial reset).
+        r = slice(None) if mask is None else mask
+        z = normals[r]
+        z_meas = z[:, n * 3 : n * 9].reshape(-1, n, 6)
+        mp, mv = measure(self.uav_pos[r], self.uav_vel[r], z_meas[..., :3], z_meas[..., 3:])
         if m:
-            z_obs = normals[:, n * 9 :].reshape(e, m, 6)
-            omp, omv = measure(self.obstacles.pos, obs_vel, z_obs[..., :3], z_obs[..., 3:])
+            obs_vel = obstacle_velocity(self.obstacles, None if mask is None else mask)
+            z_obs = z[:, n * 9 :].reshape(-1, m, 6)
+            omp, omv = measure(self.obstacles.pos[r], obs_vel, z_obs[..., :3], z_obs[..., 3:])
         if initialise or not cfg.prediction.kalman:
-            sel = mask if mask is not None else np.ones(e, dtype=bool)
-            self.est_pos[sel], self.est_vel[sel] = mp[sel], mv[sel]
+            self.est_pos[r], self.est_vel[r] = mp, mv
             if m:
-                self.obs_est_pos[sel], self.obs_est_vel[sel] = omp[sel], omv[sel]
+                self.obs_est_pos[r], self.obs_est_vel[r] = omp, omv
             if initialise:
-                self._kf_count[sel] = 0
+                self._kf_count[r] = 0
             return
         self._kf_count += 1
         self._uav_kf.update(self.est_pos, self.est_vel, known_accel, mp, mv, self._kf_count)
@@ -514,17 +516,23 @@ class World:
             self._obs_kf.update(self.obs_est_pos, self.obs_est_vel, None, omp, omv, self._kf_count)
 
     # ------------------------------------------------------------------ prediction
-    def _predict_regions(self) -> None:
-        """Place each obstacle's reachable ellipsoid on its current estimate (eqs. 8-18)."""
+    def _predict_regions(self, mask: np.ndarray | None = None) -> None:
+        """Place each obstacle's reachable ellipsoid on its current estimate (eqs. 8-18).
+
+        All environments, or those in ``mask`` (a partial reset).
+        """
         if not self.n_obstacles:
             return
-        wind = self.obstacles.wind[:, None, :]
-        air = self.obs_est_vel - wind  # heading is the airspeed direction
+        r = slice(None) if mask is None else mask
+        est_pos, offset = self.obs_est_pos[r], self.pred_offset[r]
+        air = self.obs_est_vel[r] - self.obstacles.wind[r, None, :]  # heading: airspeed's
         heading = np.arctan2(air[..., 1], air[..., 0])
-        self.pred_heading[...] = heading
-        self.pred_center[..., 0] = self.obs_est_pos[..., 0] + self.pred_offset * np.cos(heading)
-        self.pred_center[..., 1] = self.obs_est_pos[..., 1] + self.pred_offset * np.sin(heading)
-        self.pred_center[..., 2] = self.obs_est_pos[..., 2]
+        self.pred_heading[r] = heading
+        center = np.empty_like(est_pos)
+        center[..., 0] = est_pos[..., 0] + offset * np.cos(heading)
+        center[..., 1] = est_pos[..., 1] + offset * np.sin(heading)
+        center[..., 2] = est_pos[..., 2]
+        self.pred_center[r] = center
 
     # ------------------------------------------------------------------ safety
     def _update_safety(self, reset_mask: np.ndarray | None = None) -> None:
