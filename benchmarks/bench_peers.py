@@ -13,7 +13,8 @@ Prints steps/s and agent-steps/s of
   way (pre-drawn actions in a dict, one ``step`` per iteration, reset when done);
 * the vector env (``gymnasium.make_vec``) at each size against VMAS's ``navigation``
   scenario on the CPU (3 agents, torch pinned to one thread) and the bare numpy double
-  integrator at the same shapes (the ceiling);
+  integrator at the same shapes (the ceiling), and how fast the env's noise alone can be
+  drawn (a floor under the env's own step: per-environment generators, bit-reproducible);
 * batched APF decisions/s;
 * SB3 PPO training env-steps/s through the parameter-sharing adapter, and the share of
   its wall time spent inside the environment, for each ``--ppo-envs`` batch size;
@@ -136,6 +137,19 @@ def bench_bare_numpy(n: int, seconds: float, n_agents: int = 3, dt: float = 0.2)
     return _rate(step, seconds) * n
 
 
+def bench_noise(n: int, seconds: float) -> float:
+    """Env-steps/s of drawing the env's noise alone (the floor under any step of it).
+
+    One physics step's process, measurement and obstacle noise and the pilot's uniforms,
+    from each environment's own generator, as :class:`uasep_env.World` draws them.
+    """
+    from uasep_env import World
+
+    world = World({"n_uavs": 3, "n_obstacles": 1, "scenario": "random"}, n)
+    world.reset(seed=0)
+    return _rate(world._draw, seconds) * n
+
+
 def bench_apf(n: int, seconds: float) -> float:
     """Batched APF decisions/s (one decision = one UAV's action) on ``n`` environments."""
     from uasep_env import make_config
@@ -206,19 +220,21 @@ def main() -> None:
     print("\n== batched (env-steps/s; agent-steps/s = x3) ==")
     print(
         f"{'n_envs':>7} {'uasep vector':>14} {'VMAS nav':>14} {'bare numpy':>14} "
-        f"{'uasep/VMAS':>10} {'uasep/bare':>10} {'agent-steps/s':>14}"
+        f"{'noise only':>14} {'uasep/VMAS':>10} {'uasep/bare':>10} {'noise/bare':>10} "
+        f"{'agent-steps/s':>14}"
     )
     rows = {}
     for n in args.sizes:
         ours = bench_vector(n, s)
         vm = bench_vmas(n, s)
         bare = bench_bare_numpy(n, s)
+        noise = bench_noise(n, s)
         rows[n] = (ours, vm, bare)
         vm_txt = f"{vm:>14,.0f}" if vm else f"{'n/a':>14}"
         ratio = f"{ours / vm:>10.1f}" if vm else f"{'n/a':>10}"
         print(
-            f"{n:>7} {ours:>14,.0f} {vm_txt} {bare:>14,.0f} {ratio} {ours / bare:>10.2%} "
-            f"{ours * 3:>14,.0f}"
+            f"{n:>7} {ours:>14,.0f} {vm_txt} {bare:>14,.0f} {noise:>14,.0f} {ratio} "
+            f"{ours / bare:>10.2%} {noise / bare:>10.1%} {ours * 3:>14,.0f}"
         )
 
     big = max(args.sizes)
@@ -233,8 +249,7 @@ def main() -> None:
             break
         ppo[n_envs] = res
         print(
-            f"SB3 PPO ({n_envs} envs x 3 UAVs): {res[0]:,.0f} agent-steps/s, "
-            f"env share {res[1]:.1%}"
+            f"SB3 PPO ({n_envs} envs x 3 UAVs): {res[0]:,.0f} agent-steps/s, env share {res[1]:.1%}"
         )
 
     print("\n== targets (ratios from this run) ==")
