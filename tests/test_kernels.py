@@ -236,3 +236,23 @@ def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shar
         for name in rewards.REWARD_TERMS:
             np.testing.assert_array_equal(fast[1][name], slow[1][name], err_msg=name)
     assert (fast[1]["collision"] < 0).any() and (fast[1]["separation_region"] < 0).any()
+
+
+def test_plan_kernel_matches_numpy_along_and_past_the_plan(monkeypatch):
+    from uasep_env import World
+
+    world = World({"n_uavs": 4, "n_obstacles": 1, "scenario": "random"}, 50)
+    world.reset(seed=1)
+    seen = set()
+    for t in (0.0, 0.2, 7.3, 40.0, 95.5, 300.0, 1e5):
+        world.time[:] = t + np.arange(50) * 3.1  # every env somewhere else on its plan
+        world._refresh_plan()
+        fast = [a.copy() for a in world._plan_arrays()]
+        seen.update(world.plan.locate(world.time)[1].tolist())
+        monkeypatch.setitem(_numba._state, "numba", None)
+        world._refresh_plan()
+        slow = world._plan_arrays()
+        monkeypatch.undo()
+        for f, s in zip(fast, slow, strict=True):
+            np.testing.assert_array_equal(f, s)
+    assert len(seen) > 2  # several segments, and the end of the plan (t = 1e5)

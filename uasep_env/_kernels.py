@@ -12,7 +12,10 @@ the fallback when numba is missing (see :mod:`uasep_env._numba`).
 * :func:`separations` -- :meth:`uasep_env.world.World.separations`;
 * :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
 * :func:`reward_terms` -- :func:`uasep_env.rewards._terms` and the weighted sum of
-  :func:`uasep_env.rewards.compute_rewards`.
+  :func:`uasep_env.rewards.compute_rewards`;
+* :func:`plan_now` -- the plan's evaluation in :meth:`uasep_env.world.World._plan_arrays`
+  (:meth:`uasep_env.formation.PlannedTrajectory.center_and_direction` and the per-segment
+  slot offsets).
 """
 
 from __future__ import annotations
@@ -593,3 +596,59 @@ def reward_terms(
     fn = _rewards_parallel if own.size >= PARALLEL_MIN else _rewards_serial
     fn(x, constants, weights, own, terms)
     return own, terms
+
+
+# ---------------------------------------------------------------------------- the plan
+@numba.njit(**_JIT)
+def _plan_rows(time, speed, length, cum, waypoints, direction, offsets, center, d_out, pos, vel):  # noqa: ANN001, ANN202
+    for e in range(time.shape[0]):
+        t = time[e]
+        s = min(speed[e] * max(t, 0.0), length[e])
+        # Segment index: how many inner way-points lie at or before s, at most the last.
+        idx = 0
+        for k in range(1, cum.shape[1] - 1):
+            if cum[e, k] <= s:
+                idx += 1
+        idx = min(idx, direction.shape[1] - 1)
+        along = s - cum[e, idx]
+        moving = speed[e] * t < length[e]
+        for a in range(3):
+            d = direction[e, idx, a]
+            c = waypoints[e, idx, a] + along * d
+            v = speed[e] * d if moving else 0.0
+            center[e, a] = c
+            d_out[e, a] = d
+            for i in range(pos.shape[1]):
+                pos[e, i, a] = c + offsets[e, idx, i, a]
+                vel[e, i, a] = v
+
+
+def plan_now(
+    time: np.ndarray,
+    speed: np.ndarray,
+    length: np.ndarray,
+    cum: np.ndarray,
+    waypoints: np.ndarray,
+    direction: np.ndarray,
+    offsets: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Compiled plan evaluation: ``(center, direction, pos, vel)`` at ``time``.
+
+    Args:
+        time: ``(E,)`` times (s).
+        speed: ``(E,)`` cruise speeds (m/s).
+        length: ``(E,)`` path lengths (m).
+        cum: ``(E, W)`` arc length at each way-point (m).
+        waypoints: ``(E, W, 3)`` way-points (m).
+        direction: ``(E, W - 1, 3)`` unit segment directions.
+        offsets: ``(E, W - 1, N, 3)`` slots rotated along each segment (m).
+
+    Returns:
+        ``(E, 3)`` planned centre (m) and direction, ``(E, N, 3)`` planned UAV positions (m)
+        and velocities (m/s).
+    """
+    e, _, n, _ = offsets.shape
+    center, d = np.empty((e, 3)), np.empty((e, 3))
+    pos, vel = np.empty((e, n, 3)), np.empty((e, n, 3))
+    _plan_rows(time, speed, length, cum, waypoints, direction, offsets, center, d, pos, vel)
+    return center, d, pos, vel

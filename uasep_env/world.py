@@ -393,13 +393,21 @@ class World:
         """
         if self._plan_now is None:
             plan = self.plan
-            located = plan.locate(self.time)
-            center, center_vel, direction = plan.center_and_direction(self.time, located)
-            # plan.uav_positions, with the segment's rotated slots looked up, not recomputed.
-            offsets = self._plan_offsets[np.arange(self.n_envs), located[1]]
-            pos = center[:, None, :] + offsets
-            vel = np.empty_like(pos)
-            vel[...] = center_vel[:, None, :]
+            if _numba.available():
+                from uasep_env import _kernels
+
+                center, direction, pos, vel = _kernels.plan_now(
+                    self.time, plan.cruise_speed, plan.length, plan.cum, plan.waypoints,
+                    plan.direction, self._plan_offsets,
+                )  # fmt: skip
+            else:
+                located = plan.locate(self.time)
+                center, center_vel, direction = plan.center_and_direction(self.time, located)
+                # plan.uav_positions, with the segment's rotated slots looked up.
+                offsets = self._plan_offsets[np.arange(self.n_envs), located[1]]
+                pos = center[:, None, :] + offsets
+                vel = np.empty_like(pos)
+                vel[...] = center_vel[:, None, :]
             for arr in (center, direction, pos, vel):
                 arr.flags.writeable = False
             self._plan_now = (center, direction, pos, vel)
