@@ -248,3 +248,25 @@ def test_noise_drawn_on_several_threads_is_bit_identical(monkeypatch):
     for s, t in zip(serial, threaded, strict=True):
         for k in s:
             np.testing.assert_array_equal(s[k], t[k], err_msg=k)
+
+
+def _threaded_rollout(_: int = 0) -> np.ndarray:
+    w = World(make_config(scenario="random"), 8, noise_block=4)
+    w.reset(seed=6)
+    return np.stack([t["est_pos"] for t in _run(w, 10)])
+
+
+def test_noise_threads_work_in_a_forked_child(monkeypatch):
+    """A child forked after the parent used the noise thread pool makes its own pool."""
+    import multiprocessing
+
+    import uasep_env.world as world_mod
+
+    monkeypatch.setattr(world_mod, "REFILL_CHUNK", 2)
+    if (multiprocessing.cpu_count() or 1) < 2:
+        pytest.skip("one core: the noise is drawn on one thread")
+    parent = _threaded_rollout()
+    assert world_mod._pool  # the parent's pool exists when the child is forked
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        child = pool.apply_async(_threaded_rollout).get(timeout=120)
+    np.testing.assert_array_equal(child, parent)

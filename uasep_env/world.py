@@ -39,9 +39,7 @@ from uasep_env.dynamics import measure, step_double_integrator
 from uasep_env.estimation import KalmanModel
 from uasep_env.formation import (
     PlannedTrajectory,
-    formation_center,
     segment_offsets,
-    slot_positions,
 )
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, sample_scenario
@@ -52,6 +50,8 @@ __all__ = ["World"]
 #: this, one thread does it all (a task costs more than it saves).
 REFILL_CHUNK = 256
 _pool: list[ThreadPoolExecutor] = []
+# A forked child has the pool object but none of its threads: it makes its own.
+os.register_at_fork(after_in_child=_pool.clear)
 
 
 def _run_chunked(fn: Callable[[np.ndarray], None], envs: np.ndarray) -> None:
@@ -611,26 +611,6 @@ class World:
     def planned(self) -> tuple[np.ndarray, np.ndarray]:
         """Each UAV's planned position and velocity now, ``(E, N, 3)`` each (read-only)."""
         return self.plan_pos, self.plan_vel
-
-    def desired_slots(
-        self,
-        estimated: bool = True,
-        center: np.ndarray | None = None,
-        mean_vel: np.ndarray | None = None,
-    ) -> np.ndarray:
-        """Eq. 7: each UAV's slot in the current formation frame, ``(E, N, 3)`` (m).
-
-        Args:
-            estimated: Use the estimates (what the UAVs know) rather than the truth.
-            center: The formation centre of those positions, if the caller has it.
-            mean_vel: Their mean velocity, if the caller has it (given with ``center``).
-        """
-        if center is None or mean_vel is None:
-            pos = self.est_pos if estimated else self.uav_pos
-            vel = self.est_vel if estimated else self.uav_vel
-            center, mean_vel = formation_center(pos, vel)
-        # Only the planned path's direction matters for the low-speed fallback.
-        return slot_positions(center, mean_vel, self.plan_dir, self.slots)
 
     def plan_finished(self) -> np.ndarray:
         """``(E,)`` whether the planned trajectory has been flown to its end."""
