@@ -256,3 +256,26 @@ def test_plan_kernel_matches_numpy_along_and_past_the_plan(monkeypatch):
         for f, s in zip(fast, slow, strict=True):
             np.testing.assert_array_equal(f, s)
     assert len(seen) > 2  # several segments, and the end of the plan (t = 1e5)
+
+
+def _big_rollout(_: int = 0) -> np.ndarray:
+    from uasep_env.envs.core import EnvCore
+
+    core = EnvCore({"n_uavs": 3, "n_obstacles": 1, "scenario": "random"}, n_envs=700)
+    core.reset(seed=0)
+    for _ in range(3):
+        res = core.step(np.zeros((700, 3, 3)))
+    return res.obs
+
+
+def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel():
+    """numba's GNU OpenMP layer would kill the child; forked children use the serial loops."""
+    import multiprocessing
+
+    from uasep_env import _kernels
+
+    parent = _big_rollout()  # 2,100 agents: the parallel loops
+    assert _kernels._parallel(2100)
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        child = pool.apply_async(_big_rollout).get(timeout=120)
+    np.testing.assert_array_equal(child, parent)

@@ -21,6 +21,7 @@ the fallback when numba is missing (see :mod:`uasep_env._numba`).
 from __future__ import annotations
 
 import math
+import os
 
 import numba
 import numpy as np
@@ -178,13 +179,22 @@ def _serial(points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out):
 
 
 @numba.njit(parallel=True, **_JIT)
-def _parallel(points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out):  # noqa: ANN001, ANN202
+def _parallel_loop(points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out):  # noqa: ANN001, ANN202
     for k in numba.prange(points.shape[0]):
         _solve_point(k, points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out)
 
 
 #: Points per call above which the loop is spread over the cores (thread start-up costs).
 PARALLEL_MIN = 2048
+# numba's OpenMP layer (GNU) kills a forked child that runs a parallel loop after its
+# parent has run one; forked children (multiprocessing workers) use the serial loops.
+_forked = [False]
+os.register_at_fork(after_in_child=lambda: _forked.__setitem__(0, True))
+
+
+def _parallel(size: int) -> bool:
+    """Whether a loop over ``size`` items is spread over the cores."""
+    return size >= PARALLEL_MIN and not _forked[0]
 
 
 def nearest_on_ellipsoids(
@@ -206,7 +216,7 @@ def nearest_on_ellipsoids(
     x = np.empty((k, 3))
     d = np.empty(k)
     n = np.empty((k, 3))
-    fn = _parallel if k >= PARALLEL_MIN else _serial
+    fn = _parallel_loop if _parallel(k) else _serial
     # numpy's cos/sin, not libm's: the rotation must match the numpy form to the last bit.
     fn(points, centers, axes, np.cos(headings), np.sin(headings), _N_NEWTON, x, d, n)
     return x, d, n
@@ -258,7 +268,7 @@ def pairwise_distances(
     """
     e, n, _ = points.shape
     out = np.empty((e, n, centers.shape[1]))
-    fn = _pairs_parallel if out.size >= PARALLEL_MIN else _pairs_serial
+    fn = _pairs_parallel if _parallel(out.size) else _pairs_serial
     c = np.ascontiguousarray
     fn(c(points), c(centers), c(axes), np.cos(headings), np.sin(headings), _N_NEWTON, out)
     return out
@@ -323,7 +333,7 @@ def separations(
     e, n, _ = uav_pos.shape
     d_uav = np.empty((e, n))
     d_obs = np.empty((e, n))
-    fn = _separations_parallel if d_uav.size >= PARALLEL_MIN else _separations_serial
+    fn = _separations_parallel if _parallel(d_uav.size) else _separations_serial
     c = np.ascontiguousarray
     fn(c(uav_pos), c(obs_pos), c(active), d_uav, d_obs)
     return d_uav, d_obs
@@ -517,7 +527,7 @@ def assemble_observations(inputs: tuple, layout: object, out: np.ndarray) -> Non
     )
     # Contiguous arrays only: one compiled signature, whatever views the caller passes.
     x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
-    fn = _observe_parallel if out.shape[0] * out.shape[1] >= PARALLEL_MIN else _observe_serial
+    fn = _observe_parallel if _parallel(out.shape[0] * out.shape[1]) else _observe_serial
     fn(x, scales, layout.k_uavs, layout.k_obstacles, layout.self_dim, out)
 
 
@@ -593,7 +603,7 @@ def reward_terms(
     e, n = x.min_uav_dist.shape
     own = np.empty((e, n))
     terms = np.empty((len(weights), e, n))
-    fn = _rewards_parallel if own.size >= PARALLEL_MIN else _rewards_serial
+    fn = _rewards_parallel if _parallel(own.size) else _rewards_serial
     fn(x, constants, weights, own, terms)
     return own, terms
 
