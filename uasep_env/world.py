@@ -306,7 +306,7 @@ class World:
             self._buf_pos[refill] = 0
         at = np.minimum(self._buf_pos, self.noise_block - 1)
         if (at == at[0]).all():
-            # Environments in lockstep (the usual case): a view, no gather.
+            # Still in lockstep (a masked draw that every environment took part in): a view.
             normals = self._normal_buf[at[0]]
             unifs = self._unif_buf[at[0]]
         else:
