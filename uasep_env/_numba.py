@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 from typing import Any
 
-__all__ = ["available"]
+__all__ = ["available", "kernels"]
 
 _state: dict[str, Any] = {}
 
@@ -32,3 +32,17 @@ def _numba() -> Any:
 def available() -> bool:
     """Whether compiled kernels are in use (numba importable and not disabled)."""
     return _numba() is not None
+
+
+def kernels() -> Any:
+    """:mod:`uasep_env._kernels` when compiled kernels are in use, else ``None``.
+
+    Imported once, on first use (importing it imports numba): the hot paths ask every step.
+    """
+    if _numba() is None:
+        return None
+    if "kernels" not in _state:
+        from uasep_env import _kernels
+
+        _state["kernels"] = _kernels
+    return _state["kernels"]

@@ -247,9 +247,7 @@ def build_observations(
     if out is None:
         out = np.empty((e, world.n_uavs, layout.dim), dtype=np.float32)
     inputs = _gather_inputs(world, layout, rows)
-    if _numba.available():
-        from uasep_env import _kernels
-
+    if (_kernels := _numba.kernels()) is not None:
         _kernels.assemble_observations(inputs, layout, out)
     else:
         _assemble(inputs, layout, out)

@@ -1046,9 +1046,7 @@ def pairwise_distances(
     p = np.asarray(points, dtype=np.float64)
     c = np.asarray(centers, dtype=np.float64)
     psi = np.asarray(headings, dtype=np.float64)
-    if _numba.available():
-        from uasep_env import _kernels
-
+    if (_kernels := _numba.kernels()) is not None:
         return _kernels.pairwise_distances(p, c, ax, psi)
     return distance_to_ellipsoid(p[:, :, None], c[:, None], ax[:, None], psi[:, None])
 
@@ -1093,10 +1091,8 @@ def _compiled(
     Same numbers as the numpy path (:func:`_to_body`, :func:`_nearest_body`, :func:`_to_world`)
     bit for bit; see :mod:`uasep_env._kernels`.
     """
-    if not _numba.available():
+    if (_kernels := _numba.kernels()) is None:
         return None
-    from uasep_env import _kernels
-
     p = np.asarray(points, dtype=np.float64)
     c = np.asarray(centers, dtype=np.float64)
     psi = np.asarray(headings, dtype=np.float64)

@@ -116,9 +116,7 @@ def compute_rewards(
     )
     u = world.config.uav
     w, c = _vectors(weights, u)
-    if _numba.available():
-        from uasep_env import _kernels
-
+    if (_kernels := _numba.kernels()) is not None:
         own, stacked = _kernels.reward_terms(x, c, w)
         terms = dict(zip(REWARD_TERMS, stacked, strict=True))
     else:

@@ -393,9 +393,7 @@ class World:
         """
         if self._plan_now is None:
             plan = self.plan
-            if _numba.available():
-                from uasep_env import _kernels
-
+            if (_kernels := _numba.kernels()) is not None:
                 center, direction, pos, vel = _kernels.plan_now(
                     self.time, plan.cruise_speed, plan.length, plan.cum, plan.waypoints,
                     plan.direction, self._plan_offsets,
@@ -563,9 +561,7 @@ class World:
             ``(uav, obstacle)``, each ``(E, N)`` (m).
         """
         ob = self.obstacles
-        if _numba.available():
-            from uasep_env import _kernels
-
+        if (_kernels := _numba.kernels()) is not None:
             return _kernels.separations(self.uav_pos, ob.pos, ob.active)
         d_uav = np.where(self._offdiag, self.uav_distances(), np.inf).min(axis=-1)
         return d_uav, self.obstacle_distances().min(axis=-1, initial=np.inf)
