@@ -118,9 +118,20 @@ def _zero(env):
         (lambda a: a.pop("uav_0"), r"missing \['uav_0'\]"),
         (lambda a: a.update(uav_9=np.zeros(3)), r"unknown \['uav_9'\]"),
         (lambda a: a.update(uav_1=np.zeros(2)), r"action of uav_1 must have shape \(3,\)"),
-        (lambda a: a.update(uav_2=np.array([0, np.nan, 0])), "non-finite value nan"),
-        (lambda a: a.update(uav_2=np.array([0, 0, np.inf])), "non-finite value inf"),
-        (lambda a: a.update(uav_0=np.array([0, 1.5, 0])), r"1.5 at index \(1,\) is outside"),
+        (
+            lambda a: a.update(uav_2=np.array([0, np.nan, 0])),
+            "uav_2 contains a non-finite value nan",
+        ),
+        (
+            lambda a: a.update(uav_2=np.array([0, 0, np.inf])),
+            "uav_2 contains a non-finite value inf",
+        ),
+        (lambda a: a.update(uav_1=[0.0, -np.inf, 2.0]), "uav_1 contains a non-finite value -inf"),
+        (
+            lambda a: a.update(uav_0=np.array([0, 1.5, 0])),
+            r"action of uav_0 value 1.5 at index \(1,\) is outside",
+        ),
+        (lambda a: a.update(uav_1=0.5), r"action of uav_1 must have shape \(3,\), got \(\)"),
     ],
 )
 def test_bad_actions_raise_clear_errors(env, mutate, match):
