@@ -279,3 +279,27 @@ def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel()
     with multiprocessing.get_context("fork").Pool(1) as pool:
         child = pool.apply_async(_big_rollout).get(timeout=120)
     np.testing.assert_array_equal(child, parent)
+
+
+def test_world_region_distances_from_kept_cosines_match_numpy(monkeypatch):
+    """The compiled region distances use the world's kept cos/sin; numpy recomputes them."""
+    from uasep_env import World
+
+    world = World({"n_uavs": 3, "n_obstacles": 3, "scenario": "random"}, 40)
+    world.reset(seed=4)
+    rng = np.random.default_rng(5)
+    for step in range(20):
+        active = rng.random(40) < 0.8  # frozen envs are snapshotted and restored
+        world.step(rng.uniform(-3, 3, size=(40, 3, 3)), active=active)
+        if step == 7:
+            world.reset(mask=rng.random(40) < 0.3)  # a partial reset places regions anew
+        world.obstacles.active[::4, 1] = False
+        fast = world.region_distances()
+        est = world.region_distances(world.est_pos[5:9], rows=np.arange(5, 9))
+        monkeypatch.setitem(_numba._state, "numba", None)
+        np.testing.assert_array_equal(fast, world.region_distances())
+        np.testing.assert_array_equal(
+            est, world.region_distances(world.est_pos[5:9], rows=np.arange(5, 9))
+        )
+        monkeypatch.undo()
+        assert np.isinf(fast[::4, :, 1]).all() and np.isfinite(fast[1::4]).all()

@@ -8,7 +8,9 @@ the fallback when numba is missing (see :mod:`uasep_env._numba`).
 * :func:`nearest_on_ellipsoids` -- :func:`uasep_env.reachable._nearest_body` with the
   heading rotation of :func:`uasep_env.reachable.distance_to_ellipsoid` around it;
 * :func:`pairwise_distances` -- the same solve for every point against every ellipsoid of
-  its batch row (:func:`uasep_env.reachable.pairwise_distances`), without broadcast copies;
+  its batch row (:func:`uasep_env.reachable.pairwise_distances`), without broadcast copies,
+  and :func:`region_distances`, the same from precomputed cosines and sines with the
+  inactive regions at ``inf`` (:meth:`uasep_env.world.World.region_distances`);
 * :func:`separations` -- :meth:`uasep_env.world.World.separations`;
 * :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
 * :func:`reward_terms` -- :func:`uasep_env.rewards._terms` and the weighted sum of
@@ -223,12 +225,18 @@ def nearest_on_ellipsoids(
 
 
 @numba.njit(inline="always", **_JIT)
-def _pair_distance(k, points, centers, axes, cos_h, sin_h, n_newton, out):  # noqa: ANN001, ANN202
-    """Pair ``k`` of the flat ``(E, N, M)`` grid: point ``(e, i)`` against ellipsoid ``(e, j)``."""
+def _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
+    """Pair ``k`` of the flat ``(E, N, M)`` grid: point ``(e, i)`` against ellipsoid ``(e, j)``.
+
+    ``inf`` where the ellipsoid is not ``active``.
+    """
     n, m = points.shape[1], centers.shape[1]
     e = k // (n * m)
     i = (k // m) % n
     j = k % m
+    if not active[e, j]:
+        out[e, i, j] = np.inf
+        return
     cp = cos_h[e, j]
     sp = sin_h[e, j]
     d0 = points[e, i, 0] - centers[e, j, 0]
@@ -241,15 +249,15 @@ def _pair_distance(k, points, centers, axes, cos_h, sin_h, n_newton, out):  # no
 
 
 @numba.njit(**_JIT)
-def _pairs_serial(points, centers, axes, cos_h, sin_h, n_newton, out):  # noqa: ANN001, ANN202
+def _pairs_serial(points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
     for k in range(out.size):
-        _pair_distance(k, points, centers, axes, cos_h, sin_h, n_newton, out)
+        _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _pairs_parallel(points, centers, axes, cos_h, sin_h, n_newton, out):  # noqa: ANN001, ANN202
+def _pairs_parallel(points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
     for k in numba.prange(out.size):
-        _pair_distance(k, points, centers, axes, cos_h, sin_h, n_newton, out)
+        _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out)
 
 
 def pairwise_distances(
@@ -266,11 +274,39 @@ def pairwise_distances(
     Returns:
         ``(E, N, M)`` signed distances (m), as :func:`nearest_on_ellipsoids` on the pairs.
     """
+    on = np.ones(headings.shape, dtype=bool)
+    return region_distances(points, centers, axes, np.cos(headings), np.sin(headings), on)
+
+
+def region_distances(
+    points: np.ndarray,
+    centers: np.ndarray,
+    axes: np.ndarray,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    active: np.ndarray,
+) -> np.ndarray:
+    """:func:`pairwise_distances` from the headings' cosines and sines, ``inf`` where inactive.
+
+    The world keeps the cosines and sines of its regions' headings (numpy's, the same
+    numbers as :func:`pairwise_distances` takes), so a step does not compute them again.
+
+    Args:
+        points: ``(E, N, 3)`` positions (m).
+        centers: ``(E, M, 3)`` ellipsoid centres (m).
+        axes: ``(E, M, 3)`` semi-axes (m), already validated.
+        cos_h: ``(E, M)`` cosines of the headings.
+        sin_h: ``(E, M)`` sines of the headings.
+        active: ``(E, M)`` bool; inactive ellipsoids give ``inf``.
+
+    Returns:
+        ``(E, N, M)`` signed distances (m).
+    """
     e, n, _ = points.shape
     out = np.empty((e, n, centers.shape[1]))
     fn = _pairs_parallel if _parallel(out.size) else _pairs_serial
     c = np.ascontiguousarray
-    fn(c(points), c(centers), c(axes), np.cos(headings), np.sin(headings), _N_NEWTON, out)
+    fn(c(points), c(centers), c(axes), c(cos_h), c(sin_h), c(active), _N_NEWTON, out)
     return out
 
 

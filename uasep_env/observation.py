@@ -265,13 +265,8 @@ def _gather_inputs(
     pos = world.est_pos[r]
     progress = np.minimum(world.time[r] / world.config.episode_duration, 1.0)
     m = world.n_obstacles if layout.k_obstacles else 0
-    if m:
-        # Estimated UAV positions against the predicted ellipsoids.
-        region = world.region_distances(pos, rows)
-        heading = world.pred_heading[r]
-    else:
-        region = np.zeros((*pos.shape[:2], 0))
-        heading = np.zeros((len(pos), 0))
+    # Estimated UAV positions against the predicted ellipsoids (none if none is observed).
+    region = world.region_distances(pos, rows) if m else np.zeros((*pos.shape[:2], 0))
     return _Inputs(
         pos,
         world.est_vel[r],
@@ -288,8 +283,8 @@ def _gather_inputs(
         world.obs_est_vel[r, :m],
         world.pred_center[r, :m],
         world.pred_axes[r, :m],
-        np.cos(heading),
-        np.sin(heading),
+        world.pred_cos[r, :m],
+        world.pred_sin[r, :m],
         world.obstacles.active[r, :m],
     )
 

@@ -99,6 +99,8 @@ class World:
         pred_center: ``(E, M, 3)`` centres of the predicted reachable ellipsoids (m).
         pred_axes: ``(E, M, 3)`` their semi-axes (longitudinal, lateral, vertical) (m).
         pred_heading: ``(E, M)`` their headings (rad).
+        pred_cos: ``(E, M)`` the headings' cosines (numpy's ``cos``).
+        pred_sin: ``(E, M)`` the headings' sines.
         slots: ``(E, N, 3)`` formation pattern (m, formation frame).
         plan: The planned trajectories (:class:`PlannedTrajectory`).
         plan_center: ``(E, 3)`` planned formation centre now (m); read-only, new arrays
@@ -159,6 +161,7 @@ class World:
         self.pred_center = np.zeros((e, m, 3))
         self.pred_axes = np.ones((e, m, 3))
         self.pred_heading = np.zeros((e, m))
+        self.pred_cos, self.pred_sin = np.ones((e, m)), np.zeros((e, m))
         self.slots = np.zeros((e, n, 3))
         self.plan = PlannedTrajectory(np.tile(np.eye(N_WAYPOINTS, 3)[None], (e, 1, 1)), 1.0)
         # Each UAV's planned offset from the centre along each segment (fixed per episode).
@@ -446,6 +449,8 @@ class World:
         "obs_est_vel",
         "pred_center",
         "pred_heading",
+        "pred_cos",
+        "pred_sin",
         "min_uav_dist",
         "min_obs_dist",
     )
@@ -533,10 +538,12 @@ class World:
         est_pos, offset = self.obs_est_pos[r], self.pred_offset[r]
         air = self.obs_est_vel[r] - self.obstacles.wind[r, None, :]  # heading: airspeed's
         heading = np.arctan2(air[..., 1], air[..., 0])
+        cos_h, sin_h = np.cos(heading), np.sin(heading)
         self.pred_heading[r] = heading
+        self.pred_cos[r], self.pred_sin[r] = cos_h, sin_h  # distances and observations
         center = np.empty_like(est_pos)
-        center[..., 0] = est_pos[..., 0] + offset * np.cos(heading)
-        center[..., 1] = est_pos[..., 1] + offset * np.sin(heading)
+        center[..., 0] = est_pos[..., 0] + offset * cos_h
+        center[..., 1] = est_pos[..., 1] + offset * sin_h
         center[..., 2] = est_pos[..., 2]
         self.pred_center[r] = center
 
@@ -595,6 +602,12 @@ class World:
         p = self.uav_pos[sel] if pos is None else pos
         if not self.n_obstacles:
             return np.zeros((*p.shape[:2], 0))
+        if (_kernels := _numba.kernels()) is not None:
+            ob = self.obstacles
+            return _kernels.region_distances(
+                p, self.pred_center[sel], self.pred_axes[sel], self.pred_cos[sel],
+                self.pred_sin[sel], ob.active[sel],
+            )  # fmt: skip
         d = reachable.pairwise_distances(
             p, self.pred_center[sel], self.pred_axes[sel], self.pred_heading[sel]
         )
