@@ -132,6 +132,8 @@ def _zero(env):
             r"action of uav_0 value 1.5 at index \(1,\) is outside",
         ),
         (lambda a: a.update(uav_1=0.5), r"action of uav_1 must have shape \(3,\), got \(\)"),
+        (lambda a: a.update(uav_2=[0.1, "x", 0.2]), r"action of uav_2 must be numbers, got \[0.1"),
+        (lambda a: a.update(uav_0=np.array(["a", "b", "c"])), "action of uav_0 must be numbers"),
     ],
 )
 def test_bad_actions_raise_clear_errors(env, mutate, match):

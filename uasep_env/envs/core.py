@@ -39,12 +39,15 @@ def validate_actions(
         The actions as float64, clipped only by the rounding tolerance.
 
     Raises:
-        ValueError: Naming the wrong shape, or the first non-finite or out-of-range value.
+        ValueError: Naming a value that is not a number, the wrong shape, or the first
+            non-finite or out-of-range value.
     """
-    a = np.asarray(actions, dtype=float) if not isinstance(actions, np.ndarray) else actions
+    try:
+        a = np.asarray(actions).astype(float, copy=False)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{where} must be numbers, got {actions!r}") from err
     if a.shape != shape:
         raise ValueError(f"{where} must have shape {shape}, got {a.shape}")
-    a = a.astype(float, copy=False)
     # One pass in the usual case: NaN compares false, so it fails this test too.
     if not (np.abs(a) <= 1.0 + ACTION_TOLERANCE).all():
         finite = np.isfinite(a)

@@ -209,17 +209,17 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         so that the error names the agent.
         """
         joint = np.empty((1, len(self.possible_agents), 3))
+        for agent, i in self._index.items():
+            a = actions[agent]
+            if not (isinstance(a, np.ndarray) and a.shape == (3,) and a.dtype.kind in "fiu"):
+                a = validate_actions(a, (3,), f"action of {agent}")  # lists, wrong shapes
+            joint[0, i] = a
         try:
-            for agent, i in self._index.items():
-                a = actions[agent]
-                if np.shape(a) != (3,):
-                    raise ValueError
-                joint[0, i] = a
             return validate_actions(joint, joint.shape)
-        except (ValueError, TypeError):
-            for agent, i in self._index.items():
-                joint[0, i] = validate_actions(actions[agent], (3,), f"action of {agent}")
-            raise  # pragma: no cover - the loop above names the bad action
+        except ValueError:
+            for agent in self._index:  # the same check per agent, to name the agent
+                validate_actions(actions[agent], (3,), f"action of {agent}")
+            raise
 
     def state(self) -> np.ndarray:
         """The global true state (normalised), shape ``state_space.shape``."""
