@@ -312,9 +312,15 @@ def region_distances(
 
 # ---------------------------------------------------------------------------- separations
 @numba.njit(inline="always", **_JIT)
+def _sq3(a, b, c):  # noqa: ANN001, ANN202
+    """Squared norm in the order numpy's ``einsum("...i,...i")`` adds (two SIMD lanes)."""
+    return (a * a + c * c) + b * b
+
+
+@numba.njit(inline="always", **_JIT)
 def _dist3(a, b, c):  # noqa: ANN001, ANN202
-    """Euclidean norm in the order numpy's ``einsum("...i,...i")`` adds (two SIMD lanes)."""
-    return math.sqrt((a * a + c * c) + b * b)
+    """Euclidean norm as numpy's ``sqrt(einsum("...i,...i"))``."""
+    return math.sqrt(_sq3(a, b, c))
 
 
 @numba.njit(inline="always", **_JIT)
@@ -597,11 +603,11 @@ def _reward_agent(k, x, c, weights, own, terms):  # noqa: ANN001, ANN202
     terms[3, e, i] = -min(10.0, dev / dev_scale)
     a0, a1, a2 = x.cmd[e, i, 0], x.cmd[e, i, 1], x.cmd[e, i, 2]
     u0, u1, u2 = a0 / max_acc, a1 / max_acc, a2 / max_acc
-    terms[4, e, i] = -((u0 * u0 + u2 * u2) + u1 * u1) / 3.0  # einsum's order
+    terms[4, e, i] = -_sq3(u0, u1, u2) / 3.0
     u0 = (a0 - x.prev_cmd[e, i, 0]) / max_acc
     u1 = (a1 - x.prev_cmd[e, i, 1]) / max_acc
     u2 = (a2 - x.prev_cmd[e, i, 2]) / max_acc
-    terms[5, e, i] = -((u0 * u0 + u2 * u2) + u1 * u1) / 3.0
+    terms[5, e, i] = -_sq3(u0, u1, u2) / 3.0
     terms[6, e, i] = -1.0 if (d_uav < d_col or d_obs < d_col) else -0.0
     terms[7, e, i] = 1.0
     total = 0.0

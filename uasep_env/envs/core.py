@@ -168,11 +168,6 @@ class EnvCore:
         return StepResult(obs, rewards, terms, terminated, truncated, safety)
 
     @staticmethod
-    def agent_info(result: StepResult, env: int, uav: int) -> dict:
-        """The ``info`` dict of one agent: reward terms and safety figures."""
-        return EnvCore.env_infos(result, env)[uav]
-
-    @staticmethod
     def env_infos(result: StepResult, env: int) -> list[dict]:
         """The ``info`` dicts of every agent of environment ``env``, in agent order.
 
