@@ -62,11 +62,11 @@ def _cell(agg: dict[str, Any], key: str, stat: str, fmt: str) -> str:
     return format(mean, fmt)
 
 
-def table(result: dict[str, Any]) -> str:
+def table(result: dict[str, Any], rows: tuple[tuple[str, str, str, str], ...] = ROWS) -> str:
     """A markdown table, controllers side by side (mean [95 % CI] / rate [Wilson CI])."""
     labels = list(result["results"])
     lines = ["| metric | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
-    for name, key, stat, fmt in ROWS:
+    for name, key, stat, fmt in rows:
         cells = [_cell(result["results"][p]["aggregate"], key, stat, fmt) for p in labels]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -39,20 +39,20 @@ def test_gymnasium_check_env_every_id(env_id):
 
 @pytest.mark.parametrize("cfg", GRID[:5])
 def test_gymnasium_check_env_grid(cfg):
-    env = gymnasium.make("uasep/Formation-v0", **cfg)
+    env = gymnasium.make("uasep/Formation-v1", **cfg)
     check_env(env.unwrapped, skip_render_check=True)
 
 
 def test_gymnasium_make_validates_config():
     with pytest.raises(ValueError, match="n_uavz"):
-        gymnasium.make("uasep/Formation-v0", n_uavz=3)
+        gymnasium.make("uasep/Formation-v1", n_uavz=3)
     with pytest.raises(ValueError, match="n_uavs=99"):
-        gymnasium.make("uasep/PaperEncounter-v0", n_uavs=99)
+        gymnasium.make("uasep/PaperEncounter-v1", n_uavs=99)
 
 
 def test_registration_survives_spawned_subprocesses():
     vec = gymnasium.make_vec(
-        "uasep/Formation-v0",
+        "uasep/Formation-v1",
         num_envs=2,
         vectorization_mode="async",
         vector_kwargs={"context": "spawn"},
@@ -68,7 +68,7 @@ def test_registration_survives_spawned_subprocesses():
 
 def test_import_registers_ids_in_a_fresh_interpreter():
     code = (
-        "import gymnasium, uasep_env; e = gymnasium.make('uasep/PaperEncounter-v0'); "
+        "import gymnasium, uasep_env; e = gymnasium.make('uasep/PaperEncounter-v1'); "
         "print(e.reset(seed=0)[0].shape)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -150,7 +150,7 @@ def test_bad_agent_and_spaces(env):
 
 
 def test_gym_bad_action():
-    env = gymnasium.make("uasep/Formation-v0").unwrapped
+    env = gymnasium.make("uasep/Formation-v1").unwrapped
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"shape \(9,\)"):
         env.step(np.zeros(3))

@@ -55,7 +55,7 @@ def test_obstacle_and_inner_separation_terms(core):
     assert far["separation_obstacle"] == 0.0 and near["separation_obstacle"] < 0.0
     assert near["collision"] == 0.0
     hit = _terms_with_uav2_at(core, obs + np.array([0.0, 0.0, -1.0]))
-    assert hit["collision"] == -1.0
+    assert hit["collision"] == -core.config.max_steps
     other = w.uav_pos[0, 0].copy()
     close = _terms_with_uav2_at(core, other + np.array([0.0, 4.0, 0.0]))
     closer = _terms_with_uav2_at(core, other + np.array([0.0, 3.5, 0.0]))
@@ -68,7 +68,9 @@ def test_deviation_control_smoothness_terms(core):
     on = _terms_with_uav2_at(core, plan[0, 2], cmd=np.zeros(3), prev=np.zeros(3))
     off = _terms_with_uav2_at(core, plan[0, 2] + np.array([0, 0, 20.0]))
     assert on["deviation"] == pytest.approx(0.0, abs=1e-12)
-    assert off["deviation"] == pytest.approx(-2.0)
+    assert off["deviation"] == pytest.approx(-0.5)  # 20 m off: half the cap
+    far = _terms_with_uav2_at(core, plan[0, 2] + np.array([0, 0, 180.0]))
+    assert far["deviation"] == pytest.approx(-0.9)
     assert on["control"] == 0.0 and on["smoothness"] == 0.0
     a = core.config.uav.max_accel
     t = _terms_with_uav2_at(core, plan[0, 2], cmd=np.array([a, 0, 0]), prev=np.array([-a, 0, 0]))
@@ -98,3 +100,71 @@ def test_team_mean_is_numpy_mean_bit_for_bit(n):
     got = team_mean(x)
     assert got.shape == (5, 300)
     np.testing.assert_array_equal(got, x.mean(axis=-1))
+
+
+def _weights_max_penalty(w: RewardWeights) -> float:
+    from uasep_env.rewards import REGION_TERM_CAP
+
+    return (
+        w.separation_inner
+        + w.separation_obstacle
+        + REGION_TERM_CAP * w.separation_region
+        + w.deviation
+        + w.control
+        + 4.0 * w.smoothness
+    )
+
+
+def test_default_step_reward_is_in_zero_one():
+    # Worst case of every penalty at once (smoothness reaches -4 with a full reversal)
+    # stays within the alive bonus, so no step alive is worth less than ending the episode.
+    w = RewardWeights()
+    assert w.progress == 1.0
+    assert _weights_max_penalty(w) == pytest.approx(1.0)
+    # And over real episodes with random actions (many collide, many drift far off).
+    core = EnvCore(make_config(scenario="random", episode_duration=60.0), n_envs=16)
+    core.reset(seed=3)
+    rng = np.random.default_rng(0)
+    alive = np.ones(16, dtype=bool)
+    for _ in range(300):
+        res = core.step(rng.uniform(-1, 1, size=(16, 3, 3)), active=alive)
+        no_collision = res.terms["collision"] == 0.0
+        r = res.rewards[alive][no_collision[alive]]
+        assert (r >= 0.0).all() and (r <= 1.0).all()
+        alive &= ~(res.terminated | res.truncated)
+        if not alive.any():
+            break
+
+
+def _play(cfg, seed, crash_at=None):
+    """APF episode return (mean over agents); with ``crash_at``, UAV 1 is put onto UAV 0."""
+    from uasep_env.policies import APF
+
+    core = EnvCore(cfg, n_envs=1)
+    obs = core.reset(seed=seed)
+    apf = APF(cfg)
+    total, k = 0.0, 0
+    while True:
+        k += 1
+        if crash_at is not None and k == crash_at:
+            w = core.world
+            w.uav_pos[0, 1] = w.uav_pos[0, 0] + np.array([0.0, 1.0, 0.0])
+            w.uav_vel[0, 1] = w.uav_vel[0, 0]
+        res = core.step(apf(obs))
+        obs = res.obs
+        total += float(res.rewards.mean())
+        if res.terminated[0] or res.truncated[0]:
+            return total, bool(res.terminated[0]), k
+
+
+@pytest.mark.parametrize("scenario", ["paper", "crossing"])
+def test_collision_never_pays(scenario):
+    """An episode ending in a collision returns less than the collision-free one, at any step."""
+    cfg = make_config(scenario=scenario, episode_duration=60.0)
+    safe, terminated, steps = _play(cfg, seed=7)
+    assert not terminated and steps == cfg.max_steps
+    assert safe > 0.0
+    for crash_at in (1, 2, steps // 3, steps // 2, steps - 5, steps - 1, steps):
+        crashed, terminated, k = _play(cfg, seed=7, crash_at=crash_at)
+        assert terminated and k == crash_at
+        assert crashed < 0.0 < safe, (crash_at, crashed, safe)

@@ -1,120 +1,429 @@
-"""Train one PPO policy shared by every UAV (parameter sharing), then compare it with the APF.
+"""Train one PPO policy shared by every UAV (parameter sharing), pure or residual on the APF.
 
 A single-file script in the CleanRL style: every option is a field of :class:`Args`.
 
-    python train/ppo_shared.py --total-timesteps 2000000 --n-envs 64 --scenario random
+    python train/ppo_shared.py                                 # pure policy
+    python train/ppo_shared.py --action-mode residual_apf      # = train/ppo_residual_apf.py
+    python train/ppo_shared.py --resume runs/ppo_shared/checkpoints/latest
 
 Each UAV of each of ``n_envs`` batched environments is one SB3 sub-environment
-(:class:`uasep_env.envs.sb3.UAVSharedVecEnv`). After training, the model is saved and
-evaluated against the APF on the same seeded encounters with :mod:`uasep_env.rollout` and
-:mod:`uasep_env.metrics`; the summary is printed. Requires the ``train`` extra (install
-``torch==2.13.0`` first).
+(:class:`uasep_env.envs.sb3.UAVSharedVecEnv`), wrapped in SB3's ``VecNormalize``
+(observation and return normalisation). The defaults are the ones the sweep in
+``train/README.md`` chose. A run writes to ``out_dir``:
+
+* ``progress.csv``: one row per PPO iteration (agent-steps, wall time, and over the last
+  200 finished episodes: mean return per agent, collision rate, loss-of-separation rate,
+  mean max deviation, mean length); ``curves.png`` drawn from it at the end;
+* ``checkpoints/step_<agent-steps>/`` every ``checkpoint_every`` agent-steps, and
+  ``checkpoints/latest``: what ``--resume`` needs (torch state dicts, loaded weights-only,
+  normalisation statistics, counters) and ``policy.zip``, the policy checkpoint;
+* ``policy.zip``: the final policy checkpoint (:mod:`uasep_env.policies.learned`: config,
+  action mode, normalisation and weights; loads without unpickling, runs in numpy);
+* ``validation.json``: the policy and the APF on ``eval_episodes`` validation encounters.
+
+Seeds: training environments are seeded ``seed + e`` inside
+:data:`uasep_env.scenarios.TRAINING_SEEDS`; validation uses
+:data:`~uasep_env.scenarios.VALIDATION_SEEDS`; neither meets the held-out bank
+(:data:`~uasep_env.scenarios.HELD_OUT_SEEDS`) that ``baselines/learned_vs_apf.py`` uses.
+Requires the ``train`` extra (install ``torch==2.13.0`` first).
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
+import csv
 import dataclasses
 import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 
 @dataclass
 class Args:
     """Command-line options (``--total-timesteps``, ``--n-envs``, ...)."""
 
+    action_mode: str = "direct"  # "direct" (pure policy) or "residual_apf"
+    residual_scale: float = 0.5  # residual_apf: largest correction, fraction of max_accel
     scenario: str = "random"
     n_uavs: int = 3
     n_obstacles: int = 1
-    episode_duration: float = 120.0  # s
-    total_timesteps: int = 500_000  # agent-steps
+    episode_duration: float = 200.0  # s
+    total_timesteps: int = 30_000_000  # agent-steps
+    max_minutes: float = 60.0  # wall-clock budget; training stops when it is spent
     n_envs: int = 32
-    n_steps: int = 128  # rollout length per sub-environment
-    batch_size: int = 4096
+    n_steps: int = 256  # rollout length per sub-environment
+    batch_size: int = 8192
+    n_epochs: int = 5
     learning_rate: float = 3e-4
     gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    log_std_init: float = -0.5
+    hidden: str = "128,128"
+    activation: str = "tanh"
+    norm_obs: bool = True
+    norm_reward: bool = True
     seed: int = 0
-    eval_episodes: int = 20
+    checkpoint_every: int = 2_000_000  # agent-steps
+    eval_episodes: int = 50
     out_dir: str = "runs/ppo_shared"
+    resume: str = ""  # a checkpoint directory to continue from
     tensorboard: bool = False
     torch_threads: int = 1
+    progress: bool = True
 
 
-def parse_args(argv: list[str] | None = None) -> Args:
+def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:
     """Build :class:`Args` from the command line (one ``--kebab-case`` flag per field)."""
+    base = defaults or Args()
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawTextHelpFormatter
     )
     for f in dataclasses.fields(Args):
         flag = "--" + f.name.replace("_", "-")
+        default = getattr(base, f.name)
         if f.type in ("bool", bool):
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=f.default)
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default)
         else:
             cast = {"int": int, "float": float, "str": str}[str(f.type)]
-            parser.add_argument(flag, type=cast, default=f.default)
-    return Args(**vars(parser.parse_args(argv)))
+            parser.add_argument(flag, type=cast, default=default)
+    args = Args(**vars(parser.parse_args(argv)))
+    if args.action_mode not in ("direct", "residual_apf"):
+        parser.error(
+            f"argument --action-mode: must be direct or residual_apf, got {args.action_mode!r}"
+        )
+    for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs"):
+        if getattr(args, name) < 1:
+            parser.error(f"argument --{name.replace('_', '-')}: must be >= 1")
+    if args.max_minutes <= 0:
+        parser.error("argument --max-minutes: must be > 0")
+    return args
 
 
-def main(argv: list[str] | None = None) -> dict:
-    """Train, save, evaluate; returns the evaluation summary."""
-    args = parse_args(argv)
-    import torch  # lazy: the training extra
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import VecMonitor
-
+def make_env_config(args: Args) -> Any:
+    """The environment config of a run (every reward weight at its default)."""
     from uasep_env import make_config
-    from uasep_env.envs.sb3 import UAVSharedVecEnv
-    from uasep_env.metrics import aggregate, episode_metrics
-    from uasep_env.policies import APF, SB3Policy
-    from uasep_env.rollout import run_episodes
 
-    torch.set_num_threads(args.torch_threads)
-    config = make_config(
+    return make_config(
         scenario=args.scenario,
         n_uavs=args.n_uavs,
         n_obstacles=args.n_obstacles,
         episode_duration=args.episode_duration,
+        action={"mode": args.action_mode, "residual_scale": args.residual_scale},
     )
-    out = Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+
+
+def _hidden(args: Args) -> list[int]:
+    try:
+        sizes = [int(h) for h in args.hidden.split(",") if h.strip()]
+    except ValueError as err:
+        raise SystemExit(f"--hidden: comma-separated layer widths, got {args.hidden!r}") from err
+    if not sizes or min(sizes) < 1:
+        raise SystemExit(f"--hidden: comma-separated layer widths, got {args.hidden!r}")
+    return sizes
+
+
+def build(args: Args, config: Any) -> tuple[Any, Any]:
+    """The vectorised env (normalised) and a fresh PPO model for ``args``."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+    from uasep_env.scenarios import check_training_seeds
+
+    check_training_seeds(args.seed, args.n_envs)
     venv = VecMonitor(UAVSharedVecEnv(n_envs=args.n_envs, config=config, seed=args.seed))
+    venv = VecNormalize(
+        venv, norm_obs=args.norm_obs, norm_reward=args.norm_reward, gamma=args.gamma
+    )
+    hidden = _hidden(args)
+    act = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[args.activation]
     model = PPO(
         "MlpPolicy",
         venv,
         n_steps=args.n_steps,
         batch_size=args.batch_size,
+        n_epochs=args.n_epochs,
         learning_rate=args.learning_rate,
         gamma=args.gamma,
+        gae_lambda=args.gae_lambda,
+        clip_range=args.clip_range,
+        ent_coef=args.ent_coef,
+        policy_kwargs={
+            "net_arch": {"pi": hidden, "vf": hidden},
+            "activation_fn": act,
+            "log_std_init": args.log_std_init,
+        },
         seed=args.seed,
         device="cpu",
-        verbose=1,
-        tensorboard_log=str(out / "tb") if args.tensorboard else None,
+        verbose=0,
+        tensorboard_log=str(Path(args.out_dir) / "tb") if args.tensorboard else None,
     )
-    start = time.perf_counter()
-    model.learn(total_timesteps=args.total_timesteps, progress_bar=False)
-    train_s = time.perf_counter() - start
-    model.save(out / "model.zip")
+    return venv, model
 
-    seeds = list(range(10_000, 10_000 + args.eval_episodes))  # held-out encounters
-    summary: dict = {"config": config.to_dict(), "train_seconds": train_s, "policies": {}}
-    for name, policy in (("ppo", SB3Policy(model, config)), ("apf", APF(config))):
-        episodes = run_episodes(policy, config, seeds)
-        agg = aggregate([episode_metrics(e.record) for e in episodes])
-        summary["policies"][name] = {
-            k: agg[k]["mean"] if "mean" in agg[k] else agg[k].get("rate")
-            for k in (
-                "episode.min_uav_separation",
-                "episode.min_obstacle_distance",
-                "episode.collision",
-                "episode.loss_of_separation",
-                "episode.max_deviation",
-            )
-            if k in agg
-        }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
-    print(json.dumps(summary["policies"], indent=2, default=str))
+
+def export_policy(model: Any, venv: Any, config: Any, args: Args, path: Path, info: dict) -> Path:
+    """Write the actor and the normalisation of ``model`` as a policy checkpoint."""
+    import torch
+
+    from uasep_env.policies.learned import PolicyCheckpoint, save_policy
+
+    linears = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
+    linears.append(model.policy.action_net)
+    weights = [(m.weight.detach().cpu().numpy(), m.bias.detach().cpu().numpy()) for m in linears]
+    meta = PolicyCheckpoint(
+        config=config.to_dict(),
+        obs_dim=int(venv.observation_space.shape[0]),
+        activation=args.activation,
+        hidden=tuple(_hidden(args)),
+        obs_norm=bool(venv.norm_obs),
+        clip_obs=float(venv.clip_obs),
+        obs_epsilon=float(venv.epsilon),
+        algorithm="PPO",
+        info={**info, "args": dataclasses.asdict(args)},
+    )
+    rms = venv.obs_rms
+    return save_policy(path, meta, weights, rms.mean, rms.var)
+
+
+def save_checkpoint(
+    model: Any, venv: Any, config: Any, args: Args, directory: Path, info: dict
+) -> None:
+    """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``."""
+    import torch
+
+    directory.mkdir(parents=True, exist_ok=True)
+    torch.save(
+        {"policy": model.policy.state_dict(), "optimizer": model.policy.optimizer.state_dict()},
+        directory / "state.pt",
+    )
+    o, r = venv.obs_rms, venv.ret_rms
+    np.savez(
+        directory / "normalization.npz",
+        obs_mean=o.mean, obs_var=o.var, obs_count=o.count,
+        ret_mean=r.mean, ret_var=r.var, ret_count=r.count,
+    )  # fmt: skip
+    (directory / "state.json").write_text(
+        json.dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+    )
+    export_policy(model, venv, config, args, directory / "policy.zip", info)
+
+
+def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
+    """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling)."""
+    import torch
+
+    state = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
+    model.policy.load_state_dict(state["policy"])
+    model.policy.optimizer.load_state_dict(state["optimizer"])
+    with np.load(directory / "normalization.npz", allow_pickle=False) as z:
+        venv.obs_rms.mean, venv.obs_rms.var = z["obs_mean"], z["obs_var"]
+        venv.obs_rms.count = float(z["obs_count"])
+        venv.ret_rms.mean, venv.ret_rms.var = z["ret_mean"], z["ret_var"]
+        venv.ret_rms.count = float(z["ret_count"])
+    info = json.loads((directory / "state.json").read_text())
+    model.num_timesteps = int(info["agent_steps"])
+    return info
+
+
+CSV_FIELDS = (
+    "agent_steps",
+    "wall_s",
+    "episodes",
+    "return_mean",
+    "collision_rate",
+    "loss_of_separation_rate",
+    "max_deviation_mean",
+    "episode_length_mean",
+)
+
+
+def make_callback(args: Args, config: Any, venv: Any, wall_offset: float, total: int) -> Any:
+    """The SB3 callback: progress bar, learning curve rows, checkpoints, wall budget."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    out = Path(args.out_dir)
+    n_uavs = config.n_uavs
+
+    class Progress(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.t0 = time.perf_counter() - wall_offset
+            self.window: collections.deque = collections.deque(maxlen=200)
+            self.episodes = 0
+            self.next_ckpt = (
+                self.num_timesteps // args.checkpoint_every + 1
+            ) * args.checkpoint_every
+            new = not (out / "progress.csv").exists()
+            self.csv_file = (out / "progress.csv").open("a", newline="")
+            self.csv = csv.DictWriter(self.csv_file, fieldnames=CSV_FIELDS)
+            if new:
+                self.csv.writeheader()
+            self.bar = None
+            if args.progress:
+                from tqdm import tqdm
+
+                self.bar = tqdm(
+                    total=total, initial=self.num_timesteps, unit="step", unit_scale=True,
+                    desc=args.action_mode, dynamic_ncols=True,
+                )  # fmt: skip
+
+        def wall(self) -> float:
+            return time.perf_counter() - self.t0
+
+        def summary(self) -> dict:
+            w = list(self.window)
+            if not w:
+                return {}
+            return {
+                "return_mean": float(np.mean([e[0] for e in w])),
+                "collision_rate": float(np.mean([e[1] for e in w])),
+                "loss_of_separation_rate": float(np.mean([e[2] for e in w])),
+                "max_deviation_mean": float(np.mean([e[3] for e in w])),
+                "episode_length_mean": float(np.mean([e[4] for e in w])),
+            }
+
+        def _on_step(self) -> bool:
+            for k, info in enumerate(self.locals["infos"]):
+                if k % n_uavs == 0 and "episode_safety" in info:
+                    s = info["episode_safety"]
+                    ep = info.get("episode", {"r": np.nan, "l": np.nan})
+                    row = (ep["r"], s["collision"], s["loss_of_separation"])
+                    self.window.append((*row, s["max_deviation"], ep["l"]))
+                    self.episodes += 1
+            if self.bar is not None:
+                self.bar.update(self.num_timesteps - self.bar.n)
+            if self.num_timesteps >= self.next_ckpt:
+                self.checkpoint()
+                self.next_ckpt += args.checkpoint_every
+            return self.wall() < args.max_minutes * 60.0
+
+        def _on_rollout_end(self) -> None:
+            s = self.summary()
+            row = {"agent_steps": self.num_timesteps, "wall_s": round(self.wall(), 2),
+                   "episodes": self.episodes, **s}  # fmt: skip
+            self.csv.writerow(row)
+            self.csv_file.flush()
+            if self.bar is not None and s:
+                self.bar.set_postfix(
+                    ret=f"{s['return_mean']:.0f}",
+                    coll=f"{s['collision_rate']:.1%}",
+                    los=f"{s['loss_of_separation_rate']:.1%}",
+                    dev=f"{s['max_deviation_mean']:.1f}m",
+                )
+            if args.tensorboard and s:
+                for k, v in s.items():
+                    self.logger.record(f"uasep/{k}", v)
+
+        def info(self) -> dict:
+            return {"agent_steps": int(self.num_timesteps), "wall_s": self.wall(),
+                    "episodes": self.episodes, **self.summary()}  # fmt: skip
+
+        def checkpoint(self) -> None:
+            info = self.info()
+            d = out / "checkpoints" / f"step_{self.num_timesteps}"
+            save_checkpoint(self.model, venv, config, args, d, info)
+            latest = out / "checkpoints" / "latest"
+            if latest.is_symlink() or latest.exists():
+                latest.unlink()
+            latest.symlink_to(d.name)
+
+        def _on_training_end(self) -> None:
+            self.checkpoint()
+            self.csv_file.close()
+            if self.bar is not None:
+                self.bar.close()
+
+    return Progress()
+
+
+def plot_curves(csv_path: Path, png_path: Path, title: str = "") -> Path:
+    """Learning curves (return, collision and loss-of-separation rates, deviation) as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with csv_path.open() as f:
+        rows = [r for r in csv.DictReader(f) if r.get("return_mean")]
+    data = {k: np.array([float(r[k]) for r in rows]) for k in CSV_FIELDS}
+    fig, axes = plt.subplots(2, 4, figsize=(16, 6.5), sharey="col")
+    panels = (
+        ("return_mean", "mean return per agent"),
+        ("collision_rate", "collision rate"),
+        ("loss_of_separation_rate", "loss-of-separation rate"),
+        ("max_deviation_mean", "mean max deviation (m)"),
+    )
+    for row, (x_key, x_label, scale) in enumerate(
+        (("agent_steps", "agent-steps (millions)", 1e-6), ("wall_s", "wall time (min)", 1 / 60))
+    ):
+        for col, (key, label) in enumerate(panels):
+            ax = axes[row, col]
+            ax.plot(data[x_key] * scale, data[key], lw=1.2)
+            ax.set_xlabel(x_label)
+            ax.set_title(label, fontsize=10)
+            ax.grid(alpha=0.3)
+    fig.suptitle(title or csv_path.parent.name)
+    fig.tight_layout()
+    png_path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png_path, dpi=90)
+    plt.close(fig)
+    return png_path
+
+
+def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
+    """Train (or resume), export the policy, validate against the APF; returns the summary."""
+    args = parse_args(argv, defaults)
+    import torch  # lazy: the training extra
+
+    from uasep_env.evaluation import evaluate
+    from uasep_env.policies import load_policy
+    from uasep_env.scenarios import VALIDATION_SEEDS
+
+    torch.set_num_threads(args.torch_threads)
+    config = make_env_config(args)
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    venv, model = build(args, config)
+    wall_offset = 0.0
+    if args.resume:
+        info = load_checkpoint(model, venv, Path(args.resume))
+        wall_offset = float(info["wall_s"])
+        print(f"resumed from {args.resume} at {model.num_timesteps:,} agent-steps")
+    remaining = max(0, args.total_timesteps - model.num_timesteps)
+    callback = make_callback(args, config, venv, wall_offset, args.total_timesteps)
+    model.learn(
+        total_timesteps=remaining,
+        callback=callback,
+        reset_num_timesteps=not args.resume,
+        tb_log_name=args.action_mode,
+    )
+    info = callback.info()
+    policy_path = export_policy(model, venv, config, args, out / "policy.zip", info)
+    plot_curves(out / "progress.csv", out / "curves.png", f"PPO ({args.action_mode})")
+
+    eval_cfg = config.replace(action={"mode": "direct"})
+    seeds = list(VALIDATION_SEEDS)[: args.eval_episodes]
+    summary: dict = {"training": info, "policy": str(policy_path), "validation": {}}
+    if seeds:
+        policies = {"learned": load_policy(policy_path, eval_cfg), "apf": "apf"}
+        result = evaluate(policies, eval_cfg, seeds)
+        keys = ("collision", "loss_of_separation", "max_deviation")
+        for label, res in result["results"].items():
+            agg = res["aggregate"]
+            summary["validation"][label] = {
+                k: agg[f"episode.{k}"].get("mean", agg[f"episode.{k}"].get("rate"))
+                for k in keys
+                if f"episode.{k}" in agg
+            }
+    (out / "validation.json").write_text(json.dumps(summary, indent=2, default=str))
+    print(json.dumps(summary, indent=2, default=str))
     return summary
 
 

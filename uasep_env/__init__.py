@@ -1,7 +1,7 @@
 """uasep-env: separation management for UAV formations among non-cooperative obstacles.
 
 * :func:`parallel_env` -- the PettingZoo parallel environment (primary API).
-* ``gymnasium.make("uasep/Formation-v0")`` / ``"uasep/PaperEncounter-v0"`` -- centralised
+* ``gymnasium.make("uasep/Formation-v1")`` / ``"uasep/PaperEncounter-v1"`` -- centralised
   Gymnasium views, registered on import (``gymnasium.make_vec`` gives the batched vector env).
 * :class:`World` -- the batched numpy core, the one transition function.
 * :mod:`uasep_env.policies` -- the paper's APF and its comparison methods.

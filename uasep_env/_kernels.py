@@ -580,12 +580,14 @@ def _reward_agent(k, x, c, weights, own, terms):  # noqa: ANN001, ANN202
 
     ``x`` is the :class:`uasep_env.rewards._Inputs` named tuple; ``c`` holds
     ``(max_accel, separation_distance, obstacle_separation, collision_distance,
-    deviation_scale)``. Terms in :data:`uasep_env.rewards.REWARD_TERMS` order.
+    deviation_scale, region_cap, max_steps)``. Terms in :data:`uasep_env.rewards.REWARD_TERMS`
+    order.
     """
     n = x.uav_pos.shape[1]
     e = k // n
     i = k % n
     max_acc, d_sep, d_obs_sep, d_col, dev_scale = c[0], c[1], c[2], c[3], c[4]
+    region_cap, max_steps = c[5], c[6]
     d_uav, d_obs = x.min_uav_dist[e, i], x.min_obs_dist[e, i]
     d_region = np.inf
     for j in range(x.region.shape[2]):
@@ -594,13 +596,13 @@ def _reward_agent(k, x, c, weights, own, terms):  # noqa: ANN001, ANN202
     terms[0, e, i] = -(t * t)
     t = max(0.0, 1.0 - d_obs / d_obs_sep)
     terms[1, e, i] = -(t * t)
-    terms[2, e, i] = -min(2.0, max(0.0, 1.0 - d_region / d_obs_sep))
+    terms[2, e, i] = -min(region_cap, max(0.0, 1.0 - d_region / d_obs_sep))
     dev = _norm3(
         x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0],
         x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
         x.uav_pos[e, i, 2] - x.plan_pos[e, i, 2],
     )
-    terms[3, e, i] = -min(10.0, dev / dev_scale)
+    terms[3, e, i] = -(dev / (dev + dev_scale))
     a0, a1, a2 = x.cmd[e, i, 0], x.cmd[e, i, 1], x.cmd[e, i, 2]
     u0, u1, u2 = a0 / max_acc, a1 / max_acc, a2 / max_acc
     terms[4, e, i] = -_sq3(u0, u1, u2) / 3.0
@@ -608,7 +610,10 @@ def _reward_agent(k, x, c, weights, own, terms):  # noqa: ANN001, ANN202
     u1 = (a1 - x.prev_cmd[e, i, 1]) / max_acc
     u2 = (a2 - x.prev_cmd[e, i, 2]) / max_acc
     terms[5, e, i] = -_sq3(u0, u1, u2) / 3.0
-    terms[6, e, i] = -1.0 if (d_uav < d_col or d_obs < d_col) else -0.0
+    hit = False  # any UAV of the environment (the collision ends everyone's episode)
+    for j in range(n):
+        hit = hit or x.min_uav_dist[e, j] < d_col or x.min_obs_dist[e, j] < d_col
+    terms[6, e, i] = -max_steps if hit else -0.0
     terms[7, e, i] = 1.0
     total = 0.0
     for t_idx in range(terms.shape[0]):

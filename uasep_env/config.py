@@ -18,8 +18,10 @@ from typing import Any, TypeVar
 import numpy as np
 
 __all__ = [
+    "ACTION_MODES",
     "FORMATION_PATTERNS",
     "SCENARIOS",
+    "ActionConfig",
     "EnvConfig",
     "NoiseConfig",
     "ObservationConfig",
@@ -273,25 +275,60 @@ class RewardWeights:
         deviation: Weight of the planned-trajectory deviation term.
         control: Weight of the control-effort term.
         smoothness: Weight of the acceleration-change term.
-        collision: Weight of the collision event term.
-        progress: Weight of the per-step alive/progress bonus.
+        collision: Weight of the collision term (``-max_steps`` on a collision).
+        progress: Weight of the per-step alive bonus.
         shared: Share of the team-mean reward in each agent's reward, in [0, 1].
     """
 
-    separation_inner: float = 1.0
-    separation_obstacle: float = 1.0
-    separation_region: float = 1.0
-    deviation: float = 1.0
+    # Defaults: a step's reward is in [0, 1] and a collision costs a whole episode (why:
+    # uasep_env.rewards).
+    separation_inner: float = 0.1
+    separation_obstacle: float = 0.25
+    separation_region: float = 0.05
+    deviation: float = 0.4
     control: float = 0.05
-    smoothness: float = 0.05
-    collision: float = 10.0
-    progress: float = 0.0
+    smoothness: float = 0.025
+    collision: float = 1.0
+    progress: float = 1.0
     shared: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             _finite(f"reward.{f.name}", getattr(self, f.name))
         _check(0.0 <= self.shared <= 1.0, "reward.shared", self.shared, "must be in [0, 1]")
+
+
+#: Names accepted for ``ActionConfig.mode`` (see :mod:`uasep_env.actions`).
+ACTION_MODES = ("direct", "residual_apf")
+
+
+@dataclass(frozen=True)
+class ActionConfig:
+    """What an agent's action means (see :mod:`uasep_env.actions`).
+
+    Attributes:
+        mode: ``"direct"``: the action is the commanded acceleration, as a fraction of
+            ``uav.max_accel`` per axis. ``"residual_apf"``: the action is a bounded
+            correction added to the paper's APF command for the same observation; the
+            observation then ends with that APF command (3 more entries).
+        residual_scale: In ``residual_apf`` mode, the largest correction per axis, as a
+            fraction of ``uav.max_accel`` (the sum is clipped to the acceleration bound).
+    """
+
+    mode: str = "direct"
+    residual_scale: float = 0.5  # fraction of uav.max_accel
+
+    def __post_init__(self) -> None:
+        _check(
+            self.mode in ACTION_MODES, "action.mode", self.mode, f"must be one of {ACTION_MODES}"
+        )
+        _finite("action.residual_scale", self.residual_scale)
+        _check(
+            0.0 < self.residual_scale <= 2.0,
+            "action.residual_scale",
+            self.residual_scale,
+            "must be in (0, 2]",
+        )
 
 
 @dataclass(frozen=True)
@@ -316,6 +353,7 @@ class EnvConfig:
         prediction: Reachable-set prediction and filtering.
         observation: Observation options.
         reward: Reward weights.
+        action: What an action means (direct command or residual on the APF).
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
     """
 
@@ -334,6 +372,7 @@ class EnvConfig:
     prediction: PredictionConfig = field(default_factory=PredictionConfig)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     reward: RewardWeights = field(default_factory=RewardWeights)
+    action: ActionConfig = field(default_factory=ActionConfig)
     render_mode: str | None = None
 
     def __post_init__(self) -> None:
@@ -390,6 +429,12 @@ class EnvConfig:
                 getattr(self, name),
                 f"must be a {cls.__name__} (use make_config to build from dicts)",
             )
+        _check(
+            self.action.mode != "residual_apf" or self.observation.clip >= 1.0,
+            "observation.clip",
+            self.observation.clip,
+            "must be >= 1 with action.mode='residual_apf' (the observed APF command is in [-1, 1])",
+        )
 
     @property
     def step_duration(self) -> float:
@@ -417,6 +462,7 @@ _NESTED: dict[str, type] = {
     "prediction": PredictionConfig,
     "observation": ObservationConfig,
     "reward": RewardWeights,
+    "action": ActionConfig,
 }
 
 

@@ -247,6 +247,7 @@ def _run_chunk(
     settle_time: float,
     hold_time: float,
     keep: int,
+    allow_pickle: bool = False,
 ) -> tuple[list[dict[str, Any]], list[Episode]]:
     """Play one chunk of seeds with one policy and compute its metrics (pool task).
 
@@ -258,11 +259,12 @@ def _run_chunk(
         settle_time: Start of the deviation / fluctuation statistics (s).
         hold_time: Hold time of the conflict timeline (s).
         keep: Number of leading episodes of the chunk to return whole (for plots).
+        allow_pickle: Let SB3 model files be unpickled (see :func:`make_policy`).
 
     Returns:
         Per-episode JSON-able entries, and the first ``keep`` :class:`Episode` objects.
     """
-    policy = make_policy(spec, config) if isinstance(spec, str) else spec
+    policy = make_policy(spec, config, allow_pickle) if isinstance(spec, str) else spec
     if isinstance(spec, str) and isinstance(policy, RandomPolicy):
         policy = RandomPolicy(config, seed=seeds[0])  # independent draws per chunk
     episodes = run_episodes(
@@ -317,6 +319,7 @@ def evaluate(
     confidence: float = 0.95,
     keep_episodes: int = 0,
     progress: Callable[[int], None] | None = None,
+    allow_pickle: bool = False,
 ) -> dict[str, Any]:
     """Evaluate policies on the same seeds and aggregate the paper's metrics.
 
@@ -338,6 +341,8 @@ def evaluate(
         confidence: Confidence level of the aggregate intervals.
         keep_episodes: Number of leading episodes per policy to keep whole (for plots).
         progress: Called with the number of episodes finished after each chunk.
+        allow_pickle: Let stable-baselines3 model files be unpickled (runs code from the
+            file; policy checkpoints never need it).
 
     Returns:
         A dict::
@@ -385,6 +390,7 @@ def evaluate(
                 settle_time,
                 hold_time,
                 keep_episodes if ci == 0 else 0,
+                allow_pickle,
             ),
         )
         for label, spec in specs.items()
@@ -774,7 +780,7 @@ def build_parser() -> argparse.ArgumentParser:
             "  uasep-eval --policy apf --scenario random --episodes 100 --workers 4 "
             "--json out.json\n"
             "  uasep-eval --config noise=false --config obstacle.speed=6 --csv out.csv\n"
-            f"policies: {', '.join(POLICIES)} or the path of a saved SB3 model"
+            f"policies: {', '.join(POLICIES)} or the path of a policy checkpoint (.zip)"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -869,6 +875,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="no progress bar and no summary on stdout (errors still go to stderr)",
     )
+    p.add_argument(
+        "--allow-pickle",
+        action="store_true",
+        help="let a stable-baselines3 model file be unpickled, which runs code from it; "
+        "only for files you trust (policy checkpoints never need it)",
+    )
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return p
 
@@ -895,7 +907,7 @@ def _run(argv: Sequence[str] | None) -> int:
         if name not in POLICIES and not Path(name).exists():
             parser.error(
                 f"argument --policy: unknown policy {name!r} (use one of "
-                f"{', '.join(POLICIES)} or the path of a saved SB3 model)"
+                f"{', '.join(POLICIES)} or the path of a policy checkpoint)"
             )
     if args.deviation_threshold <= 0:
         parser.error(
@@ -907,7 +919,7 @@ def _run(argv: Sequence[str] | None) -> int:
         parser.error(f"argument --config: {err}")
     for name in names:  # fail early on models that do not load
         try:
-            make_policy(name, cfg)
+            make_policy(name, cfg, args.allow_pickle)
         except Exception as err:
             parser.error(f"argument --policy: cannot load {name!r}: {err}")
 
@@ -925,6 +937,7 @@ def _run(argv: Sequence[str] | None) -> int:
             hold_time=args.hold_time,
             keep_episodes=1 if args.plot is not None else 0,
             progress=bar.update if bar is not None else None,
+            allow_pickle=args.allow_pickle,
         )
     finally:
         if bar is not None:

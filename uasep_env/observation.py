@@ -35,6 +35,10 @@ per nearest obstacle   16    reachable-ellipsoid centre relative to the UAV (3, 
 
 UAVs are sorted by estimated distance, obstacles by distance to their reachable region;
 absent entries (fewer than K, or beyond ``sensing_range``) are zero with mask 0.
+
+In the ``residual_apf`` action mode (``action.mode``, see :mod:`uasep_env.actions`) the
+vector ends with one more feature, ``base_action`` (3): the APF's normalised command for
+the rest of the vector, the command the agent's action corrects. It is not clipped.
 """
 
 from __future__ import annotations
@@ -96,6 +100,7 @@ class ObservationLayout:
         acc_scale: Acceleration divisor (m/s^2).
         clip: Clip bound of the normalised entries.
         sensing_range: Range beyond which nothing is observed (m).
+        base_action: Whether the vector ends with the APF's command (``residual_apf``).
     """
 
     k_uavs: int
@@ -105,6 +110,7 @@ class ObservationLayout:
     acc_scale: float
     clip: float
     sensing_range: float
+    base_action: bool = False
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> ObservationLayout:
@@ -121,6 +127,7 @@ class ObservationLayout:
             acc_scale=config.uav.max_accel,
             clip=oc.clip,
             sensing_range=oc.sensing_range,
+            base_action=config.action.mode == "residual_apf",
         )
 
     @property
@@ -129,13 +136,18 @@ class ObservationLayout:
         return _width(SELF_FIELDS)
 
     @property
-    def dim(self) -> int:
-        """Width of the whole observation vector."""
+    def world_dim(self) -> int:
+        """Width of what is observed of the world (everything but ``base_action``)."""
         return (
             self.self_dim
             + self.k_uavs * _width(UAV_FIELDS)
             + self.k_obstacles * _width(OBSTACLE_FIELDS)
         )
+
+    @property
+    def dim(self) -> int:
+        """Width of the whole observation vector."""
+        return self.world_dim + (3 if self.base_action else 0)
 
     def _scale(self, kind: str) -> float:
         return {"pos": self.pos_scale, "vel": self.vel_scale, "acc": self.acc_scale}.get(kind, 1.0)
@@ -149,8 +161,9 @@ class ObservationLayout:
         Returns:
             A dict of arrays: the own-state fields of :data:`SELF_FIELDS` (``(..., size)``),
             ``uav_<field>`` with shape ``(..., k_uavs, size)`` and ``obstacle_<field>`` with
-            shape ``(..., k_obstacles, size)``. Masks are bools of shape ``(..., K)``.
-            Values that were clipped stay clipped.
+            shape ``(..., k_obstacles, size)``; ``base_action`` ``(..., 3)`` when the layout
+            has it. Masks are bools of shape ``(..., K)``. Values that were clipped stay
+            clipped.
 
         Raises:
             ValueError: If the last axis is not ``dim`` wide.
@@ -175,6 +188,8 @@ class ObservationLayout:
                 j += size
             out[prefix + "mask"] = out[prefix + "mask"][..., 0] > 0.5
             i += k * w
+        if self.base_action:
+            out["base_action"] = obs[..., i : i + 3].astype(float)
         return out
 
     def feature_names(self) -> list[str]:
@@ -190,6 +205,8 @@ class ObservationLayout:
                 for name, size, _ in spec:
                     base = f"{prefix}{slot}.{name}"
                     names += [f"{base}[{c}]" for c in range(size)] if size > 1 else [base]
+        if self.base_action:
+            names += [f"base_action[{c}]" for c in range(3)]
         return names
 
 
@@ -226,7 +243,7 @@ def build_observations(
     out: np.ndarray | None = None,
     rows: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Every agent's observation, ``(n_envs, n_uavs, layout.dim)`` float32.
+    """Every agent's observation of the world, ``(n_envs, n_uavs, layout.world_dim)`` float32.
 
     The plan and the distances to the reachable ellipsoids come from the world; the
     estimated formation geometry (eqs. 5-7) and the per-agent assembly (relative vectors,
@@ -245,7 +262,7 @@ def build_observations(
     """
     e = world.n_envs if rows is None else len(rows)
     if out is None:
-        out = np.empty((e, world.n_uavs, layout.dim), dtype=np.float32)
+        out = np.empty((e, world.n_uavs, layout.world_dim), dtype=np.float32)
     inputs = _gather_inputs(world, layout, rows)
     if (_kernels := _numba.kernels()) is not None:
         _kernels.assemble_observations(inputs, layout, out)

@@ -8,9 +8,9 @@ __all__ = ["ENV_IDS", "register_envs"]
 
 #: id -> default config overrides.
 ENV_IDS: dict[str, dict] = {
-    "uasep/Formation-v0": {"scenario": "random"},
-    "uasep/PaperEncounter-v0": {"scenario": "paper"},
-    "uasep/LargeFormation-v0": {
+    "uasep/Formation-v1": {"scenario": "random"},
+    "uasep/PaperEncounter-v1": {"scenario": "paper"},
+    "uasep/LargeFormation-v1": {
         "scenario": "large_formation",
         "n_uavs": 8,
         "formation": "wedge",

@@ -14,14 +14,39 @@ Term                       Value per agent (unweighted)
 ``separation_region``      ``-min(2, max(0, 1 - d_region / d_obs_sep))``: signed distance
                            to the nearest predicted reachable ellipsoid; grows as the UAV
                            moves towards and into the region
-``deviation``              ``-min(10, |p - p_planned| / 10 m)``: distance from the planned
-                           position
+``deviation``              ``-d / (d + 20 m)``, ``d = |p - p_planned|``: in ``(-1, 0]``,
+                           steepest near the plan and still sloped 100 m off it
 ``control``                ``-|a_cmd / a_max|^2 / 3``: control effort
 ``smoothness``             ``-|(a_cmd - a_cmd_prev) / a_max|^2 / 3``: change of command
-``collision``              ``-1`` when the UAV came within ``uav.collision_distance`` of
-                           another UAV or an obstacle during the step, else 0
-``progress``               ``+1`` per step (alive bonus; weight 0 by default)
+                           (down to -4, a full reversal on every axis)
+``collision``              ``-T`` (``T`` = ``max_steps``, the episode's step budget) for
+                           every UAV of an environment in which a UAV came within
+                           ``uav.collision_distance`` of another UAV or an obstacle
+                           during the step, else 0: the collision ends the episode for
+                           the whole formation, and so costs each of its UAVs
+``progress``               ``+1`` per step (alive bonus)
 =========================  ===========================================================
+
+Why these defaults (:class:`~uasep_env.config.RewardWeights`): the reward is learnable by
+construction, and its optimum is what the paper wants (fly the plan, keep separation,
+never collide).
+
+* Every step alive pays ``progress`` (+1) minus penalties that sum to at most 1: deviation
+  0.4, obstacle separation 0.25 and inner separation 0.1 (terms in ``[-1, 0]``), region
+  0.05 (term in ``[-2, 0]``), control 0.05 (``[-1, 0]``) and smoothness 0.025 (``[-4, 0]``:
+  a full reversal on every axis). So a step's reward is in ``[0, 1]``.
+  Ending an episode early therefore never pays: the earlier design (penalties only, up to
+  -10 a step, a -10 collision) made the earliest collision the optimum, and PPO with
+  return normalisation learned exactly that.
+* A collision costs ``T``, the whole episode's worth of steps, to every UAV of the
+  formation (it ends the episode for all of them, and a UAV-obstacle collision involves
+  only one UAV). An episode that ends in a collision at any step ``k`` returns at most
+  ``k - T <= 0``, for each agent and for the team; a collision-free one returns at least
+  0, and more than 0 when its deviation stays bounded
+  (``tests/test_rewards.py::test_collision_never_pays``).
+* The deviation term saturates (``(-1, 0]``) so a policy far off the plan is not paid to
+  end the episode, but keeps a slope at any distance, so a policy that has drifted still
+  sees which way the plan is. Its scale, 20 m, is that of the APF's manoeuvres.
 """
 
 from __future__ import annotations
@@ -35,7 +60,14 @@ from uasep_env import _numba
 from uasep_env.config import RewardWeights, UAVConfig
 from uasep_env.world import World
 
-__all__ = ["DEVIATION_SCALE_M", "REWARD_TERMS", "collisions", "compute_rewards", "team_mean"]
+__all__ = [
+    "DEVIATION_SCALE_M",
+    "REGION_TERM_CAP",
+    "REWARD_TERMS",
+    "collisions",
+    "compute_rewards",
+    "team_mean",
+]
 
 #: Names of the reward terms, in reporting order.
 REWARD_TERMS = (
@@ -48,8 +80,10 @@ REWARD_TERMS = (
     "collision",
     "progress",
 )
-#: Deviation (m) that costs one unit of the deviation term.
-DEVIATION_SCALE_M = 10.0
+#: Deviation (m) at which the deviation term is -1/2 (it tends to -1 far off the plan).
+DEVIATION_SCALE_M = 20.0
+#: Cap of the region term's intrusion depth (units of ``uav.obstacle_separation``).
+REGION_TERM_CAP = 2.0
 
 
 def team_mean(x: np.ndarray) -> np.ndarray:
@@ -115,12 +149,12 @@ def compute_rewards(
         world.region_distances() if region is None else region,
     )
     u = world.config.uav
-    w, c = _vectors(weights, u)
+    w, c = _vectors(weights, u, world.config.max_steps)
     if (_kernels := _numba.kernels()) is not None:
         own, stacked = _kernels.reward_terms(x, c, w)
         terms = dict(zip(REWARD_TERMS, stacked, strict=True))
     else:
-        terms = _terms(x, u)
+        terms = _terms(x, u, world.config.max_steps)
         own = np.zeros_like(x.min_uav_dist)
         for k, name in enumerate(REWARD_TERMS):
             own += w[k] * terms[name]
@@ -130,7 +164,7 @@ def compute_rewards(
 
 
 @functools.lru_cache(maxsize=64)
-def _vectors(weights: RewardWeights, u: UAVConfig) -> tuple[np.ndarray, np.ndarray]:
+def _vectors(weights: RewardWeights, u: UAVConfig, max_steps: int) -> tuple[np.ndarray, np.ndarray]:
     """The weights in term order and the kernel's constants (read-only; configs are frozen)."""
     w = np.array([getattr(weights, name) for name in REWARD_TERMS])
     c = np.array(
@@ -140,13 +174,15 @@ def _vectors(weights: RewardWeights, u: UAVConfig) -> tuple[np.ndarray, np.ndarr
             u.obstacle_separation,
             u.collision_distance,
             DEVIATION_SCALE_M,
+            REGION_TERM_CAP,
+            float(max_steps),
         ]
     )
     w.flags.writeable = c.flags.writeable = False
     return w, c
 
 
-def _terms(x: _Inputs, u: UAVConfig) -> dict[str, np.ndarray]:
+def _terms(x: _Inputs, u: UAVConfig, max_steps: int) -> dict[str, np.ndarray]:
     """The unweighted terms in numpy (the reference of the compiled form)."""
     d_region = x.region.min(axis=-1, initial=np.inf)
     dev = np.linalg.norm(x.uav_pos - x.plan_pos, axis=-1)
@@ -158,11 +194,17 @@ def _terms(x: _Inputs, u: UAVConfig) -> dict[str, np.ndarray]:
             np.maximum(0.0, 1.0 - x.min_obs_dist / u.obstacle_separation) ** 2
         ),
         "separation_region": -np.minimum(
-            2.0, np.maximum(0.0, 1.0 - d_region / u.obstacle_separation)
+            REGION_TERM_CAP, np.maximum(0.0, 1.0 - d_region / u.obstacle_separation)
         ),
-        "deviation": -np.minimum(10.0, dev / DEVIATION_SCALE_M),
+        "deviation": -(dev / (dev + DEVIATION_SCALE_M)),
         "control": -np.einsum("...i,...i->...", cmd, cmd) / 3.0,
         "smoothness": -np.einsum("...i,...i->...", dcmd, dcmd) / 3.0,
-        "collision": -_collided(x.min_uav_dist, x.min_obs_dist, u.collision_distance).astype(float),
+        "collision": -float(max_steps)
+        * np.broadcast_to(
+            _collided(x.min_uav_dist, x.min_obs_dist, u.collision_distance).any(
+                axis=-1, keepdims=True
+            ),
+            x.min_uav_dist.shape,
+        ),
         "progress": np.ones_like(x.min_uav_dist),
     }

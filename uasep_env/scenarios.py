@@ -39,12 +39,48 @@ import numpy as np
 from uasep_env.config import EnvConfig
 from uasep_env.formation import PlannedTrajectory, pattern_slots
 
-__all__ = ["N_WAYPOINTS", "RANDOM_FAMILIES", "ScenarioSpec", "sample_scenario"]
+__all__ = [
+    "HELD_OUT_PAPER_SEEDS",
+    "HELD_OUT_SEEDS",
+    "N_WAYPOINTS",
+    "RANDOM_FAMILIES",
+    "TRAINING_SEEDS",
+    "VALIDATION_SEEDS",
+    "ScenarioSpec",
+    "check_training_seeds",
+    "sample_scenario",
+]
 
 #: Way-points of every planned trajectory (shorter plans are padded with their end point).
 N_WAYPOINTS = 4
 #: Families drawn by the ``random`` scenario.
 RANDOM_FAMILIES = ("crossing", "head_on", "overtaking", "climbing", "multi_obstacle")
+
+# Seed ranges of learned baselines: training, validation and the held-out bank never meet.
+#: Seeds training environments may be created with (environment ``e`` of a batch seeded
+#: ``seed`` starts from ``seed + e`` and then continues its own generator).
+TRAINING_SEEDS = range(0, 1_000_000)
+#: Seeds of the encounters a training run checks itself on (``random`` scenario).
+VALIDATION_SEEDS = range(4_000_000, 4_001_000)
+#: The held-out bank: 500 ``random`` encounters (crossing, head-on, overtaking, climbing,
+#: multi-obstacle), the seeds every controller is compared on and training never draws.
+HELD_OUT_SEEDS = range(5_000_000, 5_000_500)
+#: The held-out bank's ``paper`` scenario runs (noise and the pilot's late manoeuvres).
+HELD_OUT_PAPER_SEEDS = range(5_000_000, 5_000_020)
+
+
+def check_training_seeds(seed: int, n_envs: int) -> None:
+    """Raise ``ValueError`` unless ``[seed, seed + n_envs)`` lies in :data:`TRAINING_SEEDS`."""
+    if not (
+        isinstance(seed, int)
+        and seed >= TRAINING_SEEDS.start
+        and seed + n_envs <= TRAINING_SEEDS.stop
+    ):
+        raise ValueError(
+            f"seed={seed!r}: training seeds [seed, seed + n_envs) must lie in "
+            f"[{TRAINING_SEEDS.start}, {TRAINING_SEEDS.stop}), disjoint from the held-out bank"
+        )
+
 
 # Ranges of the random families (units in the names).
 _SPEED_RANGE_MPS = (3.0, 12.0)

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from uasep_env.actions import ResidualAPF
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.observation import ObservationLayout, build_observations, global_state
 from uasep_env.rewards import REWARD_TERMS, collisions, compute_rewards
@@ -96,19 +97,39 @@ class EnvCore:
         self.layout = ObservationLayout.from_config(self.config)
         self.n_envs = n_envs
         self.n_uavs = self.config.n_uavs
-        self._obs = np.zeros((n_envs, self.n_uavs, self.layout.dim), dtype=np.float32)
+        self._obs = np.zeros((n_envs, self.n_uavs, self.layout.world_dim), dtype=np.float32)
+        # residual_apf mode: the APF's command for the current observations (what the next
+        # action corrects); None in direct mode.
+        self.residual = ResidualAPF(self.config) if self.layout.base_action else None
+        self._base = np.zeros((n_envs, self.n_uavs, 3), dtype=np.float32)
 
     @property
     def obs_dim(self) -> int:
         """Width of one agent's observation."""
         return self.layout.dim
 
+    def _observe(self, rows: np.ndarray | None = None) -> np.ndarray:
+        """Rebuild the observations of all environments (or ``rows``); returns a copy."""
+        if rows is None:
+            obs = build_observations(self.world, self.layout, self._obs)
+        else:
+            obs = build_observations(self.world, self.layout, rows=rows)
+            self._obs[rows] = obs
+        if self.residual is None:
+            return obs.copy() if rows is None else obs
+        base = self.residual.base(obs)
+        if rows is None:
+            self._base[...] = base
+        else:
+            self._base[rows] = base
+        return self.residual.observe(obs, base)
+
     def reset(
         self, seed: int | Sequence[int | None] | None = None, mask: np.ndarray | None = None
     ) -> np.ndarray:
         """Reset the environments in ``mask`` (all by default); returns all observations."""
         self.world.reset(seed=seed, mask=mask)
-        return build_observations(self.world, self.layout, self._obs).copy()
+        return self._observe()
 
     def reset_some(self, mask: np.ndarray) -> np.ndarray:
         """Reset the environments in ``mask``; returns their observations only.
@@ -120,11 +141,11 @@ class EnvCore:
             ``(mask.sum(), N, D)`` observations, in environment order.
         """
         self.world.reset(mask=mask)
-        return build_observations(self.world, self.layout, rows=np.flatnonzero(mask))
+        return self._observe(rows=np.flatnonzero(mask))
 
     def observations(self) -> np.ndarray:
         """Current observations ``(E, N, D)`` (a copy)."""
-        return build_observations(self.world, self.layout, self._obs).copy()
+        return self._observe()
 
     def state(self) -> np.ndarray:
         """Global true state ``(E, state_dim)``."""
@@ -136,7 +157,9 @@ class EnvCore:
         """Apply normalised actions ``(E, N, 3)`` in ``[-1, 1]`` and advance one step.
 
         Args:
-            actions: Accelerations as fractions of ``uav.max_accel`` per axis.
+            actions: Accelerations as fractions of ``uav.max_accel`` per axis, or in the
+                ``residual_apf`` mode corrections to the APF's command (see
+                :mod:`uasep_env.actions`).
             validate: Check the actions (shape, finite, in range) first.
             active: Optional ``(E,)`` mask of environments that move (see
                 :meth:`World.step <uasep_env.world.World.step>`).
@@ -147,6 +170,8 @@ class EnvCore:
         w = self.world
         if validate:
             actions = validate_actions(actions, (self.n_envs, self.n_uavs, 3), "actions")
+        if self.residual is not None:
+            actions = self.residual.command(self._base, actions)
         w.step(actions * self.config.uav.max_accel, active=active)
         region = w.region_distances()
         rewards, terms = compute_rewards(w, self.config.reward, region)
@@ -164,7 +189,7 @@ class EnvCore:
             "in_reachable_region": d_region < 0.0,
             "collision": collided,
         }
-        obs = build_observations(w, self.layout, self._obs).copy()
+        obs = self._observe()
         return StepResult(obs, rewards, terms, terminated, truncated, safety)
 
     @staticmethod

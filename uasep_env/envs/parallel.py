@@ -68,7 +68,7 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
     """
 
     metadata = {  # noqa: RUF012 - PettingZoo reads it as a class attribute
-        "name": "uasep_formation_v0",
+        "name": "uasep_formation_v1",
         "render_modes": ["human", "rgb_array"],
         "is_parallelizable": True,
         "render_fps": 10,

@@ -5,7 +5,10 @@ one agent), so ``PPO("MlpPolicy", UAVSharedVecEnv(n_envs=...))`` trains one poli
 by all UAVs. Sub-environment ``e * n_uavs + i`` is UAV ``i`` of environment ``e``. Episodes
 end for all UAVs of an environment together; the environment is then reset in the same
 step, and each of its agents' infos carries ``terminal_observation`` and
-``TimeLimit.truncated`` as SB3 expects.
+``TimeLimit.truncated`` as SB3 expects, and ``episode_safety``: the finished episode's
+``collision`` and ``loss_of_separation`` (bools, any UAV) and ``max_deviation`` (m, the
+largest true distance of a UAV from its planned position once the formation has formed
+up, as in :mod:`uasep_env.metrics`), which training scripts report as they go.
 
 This module imports stable-baselines3; the rest of the package does not.
 """
@@ -21,6 +24,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.envs.core import EnvCore
+from uasep_env.rollout import DEFAULT_SETTLE_TIME_S
 
 __all__ = ["UAVSharedVecEnv"]
 
@@ -53,6 +57,10 @@ class UAVSharedVecEnv(VecEnv):
         super().__init__(n_envs * self.n_uavs, obs_space, act_space)
         self._seed = seed
         self._actions: np.ndarray | None = None
+        # Per-environment safety of the running episode (for ``episode_safety``).
+        self._collided = np.zeros(n_envs, dtype=bool)
+        self._lost_sep = np.zeros(n_envs, dtype=bool)
+        self._max_dev = np.zeros(n_envs)
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         """Seed the next reset (environment ``e`` gets ``seed + e``)."""
@@ -63,6 +71,8 @@ class UAVSharedVecEnv(VecEnv):
         """Reset every environment; observations ``(n_envs * n_uavs, obs_dim)``."""
         obs = self.core.reset(seed=self._seed)
         self._seed = None
+        self._collided[:] = self._lost_sep[:] = False
+        self._max_dev[:] = 0.0
         return obs.reshape(self.num_envs, -1)
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -82,16 +92,37 @@ class UAVSharedVecEnv(VecEnv):
         rewards = res.rewards.reshape(-1).astype(np.float32)
         done_env = res.terminated | res.truncated
         dones = np.repeat(done_env, self.n_uavs)
+        self._track(res.safety)
         infos: list[dict] = [{} for _ in range(self.num_envs)]
         if done_env.any():
             for e in np.flatnonzero(done_env):
                 trunc = bool(res.truncated[e] and not res.terminated[e])
+                safety = {
+                    "collision": bool(self._collided[e]),
+                    "loss_of_separation": bool(self._lost_sep[e]),
+                    "max_deviation": float(self._max_dev[e]),
+                }
                 for i in range(self.n_uavs):
                     k = e * self.n_uavs + i
                     infos[k]["terminal_observation"] = obs[k].copy()
                     infos[k]["TimeLimit.truncated"] = trunc
+                    infos[k]["episode_safety"] = safety
             obs[dones] = self.core.reset_some(done_env).reshape(-1, obs.shape[1])
+            self._collided[done_env] = self._lost_sep[done_env] = False
+            self._max_dev[done_env] = 0.0
         return obs, rewards, dones, infos
+
+    def _track(self, safety: dict[str, np.ndarray]) -> None:
+        """Fold one step's safety figures into the running episodes' summaries."""
+        w = self.core.world
+        self._collided |= safety["collision"].any(axis=1)
+        self._lost_sep |= (
+            safety["loss_of_separation_uav"] | safety["loss_of_separation_obstacle"]
+        ).any(axis=1)
+        d = w.uav_pos - w.plan_pos
+        dev = np.sqrt(np.einsum("eni,eni->en", d, d)).max(axis=1)
+        settled = w.time >= DEFAULT_SETTLE_TIME_S
+        np.maximum(self._max_dev, np.where(settled, dev, 0.0), out=self._max_dev)
 
     def close(self) -> None:
         """Nothing to release."""

@@ -11,18 +11,29 @@ from pathlib import Path
 from uasep_env.config import EnvConfig
 from uasep_env.policies.apf import APF, APFGains, MotionStateAPF, TraditionalAPF
 from uasep_env.policies.base import Policy, RandomPolicy, ZeroPolicy
-from uasep_env.policies.learned import SB3Policy, load_sb3_policy
+from uasep_env.policies.learned import (
+    CheckpointError,
+    LearnedPolicy,
+    SB3Policy,
+    is_policy_checkpoint,
+    load_policy,
+    load_sb3_policy,
+)
 
 __all__ = [
     "APF",
     "POLICIES",
     "APFGains",
+    "CheckpointError",
+    "LearnedPolicy",
     "MotionStateAPF",
     "Policy",
     "RandomPolicy",
     "SB3Policy",
     "TraditionalAPF",
     "ZeroPolicy",
+    "is_policy_checkpoint",
+    "load_policy",
     "load_sb3_policy",
     "make_policy",
 ]
@@ -37,14 +48,20 @@ POLICIES = {
 }
 
 
-def make_policy(name: str, config: EnvConfig) -> Policy:
-    """A policy by name (:data:`POLICIES`) or from the path of a saved SB3 model.
+def make_policy(name: str, config: EnvConfig, allow_pickle: bool = False) -> Policy:
+    """A policy by name (:data:`POLICIES`) or from the path of a saved model.
+
+    A path is loaded as a policy checkpoint (:func:`load_policy`, no unpickling); any other
+    file as a stable-baselines3 model, only with ``allow_pickle`` (it runs code from the file).
 
     Raises:
-        ValueError: For an unknown name that is not an existing file.
+        ValueError: For an unknown name that is not an existing file
+            (:class:`CheckpointError`, a ``ValueError``, for a file that cannot be used).
     """
     if name in POLICIES:
         return POLICIES[name](config)
-    if Path(name).exists():
-        return load_sb3_policy(name, config)
+    if Path(name).is_file():
+        if is_policy_checkpoint(name):
+            return load_policy(name, config)
+        return load_sb3_policy(name, config, allow_pickle=allow_pickle)
     raise ValueError(f"unknown policy {name!r}: use one of {sorted(POLICIES)} or a model path")

@@ -1,0 +1,139 @@
+"""The learned policies against the three APFs on the held-out bank, with the targets.
+
+    python baselines/learned_vs_apf.py [--workers 2] [--episodes 500] [--paper-episodes 20]
+
+Every controller plays the same encounters: the held-out bank's 500 ``random`` encounters
+(:data:`uasep_env.scenarios.HELD_OUT_SEEDS`: crossing, head-on, overtaking, climbing,
+multi-obstacle; seeds training never draws) and 20 runs of the ``paper`` scenario
+(:data:`~uasep_env.scenarios.HELD_OUT_PAPER_SEEDS`). The learned policies are the policy
+checkpoints in ``baselines/checkpoints/`` (``ppo_shared.zip``, ``ppo_residual_apf.zip``),
+loaded without unpickling; a residual policy flies the APF's command plus its correction.
+
+Writes ``baselines/results/learned_vs_apf.md`` (the tables the README shows: means with
+95 % Student-t intervals, rates with 95 % Wilson intervals, and the targets) and
+``learned_vs_apf.json.gz`` (every metric of every episode), and prints the tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from uasep_env import make_config
+from uasep_env.evaluation import evaluate, write_json
+from uasep_env.policies import load_policy
+from uasep_env.scenarios import HELD_OUT_PAPER_SEEDS, HELD_OUT_SEEDS
+
+ROOT = Path(__file__).resolve().parent
+sys.path.insert(0, str(ROOT))
+
+from paper_experiment import ROWS, table  # noqa: E402
+
+CHECKPOINTS = ROOT / "checkpoints"
+APFS = ("apf", "motion-state-apf", "traditional-apf")
+LEARNED = ("ppo_shared", "ppo_residual_apf")
+#: Rows of the tables: the paper's, with the combined loss-of-separation rate first.
+TABLE_ROWS = (
+    ("episodes with loss of separation (any)", "episode.loss_of_separation", "rate", ".1%"),
+    ("episodes with a collision", "episode.collision", "rate", ".1%"),
+    *(r for r in ROWS if r[1] != "episode.collision"),
+)
+TRAINING_BUDGET_S = 3600.0
+
+
+def _overlap_or_better(learned: dict, apf: dict) -> bool:
+    """A rate no worse than the APF's: intervals overlap, or the learned one is lower."""
+    return learned["ci_low"] <= apf["ci_high"]
+
+
+def targets(bank: dict[str, Any], meta: dict[str, dict]) -> list[tuple[str, str, bool | None]]:
+    """The issue's targets: (target, measured, met); ``None`` where the policy is missing."""
+    res = {k: v["aggregate"] for k, v in bank["results"].items()}
+    apf = res["apf"]
+    out: list[tuple[str, str, bool | None]] = []
+    for name in LEARNED:
+        if name not in meta:
+            out.append((f"{name}: trained and shipped", "missing", None))
+            continue
+        wall = float(meta[name].get("wall_s", float("nan")))
+        steps = int(meta[name].get("agent_steps", 0))
+        out.append(
+            (f"{name}: trains in <= 60 min", f"{wall / 60:.1f} min, {steps:,} agent-steps",
+             wall <= TRAINING_BUDGET_S)
+        )  # fmt: skip
+    if "ppo_residual_apf" in res:
+        r = res["ppo_residual_apf"]
+        for key, what in (("episode.collision", "collision"), ("episode.loss_of_separation",
+                                                                "loss-of-separation")):  # fmt: skip
+            out.append(
+                (f"residual: {what} rate no worse than the APF's",
+                 f"{r[key]['rate']:.1%} [{r[key]['ci_low']:.1%}, {r[key]['ci_high']:.1%}] vs "
+                 f"{apf[key]['rate']:.1%} [{apf[key]['ci_low']:.1%}, {apf[key]['ci_high']:.1%}]",
+                 _overlap_or_better(r[key], apf[key]))
+            )  # fmt: skip
+        d, da = r["episode.max_deviation"]["mean"], apf["episode.max_deviation"]["mean"]
+        out.append(
+            ("residual: mean max deviation >= 25 % below the APF's",
+             f"{d:.1f} m vs {da:.1f} m ({(1 - d / da):+.0%} lower)", d <= 0.75 * da)
+        )  # fmt: skip
+    if "ppo_shared" in res:
+        c = res["ppo_shared"]["episode.collision"]
+        out.append(
+            ("pure: collision rate <= 5 %",
+             f"{c['rate']:.1%} [{c['ci_low']:.1%}, {c['ci_high']:.1%}]", c["rate"] <= 0.05)
+        )  # fmt: skip
+    return out
+
+
+def main(argv: list[str] | None = None) -> str:
+    """Evaluate, write the results and print the tables."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--episodes", type=int, default=len(HELD_OUT_SEEDS))
+    p.add_argument("--paper-episodes", type=int, default=len(HELD_OUT_PAPER_SEEDS))
+    p.add_argument("--out", type=Path, default=ROOT / "results")
+    args = p.parse_args(argv)
+    if not 1 <= args.episodes <= len(HELD_OUT_SEEDS):
+        p.error(f"argument --episodes: must be in [1, {len(HELD_OUT_SEEDS)}]")
+
+    policies: dict[str, Any] = {name: name for name in APFS}
+    meta: dict[str, dict] = {}
+    for name in LEARNED:
+        path = CHECKPOINTS / f"{name}.zip"
+        if path.exists():
+            policies[name] = str(path)
+            meta[name] = load_policy(path).meta.info
+    sections = []
+    results = {}
+    for scenario, seeds in (
+        ("random", list(HELD_OUT_SEEDS)[: args.episodes]),
+        ("paper", list(HELD_OUT_PAPER_SEEDS)[: args.paper_episodes]),
+    ):
+        if not seeds:
+            continue
+        result = evaluate(policies, make_config(scenario=scenario), seeds, workers=args.workers)
+        results[scenario] = result
+        what = "held-out bank" if scenario == "random" else "paper scenario"
+        sections += [
+            f"### {what.capitalize()}: {len(seeds)} `{scenario}` encounters, seeds "
+            f"{seeds[0]}-{seeds[-1]}",
+            table(result, TABLE_ROWS),
+        ]
+    if "random" in results:
+        lines = ["| target | measured | met |", "|---|---|---|"]
+        for target, measured, met in targets(results["random"], meta):
+            flag = "n/a" if met is None else ("met" if met else "not met")
+            lines.append(f"| {target} | {measured} | {flag} |")
+        sections += ["### Targets (held-out bank)", "\n".join(lines)]
+    text = "\n\n".join(sections) + "\n"
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "learned_vs_apf.md").write_text(text)
+    write_json({"meta": meta, **results}, args.out / "learned_vs_apf.json.gz")
+    print(text)
+    return text
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,204 @@
+"""Policy checkpoints: exact round trip, no unpickling, clear errors for what does not fit."""
+
+import io
+import itertools
+import json
+import pickle
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uasep_env import make_config
+from uasep_env.actions import ResidualAPF
+from uasep_env.envs.core import EnvCore
+from uasep_env.evaluation import main as eval_main
+from uasep_env.observation import ObservationLayout
+from uasep_env.policies import (
+    CheckpointError,
+    is_policy_checkpoint,
+    load_policy,
+    load_sb3_policy,
+    make_policy,
+)
+from uasep_env.policies.learned import PolicyCheckpoint, save_policy
+from uasep_env.scenarios import (
+    HELD_OUT_PAPER_SEEDS,
+    HELD_OUT_SEEDS,
+    TRAINING_SEEDS,
+    VALIDATION_SEEDS,
+    check_training_seeds,
+)
+
+CHECKPOINTS = Path(__file__).resolve().parents[1] / "baselines" / "checkpoints"
+
+
+def _random_checkpoint(path, cfg, hidden=(16, 8), seed=0, obs_norm=True):
+    rng = np.random.default_rng(seed)
+    dim = ObservationLayout.from_config(cfg).dim
+    sizes = [dim, *hidden, 3]
+    weights = [
+        (rng.normal(0, 0.3, (o, i)).astype(np.float32), rng.normal(0, 0.1, o).astype(np.float32))
+        for i, o in itertools.pairwise(sizes)
+    ]
+    meta = PolicyCheckpoint(
+        config=cfg.to_dict(), obs_dim=dim, activation="tanh", hidden=hidden, obs_norm=obs_norm
+    )
+    mean, var = rng.normal(0, 0.1, dim), rng.uniform(0.5, 2.0, dim)
+    save_policy(path, meta, weights, mean, var)
+    return weights, mean, var
+
+
+def _reference_forward(weights, mean, var, obs):
+    x = np.clip((obs.astype(np.float64) - mean) / np.sqrt(var + 1e-8), -10, 10).astype(np.float32)
+    for w, b in weights[:-1]:
+        x = np.tanh(x @ w.T + b)
+    w, b = weights[-1]
+    return np.clip(x @ w.T + b, -1, 1)
+
+
+def test_round_trip_reproduces_the_network(tmp_path):
+    cfg = make_config(scenario="random")
+    weights, mean, var = _random_checkpoint(tmp_path / "p.zip", cfg)
+    assert is_policy_checkpoint(tmp_path / "p.zip")
+    policy = load_policy(tmp_path / "p.zip")
+    obs = EnvCore(cfg, 4).reset(seed=0)
+    np.testing.assert_array_equal(policy(obs), _reference_forward(weights, mean, var, obs))
+    # The archive holds JSON and a pickle-free npz only.
+    with zipfile.ZipFile(tmp_path / "p.zip") as z:
+        assert sorted(z.namelist()) == ["uasep_policy.json", "weights.npz"]
+        desc = json.loads(z.read("uasep_policy.json"))
+        np.load(io.BytesIO(z.read("weights.npz")), allow_pickle=False)
+    assert desc["config"]["action"]["mode"] == "direct"
+
+
+def test_residual_checkpoint_in_a_direct_env_equals_the_residual_env(tmp_path):
+    cfg = make_config(scenario="random", action={"mode": "residual_apf"})
+    _random_checkpoint(tmp_path / "r.zip", cfg, seed=1)
+    direct = cfg.replace(action={"mode": "direct"})
+    in_direct = load_policy(tmp_path / "r.zip", direct)
+    in_residual = load_policy(tmp_path / "r.zip", cfg)
+    a, b = EnvCore(direct, 3), EnvCore(cfg, 3)
+    oa, ob = a.reset(seed=9), b.reset(seed=9)
+    for _ in range(60):
+        ra, rb = a.step(in_direct(oa)), b.step(in_residual(ob))
+        np.testing.assert_array_equal(a.world.uav_pos, b.world.uav_pos)
+        oa, ob = ra.obs, rb.obs
+    # And the correction really is added to the APF's command.
+    base = ResidualAPF(cfg).base(oa)
+    assert not np.array_equal(in_direct(oa), base)
+
+
+@pytest.mark.parametrize(
+    ("env", "message"),
+    [
+        ({"n_uavs": 4}, "n_uavs: trained with 3, this env has 4"),
+        ({"n_obstacles": 2}, "observation width: the network reads"),
+        ({"action": {"mode": "residual_apf"}}, "action.mode: trained with 'direct'"),
+    ],
+)
+def test_mismatched_env_is_named(tmp_path, env, message):
+    cfg = make_config(scenario="random")
+    _random_checkpoint(tmp_path / "p.zip", cfg)
+    with pytest.raises(CheckpointError, match=message):
+        load_policy(tmp_path / "p.zip", cfg.replace(**env))
+
+
+class _Boom:
+    def __reduce__(self):
+        return (Path("/tmp/uasep_pickle_ran").touch, ())
+
+
+def _sb3_like_zip(path):
+    """A zip laid out like an SB3 save whose ``data`` holds a pickled payload."""
+    import base64
+
+    payload = base64.b64encode(pickle.dumps(_Boom())).decode()
+    data = {"policy_class": {":type:": "<class 'x'>", ":serialized:": payload}}
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("data", json.dumps(data))
+        z.writestr("policy.pth", b"")
+
+
+def test_sb3_files_are_not_unpickled_without_opt_in(tmp_path):
+    marker = Path("/tmp/uasep_pickle_ran")
+    marker.unlink(missing_ok=True)
+    _sb3_like_zip(tmp_path / "model.zip")
+    cfg = make_config()
+    with pytest.raises(CheckpointError, match="allow_pickle"):
+        make_policy(str(tmp_path / "model.zip"), cfg)
+    with pytest.raises(CheckpointError, match="allow_pickle"):
+        load_sb3_policy(tmp_path / "model.zip", cfg)
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize(
+    "content",
+    [
+        b"not a zip at all",
+        b"PK\x03\x04 truncated",
+    ],
+)
+def test_corrupt_files_give_one_line_errors(tmp_path, capsys, content):
+    bad = tmp_path / "bad.zip"
+    bad.write_bytes(content)
+    with pytest.raises(CheckpointError):
+        make_policy(str(bad), make_config(), allow_pickle=False)
+    code = eval_main(["--policy", str(bad), "--episodes", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "Traceback" not in err and str(bad) in err
+
+
+def test_tampered_checkpoints_are_rejected(tmp_path):
+    cfg = make_config()
+    _random_checkpoint(tmp_path / "p.zip", cfg)
+    with zipfile.ZipFile(tmp_path / "p.zip") as z:
+        desc = json.loads(z.read("uasep_policy.json"))
+        raw = z.read("weights.npz")
+
+    def write(name, desc, raw):
+        with zipfile.ZipFile(tmp_path / name, "w") as z:
+            z.writestr("uasep_policy.json", json.dumps(desc))
+            z.writestr("weights.npz", raw)
+        return tmp_path / name
+
+    with pytest.raises(CheckpointError, match="unknown checkpoint format"):
+        load_policy(write("a.zip", {**desc, "format": "other/9"}, raw))
+    with pytest.raises(CheckpointError, match="layer 0 has shapes"):
+        load_policy(write("b.zip", {**desc, "obs_dim": desc["obs_dim"] + 1}, raw))
+    with pytest.raises(CheckpointError, match="invalid checkpoint description"):
+        load_policy(write("c.zip", {**desc, "config": {"n_uavs": 99}}, raw))
+    buf = io.BytesIO()
+    np.savez(buf, obj=np.array([{"a": 1}], dtype=object))
+    with pytest.raises(CheckpointError, match=r"unreadable weights|missing weights"):
+        load_policy(write("d.zip", desc, buf.getvalue()))
+
+
+def test_seed_ranges_are_disjoint():
+    ranges = [TRAINING_SEEDS, VALIDATION_SEEDS, HELD_OUT_SEEDS]
+    for i, a in enumerate(ranges):
+        for b in ranges[i + 1 :]:
+            assert a.stop <= b.start or b.stop <= a.start
+    assert len(HELD_OUT_SEEDS) == 500
+    assert set(HELD_OUT_PAPER_SEEDS) <= set(HELD_OUT_SEEDS)
+    check_training_seeds(0, 64)
+    with pytest.raises(ValueError, match="seed=999990"):
+        check_training_seeds(999_990, 64)
+
+
+@pytest.mark.parametrize("name", ["ppo_shared", "ppo_residual_apf"])
+def test_shipped_checkpoints_load_and_run_without_flags(name, capsys):
+    path = CHECKPOINTS / f"{name}.zip"
+    if not path.exists():
+        pytest.fail(f"shipped checkpoint {path} is missing")
+    policy = load_policy(path, make_config(scenario="random"))
+    assert policy.meta.info["agent_steps"] > 0
+    assert policy.mode == ("residual_apf" if "residual" in name else "direct")
+    code = eval_main(
+        ["--policy", str(path), "--scenario", "random", "--episodes", "2",
+         "--seed", "5000000", "--batch-size", "2"]
+    )  # fmt: skip
+    assert code == 0
+    assert "collision" in capsys.readouterr().out

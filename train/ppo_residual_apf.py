@@ -1,0 +1,27 @@
+"""Train a PPO residual on the APF: the shared policy learns corrections to the APF's command.
+
+The recipe of :mod:`ppo_shared` with ``action.mode="residual_apf"`` (see
+:mod:`uasep_env.actions`): a zero action flies the paper's APF, so training starts from the
+reference controller. Every flag of ``train/ppo_shared.py`` applies.
+
+    python train/ppo_residual_apf.py [--total-timesteps N] [--max-minutes M] ...
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ppo_shared import Args, main
+
+#: The residual recipe's defaults (where they differ from the pure policy's).
+RESIDUAL_DEFAULTS = Args(
+    action_mode="residual_apf",
+    log_std_init=-1.0,
+    out_dir="runs/ppo_residual_apf",
+)
+
+if __name__ == "__main__":
+    main(defaults=RESIDUAL_DEFAULTS)
