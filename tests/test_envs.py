@@ -44,7 +44,7 @@ def test_gymnasium_check_env_grid(cfg):
 
 
 def test_gymnasium_make_validates_config():
-    with pytest.raises(ValueError, match="n_uavz"):
+    with pytest.raises(TypeError, match="n_uavz"):
         gymnasium.make("uasep/Formation-v0", n_uavz=3)
     with pytest.raises(ValueError, match="n_uavs=99"):
         gymnasium.make("uasep/PaperEncounter-v0", n_uavs=99)
@@ -173,7 +173,7 @@ def test_reset_options_config():
     assert env.world.families[0] == "crossing"
     with pytest.raises(ValueError, match="n_uavs"):
         env.reset(options={"config": {"n_uavs": 4}})
-    with pytest.raises(ValueError, match=r"noise\.nope"):
+    with pytest.raises(TypeError, match=r"noise\.nope"):
         env.reset(options={"config": {"noise": {"nope": 1}}})
 
 

@@ -251,7 +251,7 @@ def test_parse_config_overrides():
         parse_config_overrides(["dt"])
     with pytest.raises(ValueError, match="already set"):
         parse_config_overrides(["noise=false", "noise.accel_std=0"])
-    with pytest.raises(ValueError, match="bogus"):
+    with pytest.raises(TypeError, match="bogus"):
         build_config("paper", ["noise.bogus=1"])
 
 
@@ -264,6 +264,8 @@ def test_parse_config_overrides():
         (["--config", "noise.nope=3"], "noise.nope"),
         (["--config", "dt=-1"], "dt=-1"),
         (["--config", "dt"], "dt"),
+        (["--config", "obstacle.wind=5"], "obstacle.wind=5"),
+        (["--config", "obstacle.wind=null"], "obstacle.wind=None"),
         (["--episodes", "0"], "'0'"),
         (["--episodes", "many"], "many"),
         (["--workers", "0"], "--workers"),

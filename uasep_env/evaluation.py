@@ -147,7 +147,8 @@ def build_config(
         The validated config.
 
     Raises:
-        ValueError: For malformed overrides, unknown keys or invalid values (named).
+        TypeError: For unknown keys (named).
+        ValueError: For malformed overrides or invalid values (named).
     """
     values: dict[str, Any] = {}
     if scenario is not None:
@@ -903,7 +904,7 @@ def _run(argv: Sequence[str] | None) -> int:
         )
     try:
         cfg = build_config(args.scenario, args.config)
-    except ValueError as err:
+    except (TypeError, ValueError) as err:
         parser.error(f"argument --config: {err}")
     for name in names:  # fail early on models that do not load
         try:

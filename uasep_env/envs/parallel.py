@@ -63,7 +63,7 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
     ## Arguments
     Any :class:`~uasep_env.config.EnvConfig` field as a keyword (nested dicts for the
     sub-configs), e.g. ``parallel_env(n_uavs=5, scenario="crossing", noise=False)``.
-    Unknown keys raise ``ValueError``. ``reset(options={"config": {...}})`` changes the
+    Unknown keys raise ``TypeError``. ``reset(options={"config": {...}})`` changes the
     config for the next episodes, except the keys that change the spaces.
     """
 
