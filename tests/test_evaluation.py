@@ -280,6 +280,39 @@ def test_bad_arguments_exit_2_naming_the_value(args, needle, capsys):
     assert needle in err
 
 
+@pytest.mark.parametrize("flag", ["--json", "--csv", "--plot"])
+def test_bad_output_paths_fail_before_the_evaluation(flag, tmp_path, capsys, monkeypatch):
+    """Issue 13 item 7: '--json afile/out.json' failed only after the whole evaluation."""
+    import uasep_env.evaluation as ev
+
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+
+    def boom(*args, **kwargs):
+        raise AssertionError("evaluate() ran before the output paths were checked")
+
+    monkeypatch.setattr(ev, "evaluate", boom)
+    rc = main([flag, str(afile / "out.json"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert f"argument {flag}: cannot write" in err and "is not a directory" in err
+    if flag != "--plot":
+        rc = main([flag, str(tmp_path), "--quiet"])  # a folder where a file is expected
+        assert rc == 2 and "is a directory" in capsys.readouterr().err
+    else:
+        rc = main([flag, str(afile), "--quiet"])  # a file where a folder is expected
+        assert rc == 2 and "is not a directory" in capsys.readouterr().err
+
+
+def test_argument_errors_are_one_line(capsys):
+    """Issue 13 item 7: argparse printed the whole usage before the error."""
+    for args in (["--episodes", "0"], ["--bogus"], ["--config", "dt=-1"]):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1, err
+        assert err.startswith("uasep-eval: error: ")
+
+
 def test_evaluate_rejects_bad_input():
     cfg = _short_config()
     with pytest.raises(ValueError, match="unknown policy 'nope'"):
