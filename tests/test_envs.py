@@ -277,6 +277,13 @@ def test_reset_options_must_be_a_dict(options):
             env.reset(seed=0, options=options)
 
 
+@pytest.mark.parametrize("changes", [5, "x", [], np.zeros(2)])
+def test_reset_options_config_must_be_a_dict(changes):
+    env = uasep_env.parallel_env()
+    with pytest.raises(TypeError, match=r"options\['config'\] must be a dict, got"):
+        env.reset(seed=0, options={"config": changes})
+
+
 def test_gym_unknown_reset_option_is_named():
     env = gymnasium.make("uasep/Formation-v0")
     with pytest.raises(ValueError, match=r"unknown reset option.*'bogus'"):

@@ -158,8 +158,9 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         check_seed(seed)
         if options is not None:
             check_options(options, None)  # a dict; keys other than "config" are ignored
-        if options and options.get("config") is not None:
-            self._reconfigure(options["config"])
+        changes = options.get("config") if options else None
+        if changes is not None and not (isinstance(changes, dict) and not changes):
+            self._reconfigure(changes)
         obs = self.core.reset(seed=seed)
         self.agents = list(self.possible_agents)
         self._last = None
