@@ -1,6 +1,7 @@
 """Typed, frozen, validated configuration."""
 
 import dataclasses
+import re
 
 import pytest
 
@@ -27,9 +28,6 @@ def test_nested_dicts_and_replace():
 @pytest.mark.parametrize(
     "kwargs,match",
     [
-        ({"n_uavz": 3}, "n_uavz"),
-        ({"noise": {"acel_std": 1}}, "noise.acel_std"),
-        ({"reward": {"colision": 1}}, "reward.colision"),
         ({"n_uavs": 1}, "n_uavs=1"),
         ({"n_uavs": 33}, "n_uavs=33"),
         ({"n_obstacles": 9}, "n_obstacles=9"),
@@ -47,11 +45,61 @@ def test_nested_dicts_and_replace():
         ({"uav": {"collision_distance": 20.0}}, "separation_distance"),
         ({"reward": {"shared": 1.5}}, "reward.shared=1.5"),
         ({"noise": 3}, "noise=3"),
+        # Wrong types name the dotted field, not numpy's conversion error.
+        ({"formation": {}}, "formation={}"),
+        ({"formation": (("a", "b", "c"),) * 3}, "formation[0]=('a', 'b', 'c')"),
+        ({"formation": (("1", "2", "3"),) * 3}, "formation[0]=('1', '2', '3')"),
+        ({"obstacle": {"wind": 5}}, "obstacle.wind=5"),
+        ({"obstacle": {"wind": None}}, "obstacle.wind=None"),
+        ({"obstacle": {"wind": "abc"}}, "obstacle.wind='abc'"),
+        ({"obstacle": None}, "obstacle=None"),
+        ({"scenario": ["paper"]}, "scenario=['paper']"),
+        ({"n_uavs": True}, "n_uavs=True"),
+        ({"dt": True}, "dt=True"),
+        ({"action": {"strict": 1}}, "action.strict=1"),
+        # Values that used to validate and then fail (overflow, gymnasium's Box, -inf reward).
+        ({"observation": {"clip": 1e39}}, "observation.clip=1e+39"),
+        ({"noise": {"accel_std": 1e154}}, "noise.accel_std=1e+154"),
+        ({"noise": {"obstacle_velocity_std": 1e154}}, "noise.obstacle_velocity_std=1e+154"),
+        ({"obstacle": {"speed": 1e154}}, "obstacle.speed=1e+154"),
+        ({"obstacle": {"max_turn_rate": 1e154}}, "obstacle.max_turn_rate=1e+154"),
+        ({"obstacle": {"wind": (1e300, 0, 0)}}, "obstacle.wind=(1e+300, 0, 0)"),
+        ({"reward": {"collision": 1e308}}, "reward.collision=1e+308"),
+        ({"reward": {"deviation": -1e308}}, "reward.deviation=-1e+308"),
+        ({"uav": {"max_accel": 1e200}}, "uav.max_accel=1e+200"),
+        ({"episode_duration": 1e300}, "episode_duration=1e+300"),
+        # Sensing beyond what an observation can express (clip * position_scale).
+        ({"observation": {"sensing_range": 5000.0}}, "observation.sensing_range=5000.0"),
+        (
+            {"observation": {"sensing_range": 300.0, "clip": 2.0}},
+            "observation.sensing_range=300.0",
+        ),
     ],
 )
 def test_bad_config_names_the_value(kwargs, match):
-    with pytest.raises(ValueError, match=match.replace("(", r"\(").replace(")", r"\)")):
+    with pytest.raises(ValueError, match=re.escape(match)):
         make_config(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs,match",
+    [
+        ({"n_uavz": 3}, "n_uavz"),
+        ({"noise": {"acel_std": 1}}, "noise.acel_std"),
+        ({"reward": {"colision": 1}}, "reward.colision"),
+        ({"action": {"strikt": True}}, "action.strikt"),
+    ],
+)
+def test_unknown_config_key_is_a_type_error_naming_it(kwargs, match):
+    with pytest.raises(TypeError, match=match):
+        make_config(**kwargs)
+    with pytest.raises(TypeError, match=match):
+        make_config(kwargs)
+
+
+def test_action_group_defaults_to_clipping():
+    assert make_config().action.strict is False
+    assert make_config(action={"strict": True}).action.strict is True
 
 
 def test_explicit_formation_is_normalised():

@@ -1,5 +1,6 @@
 """The PettingZoo parallel env and the Gymnasium views."""
 
+import re
 import subprocess
 import sys
 
@@ -44,7 +45,7 @@ def test_gymnasium_check_env_grid(cfg):
 
 
 def test_gymnasium_make_validates_config():
-    with pytest.raises(ValueError, match="n_uavz"):
+    with pytest.raises(TypeError, match="n_uavz"):
         gymnasium.make("uasep/Formation-v1", n_uavz=3)
     with pytest.raises(ValueError, match="n_uavs=99"):
         gymnasium.make("uasep/PaperEncounter-v1", n_uavs=99)
@@ -127,19 +128,81 @@ def _zero(env):
             "uav_2 contains a non-finite value inf",
         ),
         (lambda a: a.update(uav_1=[0.0, -np.inf, 2.0]), "uav_1 contains a non-finite value -inf"),
-        (
-            lambda a: a.update(uav_0=np.array([0, 1.5, 0])),
-            r"action of uav_0 value 1.5 at index \(1,\) is outside",
-        ),
         (lambda a: a.update(uav_1=0.5), r"action of uav_1 must have shape \(3,\), got \(\)"),
-        (lambda a: a.update(uav_2=[0.1, "x", 0.2]), r"action of uav_2 must be numbers, got \[0.1"),
-        (lambda a: a.update(uav_0=np.array(["a", "b", "c"])), "action of uav_0 must be numbers"),
+        (
+            lambda a: a.update(uav_2=[0.1, "x", 0.2]),
+            r"action of uav_2 must be real numbers, got 'x' at index \(1,\)",
+        ),
+        (
+            lambda a: a.update(uav_0=np.array(["a", "b", "c"])),
+            "action of uav_0 must be real numbers, got np.str_\\('a'\\)",
+        ),
+        # Issue 13 item 2: only real numbers are actions.
+        (
+            lambda a: a.update(uav_1=np.array([0, 0, complex(0, np.nan)])),
+            r"action of uav_1 must be real numbers.*dtype complex128",
+        ),
+        (
+            lambda a: a.update(uav_1=np.array([1, 2, 3], dtype="datetime64[s]")),
+            r"action of uav_1 must be real numbers.*dtype datetime64",
+        ),
+        (
+            lambda a: a.update(uav_1=np.array([1, 2, 3], dtype="timedelta64[s]")),
+            r"action of uav_1 must be real numbers.*dtype timedelta64",
+        ),
+        (lambda a: a.update(uav_0=["1", "-1", "0.5"]), "uav_0 must be real numbers, got '1'"),
+        (lambda a: a.update(uav_0=b"abc"), "uav_0 must be real numbers, got b'abc'"),
+        (lambda a: a.update(uav_0=np.ones(3, bool)), "uav_0 must be real numbers.*dtype bool"),
+        (lambda a: a.update(uav_0=[True, 0.0, 0.0]), "uav_0 must be real numbers, got True"),
+        (
+            lambda a: a.update(uav_2=np.array([0.1, "x", 0.2], dtype=object)),
+            r"uav_2 must be real numbers, got 'x' at index \(1,\)",
+        ),
+        # Issue 13 item 7: None is named as None, not as a non-finite nan.
+        (lambda a: a.update(uav_2=[0.0, None, 0.0]), r"uav_2 must be real numbers, got None"),
     ],
 )
 def test_bad_actions_raise_clear_errors(env, mutate, match):
     acts = _zero(env)
     mutate(acts)
     with pytest.raises(ValueError, match=match):
+        env.step(acts)
+    assert env.agents  # a rejected action does not step: the episode goes on
+
+
+def test_non_numbers_are_type_errors(env):
+    acts = _zero(env)
+    acts["uav_1"] = ["0.5", 0, 0]
+    with pytest.raises(TypeError, match=r"uav_1 must be real numbers, got '0\.5'"):
+        env.step(acts)
+
+
+def test_out_of_box_actions_are_clipped_and_counted(env):
+    ref = uasep_env.parallel_env(scenario="paper", noise=False)
+    ref.reset(seed=0)
+    acts = _zero(env)
+    acts["uav_0"] = np.array([0.0, 1.5, -7.0])
+    acts["uav_2"] = [3, 0, 0]
+    obs, rew, _, _, infos = env.step(acts)
+    clipped = {"uav_0": np.array([0.0, 1.0, -1.0]), "uav_1": np.zeros(3), "uav_2": [1, 0, 0]}
+    obs_ref, rew_ref, _, _, infos_ref = ref.step(clipped)
+    assert {a: i["clipped_actions"] for a, i in infos.items()} == {
+        "uav_0": 2,
+        "uav_1": 0,
+        "uav_2": 1,
+    }
+    assert all(i["clipped_actions"] == 0 for i in infos_ref.values())
+    for a in env.possible_agents:
+        np.testing.assert_array_equal(obs[a], obs_ref[a])
+        assert rew[a] == rew_ref[a]
+
+
+def test_strict_action_option_raises_for_out_of_box_actions():
+    env = uasep_env.parallel_env(scenario="paper", action={"strict": True})
+    env.reset(seed=0)
+    acts = _zero(env)
+    acts["uav_0"] = np.array([0.0, 1.5, 0.0])
+    with pytest.raises(ValueError, match=r"action of uav_0 value 1.5 at index \(1,\) is outside"):
         env.step(acts)
 
 
@@ -154,6 +217,77 @@ def test_gym_bad_action():
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"shape \(9,\)"):
         env.step(np.zeros(3))
+    with pytest.raises(TypeError, match=r"must be real numbers.*complex"):
+        env.step(np.zeros(9, complex))
+
+
+def test_gym_clips_and_counts_and_strict_raises():
+    env = gymnasium.make("uasep/PaperEncounter-v1")
+    env.reset(seed=0)
+    act = np.zeros(9)
+    act[[0, 1, 8]] = [2.0, -3.0, 1.5]
+    *_, info = env.step(act)
+    assert info["clipped_actions"].tolist() == [2, 0, 1]
+    *_, info = env.step(np.zeros(9))
+    assert info["clipped_actions"].tolist() == [0, 0, 0]
+    strict = gymnasium.make("uasep/PaperEncounter-v1", action={"strict": True})
+    strict.reset(seed=0)
+    with pytest.raises(ValueError, match=r"value 2.0 at index \(0,\) is outside"):
+        strict.step(act)
+
+
+def test_gym_stepping_a_finished_episode_raises():
+    """Issue 13 item 1: the Gymnasium view kept stepping after its episode ended."""
+    g = gymnasium.make("uasep/Formation-v1", formation_spacing=0.5)
+    g.reset(seed=4)
+    _, _, terminated, _, _ = g.step(np.zeros(9))
+    assert terminated  # a collision
+    with pytest.raises(RuntimeError, match="reset"):
+        g.step(np.full(9, 0.3))
+    g = gymnasium.make("uasep/Formation-v1", episode_duration=1.0).unwrapped
+    g.reset(seed=0)
+    truncated = [g.step(np.zeros(9))[3] for _ in range(5)]
+    assert truncated == [False] * 4 + [True]
+    with pytest.raises(RuntimeError, match="reset"):
+        g.step(np.zeros(9))
+    g.reset()
+    g.step(np.zeros(9))  # a new episode steps again
+
+
+@pytest.mark.parametrize("seed", ["5", b"7", [1.9], 1.5, [-5], True, np.float64(2.0), [1, 2]])
+def test_bad_seeds_are_named(seed):
+    """Issue 13 item 3: seeds were coerced ("5" == 5) or failed inside numpy."""
+    for env in (uasep_env.parallel_env(), gymnasium.make("uasep/Formation-v1")):
+        with pytest.raises(TypeError, match=re.escape(f"got {seed!r}")):
+            env.reset(seed=seed)
+    with pytest.raises(ValueError, match="seed must be >= 0, got -1"):
+        uasep_env.parallel_env().reset(seed=-1)
+
+
+def test_numpy_integer_seed_equals_int_seed():
+    a, b = gymnasium.make("uasep/Formation-v1"), gymnasium.make("uasep/Formation-v1")
+    np.testing.assert_array_equal(a.reset(seed=np.int64(3))[0], b.reset(seed=3)[0])
+
+
+@pytest.mark.parametrize("options", [5, "config", [("config", {})]])
+def test_reset_options_must_be_a_dict(options):
+    """Issue 13 item 7: reset(options=5) raised AttributeError or TypeError from inside."""
+    for env in (uasep_env.parallel_env(), gymnasium.make("uasep/Formation-v1")):
+        with pytest.raises(TypeError, match="options must be a dict or None, got"):
+            env.reset(seed=0, options=options)
+
+
+@pytest.mark.parametrize("changes", [5, "x", [], np.zeros(2)])
+def test_reset_options_config_must_be_a_dict(changes):
+    env = uasep_env.parallel_env()
+    with pytest.raises(TypeError, match=r"options\['config'\] must be a dict, got"):
+        env.reset(seed=0, options={"config": changes})
+
+
+def test_gym_unknown_reset_option_is_named():
+    env = gymnasium.make("uasep/Formation-v1")
+    with pytest.raises(ValueError, match=r"unknown reset option.*'bogus'"):
+        env.reset(seed=0, options={"bogus": 1})
 
 
 def test_step_after_end_raises():
@@ -173,7 +307,7 @@ def test_reset_options_config():
     assert env.world.families[0] == "crossing"
     with pytest.raises(ValueError, match="n_uavs"):
         env.reset(options={"config": {"n_uavs": 4}})
-    with pytest.raises(ValueError, match=r"noise\.nope"):
+    with pytest.raises(TypeError, match=r"noise\.nope"):
         env.reset(options={"config": {"noise": {"nope": 1}}})
 
 

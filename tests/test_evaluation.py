@@ -251,7 +251,7 @@ def test_parse_config_overrides():
         parse_config_overrides(["dt"])
     with pytest.raises(ValueError, match="already set"):
         parse_config_overrides(["noise=false", "noise.accel_std=0"])
-    with pytest.raises(ValueError, match="bogus"):
+    with pytest.raises(TypeError, match="bogus"):
         build_config("paper", ["noise.bogus=1"])
 
 
@@ -264,6 +264,8 @@ def test_parse_config_overrides():
         (["--config", "noise.nope=3"], "noise.nope"),
         (["--config", "dt=-1"], "dt=-1"),
         (["--config", "dt"], "dt"),
+        (["--config", "obstacle.wind=5"], "obstacle.wind=5"),
+        (["--config", "obstacle.wind=null"], "obstacle.wind=None"),
         (["--episodes", "0"], "'0'"),
         (["--episodes", "many"], "many"),
         (["--workers", "0"], "--workers"),
@@ -276,6 +278,39 @@ def test_bad_arguments_exit_2_naming_the_value(args, needle, capsys):
     err = capsys.readouterr().err
     assert rc == 2
     assert needle in err
+
+
+@pytest.mark.parametrize("flag", ["--json", "--csv", "--plot"])
+def test_bad_output_paths_fail_before_the_evaluation(flag, tmp_path, capsys, monkeypatch):
+    """Issue 13 item 7: '--json afile/out.json' failed only after the whole evaluation."""
+    import uasep_env.evaluation as ev
+
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+
+    def boom(*args, **kwargs):
+        raise AssertionError("evaluate() ran before the output paths were checked")
+
+    monkeypatch.setattr(ev, "evaluate", boom)
+    rc = main([flag, str(afile / "out.json"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert f"argument {flag}: cannot write" in err and "is not a directory" in err
+    if flag != "--plot":
+        rc = main([flag, str(tmp_path), "--quiet"])  # a folder where a file is expected
+        assert rc == 2 and "is a directory" in capsys.readouterr().err
+    else:
+        rc = main([flag, str(afile), "--quiet"])  # a file where a folder is expected
+        assert rc == 2 and "is not a directory" in capsys.readouterr().err
+
+
+def test_argument_errors_are_one_line(capsys):
+    """Issue 13 item 7: argparse printed the whole usage before the error."""
+    for args in (["--episodes", "0"], ["--bogus"], ["--config", "dt=-1"]):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1, err
+        assert err.startswith("uasep-eval: error: ")
 
 
 def test_evaluate_rejects_bad_input():

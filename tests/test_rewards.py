@@ -168,3 +168,23 @@ def test_collision_never_pays(scenario):
         crashed, terminated, k = _play(cfg, seed=7, crash_at=crash_at)
         assert terminated and k == crash_at
         assert crashed < 0.0 < safe, (crash_at, crashed, safe)
+
+
+def test_a_lost_uav_ends_the_episode():
+    cfg = make_config(scenario="paper", episode_duration=60.0)
+    core = EnvCore(cfg, n_envs=2)
+    core.reset(seed=1)
+    res = core.step(np.zeros((2, 3, 3)))
+    assert not res.terminated.any() and not res.safety["lost"].any()
+    w = core.world
+    w.uav_pos[1, 2] = w.plan_pos[1, 2] + np.array([0.0, cfg.uav.lost_distance + 20.0, 0.0])
+    res = core.step(np.zeros((2, 3, 3)))
+    assert list(res.terminated) == [False, True]
+    assert res.safety["lost"][1].tolist() == [False, False, True]
+    # Being lost is not a collision: no collision penalty, only the rest of the episode lost.
+    assert (res.terms["collision"] == 0.0).all() and (res.rewards[1] >= 0.0).all()
+
+
+def test_lost_distance_is_validated():
+    with pytest.raises(ValueError, match=r"uav\.lost_distance"):
+        make_config(uav={"lost_distance": 5.0})

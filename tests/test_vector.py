@@ -79,6 +79,73 @@ def test_vector_bad_actions_and_modes():
         FormationVectorEnv(2, autoreset_mode="Sometimes")
     with pytest.raises(ValueError, match="num_envs"):
         FormationVectorEnv(0)
+    with pytest.raises(TypeError, match=r"must be real numbers.*bool"):
+        vec.step(np.zeros((2, 9), bool))
+    with pytest.raises(TypeError, match="n_uavz"):
+        FormationVectorEnv(2, n_uavz=3)
+    with pytest.raises(TypeError, match="n_uavz"):
+        gymnasium.make_vec("uasep/Formation-v1", num_envs=2, n_uavz=3)
+
+
+def test_vector_clips_and_counts_actions():
+    vec = FormationVectorEnv(2, **SHORT)
+    ref = FormationVectorEnv(2, **SHORT)
+    vec.reset(seed=0)
+    ref.reset(seed=0)
+    act = np.zeros((2, 9))
+    act[1, [3, 4, 5]] = [5.0, -2.0, 1.0]
+    obs, rew, *_, info = vec.step(act)
+    obs_ref, rew_ref, *_, info_ref = ref.step(np.clip(act, -1, 1))
+    assert info["clipped_actions"].tolist() == [[0, 0, 0], [0, 2, 0]]
+    assert info["_clipped_actions"].all()
+    assert not info_ref["clipped_actions"].any()
+    np.testing.assert_array_equal(obs, obs_ref)
+    np.testing.assert_array_equal(rew, rew_ref)
+    strict = FormationVectorEnv(2, action={"strict": True}, **SHORT)
+    strict.reset(seed=0)
+    with pytest.raises(ValueError, match=r"value 5.0 at index \(1, 3\) is outside"):
+        strict.step(act)
+
+
+def test_vector_seeds_are_checked():
+    """Issue 13 item 3: vector seed "12345678" became the seeds 1..8."""
+    vec = FormationVectorEnv(8, **SHORT)
+    for seed, err, match in [
+        ("12345678", TypeError, "got '12345678'"),
+        (1.5, TypeError, "got 1.5"),
+        ([1, 2], ValueError, "expected 8 seeds, got 2"),
+        ([0, 1, 2, 3, 4, 5, 6, 7.0], TypeError, r"seed\[7\] must be None or a non-negative int"),
+        ([0, 1, 2, 3, 4, 5, 6, -7], ValueError, r"seed\[7\] must be >= 0, got -7"),
+        ([True] * 8, TypeError, r"seed\[0\]"),
+        (-1, ValueError, "got -1"),
+    ]:
+        with pytest.raises(err, match=match):
+            vec.reset(seed=seed)
+    obs_list, _ = vec.reset(seed=list(range(10, 18)))
+    obs_int, _ = FormationVectorEnv(8, **SHORT).reset(seed=10)
+    np.testing.assert_array_equal(obs_list, obs_int)
+    with pytest.raises(TypeError, match="options must be a dict"):
+        vec.reset(options=5)
+
+
+def test_vector_lifecycle():
+    vec = FormationVectorEnv(2, autoreset_mode="Disabled", episode_duration=0.4)
+    zero = np.zeros(vec.action_space.shape)
+    with pytest.raises(RuntimeError, match="before reset"):
+        vec.step(zero)
+    with pytest.raises(RuntimeError, match="first reset"):
+        vec.reset(options={"reset_mask": np.array([True, False])})
+    vec.reset(seed=0)
+    vec.step(zero)
+    *_, trunc, _ = vec.step(zero)
+    assert trunc.all()
+    with pytest.raises(RuntimeError, match=r"environments \[0, 1\] have finished"):
+        vec.step(zero)
+    vec.reset(options={"reset_mask": np.array([True, False])})
+    with pytest.raises(RuntimeError, match=r"environments \[1\] have finished"):
+        vec.step(zero)
+    vec.reset(options={"reset_mask": np.array([False, True])})
+    vec.step(zero)
 
 
 def test_vector_disabled_mode_reset_mask():
@@ -122,6 +189,36 @@ def test_sb3_adapter_passes_sb3_checks_and_terminal_obs():
     with pytest.raises(ValueError, match=r"shape \(6, 3\)"):
         venv.step_async(np.zeros((5, 3)))
         venv.step_wait()
+
+
+def test_sb3_adapter_hostile_actions_and_clipping():
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+
+    venv = UAVSharedVecEnv(n_envs=2, seed=3, **SHORT)
+    venv.reset()
+    # Issue 13 item 7: a ragged list gave numpy's "setting an array element with a sequence".
+    with pytest.raises(ValueError, match="must be real numbers, got a nested sequence"):
+        venv.step_async([[0, 0, 0]] * 5 + [[0, 0]])
+    # Indices are positions in the (n, 3) input, not (env, uav, axis).
+    bad = np.zeros((6, 3))
+    bad[4, 2] = np.nan
+    with pytest.raises(ValueError, match=r"non-finite value nan at index \(4, 2\)"):
+        venv.step_async(bad)
+    with pytest.raises(TypeError, match=r"must be real numbers, got None at index \(1, 0\)"):
+        venv.step_async([[0, 0, 0], [None, 0, 0]] + [[0, 0, 0]] * 4)
+    act = np.zeros((6, 3))
+    act[5] = [2.0, 2.0, -2.0]
+    venv.step_async(act)
+    _, _, _, infos = venv.step_wait()
+    assert [i["clipped_actions"] for i in infos] == [0, 0, 0, 0, 0, 3]
+    with pytest.raises(TypeError, match="seed must be None or a non-negative int, got '1'"):
+        venv.seed("1")
+    with pytest.raises(TypeError, match="n_uavz"):
+        UAVSharedVecEnv(n_envs=1, n_uavz=2)
+    strict = UAVSharedVecEnv(n_envs=2, seed=3, action={"strict": True}, **SHORT)
+    strict.reset()
+    with pytest.raises(ValueError, match=r"value 2.0 at index \(5, 0\) is outside"):
+        strict.step_async(act)
 
 
 @pytest.mark.parametrize("numba_on", [True, False])

@@ -53,8 +53,9 @@ class Args:
     n_uavs: int = 3
     n_obstacles: int = 1
     episode_duration: float = 200.0  # s
+    config: str = ""  # more env overrides, space-separated KEY=VALUE ("reward.collision=0.5")
     total_timesteps: int = 30_000_000  # agent-steps
-    max_minutes: float = 60.0  # wall-clock budget; training stops when it is spent
+    max_minutes: float = 55.0  # wall-clock budget; training stops when it is spent
     n_envs: int = 32
     n_steps: int = 256  # rollout length per sub-environment
     batch_size: int = 8192
@@ -64,11 +65,13 @@ class Args:
     gae_lambda: float = 0.95
     clip_range: float = 0.2
     ent_coef: float = 0.0
+    target_kl: float = 0.0  # stop an update's epochs past this KL (0: no limit)
+    critic_warmup: int = 0  # first PPO iterations that train the critic only
     log_std_init: float = -0.5
     hidden: str = "128,128"
     activation: str = "tanh"
     norm_obs: bool = True
-    norm_reward: bool = True
+    norm_reward: bool = False  # on, the rare -max_steps collisions swamp the scale
     seed: int = 0
     checkpoint_every: int = 2_000_000  # agent-steps
     eval_episodes: int = 50
@@ -107,16 +110,18 @@ def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> A
 
 
 def make_env_config(args: Args) -> Any:
-    """The environment config of a run (every reward weight at its default)."""
+    """The environment config of a run (reward weights at their defaults unless overridden)."""
     from uasep_env import make_config
+    from uasep_env.evaluation import parse_config_overrides
 
-    return make_config(
+    base = make_config(
         scenario=args.scenario,
         n_uavs=args.n_uavs,
         n_obstacles=args.n_obstacles,
         episode_duration=args.episode_duration,
         action={"mode": args.action_mode, "residual_scale": args.residual_scale},
     )
+    return base.replace(**parse_config_overrides(args.config.split()))
 
 
 def _hidden(args: Args) -> list[int]:
@@ -156,6 +161,7 @@ def build(args: Args, config: Any) -> tuple[Any, Any]:
         gae_lambda=args.gae_lambda,
         clip_range=args.clip_range,
         ent_coef=args.ent_coef,
+        target_kl=args.target_kl or None,
         policy_kwargs={
             "net_arch": {"pi": hidden, "vf": hidden},
             "activation_fn": act,
@@ -253,8 +259,18 @@ def make_callback(args: Args, config: Any, venv: Any, wall_offset: float, total:
     n_uavs = config.n_uavs
 
     class Progress(BaseCallback):
+        def _actor_params(self) -> list:
+            p = self.model.policy
+            return [*p.mlp_extractor.policy_net.parameters(), *p.action_net.parameters(),
+                    p.log_std]  # fmt: skip
+
         def _on_training_start(self) -> None:
             self.t0 = time.perf_counter() - wall_offset
+            # Critic warm-up: a residual policy starts at the APF, and updates driven by an
+            # untrained critic only move it away; freeze the actor for the first iterations.
+            self.iterations = self.num_timesteps // (args.n_envs * n_uavs * args.n_steps)
+            for q in self._actor_params():
+                q.requires_grad_(self.iterations >= args.critic_warmup)
             self.window: collections.deque = collections.deque(maxlen=200)
             self.episodes = 0
             self.next_ckpt = (
@@ -305,6 +321,10 @@ def make_callback(args: Args, config: Any, venv: Any, wall_offset: float, total:
             return self.wall() < args.max_minutes * 60.0
 
         def _on_rollout_end(self) -> None:
+            self.iterations += 1
+            if self.iterations == args.critic_warmup:
+                for q in self._actor_params():
+                    q.requires_grad_(True)
             s = self.summary()
             row = {"agent_steps": self.num_timesteps, "wall_s": round(self.wall(), 2),
                    "episodes": self.episodes, **s}  # fmt: skip

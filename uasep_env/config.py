@@ -2,7 +2,10 @@
 
 Every setting of the simulator and the environments lives in one of the frozen dataclasses
 below. :func:`make_config` builds an :class:`EnvConfig` from keyword arguments or a (nested)
-dict; unknown keys and out-of-range values raise a :class:`ValueError` that names them.
+dict; unknown keys raise a :class:`TypeError` (Python's convention for an unexpected
+keyword) and invalid or out-of-range values a :class:`ValueError`, each naming the dotted field.
+Every numeric field is bounded to a physically meaningful range, so that a config that
+validates also simulates (no overflow, no infinite reward, no clipped sensing).
 
 Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 """
@@ -55,33 +58,75 @@ def _check(cond: bool, name: str, value: object, what: str) -> None:
         raise ValueError(f"invalid config value {name}={value!r}: {what}")
 
 
-def _finite(name: str, value: float) -> None:
+def _is_real(value: object) -> bool:
+    """A real number: int, float or a numpy integer/floating scalar (not a bool)."""
+    return isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(
+        value, (bool, np.bool_)
+    )
+
+
+def _finite(name: str, value: float, bound: float | None = None) -> None:
     _check(
-        isinstance(value, (int, float, np.floating, np.integer))
-        and not isinstance(value, bool)
-        and math.isfinite(float(value)),
+        _is_real(value) and math.isfinite(float(value)),
         name,
         value,
         "must be a finite number",
     )
+    if bound is not None:
+        _check(abs(value) <= bound, name, value, f"must be in [-{bound:g}, {bound:g}]")
 
 
-def _positive(name: str, value: float, *, allow_zero: bool = False) -> None:
+def _positive(name: str, value: float, *, allow_zero: bool = False, hi: float) -> None:
     _finite(name, value)
     if allow_zero:
         _check(value >= 0, name, value, "must be >= 0")
     else:
         _check(value > 0, name, value, "must be > 0")
+    _check(value <= hi, name, value, f"must be <= {hi:g}")
 
 
 def _int_in(name: str, value: int, lo: int, hi: int) -> None:
     _check(
-        isinstance(value, (int, np.integer)) and not isinstance(value, bool),
+        isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)),
         name,
         value,
         "must be an integer",
     )
     _check(lo <= value <= hi, name, value, f"must be in [{lo}, {hi}]")
+
+
+def _one_of(name: str, value: object, choices: tuple) -> None:
+    _check(
+        (value is None or isinstance(value, str)) and value in choices,
+        name,
+        value,
+        f"must be one of {choices}",
+    )
+
+
+def _vector(name: str, value: object, length: int, bound: float) -> tuple[float, ...]:
+    """A sequence of ``length`` finite reals within ``[-bound, bound]``, as a float tuple."""
+    _check(
+        isinstance(value, (tuple, list, np.ndarray)) and len(value) == length,
+        name,
+        value,
+        f"must be a sequence of {length} numbers",
+    )
+    for v in value:  # type: ignore[union-attr]
+        _check(_is_real(v) and math.isfinite(float(v)), name, value, "must be finite numbers")
+        _check(abs(v) <= bound, name, value, f"components must be in [-{bound:g}, {bound:g}]")
+    return tuple(float(v) for v in value)  # type: ignore[union-attr]
+
+
+# Physical bounds of the fields (SI). Generous, but finite: beyond them a config would
+# overflow, give infinite rewards or describe no aircraft.
+_MAX_SPEED = 200.0  # m/s (UAVs, obstacles, wind, velocity noise)
+_MAX_ACCEL = 100.0  # m/s^2 (about 10 g)
+_MAX_DIST = 10_000.0  # m (separation radii, formation sizes, position noise)
+_MAX_TURN_RATE = 2.0 * math.pi  # rad/s (a full turn per second)
+_MAX_TIME = 1.0e6  # s (episode duration, switch times)
+_MAX_WEIGHT = 1.0e6  # reward weights
+_MAX_OBS = 1.0e6  # observation scales, clip bound and sensing range
 
 
 @dataclass(frozen=True)
@@ -97,6 +142,11 @@ class UAVConfig:
         separation_distance: UAV-UAV loss-of-separation threshold (m).
         obstacle_separation: UAV-obstacle loss-of-separation threshold (m), measured
             between centres.
+        lost_distance: A UAV farther than this from its planned position is lost: the
+            episode ends (terminated) (m). The default is almost three times the APF's
+            largest deviation on the random bank (112 m), so it never ends a controlled
+            flight; it ends the flights of untrained policies before they drift for
+            kilometres, where no reward term can tell them the way back.
     """
 
     max_speed: float = 10.0  # m/s
@@ -104,13 +154,15 @@ class UAVConfig:
     collision_distance: float = 3.0  # m
     separation_distance: float = 8.0  # m
     obstacle_separation: float = 10.0  # m
+    lost_distance: float = 300.0  # m
 
     def __post_init__(self) -> None:
-        _positive("uav.max_speed", self.max_speed)
-        _positive("uav.max_accel", self.max_accel)
-        _positive("uav.collision_distance", self.collision_distance)
-        _positive("uav.separation_distance", self.separation_distance)
-        _positive("uav.obstacle_separation", self.obstacle_separation)
+        _positive("uav.max_speed", self.max_speed, hi=_MAX_SPEED)
+        _positive("uav.max_accel", self.max_accel, hi=_MAX_ACCEL)
+        _positive("uav.collision_distance", self.collision_distance, hi=_MAX_DIST)
+        _positive("uav.separation_distance", self.separation_distance, hi=_MAX_DIST)
+        _positive("uav.obstacle_separation", self.obstacle_separation, hi=_MAX_DIST)
+        _positive("uav.lost_distance", self.lost_distance, hi=_MAX_DIST)
         _check(
             self.separation_distance >= self.collision_distance,
             "uav.separation_distance",
@@ -122,6 +174,12 @@ class UAVConfig:
             "uav.obstacle_separation",
             self.obstacle_separation,
             "must be >= uav.collision_distance",
+        )
+        _check(
+            self.lost_distance > max(self.separation_distance, self.obstacle_separation),
+            "uav.lost_distance",
+            self.lost_distance,
+            "must be > uav.separation_distance and uav.obstacle_separation",
         )
 
 
@@ -145,8 +203,15 @@ class NoiseConfig:
     obstacle_velocity_std: float = 0.3  # m/s
 
     def __post_init__(self) -> None:
+        bounds = {
+            "accel_std": _MAX_ACCEL,
+            "position_std": _MAX_DIST,
+            "velocity_std": _MAX_SPEED,
+            "obstacle_position_std": _MAX_DIST,
+            "obstacle_velocity_std": _MAX_SPEED,
+        }
         for f in fields(self):
-            _positive(f"noise.{f.name}", getattr(self, f.name), allow_zero=True)
+            _positive(f"noise.{f.name}", getattr(self, f.name), allow_zero=True, hi=bounds[f.name])
 
     @classmethod
     def off(cls) -> NoiseConfig:
@@ -186,11 +251,11 @@ class ObstacleConfig:
     wind: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s, NED
 
     def __post_init__(self) -> None:
-        _positive("obstacle.speed", self.speed)
-        _positive("obstacle.max_turn_rate", self.max_turn_rate, allow_zero=True)
-        _positive("obstacle.max_climb_rate", self.max_climb_rate, allow_zero=True)
-        _positive("obstacle.radius", self.radius, allow_zero=True)
-        _positive("obstacle.mean_switch_time", self.mean_switch_time)
+        _positive("obstacle.speed", self.speed, hi=_MAX_SPEED)
+        _positive("obstacle.max_turn_rate", self.max_turn_rate, allow_zero=True, hi=_MAX_TURN_RATE)
+        _positive("obstacle.max_climb_rate", self.max_climb_rate, allow_zero=True, hi=_MAX_SPEED)
+        _positive("obstacle.radius", self.radius, allow_zero=True, hi=_MAX_DIST)
+        _positive("obstacle.mean_switch_time", self.mean_switch_time, hi=_MAX_TIME)
         _finite("obstacle.straight_probability", self.straight_probability)
         _check(
             0.0 <= self.straight_probability <= 1.0,
@@ -198,11 +263,8 @@ class ObstacleConfig:
             self.straight_probability,
             "must be in [0, 1]",
         )
-        wind = tuple(self.wind)
-        _check(len(wind) == 3, "obstacle.wind", self.wind, "must have 3 components (NED)")
-        for w in wind:
-            _finite("obstacle.wind", w)
-        object.__setattr__(self, "wind", tuple(float(w) for w in wind))
+        wind = _vector("obstacle.wind", self.wind, 3, _MAX_SPEED)  # NED
+        object.__setattr__(self, "wind", wind)
 
 
 @dataclass(frozen=True)
@@ -222,14 +284,8 @@ class PredictionConfig:
     kalman: bool = True
 
     def __post_init__(self) -> None:
-        _positive("prediction.horizon", self.horizon)
-        _check(self.horizon <= 600.0, "prediction.horizon", self.horizon, "must be <= 600 s")
-        _check(
-            self.mode in ("swept", "terminal"),
-            "prediction.mode",
-            self.mode,
-            "must be 'swept' or 'terminal'",
-        )
+        _positive("prediction.horizon", self.horizon, hi=600.0)
+        _one_of("prediction.mode", self.mode, ("swept", "terminal"))
         _check(isinstance(self.kalman, bool), "prediction.kalman", self.kalman, "must be a bool")
 
 
@@ -242,7 +298,8 @@ class ObservationConfig:
         k_obstacles: Number of nearest obstacles observed (``None``: all, at least 1 slot).
         position_scale: Divisor that normalises positions (m).
         clip: Normalised values are clipped to ``[-clip, clip]``.
-        sensing_range: Obstacles and UAVs farther than this are not observed (m).
+        sensing_range: Obstacles and UAVs farther than this are not observed (m); at most
+            ``clip * position_scale``, the farthest distance an observation can express.
     """
 
     k_uavs: int | None = None
@@ -256,9 +313,17 @@ class ObservationConfig:
             _int_in("observation.k_uavs", self.k_uavs, 1, 31)
         if self.k_obstacles is not None:
             _int_in("observation.k_obstacles", self.k_obstacles, 1, 8)
-        _positive("observation.position_scale", self.position_scale)
-        _positive("observation.clip", self.clip)
-        _positive("observation.sensing_range", self.sensing_range)
+        _positive("observation.position_scale", self.position_scale, hi=_MAX_OBS)
+        _positive("observation.clip", self.clip, hi=_MAX_OBS)
+        _positive("observation.sensing_range", self.sensing_range, hi=_MAX_OBS)
+        reach = self.clip * self.position_scale
+        _check(
+            self.sensing_range <= reach,
+            "observation.sensing_range",
+            self.sensing_range,
+            f"must be <= observation.clip * observation.position_scale ({reach:g} m): "
+            "farther objects would be observed with clipped distances",
+        )
 
 
 @dataclass(frozen=True)
@@ -294,7 +359,7 @@ class RewardWeights:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            _finite(f"reward.{f.name}", getattr(self, f.name))
+            _finite(f"reward.{f.name}", getattr(self, f.name), _MAX_WEIGHT)
         _check(0.0 <= self.shared <= 1.0, "reward.shared", self.shared, "must be in [0, 1]")
 
 
@@ -313,10 +378,14 @@ class ActionConfig:
             observation then ends with that APF command (3 more entries).
         residual_scale: In ``residual_apf`` mode, the largest correction per axis, as a
             fraction of ``uav.max_accel`` (the sum is clipped to the acceleration bound).
+        strict: Finite actions outside the action box ``[-1, 1]`` raise a ``ValueError``
+            naming them. Off (the default, the ecosystem's convention), they are clipped to
+            the box and counted in the step's infos (``clipped_actions``).
     """
 
     mode: str = "direct"
     residual_scale: float = 0.5  # fraction of uav.max_accel
+    strict: bool = False
 
     def __post_init__(self) -> None:
         _check(
@@ -329,6 +398,7 @@ class ActionConfig:
             self.residual_scale,
             "must be in (0, 2]",
         )
+        _check(isinstance(self.strict, bool), "action.strict", self.strict, "must be a bool")
 
 
 @dataclass(frozen=True)
@@ -353,7 +423,8 @@ class EnvConfig:
         prediction: Reachable-set prediction and filtering.
         observation: Observation options.
         reward: Reward weights.
-        action: What an action means (direct command or residual on the APF).
+        action: What an action means (direct command or residual on the APF) and how
+            out-of-box actions are treated.
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
     """
 
@@ -378,7 +449,7 @@ class EnvConfig:
     def __post_init__(self) -> None:
         _int_in("n_uavs", self.n_uavs, 2, 32)
         _int_in("n_obstacles", self.n_obstacles, 0, 8)
-        _check(self.scenario in SCENARIOS, "scenario", self.scenario, f"must be one of {SCENARIOS}")
+        _one_of("scenario", self.scenario, SCENARIOS)
         if isinstance(self.formation, str):
             _check(
                 self.formation in FORMATION_PATTERNS,
@@ -387,41 +458,36 @@ class EnvConfig:
                 f"must be one of {FORMATION_PATTERNS} or a tuple of (x, y, z) slots",
             )
         else:
-            slots = np.asarray(self.formation, dtype=float)
             _check(
-                slots.shape == (self.n_uavs, 3),
+                isinstance(self.formation, (tuple, list, np.ndarray))
+                and len(self.formation) == self.n_uavs,
                 "formation",
                 self.formation,
-                f"explicit pattern must have shape ({self.n_uavs}, 3)",
+                f"explicit pattern must have shape ({self.n_uavs}, 3): one (x, y, z) per UAV",
             )
-            _check(bool(np.all(np.isfinite(slots))), "formation", self.formation, "must be finite")
-            object.__setattr__(
-                self, "formation", tuple(tuple(float(c) for c in row) for row in slots)
+            slots = tuple(
+                _vector(f"formation[{i}]", row, 3, _MAX_DIST)
+                for i, row in enumerate(self.formation)  # type: ignore[arg-type]
             )
-        _positive("formation_spacing", self.formation_spacing)
-        _positive("cruise_speed", self.cruise_speed)
+            object.__setattr__(self, "formation", slots)
+        _positive("formation_spacing", self.formation_spacing, hi=_MAX_DIST)
+        _positive("cruise_speed", self.cruise_speed, hi=_MAX_SPEED)
         _check(
             self.cruise_speed <= self.uav.max_speed,
             "cruise_speed",
             self.cruise_speed,
             f"must be <= uav.max_speed ({self.uav.max_speed})",
         )
-        _positive("dt", self.dt)
-        _check(self.dt <= 5.0, "dt", self.dt, "must be <= 5 s")
+        _positive("dt", self.dt, hi=5.0)
         _int_in("decision_interval", self.decision_interval, 1, 1000)
-        _positive("episode_duration", self.episode_duration)
+        _positive("episode_duration", self.episode_duration, hi=_MAX_TIME)
         _check(
             self.episode_duration >= self.dt * self.decision_interval,
             "episode_duration",
             self.episode_duration,
             "must be at least one environment step",
         )
-        _check(
-            self.render_mode in (None, "human", "rgb_array"),
-            "render_mode",
-            self.render_mode,
-            "must be None, 'human' or 'rgb_array'",
-        )
+        _one_of("render_mode", self.render_mode, (None, "human", "rgb_array"))
         for name, cls in _NESTED.items():
             _check(
                 isinstance(getattr(self, name), cls),
@@ -467,12 +533,20 @@ _NESTED: dict[str, type] = {
 
 
 def _build(cls: type[T], base: T | None, values: Mapping[str, Any], prefix: str) -> T:
-    """Build dataclass ``cls`` from ``base`` updated with ``values``; unknown keys raise."""
+    """Build dataclass ``cls`` from ``base`` updated with ``values``.
+
+    Raises:
+        TypeError: For unknown keys (named, dotted).
+        ValueError: For invalid values (named, dotted).
+    """
     names = {f.name for f in fields(cls)}  # type: ignore[arg-type]
+    bad_keys = [k for k in values if not isinstance(k, str)]
+    if bad_keys:
+        raise TypeError(f"config keys must be strings, got {bad_keys[0]!r} in {prefix or 'config'}")
     unknown = sorted(set(values) - names)
     if unknown:
         full = ", ".join(prefix + k for k in unknown)
-        raise ValueError(f"unknown config key(s): {full}; valid keys: {sorted(names)}")
+        raise TypeError(f"unknown config key(s): {full}; valid keys: {sorted(names)}")
     current = {f.name: getattr(base, f.name) for f in fields(cls)} if base is not None else {}
     for key, value in values.items():
         sub = _NESTED.get(key) if cls is EnvConfig else None
@@ -489,10 +563,7 @@ def _build(cls: type[T], base: T | None, values: Mapping[str, Any], prefix: str)
                     f"must be a dict or {sub.__name__}"
                 )
         current[key] = value
-    try:
-        return cls(**current)
-    except TypeError as err:  # e.g. wrong positional structure
-        raise ValueError(f"invalid config for {cls.__name__}: {err}") from err
+    return cls(**current)
 
 
 def make_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwargs: Any) -> EnvConfig:
@@ -506,7 +577,8 @@ def make_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwargs: A
         The frozen config.
 
     Raises:
-        ValueError: For unknown keys (named) or out-of-range values (named with the value).
+        TypeError: For unknown keys (named, e.g. ``noise.acel_std``).
+        ValueError: For invalid or out-of-range values (the dotted field and the value).
     """
     if config is None:
         base, values = EnvConfig(), {}

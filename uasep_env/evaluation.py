@@ -32,13 +32,14 @@ import gzip
 import json
 import math
 import multiprocessing
+import os
 import sys
 import textwrap
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -147,7 +148,8 @@ def build_config(
         The validated config.
 
     Raises:
-        ValueError: For malformed overrides, unknown keys or invalid values (named).
+        TypeError: For unknown keys (named).
+        ValueError: For malformed overrides or invalid values (named).
     """
     values: dict[str, Any] = {}
     if scenario is not None:
@@ -754,6 +756,39 @@ def _bounded(kind: type, minimum: float) -> Callable[[str], float]:
     return parse
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (not the whole usage)."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``prog: error: message`` and a pointer to ``--help``; exit with status 2."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _output_problem(path: Path, directory: bool) -> str | None:
+    """Why ``path`` cannot be written (a file, or a folder when ``directory``), or None.
+
+    Checked before the evaluation runs, so that a bad path fails at once: the path must
+    not be a folder (a file for ``directory``), its nearest existing parent must be a
+    writable folder, and an existing target must be writable.
+    """
+    if path.exists():
+        if directory and not path.is_dir():
+            return "exists and is not a directory"
+        if not directory and path.is_dir():
+            return "is a directory"
+        if not os.access(path, os.W_OK):
+            return "is not writable"
+        return None
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"{parent} is not a directory"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"{parent} is not writable"
+    return None
+
+
 _positive_int = _bounded(int, 1)
 _non_negative_int = _bounded(int, 0)
 _non_negative_float = _bounded(float, 0.0)
@@ -767,7 +802,7 @@ def build_parser() -> argparse.ArgumentParser:
     """
     from uasep_env import __version__
 
-    p = argparse.ArgumentParser(
+    p = _OneLineParser(
         prog="uasep-eval",
         description=(
             "Evaluate separation-management policies headlessly on the same seeded scenarios "
@@ -913,9 +948,17 @@ def _run(argv: Sequence[str] | None) -> int:
         parser.error(
             f"argument --deviation-threshold: must be > 0, got {args.deviation_threshold:g}"
         )
+    for flag, path, directory in (
+        ("--json", args.json, False),
+        ("--csv", args.csv, False),
+        ("--plot", args.plot, True),
+    ):
+        problem = None if path is None else _output_problem(path, directory)
+        if problem is not None:
+            parser.error(f"argument {flag}: cannot write {str(path)!r}: {problem}")
     try:
         cfg = build_config(args.scenario, args.config)
-    except ValueError as err:
+    except (TypeError, ValueError) as err:
         parser.error(f"argument --config: {err}")
     for name in names:  # fail early on models that do not load
         try:
@@ -980,8 +1023,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         argv: Arguments (without the program name); ``sys.argv[1:]`` when None.
 
     Returns:
-        The exit status: 0 on success, 2 for bad arguments (the message, on stderr, names
-        the bad value), 1 for an output file that cannot be written.
+        The exit status: 0 on success, 2 for bad arguments (one line on stderr that names
+        the bad value; output paths are checked before the evaluation runs), 1 for an output
+        file that still cannot be written.
     """
     try:
         return _run(argv)

@@ -44,7 +44,7 @@ from uasep_env.formation import (
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, sample_scenario
 
-__all__ = ["World"]
+__all__ = ["World", "check_seed"]
 
 #: Environments refilled per task when noise is drawn on several threads; below twice
 #: this, one thread does it all (a task costs more than it saves).
@@ -69,6 +69,44 @@ def _run_chunked(fn: Callable[[np.ndarray], None], envs: np.ndarray) -> None:
         _pool.append(ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="uasep-noise"))
     for future in [_pool[0].submit(fn, part) for part in np.array_split(envs, workers)]:
         future.result()
+
+
+def _is_int(x: object) -> bool:
+    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+
+def check_seed(seed: object, n_envs: int | None = None) -> None:
+    """Check a reset seed as Gymnasium does; name the bad value.
+
+    Args:
+        seed: ``None`` or a non-negative int; with ``n_envs`` (the batched views) also a
+            sequence of ``n_envs`` entries, each ``None`` or a non-negative int.
+        n_envs: The batch size when sequences are accepted, else ``None``.
+
+    Raises:
+        TypeError: A seed that is not None, an int (bools, floats and strings are not) or,
+            for batches, a list/tuple/array of them.
+        ValueError: A negative seed, or a sequence of the wrong length.
+    """
+    if seed is None:
+        return
+    if _is_int(seed):
+        if seed < 0:  # type: ignore[operator]
+            raise ValueError(f"seed must be >= 0, got {seed!r}")
+        return
+    kinds = "None or a non-negative int"
+    if n_envs is None or not isinstance(seed, (list, tuple, np.ndarray)):
+        if n_envs is not None:
+            kinds += f", or a list of {n_envs} of them (one per environment)"
+        raise TypeError(f"seed must be {kinds}, got {seed!r}")
+    seeds = list(seed)
+    if len(seeds) != n_envs:
+        raise ValueError(f"expected {n_envs} seeds, got {len(seeds)}: {seed!r}")
+    for i, s in enumerate(seeds):
+        if s is not None and not _is_int(s):
+            raise TypeError(f"seed[{i}] must be None or a non-negative int, got {s!r}")
+        if s is not None and s < 0:
+            raise ValueError(f"seed[{i}] must be >= 0, got {s!r}")
 
 
 class World:
@@ -196,7 +234,9 @@ class World:
             mask: ``(n_envs,)`` bool; which environments to reset.
 
         Raises:
-            ValueError: If ``mask`` or ``seed`` has the wrong shape or type.
+            TypeError: If ``seed`` is not None, an int or a sequence of them (named).
+            ValueError: If ``mask`` has the wrong shape or type, a seed is negative, or
+                the number of seeds is not ``n_envs``.
         """
         e = self.n_envs
         if mask is None:
@@ -204,17 +244,14 @@ class World:
         mask = np.asarray(mask)
         if mask.shape != (e,) or mask.dtype != bool:
             raise ValueError(f"mask must be a bool array of shape ({e},), got {mask!r}")
+        check_seed(seed, e)
         seeds: list[int | None]
         if seed is None:
             seeds = [None] * e
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            if seed < 0:
-                raise ValueError(f"seed must be >= 0, got {seed}")
-            seeds = [int(seed) + i for i in range(e)]
+        elif _is_int(seed):
+            seeds = [int(seed) + i for i in range(e)]  # type: ignore[arg-type]
         else:
-            seeds = list(seed)
-            if len(seeds) != e:
-                raise ValueError(f"expected {e} seeds, got {len(seeds)}: {seed!r}")
+            seeds = list(seed)  # type: ignore[arg-type]
         idx = np.flatnonzero(mask)
         specs: list[ScenarioSpec] = []
         for i in idx:

@@ -2,15 +2,18 @@
 
 :class:`EnvCore` wraps a :class:`~uasep_env.world.World` and adds what an RL environment
 needs on top of the physics: action validation and scaling, observations, named rewards,
-termination (a collision), truncation (time limit / end of the plan) and the per-step
-safety figures. The PettingZoo env, the Gymnasium env, the vector env and the SB3 adapter
-are thin views of it; none of them steps the world another way.
+termination (a collision, or a UAV lost: farther than ``uav.lost_distance`` from its
+plan), truncation (time limit / end of the plan) and the per-step safety figures. The
+PettingZoo env, the Gymnasium env, the vector env and the SB3 adapter are thin views of
+it; none of them steps the world another way.
 """
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -20,16 +23,142 @@ from uasep_env.observation import ObservationLayout, build_observations, global_
 from uasep_env.rewards import REWARD_TERMS, collisions, compute_rewards
 from uasep_env.world import World
 
-__all__ = ["ACTION_TOLERANCE", "EnvCore", "StepResult", "validate_actions"]
+__all__ = [
+    "ACTION_TOLERANCE",
+    "ActionTypeError",
+    "EnvCore",
+    "StepResult",
+    "action_array",
+    "check_options",
+    "prepare_actions",
+    "validate_actions",
+]
 
-#: Actions may exceed ``[-1, 1]`` by this much (rounding) before they are rejected.
+#: Actions may exceed ``[-1, 1]`` by this much (rounding) before strict checks reject them.
 ACTION_TOLERANCE = 1e-6
+
+
+class ActionTypeError(TypeError, ValueError):
+    """An action that is not made of real numbers (strings, bools, complex, None, ...).
+
+    A :class:`TypeError` (Python's convention for a value of the wrong type) that is also a
+    :class:`ValueError`, which every other bad action raises.
+    """
+
+
+def _short(value: Any, limit: int = 120) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def _is_real(x: Any) -> bool:
+    """A real number: Python int/float (or other ``numbers.Real``), numpy int/float, not bool."""
+    if isinstance(x, (bool, np.bool_)):
+        return False
+    if isinstance(x, np.ndarray):
+        return x.ndim == 0 and x.dtype.kind in "fiu"
+    return isinstance(x, (numbers.Real, np.integer, np.floating))
+
+
+def _real_array(actions: Any, where: str) -> np.ndarray:
+    """``actions`` as an array of an integer or floating dtype; anything else is named."""
+    if isinstance(actions, np.ndarray) and actions.dtype.kind in "fiu":
+        return actions
+    if isinstance(actions, np.ndarray) and actions.dtype.kind != "O":
+        if actions.size == 0:
+            raise ActionTypeError(f"{where} must be real numbers, got dtype {actions.dtype}")
+        idx = np.unravel_index(0, actions.shape)
+        raise ActionTypeError(
+            f"{where} must be real numbers, got {_short(actions[idx])} (dtype {actions.dtype}) "
+            f"at index {tuple(int(i) for i in idx)}"
+        )
+    # Lists, scalars and object arrays: look at each element's own type, so that bools,
+    # strings or None inside a list are not converted.
+    try:
+        arr = actions if isinstance(actions, np.ndarray) else np.asarray(actions, dtype=object)
+    except (TypeError, ValueError, OverflowError) as err:
+        raise ActionTypeError(
+            f"{where} must be a rectangular array of real numbers, got {_short(actions)}"
+        ) from err
+    flat = arr.ravel()
+    for i, x in enumerate(flat):
+        if not _is_real(x):
+            idx = tuple(int(j) for j in np.unravel_index(i, arr.shape))
+            what = "a nested sequence (ragged)" if isinstance(x, (list, tuple, np.ndarray)) else ""
+            raise ActionTypeError(
+                f"{where} must be real numbers, got {what or _short(x)} at index {idx}"
+                + (f": {_short(x)}" if what else "")
+            )
+    # Python ints beyond float range are finite: clamp them (they are clipped anyway).
+    values = [max(-2, min(2, x)) if isinstance(x, int) else x for x in flat]
+    return np.array([float(v) for v in values], dtype=float).reshape(arr.shape)
+
+
+def action_array(actions: Any, shape: tuple[int, ...], where: str = "action") -> np.ndarray:
+    """``actions`` as a float64 array of ``shape``, not range-checked.
+
+    Raises:
+        ActionTypeError: A value that is not a real number, named with its index.
+        ValueError: The wrong shape.
+    """
+    a = _real_array(actions, where)
+    if a.shape != tuple(shape):
+        raise ValueError(f"{where} must have shape {tuple(shape)}, got {a.shape}")
+    return a.astype(float, copy=False)
+
+
+def prepare_actions(
+    actions: Any, shape: tuple[int, ...], where: str = "action", strict: bool = False
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Check normalised actions and clip finite ones to the box ``[-1, 1]``.
+
+    Only real numbers are actions: arrays of an integer or floating dtype, Python or numpy
+    numbers, and (nested) lists of them. Finite values outside the box are clipped to it
+    (the ecosystem's convention), unless ``strict``.
+
+    Args:
+        actions: The actions.
+        shape: Their expected shape.
+        where: Name used in error messages.
+        strict: Raise for values outside the box (beyond the rounding tolerance
+            :data:`ACTION_TOLERANCE`) instead of clipping them.
+
+    Returns:
+        ``(clipped, outside)``: the actions as float64 in ``[-1, 1]``, and a bool mask of
+        ``shape`` marking the values that were outside the box (``None`` when none was).
+
+    Raises:
+        ActionTypeError: A value that is not a real number (a ``TypeError`` and a
+            ``ValueError``), named with its index.
+        ValueError: The wrong shape, or a non-finite value (named with its index), or, with
+            ``strict``, a value outside the box.
+    """
+    a = action_array(actions, shape, where)
+    # One pass in the usual case: NaN compares false, so it fails this test too.
+    if (np.abs(a) <= 1.0).all():
+        return np.array(a, dtype=float), None
+    finite = np.isfinite(a)
+    if not finite.all():
+        idx = tuple(int(i) for i in np.argwhere(~finite)[0])
+        raise ValueError(f"{where} contains a non-finite value {float(a[idx])} at index {idx}")
+    if strict:
+        beyond = np.abs(a) > 1.0 + ACTION_TOLERANCE
+        if beyond.any():
+            idx = tuple(int(i) for i in np.argwhere(beyond)[0])
+            raise ValueError(
+                f"{where} value {float(a[idx])} at index {idx} is outside the action space "
+                "[-1, 1] (action.strict is set)"
+            )
+    return np.minimum(np.maximum(a, -1.0), 1.0), np.abs(a) > 1.0
 
 
 def validate_actions(
     actions: np.ndarray, shape: tuple[int, ...], where: str = "action"
 ) -> np.ndarray:
-    """Check normalised actions: shape, finiteness and the ``[-1, 1]`` box.
+    """Check normalised actions strictly: shape, real numbers, finite, in ``[-1, 1]``.
+
+    :func:`prepare_actions` with ``strict=True``, for callers that own their actions (the
+    rollouts of policies); the environments clip unless ``action.strict`` is set.
 
     Args:
         actions: The actions.
@@ -40,26 +169,47 @@ def validate_actions(
         The actions as float64, clipped only by the rounding tolerance.
 
     Raises:
-        ValueError: Naming a value that is not a number, the wrong shape, or the first
-            non-finite or out-of-range value.
+        ValueError: Naming a value that is not a number (:class:`ActionTypeError`), the
+            wrong shape, or the first non-finite or out-of-range value.
     """
-    try:
-        a = np.asarray(actions).astype(float, copy=False)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{where} must be numbers, got {actions!r}") from err
-    if a.shape != shape:
-        raise ValueError(f"{where} must have shape {shape}, got {a.shape}")
-    # One pass in the usual case: NaN compares false, so it fails this test too.
-    if not (np.abs(a) <= 1.0 + ACTION_TOLERANCE).all():
-        finite = np.isfinite(a)
-        if not finite.all():
-            idx = tuple(int(i) for i in np.argwhere(~finite)[0])
-            raise ValueError(f"{where} contains a non-finite value {float(a[idx])} at index {idx}")
-        idx = tuple(int(i) for i in np.argwhere(np.abs(a) > 1.0 + ACTION_TOLERANCE)[0])
+    return prepare_actions(actions, shape, where, strict=True)[0]
+
+
+def clipped_counts(outside: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """Per-agent number of clipped action components: ``outside`` summed over its last axis.
+
+    Args:
+        outside: The mask of :func:`prepare_actions` (``None``: nothing was clipped).
+        shape: The shape of the counts (the mask's shape without its last axis).
+    """
+    if outside is None:
+        return np.zeros(shape, dtype=np.int64)
+    return outside.reshape(*shape, -1).sum(axis=-1)
+
+
+def check_options(options: Any, supported: Sequence[str] | None, where: str = "reset") -> dict:
+    """Reset ``options``: ``None`` or a dict of the ``supported`` keys (unknown keys named).
+
+    Args:
+        options: The options.
+        supported: The option keys understood (``None``: any key, the others ignored).
+        where: Name used in error messages.
+
+    Raises:
+        TypeError: ``options`` is not a dict (or None).
+        ValueError: An unknown option key.
+    """
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise TypeError(f"{where} options must be a dict or None, got {_short(options)}")
+    unknown = [] if supported is None else [k for k in options if k not in supported]
+    if unknown:
+        names = ", ".join(_short(k) for k in unknown)
         raise ValueError(
-            f"{where} value {float(a[idx])} at index {idx} is outside the action space [-1, 1]"
+            f"unknown {where} option(s) {names}; supported: {', '.join(supported or ()) or 'none'}"
         )
-    return np.minimum(np.maximum(a, -1.0), 1.0)  # np.clip, with less overhead
+    return options
 
 
 @dataclass
@@ -70,7 +220,8 @@ class StepResult:
         obs: ``(E, N, D)`` observations after the step.
         rewards: ``(E, N)`` rewards.
         terms: Unweighted reward terms, name -> ``(E, N)``.
-        terminated: ``(E,)`` an episode ended by a collision.
+        terminated: ``(E,)`` an episode ended by a collision or a lost UAV (farther than
+            ``uav.lost_distance`` from its planned position).
         truncated: ``(E,)`` an episode ended by the time limit or the end of the plan.
         safety: Per-step safety figures, name -> ``(E, N)``.
     """
@@ -176,7 +327,9 @@ class EnvCore:
         region = w.region_distances()
         rewards, terms = compute_rewards(w, self.config.reward, region)
         collided = collisions(w)
-        terminated = collided.any(axis=1)
+        off = w.uav_pos - w.plan_pos
+        lost = np.einsum("eni,eni->en", off, off) > self.config.uav.lost_distance**2
+        terminated = (collided | lost).any(axis=1)
         truncated = ((w.steps >= self.config.max_steps) | w.plan_finished()) & ~terminated
         u = self.config.uav
         d_region = region.min(axis=-1, initial=np.inf)
@@ -188,6 +341,7 @@ class EnvCore:
             "loss_of_separation_obstacle": w.min_obs_dist < u.obstacle_separation,
             "in_reachable_region": d_region < 0.0,
             "collision": collided,
+            "lost": lost,
         }
         obs = self._observe()
         return StepResult(obs, rewards, terms, terminated, truncated, safety)

@@ -9,8 +9,9 @@ import numpy as np
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.envs._render import RenderMixin
-from uasep_env.envs.core import EnvCore, validate_actions
+from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS
+from uasep_env.world import check_seed
 
 __all__ = ["FormationEnv"]
 
@@ -22,7 +23,10 @@ class FormationEnv(RenderMixin, gymnasium.Env):
     :class:`~uasep_env.envs.parallel.UAVSeparationParallelEnv`, seen jointly.
 
     ## Action space
-    ``Box(-1, 1, (3 N,), float32)``: the UAVs' normalised accelerations, UAV-major.
+    ``Box(-1, 1, (3 N,), float32)``: the UAVs' normalised accelerations, UAV-major. Only
+    real numbers are actions (:class:`~uasep_env.envs.core.ActionTypeError` otherwise);
+    finite values outside the box are clipped and counted per UAV in
+    ``info["clipped_actions"]``, or raise ``ValueError`` with ``action={"strict": True}``.
 
     ## Observation space
     ``Box(-clip, clip, (N D,), float32)``: the agents' observations concatenated.
@@ -33,7 +37,7 @@ class FormationEnv(RenderMixin, gymnasium.Env):
 
     ## Episode end
     Terminated on a collision, truncated at the time limit (no ``TimeLimit`` wrapper is
-    needed).
+    needed). Stepping a finished episode raises ``RuntimeError`` until :meth:`reset`.
 
     ## Arguments
     Any :class:`~uasep_env.config.EnvConfig` field as a keyword, validated.
@@ -50,6 +54,7 @@ class FormationEnv(RenderMixin, gymnasium.Env):
         self.observation_space = gymnasium.spaces.Box(-clip, clip, (n * d,), np.float32)
         self.action_space = gymnasium.spaces.Box(-1.0, 1.0, (n * 3,), np.float32)
         self._renderer: Any = None
+        self._done = True  # no episode yet
 
     @property
     def world(self) -> Any:
@@ -59,31 +64,47 @@ class FormationEnv(RenderMixin, gymnasium.Env):
     def reset(
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict]:
-        """Start an episode; ``seed`` fixes it."""
-        super().reset(seed=seed)
-        if options:
-            raise ValueError(f"unsupported reset options {sorted(options)}")
+        """Start an episode; ``seed`` fixes it.
+
+        Raises:
+            TypeError: ``seed`` is not None or an int, or ``options`` is not a dict.
+            ValueError: A negative seed, or any option (none is supported).
+        """
+        check_seed(seed)
+        check_options(options, ())
+        super().reset(seed=None if seed is None else int(seed))
         obs = self.core.reset(seed=seed)
+        self._done = False
         if self.render_mode == "human":
             self.render()
         return obs[0].reshape(-1), {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
-        """Advance one step with the joint action."""
+        """Advance one step with the joint action.
+
+        Raises:
+            RuntimeError: The episode has ended (or none was started): call ``reset``.
+            ValueError: A bad action (named); see the class docstring.
+        """
+        if self._done:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
         n = self.config.n_uavs
-        a = validate_actions(action, (n * 3,), "action").reshape(1, n, 3)
-        res = self.core.step(a, validate=False)
+        a, outside = prepare_actions(action, (n * 3,), "action", self.config.action.strict)
+        res = self.core.step(a.reshape(1, n, 3), validate=False)
         info: dict[str, Any] = {
             "rewards": res.rewards[0].copy(),
             "reward_terms": {k: float(res.terms[k][0].mean()) for k in REWARD_TERMS},
             **{k: v[0].copy() for k, v in res.safety.items()},
+            "clipped_actions": clipped_counts(outside, (n,)),
         }
+        terminated, truncated = bool(res.terminated[0]), bool(res.truncated[0])
+        self._done = terminated or truncated
         if self.render_mode == "human":
             self.render()
         return (
             res.obs[0].reshape(-1),
             float(res.rewards[0].mean()),
-            bool(res.terminated[0]),
-            bool(res.truncated[0]),
+            terminated,
+            truncated,
             info,
         )

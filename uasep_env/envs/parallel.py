@@ -11,8 +11,15 @@ from pettingzoo import ParallelEnv
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.envs._render import RenderMixin
-from uasep_env.envs.core import EnvCore, StepResult, validate_actions
+from uasep_env.envs.core import (
+    EnvCore,
+    StepResult,
+    action_array,
+    check_options,
+    prepare_actions,
+)
 from uasep_env.observation import state_dim
+from uasep_env.world import check_seed
 
 __all__ = ["UAVSeparationParallelEnv", "parallel_env"]
 
@@ -35,8 +42,13 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
 
     ## Action space
     ``Box(-1, 1, (3,), float32)`` per agent: the commanded acceleration along north, east
-    and down as a fraction of ``uav.max_accel`` (m/s^2). Actions of the wrong shape,
-    non-finite, outside ``[-1, 1]``, missing agents or unknown agents raise ``ValueError``.
+    and down as a fraction of ``uav.max_accel`` (m/s^2). Only real numbers are actions
+    (integer or floating arrays, Python numbers): other types raise
+    :class:`~uasep_env.envs.core.ActionTypeError` (a ``TypeError`` and a ``ValueError``);
+    the wrong shape, non-finite values, missing agents or unknown agents raise
+    ``ValueError``. Finite values outside ``[-1, 1]`` are clipped to it and counted in
+    ``infos[agent]["clipped_actions"]``; with ``action={"strict": True}`` they raise
+    ``ValueError`` instead.
 
     ## Observation space
     ``Box(-clip, clip, (D,), float32)`` per agent, normalised; the features are listed in
@@ -57,13 +69,14 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
 
     ## Info
     ``reward_terms``, ``min_uav_distance``, ``min_obstacle_distance``,
-    ``min_region_distance`` (m), and the flags ``loss_of_separation_uav``,
-    ``loss_of_separation_obstacle``, ``in_reachable_region``, ``collision``.
+    ``min_region_distance`` (m), the flags ``loss_of_separation_uav``,
+    ``loss_of_separation_obstacle``, ``in_reachable_region``, ``collision``, and
+    ``clipped_actions``: how many components of the agent's action were clipped to the box.
 
     ## Arguments
     Any :class:`~uasep_env.config.EnvConfig` field as a keyword (nested dicts for the
     sub-configs), e.g. ``parallel_env(n_uavs=5, scenario="crossing", noise=False)``.
-    Unknown keys raise ``ValueError``. ``reset(options={"config": {...}})`` changes the
+    Unknown keys raise ``TypeError``. ``reset(options={"config": {...}})`` changes the
     config for the next episodes, except the keys that change the spaces.
     """
 
@@ -130,15 +143,24 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
 
         Args:
             seed: Seeds the episode's generator (all randomness flows from it).
-            options: ``{"config": {...}}`` to change config fields for this and later
-                episodes (not those that change the spaces). Other keys are ignored.
+            options: ``None`` or a dict; ``{"config": {...}}`` changes config fields for this
+                and later episodes (not those that change the spaces). Other keys are
+                ignored, as PettingZoo's API test expects.
 
         Returns:
             ``(observations, infos)`` keyed by agent.
+
+        Raises:
+            TypeError: ``seed`` is not None or an int, ``options`` is not a dict, or an
+                unknown config key.
+            ValueError: A negative seed or an invalid config value.
         """
-        # Other option keys are ignored, as PettingZoo's API test expects.
-        if options and options.get("config"):
-            self._reconfigure(options["config"])
+        check_seed(seed)
+        if options is not None:
+            check_options(options, None)  # a dict; keys other than "config" are ignored
+        changes = options.get("config") if options else None
+        if changes is not None and not (isinstance(changes, dict) and not changes):
+            self._reconfigure(changes)
         obs = self.core.reset(seed=seed)
         self.agents = list(self.possible_agents)
         self._last = None
@@ -150,7 +172,7 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
 
     def _reconfigure(self, changes: dict) -> None:
         if not isinstance(changes, dict):
-            raise ValueError(f"options['config'] must be a dict, got {changes!r}")
+            raise TypeError(f"options['config'] must be a dict, got {changes!r}")
         fixed = [k for k in changes if k in _SPACE_KEYS]
         if fixed:
             raise ValueError(
@@ -187,7 +209,8 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         missing = sorted(set(self.agents) - set(actions))
         if unknown or missing:
             raise ValueError(f"bad action keys: missing {missing}, unknown {unknown}")
-        res = self.core.step(self._joint_action(actions), validate=False)
+        joint, clipped = self._joint_action(actions)
+        res = self.core.step(joint, validate=False)
         self._last = res
         done_term = bool(res.terminated[0])
         done_trunc = bool(res.truncated[0])
@@ -196,30 +219,39 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         terminations = dict.fromkeys(self.agents, done_term)
         truncations = dict.fromkeys(self.agents, done_trunc)
         infos = dict(zip(self._index, self.core.env_infos(res, 0), strict=True))
+        for agent, i in self._index.items():
+            infos[agent]["clipped_actions"] = int(clipped[i])
         if done_term or done_trunc:
             self.agents = []
         if self.render_mode == "human":
             self.render()
         return observations, rewards, terminations, truncations, infos
 
-    def _joint_action(self, actions: dict[str, np.ndarray]) -> np.ndarray:
-        """The agents' actions as one validated ``(1, N, 3)`` array.
+    def _joint_action(self, actions: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """The agents' actions as one checked ``(1, N, 3)`` array, clipped to the box.
 
-        Checked as a whole (one pass); only a bad joint action is checked agent by agent,
-        so that the error names the agent.
+        Returns the array and each agent's number of clipped components. Checked as a whole
+        (one pass); only a bad joint action is checked agent by agent, so that the error
+        names the agent.
         """
+        strict = self.config.action.strict
         joint = np.empty((1, len(self.possible_agents), 3))
         for agent, i in self._index.items():
             a = actions[agent]
             if not (isinstance(a, np.ndarray) and a.shape == (3,) and a.dtype.kind in "fiu"):
-                a = validate_actions(a, (3,), f"action of {agent}")  # lists, wrong shapes
+                # lists, wrong shapes, wrong types: named by agent
+                a = action_array(a, (3,), f"action of {agent}")
             joint[0, i] = a
         try:
-            return validate_actions(joint, joint.shape)
+            out, outside = prepare_actions(joint, joint.shape, "actions", strict)
         except ValueError:
             for agent in self._index:  # the same check per agent, to name the agent
-                validate_actions(actions[agent], (3,), f"action of {agent}")
+                prepare_actions(actions[agent], (3,), f"action of {agent}", strict)
             raise
+        counts = np.zeros(len(self.possible_agents), dtype=np.int64)
+        if outside is not None:
+            counts = outside[0].sum(axis=-1)
+        return out, counts
 
     def state(self) -> np.ndarray:
         """The global true state (normalised), shape ``state_space.shape``."""

@@ -8,7 +8,10 @@ step, and each of its agents' infos carries ``terminal_observation`` and
 ``TimeLimit.truncated`` as SB3 expects, and ``episode_safety``: the finished episode's
 ``collision`` and ``loss_of_separation`` (bools, any UAV) and ``max_deviation`` (m, the
 largest true distance of a UAV from its planned position once the formation has formed
-up, as in :mod:`uasep_env.metrics`), which training scripts report as they go.
+up, as in :mod:`uasep_env.metrics`), which training scripts report as they go. Every
+agent's info has ``clipped_actions``: how many components of its action were clipped to
+``[-1, 1]`` (with ``action={"strict": True}``, out-of-box actions raise ``ValueError``
+instead).
 
 This module imports stable-baselines3; the rest of the package does not.
 """
@@ -23,8 +26,9 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from uasep_env.config import EnvConfig, make_config
-from uasep_env.envs.core import EnvCore
+from uasep_env.envs.core import EnvCore, prepare_actions
 from uasep_env.rollout import DEFAULT_SETTLE_TIME_S
+from uasep_env.world import check_seed
 
 __all__ = ["UAVSharedVecEnv"]
 
@@ -47,6 +51,7 @@ class UAVSharedVecEnv(VecEnv):
         **kwargs: Any,
     ) -> None:
         self.config = make_config(config, **kwargs)
+        check_seed(seed)
         self.core = EnvCore(self.config, n_envs=n_envs)
         self.n_envs = n_envs
         self.n_uavs = self.config.n_uavs
@@ -61,9 +66,17 @@ class UAVSharedVecEnv(VecEnv):
         self._collided = np.zeros(n_envs, dtype=bool)
         self._lost_sep = np.zeros(n_envs, dtype=bool)
         self._max_dev = np.zeros(n_envs)
+        self._clipped = np.zeros(self.num_envs, dtype=np.int64)
+        self._started = False
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
-        """Seed the next reset (environment ``e`` gets ``seed + e``)."""
+        """Seed the next reset (environment ``e`` gets ``seed + e``).
+
+        Raises:
+            TypeError: ``seed`` is not None or an int.
+            ValueError: A negative seed.
+        """
+        check_seed(seed)
         self._seed = seed
         return [seed] * self.num_envs
 
@@ -73,27 +86,45 @@ class UAVSharedVecEnv(VecEnv):
         self._seed = None
         self._collided[:] = self._lost_sep[:] = False
         self._max_dev[:] = 0.0
+        self._started = True
         return obs.reshape(self.num_envs, -1)
 
     def step_async(self, actions: np.ndarray) -> None:
-        """Store the actions ``(n_envs * n_uavs, 3)``."""
-        self._actions = np.asarray(actions)
+        """Check and store the actions ``(n_envs * n_uavs, 3)``.
+
+        Raises:
+            ValueError: A bad action, named by its index in ``actions``
+                (:class:`~uasep_env.envs.core.ActionTypeError` for values that are not
+                real numbers).
+        """
+        acts, outside = prepare_actions(
+            actions, (self.num_envs, 3), "actions", self.config.action.strict
+        )
+        self._actions = acts
+        self._clipped = (
+            np.zeros(self.num_envs, np.int64) if outside is None else outside.sum(axis=-1)
+        )
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
-        """Step all environments; reset those that ended (same step)."""
+        """Step all environments; reset those that ended (same step).
+
+        Raises:
+            RuntimeError: Before the first reset, or without ``step_async``.
+        """
+        if not self._started:
+            raise RuntimeError("step_wait() called before reset()")
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
         acts = self._actions
-        if acts.shape != (self.num_envs, 3):
-            raise ValueError(f"actions must have shape ({self.num_envs}, 3), got {acts.shape}")
         self._actions = None
-        res = self.core.step(acts.reshape(self.n_envs, self.n_uavs, 3))
+        res = self.core.step(acts.reshape(self.n_envs, self.n_uavs, 3), validate=False)
         obs = res.obs.reshape(self.num_envs, -1)
         rewards = res.rewards.reshape(-1).astype(np.float32)
         done_env = res.terminated | res.truncated
         dones = np.repeat(done_env, self.n_uavs)
         self._track(res.safety)
         infos: list[dict] = [{} for _ in range(self.num_envs)]
+        infos: list[dict] = [{"clipped_actions": int(c)} for c in self._clipped]
         if done_env.any():
             for e in np.flatnonzero(done_env):
                 trunc = bool(res.truncated[e] and not res.terminated[e])

@@ -17,8 +17,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from uasep_env.config import EnvConfig, make_config
-from uasep_env.envs.core import EnvCore, validate_actions
+from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS, team_mean
+from uasep_env.world import check_seed
 
 __all__ = ["FormationVectorEnv"]
 
@@ -37,7 +38,12 @@ class FormationVectorEnv(VectorEnv):
         **kwargs: :class:`~uasep_env.config.EnvConfig` fields.
 
     Infos are dicts of arrays with Gymnasium's ``_key`` masks: ``rewards`` (per UAV),
-    ``reward_terms`` (team mean of each term) and the safety figures per UAV.
+    ``reward_terms`` (team mean of each term), the safety figures per UAV and
+    ``clipped_actions`` (per UAV, the action components clipped to ``[-1, 1]``; with
+    ``action={"strict": True}`` out-of-box actions raise ``ValueError`` instead).
+
+    Stepping before the first :meth:`reset`, or (``"Disabled"`` mode) stepping an
+    environment whose episode ended and was not reset, raises ``RuntimeError``.
     """
 
     def __init__(
@@ -76,6 +82,7 @@ class FormationVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._needs_reset = np.zeros(self.num_envs, dtype=bool)
+        self._started = False
         self._renderer: Any = None
 
     @property
@@ -91,16 +98,28 @@ class FormationVectorEnv(VectorEnv):
         Args:
             seed: One int (environment ``i`` gets ``seed + i``) or one seed per environment.
             options: ``{"reset_mask": bool array}`` to reset only some environments.
+
+        Raises:
+            TypeError: A seed that is not None, an int or a list of them; ``options`` not
+                a dict.
+            ValueError: A negative seed, the wrong number of seeds, an unknown option or a
+                bad mask.
         """
+        check_seed(seed, self.num_envs)
         mask = None
-        if options:
-            unknown = sorted(set(options) - {"reset_mask"})
-            if unknown:
-                raise ValueError(f"unknown reset option(s) {unknown}; supported: ['reset_mask']")
-            mask = np.asarray(options["reset_mask"])
+        if check_options(options, ("reset_mask",)):
+            mask = np.asarray(options["reset_mask"])  # type: ignore[index]
+            if mask.shape != (self.num_envs,) or mask.dtype != bool:
+                raise ValueError(
+                    f"options['reset_mask'] must be a bool array of shape ({self.num_envs},), "
+                    f"got {options['reset_mask']!r}"  # type: ignore[index]
+                )
+            if not self._started and not mask.all():
+                raise RuntimeError("the first reset must reset every environment")
         if seed is not None:
             self._np_random_seed = seed if isinstance(seed, int) else -1
         obs = self.core.reset(seed=seed, mask=mask)
+        self._started = True
         if mask is None:
             self._needs_reset[:] = False
         else:
@@ -110,11 +129,26 @@ class FormationVectorEnv(VectorEnv):
     def step(
         self, actions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
-        """Step every environment with ``actions`` of shape ``(num_envs, 3 N)``."""
+        """Step every environment with ``actions`` of shape ``(num_envs, 3 N)``.
+
+        Raises:
+            RuntimeError: Before the first reset, or (``"Disabled"`` mode) an environment
+                whose episode ended has not been reset.
+            ValueError: A bad action (named with its index in ``actions``).
+        """
+        if not self._started:
+            raise RuntimeError("step() called before reset()")
+        if self.autoreset_mode == AutoresetMode.DISABLED and self._needs_reset.any():
+            raise RuntimeError(
+                f"environments {np.flatnonzero(self._needs_reset).tolist()} have finished "
+                "episodes (autoreset is disabled); reset them with "
+                "reset(options={'reset_mask': mask}) before stepping"
+            )
         n = self.config.n_uavs
-        a = validate_actions(actions, (self.num_envs, n * 3), "actions").reshape(
-            self.num_envs, n, 3
+        a, outside = prepare_actions(
+            actions, (self.num_envs, n * 3), "actions", self.config.action.strict
         )
+        a = a.reshape(self.num_envs, n, 3)
         pending = (
             self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
         )
@@ -129,6 +163,8 @@ class FormationVectorEnv(VectorEnv):
         terminated = res.terminated.copy()
         truncated = res.truncated.copy()
         infos = self._infos(res)
+        infos["clipped_actions"] = clipped_counts(outside, (self.num_envs, n))
+        infos["_clipped_actions"] = infos["_rewards"]
         done = terminated | truncated
         if some_pending:
             rewards[pending] = 0.0
