@@ -202,3 +202,23 @@ def test_shipped_checkpoints_load_and_run_without_flags(name, capsys):
     )  # fmt: skip
     assert code == 0
     assert "collision" in capsys.readouterr().out
+
+
+def test_learned_vs_apf_writes_tables_and_targets(tmp_path):
+    import sys
+
+    sys.path.insert(0, str(CHECKPOINTS.parent))
+    import learned_vs_apf
+
+    text = learned_vs_apf.main(
+        ["--episodes", "2", "--paper-episodes", "1", "--workers", "1", "--out", str(tmp_path)]
+    )
+    assert (tmp_path / "learned_vs_apf.md").read_text() == text
+    assert (tmp_path / "learned_vs_apf.json.gz").exists()
+    assert "| episodes with a collision |" in text and "### Targets (held-out bank)" in text
+    header = next(line for line in text.splitlines() if line.startswith("| metric |"))
+    for name in ("apf", "motion-state-apf", "traditional-apf"):
+        assert f" {name} " in header
+    for name in learned_vs_apf.LEARNED:
+        if (CHECKPOINTS / f"{name}.zip").exists():
+            assert f" {name} " in header

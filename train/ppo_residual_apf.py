@@ -19,7 +19,7 @@ from ppo_shared import Args, main
 #: The residual recipe's defaults (where they differ from the pure policy's).
 RESIDUAL_DEFAULTS = Args(
     action_mode="residual_apf",
-    residual_scale=1.0,
+    residual_scale=0.5,
     log_std_init=-1.0,
     learning_rate=1e-4,
     target_kl=0.02,

@@ -54,7 +54,7 @@ class Args:
     n_obstacles: int = 1
     episode_duration: float = 200.0  # s
     config: str = ""  # more env overrides, space-separated KEY=VALUE ("reward.collision=0.5")
-    total_timesteps: int = 30_000_000  # agent-steps
+    total_timesteps: int = 150_000_000  # agent-steps (the wall budget usually ends a run first)
     max_minutes: float = 55.0  # wall-clock budget; training stops when it is spent
     n_envs: int = 32
     n_steps: int = 256  # rollout length per sub-environment

@@ -347,12 +347,12 @@ class RewardWeights:
 
     # Defaults: a step's reward is in [0, 1] and a collision costs a whole episode (why:
     # uasep_env.rewards).
-    separation_inner: float = 0.1
-    separation_obstacle: float = 0.25
+    separation_inner: float = 0.25
+    separation_obstacle: float = 0.4
     separation_region: float = 0.05
-    deviation: float = 0.4
-    control: float = 0.05
-    smoothness: float = 0.025
+    deviation: float = 0.2
+    control: float = 0.0
+    smoothness: float = 0.0125
     collision: float = 1.0
     progress: float = 1.0
     shared: float = 0.0
