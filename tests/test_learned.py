@@ -222,3 +222,21 @@ def test_learned_vs_apf_writes_tables_and_targets(tmp_path):
     for name in learned_vs_apf.LEARNED:
         if (CHECKPOINTS / f"{name}.zip").exists():
             assert f" {name} " in header
+
+
+def test_select_checkpoint_ranks_on_validation_seeds(tmp_path):
+    import sys
+
+    sys.path.insert(0, str(CHECKPOINTS.parents[1] / "train"))
+    import select_checkpoint
+
+    cfg = make_config(scenario="random")
+    for step in (1, 2):
+        _random_checkpoint(tmp_path / f"checkpoints/step_{step}/policy.zip", cfg, seed=step)
+    chosen = select_checkpoint.main(
+        [str(tmp_path), "--episodes", "2", "--workers", "1", "--copy-to", str(tmp_path / "c.zip")]
+    )
+    rows = (tmp_path / "selection.csv").read_text().splitlines()
+    assert len(rows) == 1 + 2 + 1  # header, two checkpoints, the APF
+    assert chosen.parent.name in ("step_1", "step_2")
+    assert (tmp_path / "c.zip").read_bytes() == chosen.read_bytes()

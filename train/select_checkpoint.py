@@ -1,0 +1,84 @@
+"""Pick a run's best checkpoint on the validation encounters (never the held-out bank).
+
+    python train/select_checkpoint.py runs/ppo_residual_apf --episodes 100 --copy-to ship.zip
+
+Every ``checkpoints/step_*/policy.zip`` of the run (and the final ``policy.zip``) plays
+the first ``--episodes`` encounters of :data:`uasep_env.scenarios.VALIDATION_SEEDS`, beside
+the APF on the same seeds. The choice, safety first: the checkpoints whose rates of early
+ends (a collision or a lost UAV), collisions and losses of separation are no higher than
+the APF's (or, if none is, the one lowest in those rates, in that order), and of those
+the lowest mean max deviation. Writes ``<run>/selection.csv`` (one row per checkpoint)
+and prints the choice.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import shutil
+from pathlib import Path
+
+from uasep_env import make_config
+from uasep_env.evaluation import evaluate
+from uasep_env.policies import load_policy
+from uasep_env.scenarios import VALIDATION_SEEDS
+
+KEYS = ("terminated", "collision", "loss_of_separation", "max_deviation")
+
+
+def _figures(result: dict, label: str) -> dict[str, float]:
+    agg = result["results"][label]["aggregate"]
+    return {k: float(agg[f"episode.{k}"]["mean"]) for k in KEYS}
+
+
+def main(argv: list[str] | None = None) -> Path:
+    """Evaluate the checkpoints, write the table, return the chosen policy file."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("run", type=Path)
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--copy-to", type=Path, default=None)
+    args = p.parse_args(argv)
+    paths = sorted(
+        args.run.glob("checkpoints/step_*/policy.zip"),
+        key=lambda q: int(q.parent.name.removeprefix("step_")),
+    )
+    if (args.run / "policy.zip").exists():
+        paths.append(args.run / "policy.zip")
+    if not paths:
+        p.error(f"no checkpoints under {args.run}")
+    cfg = make_config(scenario="random")
+    seeds = list(VALIDATION_SEEDS)[: args.episodes]
+    policies = {"apf": "apf"} | {str(q): load_policy(q, cfg) for q in paths}
+    result = evaluate(policies, cfg, seeds, workers=args.workers)
+    apf = _figures(result, "apf")
+    rows = []
+    for q in paths:
+        f = _figures(result, str(q))
+        info = load_policy(q, cfg).meta.info
+        safe = all(f[k] <= apf[k] for k in KEYS[:3])
+        rows.append({"policy": str(q), "agent_steps": info.get("agent_steps"), **f, "safe": safe})
+    pool = [r for r in rows if r["safe"]] or sorted(
+        rows, key=lambda r: tuple(r[k] for k in KEYS[:3])
+    )[:1]
+    best = min(pool, key=lambda r: r["max_deviation"])
+    with (args.run / "selection.csv").open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+        w.writerow({"policy": "apf", "agent_steps": "", **apf, "safe": ""})
+    print(f"APF on {len(seeds)} validation encounters: {apf}")
+    for r in rows:
+        mark = "*" if r is best else " "
+        print(f"{mark} {r['policy']}: {r['agent_steps']} steps, "
+              f"{', '.join(f'{k} {r[k]:.3f}' for k in KEYS)}, safe={r['safe']}")  # fmt: skip
+    chosen = Path(best["policy"])
+    if args.copy_to is not None:
+        args.copy_to.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(chosen, args.copy_to)
+        print(f"copied {chosen} -> {args.copy_to}")
+    return chosen
+
+
+if __name__ == "__main__":
+    main()
