@@ -170,3 +170,11 @@ def test_same_step_infos_no_stray_keys():
     assert info["final_obs"].dtype == object
     assert "reward_terms" not in info  # flat keys: TorchRL batches nested dicts badly
     assert {"reward_" + k for k in REWARD_TERMS} <= set(info["final_info"])
+
+
+def test_unknown_keyword_uses_pythons_wording():
+    """TorchRL drops ``frameskip`` only on "unexpected keyword argument 'frameskip'"."""
+    with pytest.raises(TypeError, match="unexpected keyword argument 'frameskip'"):
+        gymnasium.make("uasep/Formation-v1", frameskip=1)
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'noise\.acel_std'"):
+        uasep_env.parallel_env(noise={"acel_std": 1.0})
