@@ -16,7 +16,7 @@ $(BIN)/python:
 # Core + plotting + compiled kernels: what the evaluation needs (no torch).
 $(VENV)/.core: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[viz,fast]"
-	$(BIN)/python -m uasep_env._numba  # compile the kernels at install time (disk cache)
+	$(BIN)/python -m uasep_env.precompile  # compile the kernels at install time (disk cache)
 	touch $@
 
 # Everything: torch first, then the package with every extra the tests use (torch pinned
@@ -24,7 +24,7 @@ $(VENV)/.core: pyproject.toml | $(BIN)/python
 $(VENV)/.all: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet $(TORCH)
 	$(BIN)/python -m pip install --quiet -e ".[dev,train,viz,fast,clients]" "$(TORCH)"
-	$(BIN)/python -m uasep_env._numba
+	$(BIN)/python -m uasep_env.precompile
 	touch $@ $(VENV)/.core
 
 eval: $(VENV)/.core

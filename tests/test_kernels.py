@@ -308,13 +308,13 @@ def test_world_region_distances_from_kept_cosines_match_numpy(monkeypatch):
 
 
 def test_install_time_warm_up_command_runs_without_numba():
-    """``python -m uasep_env._numba`` (run by the Makefile after installing) never fails."""
+    """``python -m uasep_env.precompile`` (run by the Makefile after installing) never fails."""
     import subprocess
     import sys
 
     env = {**os.environ, "UASEP_NUMBA": "0"}
     out = subprocess.run(
-        [sys.executable, "-m", "uasep_env._numba"],
+        [sys.executable, "-m", "uasep_env.precompile"],
         capture_output=True,
         text=True,
         env=env,

@@ -5,9 +5,9 @@ that has a compiled form (:mod:`uasep_env._kernels`) ask :func:`available`; when
 missing, or disabled with the environment variable ``UASEP_NUMBA=0``, they use its numpy
 form. Compiled kernels are cached on disk (``cache=True``), so only the first run of a
 new installation pays the compilation (about 30 s on one core for the kernels an evaluation
-uses). ``python -m uasep_env._numba`` pays it at install time (``make eval`` and ``make
-test`` run it after installing): it plays a one-second episode through the code path of
-``uasep-eval``, which compiles exactly the kernels such a run uses into the disk cache.
+uses). ``python -m uasep_env.precompile`` pays it at install time (``make eval`` and
+``make test`` run it after installing): :func:`warm_up` plays one episode through the code
+path of ``uasep-eval``, which compiles exactly the kernels such a run uses into the cache.
 """
 
 from __future__ import annotations
@@ -63,11 +63,7 @@ def warm_up() -> float:
     from uasep_env.evaluation import evaluate
 
     t0 = time.perf_counter()
-    evaluate(["apf"], {"scenario": "paper", "episode_duration": 1.0}, [0])
+    # A whole episode: some call sites (the metrics' distances) meet new argument types
+    # only when the encounter comes. The compiled episode itself takes under a second.
+    evaluate(["apf"], {"scenario": "paper"}, [0])
     return time.perf_counter() - t0
-
-
-if __name__ == "__main__":
-    seconds = warm_up()
-    status = f"compiled or loaded in {seconds:.1f} s" if available() else "not in use"
-    print(f"uasep-env numba kernels: {status}")
