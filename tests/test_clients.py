@@ -168,3 +168,27 @@ def test_uasep_eval_on_ray_equals_one_worker(local_ray, tmp_path):
     assert on_ray["results"] == one["results"]
     assert [e["seed"] for e in on_ray["results"]["random"]["episodes"]] == [0, 1, 2]
     assert np.isfinite(on_ray["results"]["apf"]["aggregate"]["episode.steps"]["mean"])
+
+
+# --- skrl (reads the observation_spaces / action_spaces dicts) ---------------------------------
+
+
+def test_skrl_pettingzoo_wrapper():
+    _need("skrl")
+    import torch
+    from skrl.envs.wrappers.torch import wrap_env
+
+    env = wrap_env(uasep_env.parallel_env(**SHORT), wrapper="pettingzoo")
+    assert env.possible_agents == ["uav_0", "uav_1", "uav_2"]
+    assert env.action_spaces["uav_0"].shape == (3,)
+    obs, _ = env.reset()
+    ends = 0
+    for _ in range(120):
+        act = {a: torch.rand((1, 3)) * 2 - 1 for a in env.possible_agents}
+        obs, rew, term, trunc, _ = env.step(act)
+        assert obs["uav_0"].shape == (1, *env.observation_spaces["uav_0"].shape)
+        assert rew["uav_0"].shape == (1, 1)
+        if any(bool(t) for t in term.values()) or any(bool(t) for t in trunc.values()):
+            ends += 1
+            obs, _ = env.reset()  # skrl's trainers reset finished episodes the same way
+    assert ends >= 2
