@@ -380,6 +380,8 @@ def evaluate(
         raise ValueError(f"seeds: must be >= 0, got {min(seed_list)}")
     if int(workers) < 1:
         raise ValueError(f"workers: must be >= 1, got {workers}")
+    if ray is not None and not (isinstance(ray, str) and ray.strip()):
+        raise ValueError(f"ray: must be 'local' or a Ray address, got {ray!r}")
     workers = int(workers)
     if batch_size is None:
         batch_size = default_batch_size(len(seed_list))
