@@ -85,6 +85,21 @@ def test_torchrl_gym_vector_env():
     assert td["next", "done"].sum() >= 4
 
 
+def test_torchrl_wraps_the_native_vector_env():
+    """TorchRL takes a SameStep (or Disabled) vector env; it failed on the nested infos."""
+    _need("torchrl")
+    import gymnasium
+    from torchrl.envs import GymWrapper
+    from torchrl.envs.utils import check_env_specs
+
+    vec = gymnasium.make_vec("uasep/Formation-v1", num_envs=2, autoreset_mode="SameStep", **SHORT)
+    env = GymWrapper(vec)
+    check_env_specs(env)
+    td = env.rollout(120, break_when_any_done=False)
+    assert td.batch_size == (2, 120)
+    assert td["next", "done"].sum() >= 4
+
+
 def test_torchrl_pettingzoo_wrapper():
     _need("torchrl")
     from torchrl.envs import PettingZooWrapper
