@@ -50,7 +50,7 @@ def test_bad_max_cycles_is_named(bad):
 def test_max_cycles_and_a_different_episode_duration_disagree():
     with pytest.raises(ValueError, match="disagree"):
         uasep_env.parallel_env(max_cycles=4, episode_duration=10.0)
-    assert uasep_env.parallel_env(max_cycles=4, episode_duration=0.8).config.max_steps == 4
+    assert uasep_env.parallel_env(max_cycles=3, episode_duration=0.6).config.max_steps == 3
 
 
 def test_spaces_dicts_are_declared():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import Any
 
@@ -291,7 +292,8 @@ def _with_max_cycles(config: EnvConfig, max_cycles: Any, kwargs: dict) -> EnvCon
     ):
         raise ValueError(f"max_cycles must be a positive integer, got {max_cycles!r}")
     duration = int(max_cycles) * config.step_duration
-    if "episode_duration" in kwargs and kwargs["episode_duration"] != duration:
+    given = kwargs.get("episode_duration")
+    if given is not None and not math.isclose(float(given), duration, rel_tol=1e-9):
         raise ValueError(
             f"max_cycles={max_cycles!r} and episode_duration={kwargs['episode_duration']!r} "
             f"disagree (max_cycles means episode_duration={duration!r}); give one of them"
