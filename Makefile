@@ -1,6 +1,6 @@
 # Two entry points, each installing what it needs into .venv on a fresh machine:
 #   make eval   -- the APF evaluated on the paper's scenario, metrics printed
-#   make test   -- ruff + the whole test suite
+#   make test   -- ruff + the whole test suite (with the ecosystem's clients: the clients extra)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -16,12 +16,15 @@ $(BIN)/python:
 # Core + plotting + compiled kernels: what the evaluation needs (no torch).
 $(VENV)/.core: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[viz,fast]"
+	$(BIN)/python -m uasep_env.precompile  # compile the kernels at install time (disk cache)
 	touch $@
 
-# Everything: torch first, then the package with every extra the tests use.
+# Everything: torch first, then the package with every extra the tests use (torch pinned
+# again so that no client upgrades it to a CUDA build).
 $(VENV)/.all: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet $(TORCH)
-	$(BIN)/python -m pip install --quiet -e ".[dev,train,viz,fast]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,train,viz,fast,clients]" "$(TORCH)"
+	$(BIN)/python -m uasep_env.precompile
 	touch $@ $(VENV)/.core
 
 eval: $(VENV)/.core
@@ -31,8 +34,9 @@ lint: $(VENV)/.all
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check uasep_env
 
+# The client tests must run (not skip) here; the Ray tests share one local Ray per worker.
 test: lint
-	$(BIN)/python -m pytest -n 2 -q
+	UASEP_REQUIRE_CLIENTS=1 $(BIN)/python -m pytest -n 2 --dist loadgroup -q
 
 bench: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[bench]"

@@ -99,7 +99,8 @@ def soak_vector(steps: int, num_envs: int, seed: int) -> tuple[list[tuple[int, f
         obs, rew, term, trunc, info = vec.step(act)
         _check_finite("vector step", obs, rew)
         stats["episodes"] += int((term | trunc).sum())
-        stats["clipped"] += int(info["clipped_actions"].sum())
+        # Absent when every environment was reset this step (as in SyncVectorEnv).
+        stats["clipped"] += int(info.get("clipped_actions", np.zeros(1)).sum())
 
     return list(_sampled(steps, step)), stats
 

@@ -372,3 +372,9 @@ def test_console_script_help():
     )
     assert bad.returncode == 2
     assert "nope" in bad.stderr
+
+
+@pytest.mark.parametrize("bad", [True, "", " ", 3])
+def test_evaluate_rejects_a_bad_ray_address(bad):
+    with pytest.raises(ValueError, match=r"ray: must be 'local' or a Ray address, got"):
+        evaluate(["apf"], _short_config(), [0], ray=bad)

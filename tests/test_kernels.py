@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -303,3 +305,19 @@ def test_world_region_distances_from_kept_cosines_match_numpy(monkeypatch):
         )
         monkeypatch.undo()
         assert np.isinf(fast[::4, :, 1]).all() and np.isfinite(fast[1::4]).all()
+
+
+def test_install_time_warm_up_command_runs_without_numba():
+    """``python -m uasep_env.precompile`` (run by the Makefile after installing) never fails."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "UASEP_NUMBA": "0"}
+    out = subprocess.run(
+        [sys.executable, "-m", "uasep_env.precompile"],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    )
+    assert "numba kernels: not in use" in out.stdout

@@ -1,6 +1,7 @@
 """uasep-env: separation management for UAV formations among non-cooperative obstacles.
 
-* :func:`parallel_env` -- the PettingZoo parallel environment (primary API).
+* :func:`parallel_env` -- the PettingZoo parallel environment (primary API); :func:`env`
+  its AEC view. The package is a PettingZoo env module (``pettingzoo.test`` takes it).
 * ``gymnasium.make("uasep/Formation-v1")`` / ``"uasep/PaperEncounter-v1"`` -- centralised
   Gymnasium views, registered on import (``gymnasium.make_vec`` gives the batched vector env).
 * :class:`World` -- the batched numpy core, the one transition function.
@@ -10,7 +11,7 @@
 from __future__ import annotations
 
 from uasep_env.config import EnvConfig, make_config
-from uasep_env.envs.parallel import UAVSeparationParallelEnv, parallel_env
+from uasep_env.envs.parallel import UAVSeparationParallelEnv, env, parallel_env
 from uasep_env.registration import register_envs
 from uasep_env.world import World
 
@@ -21,6 +22,7 @@ __all__ = [
     "UAVSeparationParallelEnv",
     "World",
     "__version__",
+    "env",
     "make_config",
     "parallel_env",
     "register_envs",

@@ -546,7 +546,10 @@ def _build(cls: type[T], base: T | None, values: Mapping[str, Any], prefix: str)
     unknown = sorted(set(values) - names)
     if unknown:
         full = ", ".join(prefix + k for k in unknown)
-        raise TypeError(f"unknown config key(s): {full}; valid keys: {sorted(names)}")
+        # Python's own wording first: clients such as TorchRL's GymEnv recognise an
+        # optional keyword the env does not take by "unexpected keyword argument 'name'".
+        python = ", ".join(f"unexpected keyword argument {prefix + k!r}" for k in unknown)
+        raise TypeError(f"{python} (unknown config key(s): {full}); valid keys: {sorted(names)}")
     current = {f.name: getattr(base, f.name) for f in fields(cls)} if base is not None else {}
     for key, value in values.items():
         sub = _NESTED.get(key) if cls is EnvConfig else None

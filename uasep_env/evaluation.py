@@ -20,8 +20,9 @@ Reproducibility: the seeds are split into chunks (one batched simulator each) wh
 depends only on the number of episodes and ``batch_size`` (:func:`default_batch_size`), never
 on ``workers``. Each chunk is played by a fresh policy built from its name (the ``random``
 policy's generator is seeded with the chunk's first seed), in-process (``workers=1``) or in a
-``spawn`` process pool, and the chunks are reassembled in seed order. The results are
-therefore identical for any worker count, for stochastic policies too.
+``spawn`` process pool, or as Ray tasks on a local Ray or a cluster (``--ray [ADDRESS]``),
+and the chunks are reassembled in seed order. The results are therefore identical for any
+worker count and on Ray, for stochastic policies too.
 """
 
 from __future__ import annotations
@@ -322,6 +323,7 @@ def evaluate(
     keep_episodes: int = 0,
     progress: Callable[[int], None] | None = None,
     allow_pickle: bool = False,
+    ray: str | None = None,
 ) -> dict[str, Any]:
     """Evaluate policies on the same seeds and aggregate the paper's metrics.
 
@@ -345,6 +347,10 @@ def evaluate(
         progress: Called with the number of episodes finished after each chunk.
         allow_pickle: Let stable-baselines3 model files be unpickled (runs code from the
             file; policy checkpoints never need it).
+        ray: Run the chunks as Ray tasks instead (``workers`` is then unused): ``"local"``
+            starts a local Ray (or uses the one this process already joined), anything else
+            is the address of a cluster (``"auto"``, ``"ray://head:10001"``). Every node
+            needs this package installed. The results are the same as with ``workers=1``.
 
     Returns:
         A dict::
@@ -374,6 +380,8 @@ def evaluate(
         raise ValueError(f"seeds: must be >= 0, got {min(seed_list)}")
     if int(workers) < 1:
         raise ValueError(f"workers: must be >= 1, got {workers}")
+    if ray is not None and not (isinstance(ray, str) and ray.strip()):
+        raise ValueError(f"ray: must be 'local' or a Ray address, got {ray!r}")
     workers = int(workers)
     if batch_size is None:
         batch_size = default_batch_size(len(seed_list))
@@ -400,7 +408,10 @@ def evaluate(
     ]
     done: dict[tuple[str, int], tuple[list[dict[str, Any]], list[Episode]]] = {}
 
-    if workers == 1 or len(tasks) == 1:
+    if ray is not None:
+        for (label, ci), out in _run_on_ray(ray, tasks, progress, [len(c) for c in chunks]):
+            done[label, ci] = out
+    elif workers == 1 or len(tasks) == 1:
         for label, ci, args in tasks:
             done[label, ci] = _run_chunk(*args)
             if progress is not None:
@@ -452,6 +463,7 @@ def evaluate(
             "settle_time": float(settle_time),
             "hold_time": float(hold_time),
             "confidence": float(confidence),
+            **({"ray": ray} if ray is not None else {}),
         },
         "results": results,
         "elapsed_s": time.perf_counter() - t0,
@@ -459,6 +471,51 @@ def evaluate(
     if keep_episodes > 0:
         out["episodes"] = kept
     return out
+
+
+def _run_on_ray(
+    address: str,
+    tasks: list[tuple[str, int, tuple]],
+    progress: Callable[[int], None] | None,
+    sizes: list[int],
+) -> Iterable[tuple[tuple[str, int], Any]]:
+    """Run :func:`_run_chunk` for every task as a Ray task; yield ``((label, chunk), out)``.
+
+    Joins the Ray this process is connected to, or starts one (``"local"``) or connects to
+    ``address``, and disconnects at the end if it connected.
+    """
+    try:
+        import ray
+    except ImportError as err:
+        raise ImportError(
+            "ray is not installed; pip install 'uasep-env[clients]' (or 'ray>=2.60')"
+        ) from err
+    started = not ray.is_initialized()
+    if started:
+        ray.init(
+            address=None if address == "local" else address,
+            include_dashboard=False,
+            log_to_driver=False,
+        )
+    refs: dict[Any, tuple[str, int]] = {}
+    try:
+        remote = ray.remote(_run_chunk)
+        refs = {remote.remote(*args): (label, ci) for label, ci, args in tasks}
+        pending = list(refs)
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            for ref in ready:
+                label, ci = refs[ref]
+                yield (label, ci), ray.get(ref)
+                if progress is not None:
+                    progress(sizes[ci])
+    except BaseException:  # a failed chunk or Ctrl-C: do not wait for the rest
+        for ref in refs:
+            ray.cancel(ref, force=True)
+        raise
+    finally:
+        if started:
+            ray.shutdown()
 
 
 # --------------------------------------------------------------------------------------------
@@ -854,6 +911,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="worker processes (default: 1 = in-process); results do not depend on it",
     )
     p.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        default=None,
+        metavar="ADDRESS",
+        help="run the episodes as Ray tasks: on a local Ray (no ADDRESS) or on the cluster "
+        "at ADDRESS ('auto', 'ray://head:10001'); results are the same as --workers 1",
+    )
+    p.add_argument(
         "--batch-size",
         type=_positive_int,
         default=None,
@@ -981,6 +1047,7 @@ def _run(argv: Sequence[str] | None) -> int:
             keep_episodes=1 if args.plot is not None else 0,
             progress=bar.update if bar is not None else None,
             allow_pickle=args.allow_pickle,
+            ray=args.ray,
         )
     finally:
         if bar is not None:

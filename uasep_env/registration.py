@@ -22,9 +22,14 @@ ENV_IDS: dict[str, dict] = {
 def register_envs() -> None:
     """Register every id in :data:`ENV_IDS` that is not registered yet.
 
-    The entry points are import strings, so processes started with ``spawn`` (e.g.
-    ``AsyncVectorEnv``) import this package, and so register the ids, by themselves.
+    Each id's ``max_episode_steps`` is its default episode length in steps (the env
+    truncates there itself; ``gymnasium.make`` adds a ``TimeLimit`` at the same step and
+    ``gymnasium.make_vec`` passes it to the vector env). The entry points are import
+    strings, so processes started with ``spawn`` (e.g. ``AsyncVectorEnv``) import this
+    package, and so register the ids, by themselves.
     """
+    from uasep_env.config import make_config
+
     for env_id, defaults in ENV_IDS.items():
         if env_id in gymnasium.registry:
             continue
@@ -33,5 +38,6 @@ def register_envs() -> None:
             entry_point="uasep_env.envs.gym_env:FormationEnv",
             vector_entry_point="uasep_env.envs.vector:FormationVectorEnv",
             kwargs=dict(defaults),
+            max_episode_steps=make_config(defaults).max_steps,
             disable_env_checker=False,
         )

@@ -27,6 +27,13 @@ formation at other times. Every obstacle holds its initial course until 10-40 s 
 encounter (drawn per obstacle; 25 s in ``paper``) and then manoeuvres at random, so that
 encounters happen and their outcome is uncertain. Random planned trajectories have a random
 heading and up to two turns of at most 45 degrees.
+
+The encounters' timing does not depend on ``episode_duration``: they are laid out on the
+default 200 s timeline (meetings at 60-140 s, the paper's at 115 s), so a shorter episode is
+the start of the same encounter and a longer one flies on along the plan's last leg. No
+scenario starts with two UAVs within ``uav.separation_distance`` (the start scatter is shrunk
+towards the formation slots when a draw would) or an obstacle near a UAV (obstacles start
+at least a minute's flight from their encounter).
 """
 
 from __future__ import annotations
@@ -86,7 +93,10 @@ def check_training_seeds(seed: int, n_envs: int) -> None:
 _SPEED_RANGE_MPS = (3.0, 12.0)
 _TURN_RATE_RANGE_RADPS = (0.01, 0.15)
 _CLIMB_RATE_RANGE_MPS = (0.2, 2.0)
-_MEET_TIME_RANGE_S = (0.3, 0.7)  # fraction of the episode
+# Encounters are laid out on a fixed timeline, whatever the episode's length: a shorter
+# episode is the first part of the same encounter, a longer one flies on along the last leg.
+_TIMELINE_S = 200.0  # the default episode_duration
+_MEET_TIME_RANGE_S = (0.3, 0.7)  # fraction of the timeline
 _REACTION_LEAD_RANGE_S = (10.0, 40.0)  # the pilot starts manoeuvring this long before
 _ALTITUDE_M = 100.0
 _ALT_BAND_HALF_WIDTH_M = 60.0
@@ -209,6 +219,22 @@ def _aim(
     return start, heading, speed, w_max, vz_max, climb
 
 
+def _separated_start(slots: np.ndarray, pos: np.ndarray, separation: float) -> np.ndarray:
+    """``pos`` with its scatter about ``slots`` shrunk until no two UAVs are within ``separation``.
+
+    The largest of the factors 1, 0.95, ..., 0 that separates them (1 for most draws, which
+    are then unchanged); no random draw, so the generator's stream is the same either way.
+    """
+    scatter = pos - slots
+    for f in np.linspace(1.0, 0.0, 21):
+        cand = slots + f * scatter if f < 1.0 else pos
+        d = np.linalg.norm(cand[:, None] - cand[None], axis=-1)
+        d[np.diag_indices(len(d))] = np.inf
+        if d.min() >= separation:
+            return cand
+    return slots + 0.0  # the pattern itself is tighter than the separation distance
+
+
 def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
     """Draw one episode's initial conditions.
 
@@ -223,7 +249,7 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
     family = config.scenario
     if family == "random":
         family = RANDOM_FAMILIES[int(rng.integers(len(RANDOM_FAMILIES)))]
-    length = config.cruise_speed * config.episode_duration
+    length = config.cruise_speed * _TIMELINE_S
     pattern = config.formation
     if family == "large_formation" and pattern == "paper":
         pattern = "wedge"
@@ -233,6 +259,10 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
         waypoints = _straight_plan(np.array([0.0, 0.0, -_ALTITUDE_M]), 0.0, length)
     else:
         waypoints = _random_plan(rng, length)
+    if config.episode_duration > _TIMELINE_S:  # fly on along the last leg
+        last = waypoints[-1] - waypoints[-2]
+        extra = config.cruise_speed * (config.episode_duration - _TIMELINE_S)
+        waypoints[-1] += last / np.linalg.norm(last) * extra
     plan = PlannedTrajectory(waypoints[None], config.cruise_speed)
     start_slots = _planned_uav(plan, 0.0, slots)
     plan_dir0 = plan.direction[0, 0]
@@ -247,6 +277,7 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
         uav_vel = plan_dir0 * config.cruise_speed + rng.uniform(
             -_START_SPEED_SCATTER_MPS, _START_SPEED_SCATTER_MPS, size=(n, 3)
         )
+    uav_pos = _separated_start(start_slots, uav_pos, config.uav.separation_distance)
 
     ob = config.obstacle
     obs_pos = np.zeros((m, 3))
@@ -259,7 +290,7 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
     obs_vzmax = np.full(m, ob.max_climb_rate)
     for k in range(m):
         if k == 0 and family == "paper":
-            meet = min(_PAPER_MEET_TIME_S, 0.575 * config.episode_duration)
+            meet = min(_PAPER_MEET_TIME_S, 0.575 * _TIMELINE_S)  # 115 s, as its float was
             target = _planned_uav(plan, meet, slots)[n - 1 if n == 3 else n // 2]
             heading = _PAPER_OBSTACLE_HEADING_RAD
             start = target + np.array([0.0, 0.0, _PAPER_OBSTACLE_BELOW_M])
@@ -275,7 +306,7 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
         else:
             sub = ("crossing", "head_on", "overtaking", "climbing")[int(rng.integers(4))]
         frac = rng.uniform(*_MEET_TIME_RANGE_S)
-        meet = frac * config.episode_duration
+        meet = frac * _TIMELINE_S
         if family == "large_formation" and k == 0:
             who = int(np.argmin(np.linalg.norm(slots, axis=1)))
         else:

@@ -33,11 +33,15 @@ class FormationEnv(RenderMixin, gymnasium.Env):
 
     ## Rewards
     The mean of the agents' rewards; ``info["rewards"]`` has each agent's reward and
-    ``info["reward_terms"]`` the mean of each named term.
+    ``info["reward_<term>"]`` the mean of each named term (flat keys, so that vector
+    wrappers and TorchRL batch them; the PettingZoo view nests them in ``reward_terms``).
 
     ## Episode end
-    Terminated on a collision, truncated at the time limit (no ``TimeLimit`` wrapper is
-    needed). Stepping a finished episode raises ``RuntimeError`` until :meth:`reset`.
+    Terminated on a collision, truncated at the time limit ``episode_duration``. The
+    registered ids declare it as ``spec.max_episode_steps`` (1000 steps at the default
+    200 s), so ``gymnasium.make`` adds a ``TimeLimit`` at the same step; for longer
+    episodes pass ``max_episode_steps`` to ``gymnasium.make`` as well (the earlier limit
+    wins). Stepping a finished episode raises ``RuntimeError`` until :meth:`reset`.
 
     ## Arguments
     Any :class:`~uasep_env.config.EnvConfig` field as a keyword, validated.
@@ -93,7 +97,7 @@ class FormationEnv(RenderMixin, gymnasium.Env):
         res = self.core.step(a.reshape(1, n, 3), validate=False)
         info: dict[str, Any] = {
             "rewards": res.rewards[0].copy(),
-            "reward_terms": {k: float(res.terms[k][0].mean()) for k in REWARD_TERMS},
+            **{"reward_" + k: float(res.terms[k][0].mean()) for k in REWARD_TERMS},
             **{k: v[0].copy() for k, v in res.safety.items()},
             "clipped_actions": clipped_counts(outside, (n,)),
         }

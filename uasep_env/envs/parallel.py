@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-import functools
+import math
+import warnings
 from typing import Any
 
 import gymnasium
@@ -21,7 +22,7 @@ from uasep_env.envs.core import (
 from uasep_env.observation import state_dim
 from uasep_env.world import check_seed
 
-__all__ = ["UAVSeparationParallelEnv", "parallel_env"]
+__all__ = ["UAVSeparationParallelEnv", "env", "parallel_env"]
 
 # Config keys that change the spaces: they cannot be changed at reset.
 _SPACE_KEYS = ("n_uavs", "n_obstacles", "observation")
@@ -76,8 +77,16 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
     ## Arguments
     Any :class:`~uasep_env.config.EnvConfig` field as a keyword (nested dicts for the
     sub-configs), e.g. ``parallel_env(n_uavs=5, scenario="crossing", noise=False)``.
-    Unknown keys raise ``TypeError``. ``reset(options={"config": {...}})`` changes the
-    config for the next episodes, except the keys that change the spaces.
+    Unknown keys raise ``TypeError``. ``max_cycles`` (PettingZoo's convention) sets the
+    episode length in steps (``episode_duration = max_cycles * step_duration``).
+    ``reset(options={"config": {...}})`` changes the config for the next episodes, except
+    the keys that change the spaces.
+
+    ## Reset options
+    ``"config"`` is the one documented option. Other keys are ignored with a
+    ``UserWarning`` naming them, not an error as in the Gymnasium views: PettingZoo's own
+    ``parallel_api_test`` / ``api_test`` call ``reset(options={"options": 1})`` and expect
+    it to work.
     """
 
     metadata = {  # noqa: RUF012 - PettingZoo reads it as a class attribute
@@ -87,8 +96,14 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         "render_fps": 10,
     }
 
-    def __init__(self, config: EnvConfig | dict | None = None, **kwargs: Any) -> None:
-        self.config = make_config(config, **kwargs)
+    def __init__(
+        self,
+        config: EnvConfig | dict | None = None,
+        *,
+        max_cycles: int | None = None,
+        **kwargs: Any,
+    ) -> None:
+        self.config = _with_max_cycles(make_config(config, **kwargs), max_cycles, kwargs)
         self.render_mode = self.config.render_mode
         self.core = EnvCore(self.config, n_envs=1)
         self.possible_agents = [f"uav_{i}" for i in range(self.config.n_uavs)]
@@ -101,6 +116,9 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
             np.float32,
         )
         self._act_space = gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32)
+        # One space object shared by every agent (PettingZoo's ParallelEnv declares these).
+        self.observation_spaces = dict.fromkeys(self.possible_agents, self._obs_space)
+        self.action_spaces = dict.fromkeys(self.possible_agents, self._act_space)
         self.state_space = gymnasium.spaces.Box(
             -self.config.observation.clip,
             self.config.observation.clip,
@@ -110,15 +128,13 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         self._renderer: Any = None
         self._last: StepResult | None = None
 
-    @functools.cache  # noqa: B019 - spaces must be the same object per agent
     def observation_space(self, agent: str) -> gymnasium.spaces.Box:
-        """The observation space of ``agent``."""
+        """The observation space of ``agent`` (the same object on every call)."""
         self._check_agent(agent)
         return self._obs_space
 
-    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> gymnasium.spaces.Box:
-        """The action space of ``agent``."""
+        """The action space of ``agent`` (the same object on every call)."""
         self._check_agent(agent)
         return self._act_space
 
@@ -145,7 +161,7 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
             seed: Seeds the episode's generator (all randomness flows from it).
             options: ``None`` or a dict; ``{"config": {...}}`` changes config fields for this
                 and later episodes (not those that change the spaces). Other keys are
-                ignored, as PettingZoo's API test expects.
+                ignored with a ``UserWarning`` (PettingZoo's API test passes one).
 
         Returns:
             ``(observations, infos)`` keyed by agent.
@@ -158,6 +174,13 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         check_seed(seed)
         if options is not None:
             check_options(options, None)  # a dict; keys other than "config" are ignored
+            unknown = [k for k in options if k != "config"]
+            if unknown:
+                warnings.warn(
+                    f"reset option(s) {unknown} ignored; the only option is 'config'",
+                    UserWarning,
+                    stacklevel=2,
+                )
         changes = options.get("config") if options else None
         if changes is not None and not (isinstance(changes, dict) and not changes):
             self._reconfigure(changes)
@@ -258,6 +281,40 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
         return self.core.state()[0]
 
 
-def parallel_env(config: EnvConfig | dict | None = None, **kwargs: Any) -> UAVSeparationParallelEnv:
+def _with_max_cycles(config: EnvConfig, max_cycles: Any, kwargs: dict) -> EnvConfig:
+    """``config`` with ``episode_duration = max_cycles * step_duration`` when given."""
+    if max_cycles is None:
+        return config
+    if (
+        not isinstance(max_cycles, (int, np.integer))
+        or isinstance(max_cycles, bool)
+        or max_cycles < 1
+    ):
+        raise ValueError(f"max_cycles must be a positive integer, got {max_cycles!r}")
+    duration = int(max_cycles) * config.step_duration
+    given = kwargs.get("episode_duration")
+    if given is not None and not math.isclose(float(given), duration, rel_tol=1e-9):
+        raise ValueError(
+            f"max_cycles={max_cycles!r} and episode_duration={kwargs['episode_duration']!r} "
+            f"disagree (max_cycles means episode_duration={duration!r}); give one of them"
+        )
+    return make_config(config, episode_duration=duration)
+
+
+def parallel_env(
+    config: EnvConfig | dict | None = None, *, max_cycles: int | None = None, **kwargs: Any
+) -> UAVSeparationParallelEnv:
     """Create the PettingZoo parallel environment (see :class:`UAVSeparationParallelEnv`)."""
-    return UAVSeparationParallelEnv(config, **kwargs)
+    return UAVSeparationParallelEnv(config, max_cycles=max_cycles, **kwargs)
+
+
+def env(
+    config: EnvConfig | dict | None = None, *, max_cycles: int | None = None, **kwargs: Any
+) -> Any:
+    """The AEC (turn-based) view of :func:`parallel_env` (PettingZoo's ``parallel_to_aec``).
+
+    Agents act in turn; the joint action is stepped once every agent has acted.
+    """
+    from pettingzoo.utils.conversions import parallel_to_aec
+
+    return parallel_to_aec(parallel_env(config, max_cycles=max_cycles, **kwargs))

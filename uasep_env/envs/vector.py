@@ -24,6 +24,41 @@ from uasep_env.world import check_seed
 __all__ = ["FormationVectorEnv"]
 
 
+def _limit_steps(config: EnvConfig, max_episode_steps: Any) -> EnvConfig:
+    """``config`` truncated after at most ``max_episode_steps`` steps (``None``: as is)."""
+    if max_episode_steps is None:
+        return config
+    if (
+        not isinstance(max_episode_steps, (int, np.integer))
+        or isinstance(max_episode_steps, bool)
+        or max_episode_steps < 1
+    ):
+        raise ValueError(f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
+    if max_episode_steps >= config.max_steps:
+        return config
+    return make_config(config, episode_duration=int(max_episode_steps) * config.step_duration)
+
+
+def _masked(values: dict[str, np.ndarray], rows: np.ndarray | None) -> dict[str, Any]:
+    """Gymnasium's vector infos of ``values`` for the environments in ``rows`` (all: None).
+
+    The other rows are zero and masked out; no row: no keys (as ``SyncVectorEnv``).
+    """
+    if rows is None:
+        out: dict[str, Any] = {}
+        n = len(next(iter(values.values())))
+        for k, v in values.items():
+            out[k], out["_" + k] = v, np.ones(n, dtype=bool)
+        return out
+    if not rows.any():
+        return {}
+    out = {}
+    for k, v in values.items():
+        keep = rows.reshape(-1, *([1] * (v.ndim - 1)))
+        out[k], out["_" + k] = np.where(keep, v, np.zeros((), v.dtype)), rows.copy()
+    return out
+
+
 class FormationVectorEnv(VectorEnv):
     """``num_envs`` centralised formation environments in one batched world.
 
@@ -35,12 +70,21 @@ class FormationVectorEnv(VectorEnv):
             ``"SameStep"`` (reset in the same step; the final observation and info are in
             ``infos["final_obs"]`` / ``infos["final_info"]``) or ``"Disabled"`` (reset
             ended environments with ``reset(options={"reset_mask": mask})``).
+        max_episode_steps: Gymnasium's time limit (``gymnasium.make_vec`` passes the id's
+            ``spec.max_episode_steps``): episodes are truncated after ``min(max_episode_steps,
+            config.max_steps)`` steps, as ``gymnasium.make``'s ``TimeLimit`` does.
         **kwargs: :class:`~uasep_env.config.EnvConfig` fields.
 
     Infos are dicts of arrays with Gymnasium's ``_key`` masks: ``rewards`` (per UAV),
-    ``reward_terms`` (team mean of each term), the safety figures per UAV and
-    ``clipped_actions`` (per UAV, the action components clipped to ``[-1, 1]``; with
-    ``action={"strict": True}`` out-of-box actions raise ``ValueError`` instead).
+    ``reward_<term>`` (team mean of each term of :data:`~uasep_env.rewards.REWARD_TERMS`),
+    the safety figures per UAV and ``clipped_actions`` (per UAV, the action components
+    clipped to ``[-1, 1]``; with ``action={"strict": True}`` out-of-box actions raise
+    ``ValueError`` instead). In every autoreset mode they are exactly what
+    ``gymnasium.vector.SyncVectorEnv`` over :class:`~uasep_env.envs.gym_env.FormationEnv`
+    gives (keys, masks, dtypes): an environment reset during the step has the reset's
+    (empty) info, i.e. its entries are masked out and zero; in ``"SameStep"`` mode
+    ``final_obs`` is an object array (``None`` where no episode ended) and ``final_info``
+    holds the finished episodes' infos, masked to them.
 
     Stepping before the first :meth:`reset`, or (``"Disabled"`` mode) stepping an
     environment whose episode ended and was not reset, raises ``RuntimeError``.
@@ -51,15 +95,17 @@ class FormationVectorEnv(VectorEnv):
         num_envs: int = 1,
         config: EnvConfig | dict | None = None,
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+        max_episode_steps: int | None = None,
         **kwargs: Any,
     ) -> None:
+        self._renderer: Any = None  # first: close() runs even if __init__ raises
         if (
             not isinstance(num_envs, (int, np.integer))
             or isinstance(num_envs, bool)
             or num_envs < 1
         ):
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        self.config = make_config(config, **kwargs)
+        self.config = _limit_steps(make_config(config, **kwargs), max_episode_steps)
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError as err:
@@ -83,7 +129,6 @@ class FormationVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._needs_reset = np.zeros(self.num_envs, dtype=bool)
         self._started = False
-        self._renderer: Any = None
 
     @property
     def world(self) -> Any:
@@ -162,38 +207,45 @@ class FormationVectorEnv(VectorEnv):
         rewards = team_mean(res.rewards)
         terminated = res.terminated.copy()
         truncated = res.truncated.copy()
-        infos = self._infos(res)
-        infos["clipped_actions"] = clipped_counts(outside, (self.num_envs, n))
-        infos["_clipped_actions"] = infos["_rewards"]
+        values = self._info_values(res)
+        values["clipped_actions"] = clipped_counts(outside, (self.num_envs, n))
         done = terminated | truncated
         if some_pending:
             rewards[pending] = 0.0
             terminated[pending] = False
             truncated[pending] = False
             done = terminated | truncated
+            # Reset this step: the reset's (empty) info, as SyncVectorEnv gives.
+            infos = _masked(values, ~pending)
+        elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            for i in np.flatnonzero(done):
+                final_obs[i] = obs[i].copy()
+            infos = {
+                "final_obs": final_obs,
+                "_final_obs": done.copy(),
+                "final_info": _masked(values, done),
+                "_final_info": done.copy(),
+                **_masked(values, ~done),  # the ended ones have the reset's (empty) info
+            }
+            obs[done] = self.core.reset_some(done).reshape(int(done.sum()), -1)
+        else:
+            infos = _masked(values, None)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self._needs_reset = done
-        elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
-            infos["final_obs"] = np.where(done[:, None], obs, 0.0).astype(np.float32)
-            infos["_final_obs"] = done.copy()
-            infos["final_info"] = {k: v for k, v in infos.items() if not k.startswith("final")}
-            infos["_final_info"] = done.copy()
-            obs[done] = self.core.reset_some(done).reshape(int(done.sum()), -1)
         elif self.autoreset_mode == AutoresetMode.DISABLED:
             self._needs_reset = self._needs_reset | done
         return obs, rewards, terminated, truncated, infos
 
-    def _infos(self, res: Any) -> dict[str, Any]:
-        ones = np.ones(self.num_envs, dtype=bool)
+    @staticmethod
+    def _info_values(res: Any) -> dict[str, np.ndarray]:
         # The step's arrays are its own (fresh each step): no copies needed.
-        infos: dict[str, Any] = {"rewards": res.rewards, "_rewards": ones}
+        values: dict[str, np.ndarray] = {"rewards": res.rewards}
         means = team_mean(np.stack([res.terms[k] for k in REWARD_TERMS]))
-        infos["reward_terms"] = dict(zip(REWARD_TERMS, means, strict=True))
-        infos["_reward_terms"] = ones
-        for k, v in res.safety.items():
-            infos[k] = v
-            infos["_" + k] = ones
-        return infos
+        for k, mean in zip(REWARD_TERMS, means, strict=True):
+            values["reward_" + k] = mean
+        values.update(res.safety)
+        return values
 
     def render(self) -> np.ndarray | None:
         """An RGB frame of environment 0 (``render_mode="rgb_array"``)."""
