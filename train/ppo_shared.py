@@ -371,7 +371,8 @@ def plot_curves(csv_path: Path, png_path: Path, title: str = "") -> Path:
     import matplotlib.pyplot as plt
 
     with csv_path.open() as f:
-        rows = [r for r in csv.DictReader(f) if r.get("return_mean")]
+        # Rows whose window holds fewer than 20 episodes (the run's first) are left out.
+        rows = [r for r in csv.DictReader(f) if r.get("return_mean") and int(r["episodes"]) >= 20]
     data = {k: np.array([float(r[k]) for r in rows]) for k in CSV_FIELDS}
     fig, axes = plt.subplots(2, 4, figsize=(16, 6.5), sharey="col")
     panels = (
