@@ -35,7 +35,7 @@ class ResidualAPF:
     """
 
     def __init__(self, config: EnvConfig) -> None:
-        from uasep_env.policies.apf import APF  # policies sit above the physics modules
+        from uasep_env.policies.apf import APF  # here: the policies package imports this module
 
         self.scale = config.action.residual_scale
         self.apf = APF(config.replace(action={"mode": "direct"}))
