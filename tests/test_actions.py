@@ -122,3 +122,25 @@ def test_sb3_adapter_offers_the_mode():
 def test_action_config_is_validated(override, field):
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):
         make_config(**override)
+
+
+@pytest.mark.parametrize("scenario", ["paper", "random"])
+def test_default_observations_are_never_clipped(scenario):
+    # Nothing a default episode observes reaches the clip bound (issue 13: waypoint_dist
+    # read 1,000 m where the truth was up to 1,012 m with the former clip of 10).
+    cfg = make_config(scenario=scenario)
+    layout = ObservationLayout.from_config(cfg)
+    wp = layout.feature_names().index("waypoint_dist")
+    core = EnvCore(cfg, 8)
+    obs = core.reset(seed=11)
+    apf = APF(cfg)
+    largest = np.abs(obs).max()
+    first_wp = obs[..., wp].max() * layout.pos_scale
+    for _ in range(cfg.max_steps):
+        res = core.step(apf(obs))
+        obs = res.obs
+        largest = max(largest, np.abs(obs).max())
+        if (res.terminated | res.truncated).all():
+            break
+    assert first_wp > 1000.0  # the case that used to clip
+    assert largest < cfg.observation.clip

@@ -240,3 +240,14 @@ def test_select_checkpoint_ranks_on_validation_seeds(tmp_path):
     assert len(rows) == 1 + 2 + 1  # header, two checkpoints, the APF
     assert chosen.parent.name in ("step_1", "step_2")
     assert (tmp_path / "c.zip").read_bytes() == chosen.read_bytes()
+
+
+def test_readme_shows_the_held_out_results_as_written():
+    root = CHECKPOINTS.parents[1]
+    readme = (root / "README.md").read_text()
+    results = (root / "baselines" / "results" / "learned_vs_apf.md").read_text()
+    bank = results[results.index("### Held-out bank") : results.index("### Paper scenario")]
+    targets = results[results.index("### Targets") :]
+    for section in (bank, targets):
+        table = section[section.index("| ") :].strip()
+        assert table in readme

@@ -297,7 +297,10 @@ class ObservationConfig:
         k_uavs: Number of nearest other UAVs observed (``None``: all others, at most 6).
         k_obstacles: Number of nearest obstacles observed (``None``: all, at least 1 slot).
         position_scale: Divisor that normalises positions (m).
-        clip: Normalised values are clipped to ``[-clip, clip]``.
+        clip: Normalised values are clipped to ``[-clip, clip]``. The default, 12, leaves
+            room for the distance to the final way-point of a default plan (1,000 m and the
+            formation's start offset; at 10 it read 1,000 m where the truth was up to
+            1,012 m).
         sensing_range: Obstacles and UAVs farther than this are not observed (m); at most
             ``clip * position_scale``, the farthest distance an observation can express.
     """
@@ -305,7 +308,7 @@ class ObservationConfig:
     k_uavs: int | None = None
     k_obstacles: int | None = None
     position_scale: float = 100.0  # m
-    clip: float = 10.0
+    clip: float = 12.0
     sensing_range: float = 1000.0  # m
 
     def __post_init__(self) -> None:

@@ -36,10 +36,11 @@ per nearest obstacle   16    reachable-ellipsoid centre relative to the UAV (3, 
 UAVs are sorted by estimated distance, obstacles by distance to their reachable region;
 absent entries (fewer than K, or beyond ``sensing_range``) are zero with mask 0.
 ``sensing_range`` is at most ``clip * position_scale`` (checked by the config), so the
-distances of observed objects are never clipped. ``waypoint_dist`` can be: with the defaults
-(``clip * position_scale`` = 1,000 m and a 1,000 m plan) it reads 1,000 m while the true
-distance is 1,000-1,012 m, in the first steps of an episode (1.2 % of the paper scenario's
-steps). None of the APF controllers uses it.
+distances of observed objects are never clipped. Nor is ``waypoint_dist`` with the
+defaults (``clip * position_scale`` = 1,200 m; a default plan's final way-point starts
+1,000-1,012 m from the formation centre); a plan longer than ``clip * position_scale``
+(a higher ``cruise_speed`` or a longer ``episode_duration``) reads that bound until the
+formation comes within it. None of the APF controllers uses it.
 
 In the ``residual_apf`` action mode (``action.mode``, see :mod:`uasep_env.actions`) the
 vector ends with one more feature, ``base_action`` (3): the APF's normalised command for
