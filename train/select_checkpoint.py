@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> Path:
     rows = []
     for q in paths:
         f = _figures(result, str(q))
-        info = load_policy(q, cfg).meta.info
+        info = policies[str(q)].meta.info
         safe = all(f[k] <= apf[k] for k in KEYS[:3])
         rows.append({"policy": str(q), "agent_steps": info.get("agent_steps"), **f, "safe": safe})
     pool = [r for r in rows if r["safe"]] or sorted(

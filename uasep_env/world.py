@@ -44,7 +44,7 @@ from uasep_env.formation import (
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, sample_scenario
 
-__all__ = ["World", "check_seed"]
+__all__ = ["World", "check_positive_int", "check_seed"]
 
 #: Environments refilled per task when noise is drawn on several threads; below twice
 #: this, one thread does it all (a task costs more than it saves).
@@ -73,6 +73,17 @@ def _run_chunked(fn: Callable[[np.ndarray], None], envs: np.ndarray) -> None:
 
 def _is_int(x: object) -> bool:
     return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+
+def check_positive_int(name: str, value: object) -> int:
+    """``value`` as an int when it is a positive integer (not a bool); else a named error.
+
+    Raises:
+        ValueError: ``{name} must be a positive integer, got {value!r}``.
+    """
+    if not _is_int(value) or value < 1:  # type: ignore[operator]
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)  # type: ignore[call-overload]
 
 
 def check_seed(seed: object, n_envs: int | None = None) -> None:
@@ -155,10 +166,8 @@ class World:
         self, config: EnvConfig | dict | None = None, n_envs: int = 1, noise_block: int = 64
     ) -> None:
         cfg = config if isinstance(config, EnvConfig) else make_config(config)
-        if not isinstance(n_envs, (int, np.integer)) or isinstance(n_envs, bool) or n_envs < 1:
-            raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
         self.config = cfg
-        self.n_envs = e = int(n_envs)
+        self.n_envs = e = check_positive_int("n_envs", n_envs)
         self.n_uavs = n = cfg.n_uavs
         self.n_obstacles = m = cfg.n_obstacles
         self.noise_block = int(noise_block)

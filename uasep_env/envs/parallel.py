@@ -20,7 +20,7 @@ from uasep_env.envs.core import (
     prepare_actions,
 )
 from uasep_env.observation import state_dim
-from uasep_env.world import check_seed
+from uasep_env.world import check_positive_int, check_seed
 
 __all__ = ["UAVSeparationParallelEnv", "env", "parallel_env"]
 
@@ -285,13 +285,7 @@ def _with_max_cycles(config: EnvConfig, max_cycles: Any, kwargs: dict) -> EnvCon
     """``config`` with ``episode_duration = max_cycles * step_duration`` when given."""
     if max_cycles is None:
         return config
-    if (
-        not isinstance(max_cycles, (int, np.integer))
-        or isinstance(max_cycles, bool)
-        or max_cycles < 1
-    ):
-        raise ValueError(f"max_cycles must be a positive integer, got {max_cycles!r}")
-    duration = int(max_cycles) * config.step_duration
+    duration = check_positive_int("max_cycles", max_cycles) * config.step_duration
     given = kwargs.get("episode_duration")
     if given is not None and not math.isclose(float(given), duration, rel_tol=1e-9):
         raise ValueError(

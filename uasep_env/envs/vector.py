@@ -19,7 +19,7 @@ from gymnasium.vector.utils import batch_space
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS, team_mean
-from uasep_env.world import check_seed
+from uasep_env.world import check_positive_int, check_seed
 
 __all__ = ["FormationVectorEnv"]
 
@@ -28,15 +28,10 @@ def _limit_steps(config: EnvConfig, max_episode_steps: Any) -> EnvConfig:
     """``config`` truncated after at most ``max_episode_steps`` steps (``None``: as is)."""
     if max_episode_steps is None:
         return config
-    if (
-        not isinstance(max_episode_steps, (int, np.integer))
-        or isinstance(max_episode_steps, bool)
-        or max_episode_steps < 1
-    ):
-        raise ValueError(f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
-    if max_episode_steps >= config.max_steps:
+    steps = check_positive_int("max_episode_steps", max_episode_steps)
+    if steps >= config.max_steps:
         return config
-    return make_config(config, episode_duration=int(max_episode_steps) * config.step_duration)
+    return make_config(config, episode_duration=steps * config.step_duration)
 
 
 def _masked(values: dict[str, np.ndarray], rows: np.ndarray | None) -> dict[str, Any]:
@@ -99,12 +94,7 @@ class FormationVectorEnv(VectorEnv):
         **kwargs: Any,
     ) -> None:
         self._renderer: Any = None  # first: close() runs even if __init__ raises
-        if (
-            not isinstance(num_envs, (int, np.integer))
-            or isinstance(num_envs, bool)
-            or num_envs < 1
-        ):
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        check_positive_int("num_envs", num_envs)
         self.config = _limit_steps(make_config(config, **kwargs), max_episode_steps)
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
