@@ -436,8 +436,8 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
         policies = {"learned": load_policy(policy_path, eval_cfg), "apf": "apf"}
         result = evaluate(policies, eval_cfg, seeds)
         keys = ("collision", "loss_of_separation", "max_deviation")
-        for label, res in result["results"].items():
-            agg = res["aggregate"]
+        for label, res in result.results.items():
+            agg = res.aggregate
             summary["validation"][label] = {
                 k: agg[f"episode.{k}"].get("mean", agg[f"episode.{k}"].get("rate"))
                 for k in keys
