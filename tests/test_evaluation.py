@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT, run_in_repo
 
 import uasep_env
 from uasep_env.config import make_config
@@ -23,8 +24,6 @@ from uasep_env.evaluation import (
     result_to_json,
     summary_rows,
 )
-
-ROOT = Path(__file__).resolve().parents[1]
 
 #: Short episodes keep the tests fast; statistics start after 5 s.
 SHORT = ["--config", "episode_duration=12", "--settle-time", "5"]
@@ -336,14 +335,7 @@ def _env():
 
 
 def test_module_help_subprocess():
-    out = subprocess.run(
-        [sys.executable, "-m", "uasep_env.evaluation", "--help"],
-        cwd=ROOT,
-        env=_env(),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    out = run_in_repo("-m", "uasep_env.evaluation", "--help", timeout=60)
     assert out.returncode == 0, out.stderr
     assert "usage: uasep-eval" in out.stdout
 
