@@ -265,32 +265,7 @@ def evaluate(
         for label, spec in specs.items()
         for ci, chunk in enumerate(chunks)
     ]
-    done: dict[tuple[str, int], tuple[list[EpisodeResult], list[Episode]]] = {}
-
-    if ray is not None:
-        for (label, ci), out in _run_on_ray(ray, tasks, progress, [len(c) for c in chunks]):
-            done[label, ci] = out
-    elif workers == 1 or len(tasks) == 1:
-        for label, ci, args in tasks:
-            done[label, ci] = _run_chunk(*args)
-            if progress is not None:
-                progress(len(chunks[ci]))
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx)
-        try:
-            futures: dict[Future[Any], tuple[str, int]] = {
-                pool.submit(_run_chunk, *args): (label, ci) for label, ci, args in tasks
-            }
-            for fut in as_completed(futures):
-                label, ci = futures[fut]
-                done[label, ci] = fut.result()
-                if progress is not None:
-                    progress(len(chunks[ci]))
-        except BaseException:  # a failed chunk or Ctrl-C: do not wait for the rest
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-        pool.shutdown()
+    done = _run_tasks(tasks, [len(c) for c in chunks], workers, ray, progress)
 
     results: dict[str, PolicyResult] = {}
     kept: dict[str, list[Episode]] = {}
@@ -325,6 +300,48 @@ def evaluate(
         elapsed_s=time.perf_counter() - t0,
         episodes=kept if keep_episodes > 0 else {},
     )
+
+
+_ChunkOutput = tuple[list[EpisodeResult], list[Episode]]
+
+
+def _run_tasks(
+    tasks: list[tuple[str, int, tuple]],
+    sizes: list[int],
+    workers: int,
+    ray: str | None,
+    progress: Callable[[int], None] | None,
+) -> dict[tuple[str, int], _ChunkOutput]:
+    """Run :func:`_run_chunk` for every task: here, in a ``spawn`` pool, or on Ray.
+
+    Returns:
+        ``(label, chunk index) -> (episode results, kept episodes)``.
+    """
+    if ray is not None:
+        return dict(_run_on_ray(ray, tasks, progress, sizes))
+    done: dict[tuple[str, int], _ChunkOutput] = {}
+    if workers == 1 or len(tasks) == 1:
+        for label, ci, args in tasks:
+            done[label, ci] = _run_chunk(*args)
+            if progress is not None:
+                progress(sizes[ci])
+        return done
+    ctx = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx)
+    try:
+        futures: dict[Future[Any], tuple[str, int]] = {
+            pool.submit(_run_chunk, *args): (label, ci) for label, ci, args in tasks
+        }
+        for fut in as_completed(futures):
+            label, ci = futures[fut]
+            done[label, ci] = fut.result()
+            if progress is not None:
+                progress(sizes[ci])
+    except BaseException:  # a failed chunk or Ctrl-C: do not wait for the rest
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+    return done
 
 
 def _run_on_ray(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -52,6 +53,121 @@ def _axis_max(rows: Sequence[Axis3]) -> Axis3:
     return tuple(_nanmax(arr[:, j]) for j in range(3))  # type: ignore[return-value]
 
 
+def _time_at(t: np.ndarray, k: int) -> float:
+    """``t[k]``, or NaN for the -1 index of an undefined minimum."""
+    return float(t[k]) if k >= 0 else math.nan
+
+
+@dataclass(frozen=True)
+class _Pairs:
+    """Per-sample UAV-UAV and UAV-obstacle quantities of one episode (the safety metrics).
+
+    ``dd`` (T, N, N) UAV-UAV distances (inf diagonal), ``od`` (T, N, M) UAV-obstacle
+    distances and ``region`` (T, N, M) region distances (inf where inactive); the ``*_los`` /
+    ``*_col`` masks and their rising-edge counts per pair (``*_edges``).
+    """
+
+    dd: np.ndarray
+    uu_los: np.ndarray
+    uu_col: np.ndarray
+    uu_los_edges: np.ndarray  # (N, N) symmetric, 0 diagonal
+    uu_col_edges: np.ndarray
+    od: np.ndarray
+    uo_los: np.ndarray  # inf (inactive) is never True
+    uo_col: np.ndarray
+    uo_los_edges: np.ndarray  # (N, M)
+    uo_col_edges: np.ndarray
+    region: np.ndarray
+
+
+def _pairs(record: EpisodeRecord) -> _Pairs:
+    dd = pairwise_uav_distances(record.uav_pos)
+    uu_los = dd < record.uav_separation
+    uu_col = dd < record.collision_distance
+    od = obstacle_distances(record.uav_pos, record.obstacle_pos, record.obstacle_active)
+    uo_los = od < record.obstacle_separation
+    uo_col = od < record.collision_distance
+    return _Pairs(
+        dd=dd,
+        uu_los=uu_los,
+        uu_col=uu_col,
+        uu_los_edges=rising_edge_counts(uu_los),
+        uu_col_edges=rising_edge_counts(uu_col),
+        od=od,
+        uo_los=uo_los,
+        uo_col=uo_col,
+        uo_los_edges=rising_edge_counts(uo_los),
+        uo_col_edges=rising_edge_counts(uo_col),
+        region=np.where(record.obstacle_active[:, None, :], record.region_distance, np.inf),
+    )
+
+
+def _uav_safety(record: EpisodeRecord, p: _Pairs, i: int) -> dict[str, object]:
+    """The safety fields of UAV ``i``'s :class:`UAVMetrics`."""
+    t, dt = record.time, record.dt
+    sep, (k_sep, j_sep) = _masked_argmin(p.dd[:, i, :])
+    odist, (k_od, j_od) = _masked_argmin(p.od[:, i, :])
+    rdist, (k_rd, j_rd) = _masked_argmin(p.region[:, i, :])
+    return {
+        "min_uav_separation": sep,
+        "min_uav_separation_partner_index": j_sep,
+        "min_uav_separation_time": _time_at(t, k_sep),
+        "min_obstacle_distance": odist,
+        "min_obstacle_distance_obstacle_index": j_od,
+        "min_obstacle_distance_time": _time_at(t, k_od),
+        "min_region_distance": rdist,
+        "min_region_distance_obstacle_index": j_rd,
+        "min_region_distance_time": _time_at(t, k_rd),
+        "uav_los_events": int(p.uu_los_edges[i].sum()),
+        "uav_los_time": float(p.uu_los[:, i, :].any(axis=-1).sum() * dt),
+        "obstacle_los_events": int(p.uo_los_edges[i].sum()),
+        "obstacle_los_time": float(p.uo_los[:, i, :].any(axis=-1).sum() * dt),
+        "uav_collision_events": int(p.uu_col_edges[i].sum()),
+        "obstacle_collision_events": int(p.uo_col_edges[i].sum()),
+        "collision": bool(p.uu_col[:, i, :].any() or p.uo_col[:, i, :].any()),
+    }
+
+
+def _episode_safety(record: EpisodeRecord, p: _Pairs) -> dict[str, object]:
+    """The safety fields of the :class:`EpisodeSummary` (minima, distinct-pair event sums)."""
+    t, dt, n = record.time, record.dt, record.n_uavs
+    upper = np.triu(np.ones((n, n), dtype=bool), k=1)
+    sep, (k_sep, a_sep, b_sep) = _masked_argmin(np.where(upper[None], p.dd, np.inf))
+    odist, (k_od, i_od, j_od) = _masked_argmin(p.od)
+    rdist, (k_rd, i_rd, j_rd) = _masked_argmin(p.region)
+    uu_events = int(p.uu_los_edges[upper].sum())
+    uo_events = int(p.uo_los_edges.sum())
+    uu_col_events = int(p.uu_col_edges[upper].sum())
+    uo_col_events = int(p.uo_col_edges.sum())
+    return {
+        "min_uav_separation": sep,
+        "min_uav_separation_uav_a_index": a_sep,
+        "min_uav_separation_uav_b_index": b_sep,
+        "min_uav_separation_time": _time_at(t, k_sep),
+        "min_obstacle_distance": odist,
+        "min_obstacle_distance_uav_index": i_od,
+        "min_obstacle_distance_obstacle_index": j_od,
+        "min_obstacle_distance_time": _time_at(t, k_od),
+        "min_region_distance": rdist,
+        "min_region_distance_uav_index": i_rd,
+        "min_region_distance_obstacle_index": j_rd,
+        "min_region_distance_time": _time_at(t, k_rd),
+        "uav_los_events": uu_events,
+        "uav_los_time": float(p.uu_los.any(axis=(1, 2)).sum() * dt),
+        "obstacle_los_events": uo_events,
+        "obstacle_los_time": float(p.uo_los.any(axis=(1, 2)).sum() * dt),
+        "uav_collision_events": uu_col_events,
+        "obstacle_collision_events": uo_col_events,
+        "collision_events": uu_col_events + uo_col_events,
+        "uav_collision": uu_col_events > 0,
+        "obstacle_collision": uo_col_events > 0,
+        "collision": (uu_col_events + uo_col_events) > 0,
+        "uav_loss_of_separation": uu_events > 0,
+        "obstacle_loss_of_separation": uo_events > 0,
+        "loss_of_separation": (uu_events + uo_events) > 0,
+    }
+
+
 def episode_metrics(record: EpisodeRecord, hold_time: float = 2.0) -> EpisodeMetrics:
     """Compute every metric of one episode.
 
@@ -63,105 +179,31 @@ def episode_metrics(record: EpisodeRecord, hold_time: float = 2.0) -> EpisodeMet
     Returns:
         The episode's :class:`EpisodeMetrics`.
     """
-    n, m = record.n_uavs, record.n_obstacles
     t = record.time
-    dt = record.dt
-
-    # ---- UAV-UAV -----------------------------------------------------------------------
-    dd = pairwise_uav_distances(record.uav_pos)  # (T, N, N), inf diagonal
-    upper = np.triu(np.ones((n, n), dtype=bool), k=1)
-    uu_los = dd < record.uav_separation
-    uu_col = dd < record.collision_distance
-    uu_los_edges = rising_edge_counts(uu_los)  # (N, N) symmetric, 0 diagonal
-    uu_col_edges = rising_edge_counts(uu_col)
-
-    # ---- UAV-obstacle ------------------------------------------------------------------
-    od = obstacle_distances(record.uav_pos, record.obstacle_pos, record.obstacle_active)
-    uo_los = od < record.obstacle_separation  # (T, N, M); inf (inactive) is never True
-    uo_col = od < record.collision_distance
-    uo_los_edges = rising_edge_counts(uo_los)  # (N, M)
-    uo_col_edges = rising_edge_counts(uo_col)
-    region = np.where(record.obstacle_active[:, None, :], record.region_distance, np.inf)
-
+    pairs = _pairs(record)
     devs = deviation_stats(record)
     timelines = conflict_timelines(record, hold_time=hold_time)
     flucts = fluctuation_stats(record)
     flown, planned, ratio = path_lengths(record)
-
-    uavs: list[UAVMetrics] = []
-    for i in range(n):
-        sep, (k_sep, j_sep) = _masked_argmin(dd[:, i, :])
-        odist, (k_od, j_od) = _masked_argmin(od[:, i, :])
-        rdist, (k_rd, j_rd) = _masked_argmin(region[:, i, :])
-        uavs.append(
-            UAVMetrics(
-                name=record.names[i],
-                index=i,
-                min_uav_separation=sep,
-                min_uav_separation_partner_index=j_sep,
-                min_uav_separation_time=float(t[k_sep]) if k_sep >= 0 else math.nan,
-                min_obstacle_distance=odist,
-                min_obstacle_distance_obstacle_index=j_od,
-                min_obstacle_distance_time=float(t[k_od]) if k_od >= 0 else math.nan,
-                min_region_distance=rdist,
-                min_region_distance_obstacle_index=j_rd,
-                min_region_distance_time=float(t[k_rd]) if k_rd >= 0 else math.nan,
-                uav_los_events=int(uu_los_edges[i].sum()),
-                uav_los_time=float(uu_los[:, i, :].any(axis=-1).sum() * dt),
-                obstacle_los_events=int(uo_los_edges[i].sum()),
-                obstacle_los_time=float(uo_los[:, i, :].any(axis=-1).sum() * dt),
-                uav_collision_events=int(uu_col_edges[i].sum()),
-                obstacle_collision_events=int(uo_col_edges[i].sum()),
-                collision=bool(uu_col[:, i, :].any() or uo_col[:, i, :].any()),
-                deviation=devs[i],
-                timeline=timelines[i],
-                fluctuation=flucts[i],
-                path_length=float(flown[i]),
-                planned_path_length=float(planned[i]),
-                path_length_ratio=float(ratio[i]),
-            )
+    uavs = tuple(
+        UAVMetrics(
+            name=record.names[i],
+            index=i,
+            **_uav_safety(record, pairs, i),  # type: ignore[arg-type]
+            deviation=devs[i],
+            timeline=timelines[i],
+            fluctuation=flucts[i],
+            path_length=float(flown[i]),
+            planned_path_length=float(planned[i]),
+            path_length_ratio=float(ratio[i]),
         )
-
-    # ---- Episode summary ---------------------------------------------------------------
-    dd_upper = np.where(upper[None], dd, np.inf)
-    sep, (k_sep, a_sep, b_sep) = _masked_argmin(dd_upper)
-    odist, (k_od, i_od, j_od) = _masked_argmin(od)
-    rdist, (k_rd, i_rd, j_rd) = _masked_argmin(region)
-    uu_events = int(uu_los_edges[upper].sum())
-    uo_events = int(uo_los_edges.sum())
-    uu_col_events = int(uu_col_edges[upper].sum())
-    uo_col_events = int(uo_col_edges.sum())
-    any_uu_los_t = uu_los.any(axis=(1, 2))
-    any_uo_los_t = uo_los.any(axis=(1, 2))
+        for i in range(record.n_uavs)
+    )
     summary = EpisodeSummary(
         duration=float(t[-1] - t[0]),
-        n_uavs=n,
-        n_obstacles=m,
-        min_uav_separation=sep,
-        min_uav_separation_uav_a_index=a_sep,
-        min_uav_separation_uav_b_index=b_sep,
-        min_uav_separation_time=float(t[k_sep]) if k_sep >= 0 else math.nan,
-        min_obstacle_distance=odist,
-        min_obstacle_distance_uav_index=i_od,
-        min_obstacle_distance_obstacle_index=j_od,
-        min_obstacle_distance_time=float(t[k_od]) if k_od >= 0 else math.nan,
-        min_region_distance=rdist,
-        min_region_distance_uav_index=i_rd,
-        min_region_distance_obstacle_index=j_rd,
-        min_region_distance_time=float(t[k_rd]) if k_rd >= 0 else math.nan,
-        uav_los_events=uu_events,
-        uav_los_time=float(any_uu_los_t.sum() * dt),
-        obstacle_los_events=uo_events,
-        obstacle_los_time=float(any_uo_los_t.sum() * dt),
-        uav_collision_events=uu_col_events,
-        obstacle_collision_events=uo_col_events,
-        collision_events=uu_col_events + uo_col_events,
-        uav_collision=uu_col_events > 0,
-        obstacle_collision=uo_col_events > 0,
-        collision=(uu_col_events + uo_col_events) > 0,
-        uav_loss_of_separation=uu_events > 0,
-        obstacle_loss_of_separation=uo_events > 0,
-        loss_of_separation=(uu_events + uo_events) > 0,
+        n_uavs=record.n_uavs,
+        n_obstacles=record.n_obstacles,
+        **_episode_safety(record, pairs),  # type: ignore[arg-type]
         max_deviation=_nanmax([d.max_norm for d in devs]),
         max_rms_deviation=_nanmax([d.rms_norm for d in devs]),
         n_uavs_left=sum(tl.left for tl in timelines),
@@ -175,7 +217,7 @@ def episode_metrics(record: EpisodeRecord, hold_time: float = 2.0) -> EpisodeMet
         max_path_length_ratio=_nanmax(list(ratio)),
     )
     config = {
-        "dt": dt,
+        "dt": record.dt,
         "collision_distance": record.collision_distance,
         "uav_separation": record.uav_separation,
         "obstacle_separation": record.obstacle_separation,
@@ -183,4 +225,4 @@ def episode_metrics(record: EpisodeRecord, hold_time: float = 2.0) -> EpisodeMet
         "settle_time": record.settle_time,
         "hold_time": float(hold_time),
     }
-    return EpisodeMetrics(episode=summary, uavs=tuple(uavs), config=config)
+    return EpisodeMetrics(episode=summary, uavs=uavs, config=config)
