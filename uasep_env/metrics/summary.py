@@ -13,13 +13,17 @@ from uasep_env.tables import render_table
 
 __all__ = ["format_table", "summary_table"]
 
-_UAV_COLUMNS: tuple[str, ...] = (
+#: Default columns of the tables: safety first (per UAV and per episode alike), then deviation.
+_SAFETY_COLUMNS: tuple[str, ...] = (
     "min_uav_separation",
     "min_obstacle_distance",
     "min_region_distance",
     "uav_los_events",
     "obstacle_los_events",
     "collision",
+)
+_UAV_COLUMNS: tuple[str, ...] = (
+    *_SAFETY_COLUMNS,
     "deviation.max_norm",
     "deviation.rms_norm",
     "timeline.t_leave",
@@ -28,17 +32,7 @@ _UAV_COLUMNS: tuple[str, ...] = (
     "timeline.conflict_duration",
     "path_length_ratio",
 )
-
-_EPISODE_COLUMNS: tuple[str, ...] = (
-    "min_uav_separation",
-    "min_obstacle_distance",
-    "min_region_distance",
-    "uav_los_events",
-    "obstacle_los_events",
-    "collision",
-    "max_deviation",
-    "max_conflict_duration",
-)
+_EPISODE_COLUMNS: tuple[str, ...] = (*_SAFETY_COLUMNS, "max_deviation", "max_conflict_duration")
 
 _AGG_COLUMNS: tuple[str, ...] = (
     "metric",
