@@ -22,9 +22,10 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
-from uasep_env.evaluation import evaluate, write_json
+from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.policies import load_policy
 from uasep_env.scenarios import HELD_OUT_PAPER_SEEDS, HELD_OUT_SEEDS
+from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))
@@ -48,9 +49,9 @@ def _overlap_or_better(learned: dict, apf: dict) -> bool:
     return learned["ci_low"] <= apf["ci_high"]
 
 
-def targets(bank: dict[str, Any], meta: dict[str, dict]) -> list[tuple[str, str, bool | None]]:
+def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, str, bool | None]]:
     """The issue's targets: (target, measured, met); ``None`` where the policy is missing."""
-    res = {k: v["aggregate"] for k, v in bank["results"].items()}
+    res = {k: v.aggregate for k, v in bank.results.items()}
     apf = res["apf"]
     out: list[tuple[str, str, bool | None]] = []
     for name in LEARNED:
@@ -122,11 +123,14 @@ def main(argv: list[str] | None = None) -> str:
             table(result, TABLE_ROWS),
         ]
     if "random" in results:
-        lines = ["| target | measured | met |", "|---|---|---|"]
-        for target, measured, met in targets(results["random"], meta):
-            flag = "n/a" if met is None else ("met" if met else "not met")
-            lines.append(f"| {target} | {measured} | {flag} |")
-        sections += ["### Targets (held-out bank)", "\n".join(lines)]
+        body = [
+            [target, measured, "n/a" if met is None else ("met" if met else "not met")]
+            for target, measured, met in targets(results["random"], meta)
+        ]
+        sections += [
+            "### Targets (held-out bank)",
+            render_table(["target", "measured", "met"], body, markdown=True),
+        ]
     text = "\n\n".join(sections) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "learned_vs_apf.md").write_text(text)

@@ -18,8 +18,9 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
-from uasep_env.evaluation import evaluate, write_json
+from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.plotting import plot_paper_figures
+from uasep_env.tables import render_table
 
 POLICIES = ("apf", "motion-state-apf", "traditional-apf")
 ROOT = Path(__file__).resolve().parent
@@ -62,36 +63,36 @@ def _cell(agg: dict[str, Any], key: str, stat: str, fmt: str) -> str:
     return format(mean, fmt)
 
 
-def table(result: dict[str, Any], rows: tuple[tuple[str, str, str, str], ...] = ROWS) -> str:
+def table(result: EvaluationResult, rows: tuple[tuple[str, str, str, str], ...] = ROWS) -> str:
     """A markdown table, controllers side by side (mean [95 % CI] / rate [Wilson CI])."""
-    labels = list(result["results"])
-    lines = ["| metric | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
-    for name, key, stat, fmt in rows:
-        cells = [_cell(result["results"][p]["aggregate"], key, stat, fmt) for p in labels]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
-def timeline(result: dict[str, Any], uav: str = "uav_2") -> str:
-    """Seed-0 conflict timeline of one UAV per controller (the paper's 103/122/130 s)."""
-    lines = [
-        "| controller | leaves plan (s) | conflict resolved (s) | back on plan (s) "
-        "| duration (s) |",
-        "|---|---|---|---|---|",
+    labels = list(result.results)
+    body = [
+        [name, *(_cell(result.results[p].aggregate, key, stat, fmt) for p in labels)]
+        for name, key, stat, fmt in rows
     ]
-    for label, res in result["results"].items():
-        m = res["episodes"][0]["metrics"]
-        u = next(x for x in m["uavs"] if x["name"] == uav)
-        t = u["timeline"]
+    return render_table(["metric", *labels], body, markdown=True)
 
-        def f(v: Any) -> str:
-            return "-" if v is None or v != v else f"{v:.1f}"
 
-        lines.append(
-            f"| {label} | {f(t['t_leave'])} | {f(t['t_resolved'])} | {f(t['t_back'])} | "
-            f"{f(t['conflict_duration'])} |"
+def timeline(result: EvaluationResult, uav: str = "uav_2") -> str:
+    """Seed-0 conflict timeline of one UAV per controller (the paper's 103/122/130 s)."""
+
+    def f(v: float) -> str:
+        return "-" if v != v else f"{v:.1f}"
+
+    body = []
+    for label, res in result.results.items():
+        t = res.episodes[0].metrics.uav(uav).timeline
+        body.append(
+            [label, *(f(v) for v in (t.t_leave, t.t_resolved, t.t_back, t.conflict_duration))]
         )
-    return "\n".join(lines)
+    headers = [
+        "controller",
+        "leaves plan (s)",
+        "conflict resolved (s)",
+        "back on plan (s)",
+        "duration (s)",
+    ]
+    return render_table(headers, body, markdown=True)
 
 
 def main() -> None:
@@ -112,9 +113,8 @@ def main() -> None:
         workers=args.workers,
         keep_episodes=1,
     )
-    episodes = paper.pop("episodes")
     write_json(paper, args.out / "paper.json")
-    plot_paper_figures({k: v[0] for k, v in episodes.items()}, args.figures)
+    plot_paper_figures({k: v[0] for k, v in paper.episodes.items()}, args.figures)
 
     bank = evaluate(
         list(POLICIES),

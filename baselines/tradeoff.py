@@ -48,7 +48,7 @@ import numpy as np
 
 from uasep_env import make_config
 from uasep_env.config import AS_PUBLISHED, EnvConfig
-from uasep_env.evaluation import evaluate
+from uasep_env.evaluation import EvaluationResult, evaluate
 from uasep_env.metrics import t_interval, wilson_interval
 from uasep_env.policies import (
     APF,
@@ -57,6 +57,7 @@ from uasep_env.policies import (
     TraditionalAPF,
     load_policy,
 )
+from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parent
 FIGURES = ROOT.parent / "docs" / "figures"
@@ -188,9 +189,9 @@ EFFICIENCY = (
 AXES = (("uav2_dev_north", "x"), ("uav2_dev_east", "y"), ("uav2_dev_down", "z"))
 
 
-def _episode_values(result: Any, label: str) -> list[dict[str, Any]]:
+def _episode_values(result: EvaluationResult, label: str) -> list[dict[str, Any]]:
     """The per-episode metrics of one label, as ``{"episode": {...}, "uavs": [...]}``."""
-    return [e["metrics"] for e in result["results"][label]["episodes"]]
+    return [e.metrics.to_dict() for e in result.results[label].episodes]
 
 
 def _row_stats(episodes: list[dict[str, Any]]) -> dict[str, float]:
@@ -421,62 +422,67 @@ def _num(x: float) -> str:
     return f"{x:.1f}" if np.isfinite(x) else "-"  # nan: no UAV ever left the plan
 
 
+def _table(headers: Sequence[str], rows: list[list[str]]) -> list[str]:
+    return render_table(headers, rows, markdown=True).splitlines()
+
+
 def report(rows: list[dict[str, Any]]) -> str:
     """The markdown summary the README quotes: defaults, equal-safety costs, resolution axes."""
     present = [m for m in METHODS if _method_rows(rows, m.name, "bank")]
-    out = ["## Defaults: the knee of each front (bank)", "",
-           "| method | knob | knee | default |", "|---|---|---|---|"]  # fmt: skip
-    for m in present:
-        k = knee(_method_rows(rows, m.name, "bank"))
-        out.append(f"| {m.label} | {m.knob} | {k['value']:g} | {m.default:g} |")
+    out = ["## Defaults: the knee of each front (bank)", ""]
+    out += _table(
+        ["method", "knob", "knee", "default"],
+        [
+            [m.label, m.knob, f"{knee(_method_rows(rows, m.name, 'bank'))['value']:g}",
+             f"{m.default:g}"]
+            for m in present
+        ],
+    )  # fmt: skip
     for ds, title in (("paper", "Paper scenario"), ("bank", "Random encounter bank")):
         levels = LEVELS_M[ds]
-        out += ["", f"## {title}: cost at equal min UAV-obstacle distance", "",
-                "max deviation (m) / longest conflict resolution (s), interpolated along each "
-                "front; - where the method's sweep does not reach that distance", "",
-                "| method | reaches (m) | " + " | ".join(f"at {v:g} m" for v in levels) + " |",
-                "|---|---|" + "---|" * len(levels)]  # fmt: skip
+        out += [
+            "", f"## {title}: cost at equal min UAV-obstacle distance", "",
+            "max deviation (m) / longest conflict resolution (s), interpolated along each "
+            "front; - where the method's sweep does not reach that distance", "",
+        ]  # fmt: skip
+        table = []
         for m in present:
             rs = _method_rows(rows, m.name, ds)
             d = [r["min_obstacle_distance"] for r in rs]
-            cells = []
+            cells = [m.label, f"{min(d):.1f}-{max(d):.1f}"]
             for v in levels:
-                dev, dur = (
-                    at_distance(rs, v, "max_deviation"),
-                    at_distance(rs, v, "conflict_duration"),
-                )
-                cells.append(
-                    "-" if dev is None else f"{dev:.1f} / {'-' if dur is None else f'{dur:.1f}'}"
-                )
-            out.append(f"| {m.label} | {min(d):.1f}-{max(d):.1f} | " + " | ".join(cells) + " |")
+                dev = at_distance(rs, v, "max_deviation")
+                dur = at_distance(rs, v, "conflict_duration")
+                cells.append("-" if dev is None else f"{dev:.1f} / {_num(dur or np.nan)}")
+            table.append(cells)
+        out += _table(["method", "reaches (m)", *(f"at {v:g} m" for v in levels)], table)
         out += [
             "",
             f"## {title}: the safest loss-of-separation rate each reaches, and its cost",
             "",
-            "| method | lowest rate | setting | collisions | min distance (m) | "
-            "max deviation (m) | conflict resolution (s) |",
-            "|---|---|---|---|---|---|---|",
         ]
+        table = []
         for m in present:
             rs = _method_rows(rows, m.name, ds)
             best = min(r["loss_of_separation"] for r in rs)
             r = min((r for r in rs if r["loss_of_separation"] == best),
                     key=lambda r: r["max_deviation"])  # fmt: skip
-            out.append(
-                f"| {m.label} | {best:.1%} | {m.knob} {r['value']:g} | {r['collision']:.1%} | "
-                f"{r['min_obstacle_distance']:.1f} | {r['max_deviation']:.1f} | "
-                f"{_num(r['conflict_duration'])} |"
-            )
+            table.append([
+                m.label, f"{best:.1%}", f"{m.knob} {r['value']:g}", f"{r['collision']:.1%}",
+                f"{r['min_obstacle_distance']:.1f}", f"{r['max_deviation']:.1f}",
+                _num(r["conflict_duration"]),
+            ])  # fmt: skip
+        out += _table(
+            ["method", "lowest rate", "setting", "collisions", "min distance (m)",
+             "max deviation (m)", "conflict resolution (s)"],
+            table,
+        )  # fmt: skip
     out += [
-        "",
-        "## Paper scenario: the middle UAV's largest deviation by axis (m)",
-        "",
+        "", "## Paper scenario: the middle UAV's largest deviation by axis (m)", "",
         "mean over the 20 seeds of uav_2's largest deviation from its plan along each axis; "
-        "the plan flies north, so north is along the track, east lateral, down vertical",
-        "",
-        "| method | setting | along track | lateral | vertical |",
-        "|---|---|---|---|---|",
-    ]
+        "the plan flies north, so north is along the track, east lateral, down vertical", "",
+    ]  # fmt: skip
+    table = []
     for m in present:
         rs = _method_rows(rows, m.name, "paper")
         safe = [r for r in rs if r["loss_of_separation"] == 0.0]
@@ -485,10 +491,11 @@ def report(rows: list[dict[str, Any]]) -> str:
             picks.append(safe[0])
         for r in picks:
             tag = "default" if r["value"] == m.default else "least margin without LoS"
-            out.append(
-                f"| {m.label} | {m.knob} {r['value']:g} ({tag}) | {r['uav2_dev_north']:.1f} | "
-                f"{r['uav2_dev_east']:.1f} | {r['uav2_dev_down']:.1f} |"
-            )
+            table.append([
+                m.label, f"{m.knob} {r['value']:g} ({tag})", f"{r['uav2_dev_north']:.1f}",
+                f"{r['uav2_dev_east']:.1f}", f"{r['uav2_dev_down']:.1f}",
+            ])  # fmt: skip
+    out += _table(["method", "setting", "along track", "lateral", "vertical"], table)
     return "\n".join(out) + "\n"
 
 

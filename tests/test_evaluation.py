@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT, run_in_repo
 
 import uasep_env
 from uasep_env.config import make_config
@@ -23,8 +24,6 @@ from uasep_env.evaluation import (
     result_to_json,
     summary_rows,
 )
-
-ROOT = Path(__file__).resolve().parents[1]
 
 #: Short episodes keep the tests fast; statistics start after 5 s.
 SHORT = ["--config", "episode_duration=12", "--settle-time", "5"]
@@ -123,7 +122,7 @@ def test_cli_end_to_end_json_csv_plots(tmp_path, capsys):
 def test_policies_share_the_scenario(scenario):
     cfg = _short_config(scenario=scenario)
     res = evaluate(["apf", "zero", "random"], cfg, [0, 1], keep_episodes=2)
-    eps = res["episodes"]
+    eps = res.episodes
     for k in range(2):
         ref = eps["apf"][k].record
         for label in ("zero", "random"):
@@ -179,8 +178,8 @@ def test_default_batch_size_ignores_workers():
     assert default_batch_size(10_000) == 64
     a = evaluate(["random"], _short_config(), [0, 1], workers=1)
     b = evaluate(["random"], _short_config(), [0, 1], workers=2)
-    assert a["settings"]["batch_size"] == b["settings"]["batch_size"] == 2
-    assert _same(a["results"], b["results"])
+    assert a.settings.batch_size == b.settings.batch_size == 2
+    assert _same(a.results, b.results)
 
 
 def test_batch_size_does_not_change_results():
@@ -188,13 +187,13 @@ def test_batch_size_does_not_change_results():
     cfg = _short_config(scenario="random")
     a = evaluate(["apf"], cfg, [5, 6, 7], batch_size=3)
     b = evaluate(["apf"], cfg, [5, 6, 7], batch_size=1)
-    assert _same(a["results"], b["results"])
+    assert _same(a.results, b.results)
 
 
 def test_result_json_is_strict_and_nan_becomes_null():
     cfg = _short_config()
     res = evaluate("zero", cfg, [0], settle_time=5.0, keep_episodes=1)
-    assert "episodes" in res
+    assert res.episodes
     data = _strict_json(result_to_json(res))
     assert "episodes" not in data
     tl = data["results"]["zero"]["episodes"][0]["metrics"]["uavs"][0]["timeline"]
@@ -283,7 +282,7 @@ def test_bad_arguments_exit_2_naming_the_value(args, needle, capsys):
 @pytest.mark.parametrize("flag", ["--json", "--csv", "--plot"])
 def test_bad_output_paths_fail_before_the_evaluation(flag, tmp_path, capsys, monkeypatch):
     """Issue 13 item 7: '--json afile/out.json' failed only after the whole evaluation."""
-    import uasep_env.evaluation as ev
+    import uasep_env.evaluation.cli as ev
 
     afile = tmp_path / "afile"
     afile.write_text("x")
@@ -336,14 +335,7 @@ def _env():
 
 
 def test_module_help_subprocess():
-    out = subprocess.run(
-        [sys.executable, "-m", "uasep_env.evaluation", "--help"],
-        cwd=ROOT,
-        env=_env(),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    out = run_in_repo("-m", "uasep_env.evaluation", "--help", timeout=60)
     assert out.returncode == 0, out.stderr
     assert "usage: uasep-eval" in out.stdout
 

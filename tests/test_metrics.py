@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import make_record
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -28,53 +29,6 @@ from uasep_env.metrics import (
 )
 
 Z975 = 1.959963984540054
-
-
-def make_record(
-    pos,
-    dt,
-    *,
-    planned=None,
-    vel=None,
-    acc=None,
-    obstacle_pos=None,
-    active=None,
-    region=None,
-    t0=0.0,
-    collision_distance=5.0,
-    uav_separation=10.0,
-    obstacle_separation=20.0,
-    **kwargs,
-):
-    pos = np.asarray(pos, dtype=float)
-    n_t = pos.shape[0]
-    time = t0 + dt * np.arange(n_t)
-    planned = pos.copy() if planned is None else planned
-    vel = np.zeros_like(pos) if vel is None else vel
-    acc = np.zeros_like(pos) if acc is None else acc
-    if obstacle_pos is None:
-        obstacle_pos = np.zeros((n_t, 0, 3))
-    obstacle_pos = np.asarray(obstacle_pos, dtype=float)
-    n_obs = obstacle_pos.shape[1]
-    if active is None:
-        active = np.ones((n_t, n_obs), dtype=bool)
-    if region is None:
-        region = np.linalg.norm(pos[:, :, None, :] - obstacle_pos[:, None, :, :], axis=-1)
-    return EpisodeRecord(
-        time=time,
-        dt=dt,
-        uav_pos=pos,
-        uav_vel=vel,
-        uav_acc=acc,
-        planned_pos=planned,
-        obstacle_pos=obstacle_pos,
-        obstacle_active=active,
-        region_distance=region,
-        collision_distance=collision_distance,
-        uav_separation=uav_separation,
-        obstacle_separation=obstacle_separation,
-        **kwargs,
-    )
 
 
 def deviation_record(dev_z, dt, *, region=None, settle_time=0.0, threshold=1.0, t0=0.0):
@@ -518,6 +472,40 @@ def test_t_quantile_monotone_in_df(p, df):
     assert q > 0
     assert t_quantile(p, df * 1.5) <= q + 1e-9
     assert q >= normal_quantile(p) - 1e-9
+
+
+#: The hand-written quantiles and Wilson interval (continued fraction and bisection) that
+#: scipy.stats replaced: the intervals of the results files moved by < 3e-12 relative.
+OLD_T = [
+    (0.975, 1, 12.706204736174696),
+    (0.975, 4, 2.776445105197787),
+    (0.975, 19, 2.0930240544083105),
+    (0.975, 199, 1.9719565442517464),
+    (0.975, 499, 1.9647293909877632),
+    (0.995, 4, 4.604094871349972),
+    (0.95, 9, 1.8331129326562277),
+    (0.9, 29, 1.311433647301559),
+]
+OLD_Z = [(0.975, 1.959963984540046), (0.995, 2.5758293035488933), (0.95, 1.6448536269514662)]
+OLD_WILSON = [
+    (0, 20, (0.0, 0.16112515805281827)),
+    (1, 20, (0.008881448800795458, 0.236131193446741)),
+    (3, 10, (0.10779126740630149, 0.6032218525388535)),
+    (8, 500, (0.008129253033388335, 0.031251108533394176)),
+    (19, 500, (0.02446011805583043, 0.058584772530643786)),
+    (200, 200, (0.9811546736227338, 1.0)),
+]
+
+
+def test_scipy_statistics_match_the_hand_written_ones():
+    for p, df, old in OLD_T:
+        assert t_quantile(p, df) == pytest.approx(old, rel=1e-9, abs=0)
+    for p, old in OLD_Z:
+        assert normal_quantile(p) == pytest.approx(old, rel=1e-9, abs=0)
+    for k, n, old in OLD_WILSON:
+        low, high = wilson_interval(k, n)
+        assert (low, high) == pytest.approx(old, rel=1e-9, abs=0)
+        assert (k > 0 or low == 0.0) and (k < n or high == 1.0)  # exact ends
 
 
 def test_t_interval_values():

@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 import math
-import os
-import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytest.importorskip("matplotlib")
 
-from uasep_env.metrics import EpisodeRecord
+from conftest import make_record, run_python
+
 from uasep_env.plotting import (
     closest_approach,
     ellipsoid_surface,
@@ -21,8 +19,6 @@ from uasep_env.plotting import (
     plot_paper_figures,
 )
 from uasep_env.rollout import Episode
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _episode(seed: int = 0, bump: float = 6.0, n_uavs: int = 3, duration: float = 60.0):
@@ -46,17 +42,15 @@ def _episode(seed: int = 0, bump: float = 6.0, n_uavs: int = 3, duration: float 
     obs = obs[:, None, :]
     active = (t >= 5.0)[:, None]
     d = np.linalg.norm(pos[:, :, None, :] - obs[:, None, :, :], axis=-1)
-    region = d - 25.0
-    record = EpisodeRecord(
-        time=t,
-        dt=dt,
-        uav_pos=pos,
-        uav_vel=vel,
-        uav_acc=acc,
-        planned_pos=planned,
+    record = make_record(
+        pos,
+        dt,
+        planned=planned,
+        vel=vel,
+        acc=acc,
         obstacle_pos=obs,
-        obstacle_active=active,
-        region_distance=region,
+        active=active,
+        region=d - 25.0,
         collision_distance=3.0,
         uav_separation=8.0,
         obstacle_separation=10.0,
@@ -151,14 +145,6 @@ def test_ellipsoid_surface_geometry(heading):
 
 def test_import_does_not_import_matplotlib():
     code = "import sys, uasep_env.plotting; print('matplotlib' in sys.modules)"
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    out = run_python(code, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"

@@ -3,12 +3,7 @@
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
-import textwrap
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,12 +11,11 @@ import pytest
 pytest.importorskip("matplotlib")
 
 import gymnasium
+from conftest import run_in_repo, run_python
 
 import uasep_env
 from uasep_env.rendering import Renderer, ellipsoid_points, save_frame
 from uasep_env.world import World
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(autouse=True)
@@ -29,23 +23,6 @@ def _agg_backend():
     import matplotlib
 
     matplotlib.use("Agg")  # never open windows in tests, even with a display
-
-
-def _run_python(code: str) -> subprocess.CompletedProcess:
-    return _run("-c", textwrap.dedent(code))
-
-
-def _run(*args: str) -> subprocess.CompletedProcess:
-    """``python *args`` in the repository, headless."""
-    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
-    return subprocess.run(
-        [sys.executable, *args],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
 
 
 def _world(seed: int = 0, **config) -> World:
@@ -68,7 +45,7 @@ def _check_frame(frame) -> None:
 
 
 def test_import_does_not_import_matplotlib():
-    res = _run_python(
+    res = run_python(
         """
         import sys
         import uasep_env.rendering
@@ -249,7 +226,7 @@ def test_save_frame(tmp_path):
 def test_readme_frame_script(tmp_path):
     """``baselines/render_frame.py`` (the one frame-making script) flies the APF and saves."""
     out = tmp_path / "frame.png"
-    res = _run("baselines/render_frame.py", "--time", "35", "--out", str(out))
+    res = run_in_repo("baselines/render_frame.py", "--time", "35", "--out", str(out))
     assert res.returncode == 0, res.stderr
     assert "t = 35" in res.stdout
     import matplotlib.image
@@ -259,7 +236,7 @@ def test_readme_frame_script(tmp_path):
 
 
 def test_human_mode_headless_does_not_crash():
-    res = _run_python(
+    res = run_python(
         """
         import warnings
         import numpy as np

@@ -205,6 +205,8 @@ def save_checkpoint(
     """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``."""
     import torch
 
+    from uasep_env.jsonio import dumps
+
     directory.mkdir(parents=True, exist_ok=True)
     torch.save(
         {"policy": model.policy.state_dict(), "optimizer": model.policy.optimizer.state_dict()},
@@ -217,7 +219,7 @@ def save_checkpoint(
         ret_mean=r.mean, ret_var=r.var, ret_count=r.count,
     )  # fmt: skip
     (directory / "state.json").write_text(
-        json.dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+        dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
     )
     export_policy(model, venv, config, args, directory / "policy.zip", info)
 
@@ -404,6 +406,7 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     import torch  # lazy: the training extra
 
     from uasep_env.evaluation import evaluate
+    from uasep_env.jsonio import dumps
     from uasep_env.policies import load_policy
     from uasep_env.scenarios import VALIDATION_SEEDS
 
@@ -436,15 +439,16 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
         policies = {"learned": load_policy(policy_path, eval_cfg), "apf": "apf"}
         result = evaluate(policies, eval_cfg, seeds)
         keys = ("collision", "loss_of_separation", "max_deviation")
-        for label, res in result["results"].items():
-            agg = res["aggregate"]
+        for label, res in result.results.items():
+            agg = res.aggregate
             summary["validation"][label] = {
                 k: agg[f"episode.{k}"].get("mean", agg[f"episode.{k}"].get("rate"))
                 for k in keys
                 if f"episode.{k}" in agg
             }
-    (out / "validation.json").write_text(json.dumps(summary, indent=2, default=str))
-    print(json.dumps(summary, indent=2, default=str))
+    text = dumps(summary, indent=2, default=str)
+    (out / "validation.json").write_text(text)
+    print(text)
     return summary
 
 

@@ -19,15 +19,15 @@ import shutil
 from pathlib import Path
 
 from uasep_env import make_config
-from uasep_env.evaluation import evaluate
+from uasep_env.evaluation import EvaluationResult, evaluate
 from uasep_env.policies import load_policy
 from uasep_env.scenarios import VALIDATION_SEEDS
 
 KEYS = ("terminated", "collision", "loss_of_separation", "max_deviation")
 
 
-def _figures(result: dict, label: str) -> dict[str, float]:
-    agg = result["results"][label]["aggregate"]
+def _figures(result: EvaluationResult, label: str) -> dict[str, float]:
+    agg = result.results[label].aggregate
     return {k: float(agg[f"episode.{k}"]["mean"]) for k in KEYS}
 
 

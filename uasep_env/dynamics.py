@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["measure", "step_double_integrator", "transition_matrices"]
+__all__ = ["AXES", "measure", "step_double_integrator", "transition_matrices"]
+#: NED axes (north, east, down), as metric and plot names.
+AXES: tuple[str, str, str] = ("x", "y", "z")
 
 
 def transition_matrices(dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -6,6 +6,7 @@ SB3 models.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from uasep_env.config import EnvConfig
@@ -32,20 +33,42 @@ __all__ = [
     "SB3Policy",
     "TraditionalAPF",
     "ZeroPolicy",
+    "check_policy_name",
     "is_policy_checkpoint",
     "load_policy",
     "load_sb3_policy",
     "make_policy",
 ]
 
-#: Built-in policies by name.
-POLICIES = {
+#: The policy registry: built-in policies by name, each a factory taking the config.
+POLICIES: dict[str, Callable[[EnvConfig], Policy]] = {
     "apf": APF,
     "motion-state-apf": MotionStateAPF,
     "traditional-apf": TraditionalAPF,
     "zero": ZeroPolicy,
     "random": RandomPolicy,
 }
+
+
+def _unknown_policy(name: str) -> ValueError:
+    return ValueError(f"unknown policy {name!r}: use one of {sorted(POLICIES)} or a model path")
+
+
+def check_policy_name(name: str) -> str:
+    """Return ``name`` if it names a built-in policy (:data:`POLICIES`) or an existing path.
+
+    Args:
+        name: A policy name or the path of a saved model.
+
+    Returns:
+        ``name``.
+
+    Raises:
+        ValueError: For an unknown name that is not an existing path.
+    """
+    if name in POLICIES or Path(name).exists():
+        return name
+    raise _unknown_policy(name)
 
 
 def make_policy(name: str, config: EnvConfig, allow_pickle: bool = False) -> Policy:
@@ -60,8 +83,8 @@ def make_policy(name: str, config: EnvConfig, allow_pickle: bool = False) -> Pol
     """
     if name in POLICIES:
         return POLICIES[name](config)
-    if Path(name).is_file():
+    if Path(check_policy_name(name)).is_file():
         if is_policy_checkpoint(name):
             return load_policy(name, config)
         return load_sb3_policy(name, config, allow_pickle=allow_pickle)
-    raise ValueError(f"unknown policy {name!r}: use one of {sorted(POLICIES)} or a model path")
+    raise _unknown_policy(name)  # an existing folder

@@ -59,7 +59,6 @@ class RandomPolicy:
 
     def __init__(self, config: EnvConfig | None = None, seed: int | None = 0) -> None:
         self.config = config
-        self._seed = seed
         self.rng = np.random.default_rng(seed)
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:

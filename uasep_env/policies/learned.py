@@ -30,6 +30,7 @@ import numpy as np
 
 from uasep_env.actions import ResidualAPF
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.jsonio import dumps
 from uasep_env.observation import ObservationLayout
 
 if TYPE_CHECKING:
@@ -243,7 +244,7 @@ def save_policy(
     desc = {**asdict(meta), "hidden": list(meta.hidden), "n_layers": len(weights)}
     tmp = p.with_name(p.name + ".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr(_META, json.dumps(desc, indent=2, sort_keys=True))
+        z.writestr(_META, dumps(desc, indent=2, sort_keys=True))
         z.writestr(_WEIGHTS, buf.getvalue())
     tmp.replace(p)
     return p

@@ -1,0 +1,98 @@
+"""Shared test helpers and fixtures.
+
+Plain helpers (import them: ``from conftest import make_record``) where module-level test
+helpers need them too; fixtures for what tests take as arguments.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from uasep_env.metrics import EpisodeRecord
+
+#: The repository root (the tests run scripts and read results files from it).
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_in_repo(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """``python *args`` in the repository, headless (Agg), importing this checkout."""
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
+    return subprocess.run(
+        [sys.executable, *args],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def run_python(code: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """``python -c code`` (dedented) in the repository, headless."""
+    return run_in_repo("-c", textwrap.dedent(code), timeout=timeout)
+
+
+def make_record(
+    pos: Any,
+    dt: float,
+    *,
+    planned: Any = None,
+    vel: Any = None,
+    acc: Any = None,
+    obstacle_pos: Any = None,
+    active: Any = None,
+    region: Any = None,
+    t0: float = 0.0,
+    collision_distance: float = 5.0,
+    uav_separation: float = 10.0,
+    obstacle_separation: float = 20.0,
+    **kwargs: Any,
+) -> EpisodeRecord:
+    """An :class:`EpisodeRecord` from UAV positions ``(T, N, 3)``, the rest defaulted.
+
+    Times start at ``t0`` in steps of ``dt``; the plan is the flown path, velocities and
+    accelerations zero, no obstacle, the region distance the obstacle centre distance.
+    """
+    pos = np.asarray(pos, dtype=float)
+    n_t = pos.shape[0]
+    time = t0 + dt * np.arange(n_t)
+    planned = pos.copy() if planned is None else planned
+    vel = np.zeros_like(pos) if vel is None else vel
+    acc = np.zeros_like(pos) if acc is None else acc
+    if obstacle_pos is None:
+        obstacle_pos = np.zeros((n_t, 0, 3))
+    obstacle_pos = np.asarray(obstacle_pos, dtype=float)
+    n_obs = obstacle_pos.shape[1]
+    if active is None:
+        active = np.ones((n_t, n_obs), dtype=bool)
+    if region is None:
+        region = np.linalg.norm(pos[:, :, None, :] - obstacle_pos[:, None, :, :], axis=-1)
+    return EpisodeRecord(
+        time=time,
+        dt=dt,
+        uav_pos=pos,
+        uav_vel=vel,
+        uav_acc=acc,
+        planned_pos=planned,
+        obstacle_pos=obstacle_pos,
+        obstacle_active=active,
+        region_distance=region,
+        collision_distance=collision_distance,
+        uav_separation=uav_separation,
+        obstacle_separation=obstacle_separation,
+        **kwargs,
+    )
+
+
+@pytest.fixture
+def repo_root() -> Path:
+    """The repository root."""
+    return ROOT

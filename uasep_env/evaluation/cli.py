@@ -1,0 +1,348 @@
+"""The ``uasep-eval`` command line (also ``python -m uasep_env.evaluation``): parse, run, write."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import textwrap
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+from uasep_env.config import SCENARIOS
+from uasep_env.evaluation.output import write_csv, write_json
+from uasep_env.evaluation.overrides import build_config
+from uasep_env.evaluation.report import format_summary
+from uasep_env.evaluation.runner import DEFAULT_HOLD_TIME_S, evaluate
+from uasep_env.policies import POLICIES, check_policy_name, make_policy
+from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
+
+__all__ = ["build_parser", "main"]
+
+
+def _split_policy_args(values: Iterable[str]) -> list[str]:
+    """Split repeatable, comma-separated ``--policy`` values; keep order, drop duplicates."""
+    names: list[str] = []
+    for value in values:
+        for part in value.split(","):
+            part = part.strip()
+            if part and part not in names:
+                names.append(part)
+    return names
+
+
+def _bounded(kind: type, minimum: float) -> Callable[[str], float]:
+    """An argparse type: ``kind`` (int or float) parsed from text, finite and >= ``minimum``."""
+    noun = "an integer" if kind is int else "a number"
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
+        if kind is float and not (math.isfinite(value) and value >= minimum):
+            raise argparse.ArgumentTypeError(
+                f"must be a finite number >= {minimum:g}, got {text!r}"
+            )
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum:g}, got {text!r}")
+        return value
+
+    return parse
+
+
+class _OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (not the whole usage)."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``prog: error: message`` and a pointer to ``--help``; exit with status 2."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _output_problem(path: Path, directory: bool) -> str | None:
+    """Why ``path`` cannot be written (a file, or a folder when ``directory``), or None.
+
+    Checked before the evaluation runs, so that a bad path fails at once: the path must
+    not be a folder (a file for ``directory``), its nearest existing parent must be a
+    writable folder, and an existing target must be writable.
+    """
+    if path.exists():
+        if directory and not path.is_dir():
+            return "exists and is not a directory"
+        if not directory and path.is_dir():
+            return "is a directory"
+        if not os.access(path, os.W_OK):
+            return "is not writable"
+        return None
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"{parent} is not a directory"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"{parent} is not writable"
+    return None
+
+
+_positive_int = _bounded(int, 1)
+_non_negative_int = _bounded(int, 0)
+_non_negative_float = _bounded(float, 0.0)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``uasep-eval`` argument parser.
+
+    Returns:
+        The parser.
+    """
+    from uasep_env import __version__
+
+    p = _OneLineParser(
+        prog="uasep-eval",
+        description=(
+            "Evaluate separation-management policies headlessly on the same seeded scenarios "
+            "and report the paper's section-4 metrics (separation, collisions, deviation, "
+            "conflict-resolution timeline, velocity/acceleration fluctuation)."
+        ),
+        epilog=(
+            "examples:\n"
+            "  uasep-eval --policy apf,motion-state-apf,traditional-apf --plot figs/\n"
+            "  uasep-eval --policy apf --scenario random --episodes 100 --workers 4 "
+            "--json out.json\n"
+            "  uasep-eval --config noise=false --config obstacle.speed=6 --csv out.csv\n"
+            f"policies: {', '.join(POLICIES)} or the path of a policy checkpoint (.zip)"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--policy",
+        action="append",
+        metavar="NAME",
+        help="policy to evaluate; repeatable or comma-separated, all on the same seeds "
+        "(default: apf)",
+    )
+    p.add_argument(
+        "--scenario",
+        default="paper",
+        choices=SCENARIOS,
+        metavar="NAME",
+        help=f"scenario family: {', '.join(SCENARIOS)} (default: paper)",
+    )
+    p.add_argument(
+        "--episodes",
+        type=_positive_int,
+        default=1,
+        metavar="N",
+        help="episodes per policy (default: 1)",
+    )
+    p.add_argument(
+        "--seed",
+        type=_non_negative_int,
+        default=0,
+        help="first seed; episode k uses seed+k (default: 0)",
+    )
+    p.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=1,
+        metavar="N",
+        help="worker processes (default: 1 = in-process); results do not depend on it",
+    )
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        default=None,
+        metavar="ADDRESS",
+        help="run the episodes as Ray tasks: on a local Ray (no ADDRESS) or on the cluster "
+        "at ADDRESS ('auto', 'ray://head:10001'); results are the same as --workers 1",
+    )
+    p.add_argument(
+        "--batch-size",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="episodes per batched simulator (default: ceil(episodes / 8) clipped to "
+        "[16, 64], at most episodes; independent of --workers)",
+    )
+    p.add_argument(
+        "--config",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="config override, repeatable; dotted keys for nested fields "
+        "(noise.accel_std=0); values parsed as JSON when possible",
+    )
+    p.add_argument(
+        "--deviation-threshold",
+        type=_non_negative_float,
+        default=DEFAULT_DEVIATION_THRESHOLD_M,
+        metavar="M",
+        help="off-track deviation threshold in m (default: %(default)s)",
+    )
+    p.add_argument(
+        "--settle-time",
+        type=_non_negative_float,
+        default=DEFAULT_SETTLE_TIME_S,
+        metavar="S",
+        help="deviation/fluctuation statistics start at this time in s (default: %(default)s)",
+    )
+    p.add_argument(
+        "--hold-time",
+        type=_non_negative_float,
+        default=DEFAULT_HOLD_TIME_S,
+        metavar="S",
+        help="time back on track before a UAV counts as returned, in s (default: %(default)s)",
+    )
+    p.add_argument(
+        "--json",
+        type=Path,
+        metavar="PATH",
+        help="write everything machine-readable (strict JSON; gzipped if it ends in .gz) to PATH",
+    )
+    p.add_argument(
+        "--csv", type=Path, metavar="PATH", help="write one row per (policy, episode) to PATH"
+    )
+    p.add_argument(
+        "--plot",
+        type=Path,
+        metavar="DIR",
+        help="write the paper's figures (first episode of each policy) to DIR",
+    )
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress bar and no summary on stdout (errors still go to stderr)",
+    )
+    p.add_argument(
+        "--allow-pickle",
+        action="store_true",
+        help="let a stable-baselines3 model file be unpickled, which runs code from it; "
+        "only for files you trust (policy checkpoints never need it)",
+    )
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    return p
+
+
+def _progress_bar(total: int, quiet: bool) -> Any:
+    """A tqdm bar on stderr, or None when quiet, not a terminal, or tqdm is missing."""
+    if quiet or not sys.stderr.isatty():
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is optional
+        return None
+    return tqdm(total=total, unit="ep", desc="uasep-eval", file=sys.stderr, leave=False)
+
+
+def _run(argv: Sequence[str] | None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+
+    names = _split_policy_args(args.policy or ["apf"])
+    if not names:
+        parser.error("argument --policy: no policy given")
+    for name in names:
+        try:
+            check_policy_name(name)
+        except ValueError as err:
+            parser.error(f"argument --policy: {err}")
+    if args.deviation_threshold <= 0:
+        parser.error(
+            f"argument --deviation-threshold: must be > 0, got {args.deviation_threshold:g}"
+        )
+    for flag, path, directory in (
+        ("--json", args.json, False),
+        ("--csv", args.csv, False),
+        ("--plot", args.plot, True),
+    ):
+        problem = None if path is None else _output_problem(path, directory)
+        if problem is not None:
+            parser.error(f"argument {flag}: cannot write {str(path)!r}: {problem}")
+    try:
+        cfg = build_config(args.scenario, args.config)
+    except (TypeError, ValueError) as err:
+        parser.error(f"argument --config: {err}")
+    for name in names:  # fail early on models that do not load
+        try:
+            make_policy(name, cfg, args.allow_pickle)
+        except Exception as err:
+            parser.error(f"argument --policy: cannot load {name!r}: {err}")
+
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    bar = _progress_bar(len(names) * len(seeds), args.quiet)
+    try:
+        result = evaluate(
+            names,
+            cfg,
+            seeds,
+            workers=args.workers,
+            batch_size=args.batch_size,
+            deviation_threshold=args.deviation_threshold,
+            settle_time=args.settle_time,
+            hold_time=args.hold_time,
+            keep_episodes=1 if args.plot is not None else 0,
+            progress=bar.update if bar is not None else None,
+            allow_pickle=args.allow_pickle,
+            ray=args.ray,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    result.command = ["uasep-eval", *(sys.argv[1:] if argv is None else argv)]
+
+    if not args.quiet:
+        print(format_summary(result))
+    written: list[Path] = []
+    if args.json is not None:
+        written.append(write_json(result, args.json))
+    if args.csv is not None:
+        written.append(write_csv(result, args.csv))
+    if args.plot is not None:
+        from uasep_env.plotting import plot_paper_figures
+
+        first = {label: eps[0] for label, eps in result.episodes.items()}
+        figs = plot_paper_figures(first, args.plot, accel_limit=cfg.uav.max_accel)
+        if not args.quiet:
+            names = textwrap.fill(
+                ", ".join(f.name for f in figs),
+                width=100,
+                initial_indent="  ",
+                subsequent_indent="  ",
+                break_on_hyphens=False,
+                break_long_words=False,
+            )
+            print(f"\n{len(figs)} figures (seed {seeds[0]}) in {args.plot}:\n{names}")
+    if not args.quiet:
+        for path in written:
+            print(f"wrote {path}")
+        print(f"({result.elapsed_s:.1f} s)")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``uasep-eval`` and ``python -m uasep_env.evaluation``.
+
+    Args:
+        argv: Arguments (without the program name); ``sys.argv[1:]`` when None.
+
+    Returns:
+        The exit status: 0 on success, 2 for bad arguments (one line on stderr that names
+        the bad value; output paths are checked before the evaluation runs), 1 for an output
+        file that still cannot be written.
+    """
+    try:
+        return _run(argv)
+    except SystemExit as exc:  # argparse: --help / --version (0) and usage errors (2)
+        code = exc.code
+        if code is None:
+            return 0
+        if isinstance(code, int):
+            return code
+        print(code, file=sys.stderr)
+        return 1
+    except OSError as err:
+        print(f"uasep-eval: error: {err}", file=sys.stderr)
+        return 1

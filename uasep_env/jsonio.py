@@ -1,0 +1,103 @@
+"""The one JSON writer: plain-Python views of results, strict JSON text, and ``.json[.gz]`` files.
+
+Every result of the package (episode metrics, evaluation results, aggregates) goes through
+:func:`to_plain` on its way to JSON, so there is one set of conversion rules:
+
+* a dataclass becomes a dict of its fields, in declaration order; a field's metadata may
+  give it its own converter (``{PLAIN: fn}``, e.g. per-axis triples as ``{"x", "y", "z"}``)
+  or leave it out (``{OMIT: True}`` always, ``{OMIT: None}`` when its value is None);
+* mappings keep their order with ``str`` keys; tuples, lists and arrays become lists;
+* numpy scalars become Python ``bool`` / ``int`` / ``float``;
+* with ``strict``, non-finite floats become ``None`` (``null``), which strict JSON needs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gzip
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["OMIT", "PLAIN", "dumps", "to_plain", "write_json"]
+
+#: Field-metadata key: a function applied to the field's value before conversion.
+PLAIN = "uasep_plain"
+#: Field-metadata key: ``True`` leaves the field out of the plain view, ``None`` only when
+#: its value is None.
+OMIT = "uasep_omit"
+
+
+def to_plain(value: Any, *, strict: bool = False) -> Any:
+    """Return a plain-Python (JSON-able) view of ``value``; see the module docstring.
+
+    Args:
+        value: A dataclass, mapping, sequence, array, numpy or Python scalar (nested).
+        strict: Write non-finite floats as None (strict JSON has no NaN / inf).
+
+    Returns:
+        Nested dict / list / bool / int / float / str / None.
+    """
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(value):
+            item = getattr(value, f.name)
+            omit = f.metadata.get(OMIT, False)
+            if omit is True or (omit is None and item is None):
+                continue
+            convert = f.metadata.get(PLAIN)
+            out[f.name] = to_plain(convert(item) if convert else item, strict=strict)
+        return out
+    if isinstance(value, Mapping):
+        return {str(k): to_plain(v, strict=strict) for k, v in value.items()}
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return None if strict and not math.isfinite(v) else v
+    if isinstance(value, (tuple, list, np.ndarray)):
+        return [to_plain(v, strict=strict) for v in value]
+    return value
+
+
+def dumps(value: Any, **kwargs: Any) -> str:
+    """Strict JSON text of ``value`` (non-finite floats written as ``null``).
+
+    Args:
+        value: Anything :func:`to_plain` takes.
+        **kwargs: Passed on to :func:`json.dumps` (e.g. ``indent``).
+
+    Returns:
+        The JSON text.
+    """
+    return json.dumps(to_plain(value, strict=True), allow_nan=False, **kwargs)
+
+
+def write_json(value: Any, path: str | Path) -> Path:
+    """Write :func:`dumps` (indented, newline-terminated) to ``path``, creating its folders.
+
+    A path ending in ``.gz`` is gzip-compressed with a zero time stamp, so the same value
+    gives the same bytes (per-episode results of large banks shrink about tenfold).
+
+    Args:
+        value: Anything :func:`to_plain` takes.
+        path: Output file.
+
+    Returns:
+        The path written.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = (dumps(value, indent=2) + "\n").encode("utf-8")
+    if path.suffix == ".gz":
+        with path.open("wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz:
+            gz.write(data)
+    else:
+        path.write_bytes(data)
+    return path
