@@ -3,21 +3,20 @@
 Each kernel is the scalar, per-point transcription of a numpy function elsewhere in the
 package and returns the same numbers bit for bit (``tests/test_kernels.py`` checks it): the
 same operations in the same order, no ``fastmath``. The numpy forms stay the reference and
-the fallback when numba is missing (see :mod:`uasep_env._numba`).
+the fallback when numba is missing: each is decorated with
+:func:`uasep_env._numba.compiled_twin`, which names its kernel here and the constants the
+kernel receives as keyword arguments. This module imports nothing of the package.
 
-* :func:`nearest_on_ellipsoids` -- :func:`uasep_env.reachable._nearest_body` with the
-  heading rotation of :func:`uasep_env.reachable.distance_to_ellipsoid` around it;
+* :func:`nearest_on_ellipsoids` -- :func:`uasep_env.reachable.distance._nearest` (the body
+  frame solve with the heading rotation around it);
 * :func:`pairwise_distances` -- the same solve for every point against every ellipsoid of
-  its batch row (:func:`uasep_env.reachable.pairwise_distances`), without broadcast copies,
+  its batch row (:func:`uasep_env.reachable.distance._pairwise`), without broadcast copies,
   and :func:`region_distances`, the same from precomputed cosines and sines with the
-  inactive regions at ``inf`` (:meth:`uasep_env.world.World.region_distances`);
-* :func:`separations` -- :meth:`uasep_env.world.World.separations`;
+  inactive regions at ``inf`` (:func:`uasep_env.reachable.distance.region_distances`);
+* :func:`separations` -- :func:`uasep_env.geometry.nearest_separations`;
 * :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
-* :func:`reward_terms` -- :func:`uasep_env.rewards._terms` and the weighted sum of
-  :func:`uasep_env.rewards.compute_rewards`;
-* :func:`plan_now` -- the plan's evaluation in :meth:`uasep_env.world.World._plan_arrays`
-  (:meth:`uasep_env.formation.PlannedTrajectory.center_and_direction` and the per-segment
-  slot offsets).
+* :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`;
+* :func:`plan_now` -- :func:`uasep_env.formation.planned_state`.
 """
 
 from __future__ import annotations
@@ -27,9 +26,6 @@ import os
 
 import numba
 import numpy as np
-
-from uasep_env.formation import MIN_FRAME_SPEED
-from uasep_env.reachable import _N_NEWTON
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
@@ -200,28 +196,44 @@ def _parallel(size: int) -> bool:
 
 
 def nearest_on_ellipsoids(
-    points: np.ndarray, centers: np.ndarray, axes: np.ndarray, headings: np.ndarray
+    points: np.ndarray,
+    centers: np.ndarray,
+    axes: np.ndarray,
+    headings: np.ndarray,
+    *,
+    n_newton: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Nearest surface points (body-frame offsets rotated to NED), signed distances, normals.
+    """Nearest surface points (offsets from the centres, NED), signed distances, normals.
 
     Args:
-        points: ``(K, 3)`` float64 positions (m).
-        centers: ``(K, 3)`` ellipsoid centres (m).
-        axes: ``(K, 3)`` semi-axes (m), already validated.
-        headings: ``(K,)`` headings (rad).
+        points: ``(..., 3)`` positions (m).
+        centers: ``(..., 3)`` ellipsoid centres (m).
+        axes: ``(..., 3)`` semi-axes (m), already validated.
+        headings: ``(...)`` headings (rad); the four broadcast together.
+        n_newton: Newton iterations (the numpy form's).
 
     Returns:
-        ``(offset, distance, normal)``: ``(K, 3)`` nearest point minus the centre, NED (m);
-        ``(K,)`` signed distance (m); ``(K, 3)`` unit outward normal, NED.
+        ``(offset, distance, normal)``: ``(..., 3)`` nearest point minus the centre, NED (m);
+        ``(...)`` signed distance (m); ``(..., 3)`` unit outward normal, NED.
     """
-    k = points.shape[0]
+    p = np.asarray(points, dtype=np.float64)
+    c = np.asarray(centers, dtype=np.float64)
+    ax = np.asarray(axes, dtype=np.float64)
+    psi = np.asarray(headings, dtype=np.float64)
+    shape = np.broadcast_shapes(p.shape[:-1], c.shape[:-1], ax.shape[:-1], psi.shape)
+    k = int(np.prod(shape))
+    flat = (k, 3)
+    p = np.broadcast_to(p, (*shape, 3)).reshape(flat)
+    c = np.broadcast_to(c, (*shape, 3)).reshape(flat)
+    ax = np.broadcast_to(ax, (*shape, 3)).reshape(flat)
+    psi = np.broadcast_to(psi, shape).reshape(-1)
     x = np.empty((k, 3))
     d = np.empty(k)
     n = np.empty((k, 3))
     fn = _parallel_loop if _parallel(k) else _serial
     # numpy's cos/sin, not libm's: the rotation must match the numpy form to the last bit.
-    fn(points, centers, axes, np.cos(headings), np.sin(headings), _N_NEWTON, x, d, n)
-    return x, d, n
+    fn(p, c, ax, np.cos(psi), np.sin(psi), n_newton, x, d, n)
+    return x.reshape(*shape, 3), d.reshape(shape), n.reshape(*shape, 3)
 
 
 @numba.njit(inline="always", **_JIT)
@@ -261,7 +273,12 @@ def _pairs_parallel(points, centers, axes, cos_h, sin_h, active, n_newton, out):
 
 
 def pairwise_distances(
-    points: np.ndarray, centers: np.ndarray, axes: np.ndarray, headings: np.ndarray
+    points: np.ndarray,
+    centers: np.ndarray,
+    axes: np.ndarray,
+    headings: np.ndarray,
+    *,
+    n_newton: int,
 ) -> np.ndarray:
     """Signed distance of every point to every ellipsoid of the same batch row.
 
@@ -270,43 +287,64 @@ def pairwise_distances(
         centers: ``(E, M, 3)`` ellipsoid centres (m).
         axes: ``(E, M, 3)`` semi-axes (m), already validated.
         headings: ``(E, M)`` headings (rad).
+        n_newton: Newton iterations (the numpy form's).
 
     Returns:
         ``(E, N, M)`` signed distances (m), as :func:`nearest_on_ellipsoids` on the pairs.
     """
     on = np.ones(headings.shape, dtype=bool)
-    return region_distances(points, centers, axes, np.cos(headings), np.sin(headings), on)
+    cos_h, sin_h = np.cos(headings), np.sin(headings)
+    return _region_loop(points, centers, axes, cos_h, sin_h, on, n_newton)
 
 
 def region_distances(
     points: np.ndarray,
     centers: np.ndarray,
     axes: np.ndarray,
+    headings: np.ndarray,
     cos_h: np.ndarray,
     sin_h: np.ndarray,
     active: np.ndarray,
+    *,
+    n_newton: int,
 ) -> np.ndarray:
     """:func:`pairwise_distances` from the headings' cosines and sines, ``inf`` where inactive.
 
     The world keeps the cosines and sines of its regions' headings (numpy's, the same
-    numbers as :func:`pairwise_distances` takes), so a step does not compute them again.
+    numbers as :func:`pairwise_distances` computes), so a step does not compute them again;
+    ``headings`` is the numpy form's input and is not read here.
 
     Args:
         points: ``(E, N, 3)`` positions (m).
         centers: ``(E, M, 3)`` ellipsoid centres (m).
         axes: ``(E, M, 3)`` semi-axes (m), already validated.
+        headings: ``(E, M)`` headings (rad), unused.
         cos_h: ``(E, M)`` cosines of the headings.
         sin_h: ``(E, M)`` sines of the headings.
         active: ``(E, M)`` bool; inactive ellipsoids give ``inf``.
+        n_newton: Newton iterations (the numpy form's).
 
     Returns:
         ``(E, N, M)`` signed distances (m).
     """
+    del headings
+    return _region_loop(points, centers, axes, cos_h, sin_h, active, n_newton)
+
+
+def _region_loop(
+    points: np.ndarray,
+    centers: np.ndarray,
+    axes: np.ndarray,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    active: np.ndarray,
+    n_newton: int,
+) -> np.ndarray:
     e, n, _ = points.shape
     out = np.empty((e, n, centers.shape[1]))
     fn = _pairs_parallel if _parallel(out.size) else _pairs_serial
     c = np.ascontiguousarray
-    fn(c(points), c(centers), c(axes), c(cos_h), c(sin_h), c(active), _N_NEWTON, out)
+    fn(c(points), c(centers), c(axes), c(cos_h), c(sin_h), c(active), n_newton, out)
     return out
 
 
@@ -428,10 +466,11 @@ def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_env(e, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+def _observe_env(e, x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
     """Environment ``e`` of :func:`uasep_env.observation._assemble`, every agent.
 
-    ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays.
+    ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays, ``cols`` the
+    :data:`uasep_env.observation.COLUMNS` named tuple of column offsets.
     """
     pos, vel = x.pos, x.vel
     # The estimated formation (eqs. 5-7): centre, mean velocity and frame, once per env.
@@ -441,11 +480,11 @@ def _observe_env(e, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
     ct, st, cp, sp = _frame(mv0, mv1, mv2, d[e, 0], d[e, 1], d[e, 2], scales[5])
     frame = (c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp)
     for i in range(pos.shape[1]):
-        _observe_agent(e, i, frame, x, scales, k_u, k_o, self_dim, out)
+        _observe_agent(e, i, frame, x, scales, cols, k_u, k_o, self_dim, out)
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_agent(e, i, frame, x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+def _observe_agent(e, i, frame, x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
     """UAV ``i`` of environment ``e``; ``frame`` is the formation's, from :func:`_observe_env`."""
     pos, vel = x.pos, x.vel
     n = pos.shape[1]
@@ -459,24 +498,27 @@ def _observe_agent(e, i, frame, x, scales, k_u, k_o, self_dim, out):  # noqa: AN
     slot1 = c1 + ((ct * p0 + (cp * st) * p1) + (-st * sp) * p2)
     slot2 = c2 + ((0.0 * p0 + (-sp) * p1) + (-cp) * p2)
     wp_dist = _norm3(x.final_wp[e, 0] - c0, x.final_wp[e, 1] - c1, x.final_wp[e, 2] - c2)
-    _put(out, e, i, 0, (slot0 - pos[e, i, 0]) / ps, clip)
-    _put(out, e, i, 1, (slot1 - pos[e, i, 1]) / ps, clip)
-    _put(out, e, i, 2, (slot2 - pos[e, i, 2]) / ps, clip)
-    _put(out, e, i, 12, mv0 / vs, clip)
-    _put(out, e, i, 13, mv1 / vs, clip)
-    _put(out, e, i, 14, mv2 / vs, clip)
-    _put(out, e, i, 15, (x.plan_center[e, 0] - c0) / ps, clip)
-    _put(out, e, i, 16, (x.plan_center[e, 1] - c1) / ps, clip)
-    _put(out, e, i, 17, (x.plan_center[e, 2] - c2) / ps, clip)
+    slot = cols.slot_offset
+    _put(out, e, i, slot, (slot0 - pos[e, i, 0]) / ps, clip)
+    _put(out, e, i, slot + 1, (slot1 - pos[e, i, 1]) / ps, clip)
+    _put(out, e, i, slot + 2, (slot2 - pos[e, i, 2]) / ps, clip)
+    fv = cols.formation_velocity
+    _put(out, e, i, fv, mv0 / vs, clip)
+    _put(out, e, i, fv + 1, mv1 / vs, clip)
+    _put(out, e, i, fv + 2, mv2 / vs, clip)
+    goal = cols.goal_offset
+    _put(out, e, i, goal, (x.plan_center[e, 0] - c0) / ps, clip)
+    _put(out, e, i, goal + 1, (x.plan_center[e, 1] - c1) / ps, clip)
+    _put(out, e, i, goal + 2, (x.plan_center[e, 2] - c2) / ps, clip)
     for a in range(3):
         p = pos[e, i, a]
-        _put(out, e, i, 3 + a, (x.plan_pos[e, i, a] - p) / ps, clip)
-        _put(out, e, i, 6 + a, vel[e, i, a] / vs, clip)
-        _put(out, e, i, 9 + a, x.plan_vel[e, i, a] / vs, clip)
-        _put(out, e, i, 18 + a, x.wp_dir[e, a], clip)
-        _put(out, e, i, 22 + a, x.accel_cmd[e, i, a] / acs, clip)
-    _put(out, e, i, 21, wp_dist / ps, clip)
-    _put(out, e, i, 25, x.progress[e], clip)
+        _put(out, e, i, cols.plan_offset + a, (x.plan_pos[e, i, a] - p) / ps, clip)
+        _put(out, e, i, cols.velocity + a, vel[e, i, a] / vs, clip)
+        _put(out, e, i, cols.plan_velocity + a, x.plan_vel[e, i, a] / vs, clip)
+        _put(out, e, i, cols.waypoint_dir + a, x.wp_dir[e, a], clip)
+        _put(out, e, i, cols.last_accel + a, x.accel_cmd[e, i, a] / acs, clip)
+    _put(out, e, i, cols.waypoint_dist, wp_dist / ps, clip)
+    _put(out, e, i, cols.progress, x.progress[e], clip)
     col = self_dim
 
     # Nearest UAVs: the k smallest (distance, index) pairs in order, i.e. a stable argsort.
@@ -493,17 +535,19 @@ def _observe_agent(e, i, frame, x, scales, k_u, k_o, self_dim, out):  # noqa: AN
         if best_j == n:  # only oneself left (an infinite distance): stable order puts it here
             best_d, best_j = np.inf, i
         prev_d, prev_j = best_d, best_j
-        c = col + s * 8
+        c = col + s * cols.uav_width
         if best_d <= sensing:
             for a in range(3):
-                _put(out, e, i, c + a, (pos[e, best_j, a] - pos[e, i, a]) / ps, clip)
-                _put(out, e, i, c + 3 + a, (vel[e, best_j, a] - vel[e, i, a]) / vs, clip)
-            _put(out, e, i, c + 6, best_d / ps, clip)
-            _put(out, e, i, c + 7, 1.0, clip)
+                rel_p = (pos[e, best_j, a] - pos[e, i, a]) / ps
+                _put(out, e, i, c + cols.uav_rel_pos + a, rel_p, clip)
+                rel_v = (vel[e, best_j, a] - vel[e, i, a]) / vs
+                _put(out, e, i, c + cols.uav_rel_vel + a, rel_v, clip)
+            _put(out, e, i, c + cols.uav_dist, best_d / ps, clip)
+            _put(out, e, i, c + cols.uav_mask, 1.0, clip)
         else:
-            for a in range(8):
+            for a in range(cols.uav_width):
                 out[e, i, c + a] = 0.0
-    col += k_u * 8
+    col += k_u * cols.uav_width
 
     # Nearest obstacles by distance to their reachable region (stable, like the UAVs).
     kk = min(k_o, m)
@@ -518,44 +562,56 @@ def _observe_agent(e, i, frame, x, scales, k_u, k_o, self_dim, out):  # noqa: AN
             if after and (key < best_d or (key == best_d and j < best_j)):
                 best_d, best_j = key, j
         prev_d, prev_j = best_d, best_j
-        c = col + s * 16
+        c = col + s * cols.obstacle_width
         if math.isfinite(best_d):
             j = best_j
             for a in range(3):
-                _put(out, e, i, c + a, (x.pred_center[e, j, a] - pos[e, i, a]) / ps, clip)
-                _put(out, e, i, c + 3 + a, x.pred_axes[e, j, a] / ps, clip)
-                _put(out, e, i, c + 8 + a, (x.obs_pos[e, j, a] - pos[e, i, a]) / ps, clip)
-                _put(out, e, i, c + 11 + a, (x.obs_vel[e, j, a] - vel[e, i, a]) / vs, clip)
-            _put(out, e, i, c + 6, x.cos_h[e, j], clip)
-            _put(out, e, i, c + 7, x.sin_h[e, j], clip)
-            _put(out, e, i, c + 14, x.region[e, i, j] / ps, clip)
-            _put(out, e, i, c + 15, 1.0, clip)
+                v = (x.pred_center[e, j, a] - pos[e, i, a]) / ps
+                _put(out, e, i, c + cols.obstacle_center + a, v, clip)
+                _put(out, e, i, c + cols.obstacle_axes + a, x.pred_axes[e, j, a] / ps, clip)
+                v = (x.obs_pos[e, j, a] - pos[e, i, a]) / ps
+                _put(out, e, i, c + cols.obstacle_rel_pos + a, v, clip)
+                v = (x.obs_vel[e, j, a] - vel[e, i, a]) / vs
+                _put(out, e, i, c + cols.obstacle_rel_vel + a, v, clip)
+            _put(out, e, i, c + cols.obstacle_heading_cs, x.cos_h[e, j], clip)
+            _put(out, e, i, c + cols.obstacle_heading_cs + 1, x.sin_h[e, j], clip)
+            _put(out, e, i, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
+            _put(out, e, i, c + cols.obstacle_mask, 1.0, clip)
         else:
-            for a in range(16):
+            for a in range(cols.obstacle_width):
                 out[e, i, c + a] = 0.0
-    for a in range(col + kk * 16, col + k_o * 16):
+    for a in range(col + kk * cols.obstacle_width, col + k_o * cols.obstacle_width):
         out[e, i, a] = 0.0
 
 
 @numba.njit(**_JIT)
-def _observe_serial(x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+def _observe_serial(x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
     for e in range(out.shape[0]):
-        _observe_env(e, x, scales, k_u, k_o, self_dim, out)
+        _observe_env(e, x, scales, cols, k_u, k_o, self_dim, out)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _observe_parallel(x, scales, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+def _observe_parallel(x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
     for e in numba.prange(out.shape[0]):
-        _observe_env(e, x, scales, k_u, k_o, self_dim, out)
+        _observe_env(e, x, scales, cols, k_u, k_o, self_dim, out)
 
 
-def assemble_observations(inputs: tuple, layout: object, out: np.ndarray) -> None:
+def assemble_observations(
+    inputs: tuple,
+    layout: object,
+    out: np.ndarray,
+    *,
+    columns: tuple,
+    min_frame_speed: float,
+) -> None:
     """Compiled :func:`uasep_env.observation._assemble`: fills ``out`` in place.
 
     Args:
         inputs: The :class:`uasep_env.observation._Inputs` of one call.
         layout: Its :class:`uasep_env.observation.ObservationLayout`.
         out: ``(E, N, dim)`` float32, C-contiguous.
+        columns: :data:`uasep_env.observation.COLUMNS`, where each feature is written.
+        min_frame_speed: :data:`uasep_env.formation.MIN_FRAME_SPEED`.
     """
     scales = np.array(
         [
@@ -564,30 +620,30 @@ def assemble_observations(inputs: tuple, layout: object, out: np.ndarray) -> Non
             layout.acc_scale,
             layout.sensing_range,
             layout.clip,
-            MIN_FRAME_SPEED,
+            min_frame_speed,
         ]
     )
     # Contiguous arrays only: one compiled signature, whatever views the caller passes.
     x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
     fn = _observe_parallel if _parallel(out.shape[0] * out.shape[1]) else _observe_serial
-    fn(x, scales, layout.k_uavs, layout.k_obstacles, layout.self_dim, out)
+    fn(x, scales, columns, layout.k_uavs, layout.k_obstacles, layout.self_dim, out)
 
 
 # ---------------------------------------------------------------------------- rewards
 @numba.njit(inline="always", **_JIT)
 def _reward_agent(k, x, c, weights, own, terms):  # noqa: ANN001, ANN202
-    """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.rewards._terms`.
+    """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.rewards._weighted_terms`.
 
-    ``x`` is the :class:`uasep_env.rewards._Inputs` named tuple; ``c`` holds
-    ``(max_accel, separation_distance, obstacle_separation, collision_distance,
-    deviation_scale, region_cap, max_steps)``. Terms in :data:`uasep_env.rewards.REWARD_TERMS`
-    order.
+    ``x`` is the :class:`uasep_env.rewards._Inputs` named tuple, ``c`` the
+    :class:`uasep_env.rewards._Constants` one. Terms in
+    :data:`uasep_env.rewards.REWARD_TERMS` order.
     """
     n = x.uav_pos.shape[1]
     e = k // n
     i = k % n
-    max_acc, d_sep, d_obs_sep, d_col, dev_scale = c[0], c[1], c[2], c[3], c[4]
-    region_cap, max_steps = c[5], c[6]
+    max_acc, d_sep, d_obs_sep = c.max_accel, c.separation_distance, c.obstacle_separation
+    d_col, dev_scale = c.collision_distance, c.deviation_scale
+    region_cap, max_steps = c.region_cap, c.max_steps
     d_uav, d_obs = x.min_uav_dist[e, i], x.min_obs_dist[e, i]
     d_region = np.inf
     for j in range(x.region.shape[2]):
@@ -634,13 +690,13 @@ def _rewards_parallel(x, c, weights, own, terms):  # noqa: ANN001, ANN202
 
 
 def reward_terms(
-    inputs: tuple, constants: np.ndarray, weights: np.ndarray
+    inputs: tuple, constants: tuple, weights: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Compiled reward terms and their weighted sum (before any team sharing).
 
     Args:
         inputs: The :class:`uasep_env.rewards._Inputs` of one call.
-        constants: See :func:`_reward_agent`.
+        constants: The :class:`uasep_env.rewards._Constants` of one call.
         weights: One weight per term, in :data:`uasep_env.rewards.REWARD_TERMS` order.
 
     Returns:
@@ -681,23 +737,13 @@ def _plan_rows(time, speed, length, cum, waypoints, direction, offsets, center, 
 
 
 def plan_now(
-    time: np.ndarray,
-    speed: np.ndarray,
-    length: np.ndarray,
-    cum: np.ndarray,
-    waypoints: np.ndarray,
-    direction: np.ndarray,
-    offsets: np.ndarray,
+    plan: object, time: np.ndarray, offsets: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Compiled plan evaluation: ``(center, direction, pos, vel)`` at ``time``.
+    """Compiled :func:`uasep_env.formation.planned_state`: the plan at ``time``.
 
     Args:
+        plan: The :class:`uasep_env.formation.PlannedTrajectory` (its arrays are read).
         time: ``(E,)`` times (s).
-        speed: ``(E,)`` cruise speeds (m/s).
-        length: ``(E,)`` path lengths (m).
-        cum: ``(E, W)`` arc length at each way-point (m).
-        waypoints: ``(E, W, 3)`` way-points (m).
-        direction: ``(E, W - 1, 3)`` unit segment directions.
         offsets: ``(E, W - 1, N, 3)`` slots rotated along each segment (m).
 
     Returns:
@@ -707,5 +753,8 @@ def plan_now(
     e, _, n, _ = offsets.shape
     center, d = np.empty((e, 3)), np.empty((e, 3))
     pos, vel = np.empty((e, n, 3)), np.empty((e, n, 3))
-    _plan_rows(time, speed, length, cum, waypoints, direction, offsets, center, d, pos, vel)
+    _plan_rows(
+        time, plan.cruise_speed, plan.length, plan.cum, plan.waypoints, plan.direction,
+        offsets, center, d, pos, vel,
+    )  # fmt: skip
     return center, d, pos, vel

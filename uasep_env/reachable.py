@@ -131,19 +131,18 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from uasep_env import _numba
+from uasep_env._numba import compiled_twin
 
 __all__ = [
     "boundary",
     "contains",
     "distance_to_ellipsoid",
     "ellipse",
-    "ellipse_area",
     "ellipsoid",
-    "ellipsoid_volume",
     "front_curve",
     "nearest_point_on_ellipsoid",
     "pairwise_distances",
+    "region_distances",
     "support",
 ]
 
@@ -383,18 +382,6 @@ def boundary(
     y = vt * yu + r * np.cos(th)
     pts = np.stack([x, y], axis=-1)
     return np.concatenate([pts, pts[:1]], axis=0)
-
-
-def ellipse_area(lateral_semi_axis: ArrayLike, longitudinal_semi_axis: ArrayLike) -> FloatArray:
-    """Area ``pi A B`` of an ellipse (m^2)."""
-    return _out(
-        np.pi * np.asarray(lateral_semi_axis, float) * np.asarray(longitudinal_semi_axis, float)
-    )
-
-
-def ellipsoid_volume(semi_axes: ArrayLike) -> FloatArray:
-    """Volume ``4/3 pi a b c`` of ellipsoids with semi-axes ``(..., 3)`` (m^3)."""
-    return _out(4.0 / 3.0 * np.pi * np.prod(np.asarray(semi_axes, float), axis=-1))
 
 
 # ---------------------------------------------------------------------------- shape table
@@ -979,6 +966,22 @@ def _to_world(n: FloatArray, cp: FloatArray, sp: FloatArray) -> FloatArray:
     )
 
 
+@compiled_twin("nearest_on_ellipsoids", n_newton=_N_NEWTON)
+def _nearest(
+    points: ArrayLike, centers: ArrayLike, ax: FloatArray, headings: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Nearest point minus the centre, signed distance and outward normal (all NED).
+
+    The solve behind :func:`distance_to_ellipsoid` and :func:`nearest_point_on_ellipsoid`;
+    ``ax`` is validated (:func:`_check_axes`), the four broadcast together.
+    """
+    q, cp, sp = _to_body(points, centers, headings)
+    x, dist, n = _nearest_body(q, ax)
+    cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
+    offset = _to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp)
+    return offset, dist, _to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+
+
 def distance_to_ellipsoid(
     points: ArrayLike,
     centers: ArrayLike,
@@ -1009,17 +1012,8 @@ def distance_to_ellipsoid(
     Raises:
         ValueError: If a semi-axis is negative or not finite.
     """
-    ax = _check_axes(semi_axes)
-    fast = _compiled(points, centers, ax, headings)
-    if fast is not None:
-        _, dist, normal = fast
-        return (dist, normal) if return_normal else dist
-    q, cp, sp = _to_body(points, centers, headings)
-    _, dist, n = _nearest_body(q, ax)
-    if not return_normal:
-        return dist
-    cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
-    return dist, _to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+    _, dist, normal = _nearest(points, centers, _check_axes(semi_axes), headings)
+    return (dist, normal) if return_normal else dist
 
 
 def pairwise_distances(
@@ -1042,13 +1036,53 @@ def pairwise_distances(
     Raises:
         ValueError: If a semi-axis is negative or not finite.
     """
-    ax = _check_axes(semi_axes)
     p = np.asarray(points, dtype=np.float64)
     c = np.asarray(centers, dtype=np.float64)
     psi = np.asarray(headings, dtype=np.float64)
-    if (_kernels := _numba.kernels()) is not None:
-        return _kernels.pairwise_distances(p, c, ax, psi)
-    return distance_to_ellipsoid(p[:, :, None], c[:, None], ax[:, None], psi[:, None])
+    return _pairwise(p, c, _check_axes(semi_axes), psi)
+
+
+@compiled_twin("pairwise_distances", n_newton=_N_NEWTON)
+def _pairwise(
+    points: FloatArray, centers: FloatArray, ax: FloatArray, headings: FloatArray
+) -> FloatArray:
+    """:func:`pairwise_distances` of float64 arrays with validated semi-axes."""
+    a = (points[:, :, None], centers[:, None], ax[:, None], headings[:, None])
+    return _nearest.reference(*a)[1]
+
+
+@compiled_twin("region_distances", n_newton=_N_NEWTON)
+def region_distances(
+    points: FloatArray,
+    centers: FloatArray,
+    semi_axes: FloatArray,
+    headings: FloatArray,
+    cos_h: FloatArray,
+    sin_h: FloatArray,
+    active: NDArray[np.bool_],
+) -> FloatArray:
+    """:func:`pairwise_distances` against the regions of a world, ``inf`` where inactive.
+
+    The compiled form reads the headings' kept cosines and sines (numpy's, the same numbers
+    the numpy form computes from ``headings``), so a step does not compute them again.
+
+    Args:
+        points: ``(E, N, 3)`` positions, NED (m).
+        centers: ``(E, M, 3)`` ellipsoid centres, NED (m).
+        semi_axes: ``(E, M, 3)`` semi-axes (m), finite and >= 0.
+        headings: ``(E, M)`` headings (rad).
+        cos_h: ``(E, M)`` ``np.cos(headings)``.
+        sin_h: ``(E, M)`` ``np.sin(headings)``.
+        active: ``(E, M)`` bool; inactive ellipsoids give ``inf``.
+
+    Returns:
+        ``(E, N, M)`` signed distances (m, negative inside).
+    """
+    p = np.asarray(points, dtype=np.float64)
+    c = np.asarray(centers, dtype=np.float64)
+    psi = np.asarray(headings, dtype=np.float64)
+    d = _pairwise.reference(p, c, _check_axes(semi_axes), psi)
+    return np.where(active[:, None, :], d, np.inf)
 
 
 def nearest_point_on_ellipsoid(
@@ -1070,41 +1104,9 @@ def nearest_point_on_ellipsoid(
     Raises:
         ValueError: If a semi-axis is negative or not finite.
     """
-    ax = _check_axes(semi_axes)
     ctr = np.asarray(centers, dtype=np.float64)
-    fast = _compiled(points, ctr, ax, headings)
-    if fast is not None:
-        offset, dist, normal = fast
-        return offset + ctr, dist, normal
-    q, cp, sp = _to_body(points, centers, headings)
-    x, dist, n = _nearest_body(q, ax)
-    cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
-    xw = _to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp) + ctr
-    return xw, dist, _to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
-
-
-def _compiled(
-    points: ArrayLike, centers: ArrayLike, ax: FloatArray, headings: ArrayLike
-) -> tuple[FloatArray, FloatArray, FloatArray] | None:
-    """The compiled kernel's ``(offset from centre, distance, normal)``, or None without numba.
-
-    Same numbers as the numpy path (:func:`_to_body`, :func:`_nearest_body`, :func:`_to_world`)
-    bit for bit; see :mod:`uasep_env._kernels`.
-    """
-    if (_kernels := _numba.kernels()) is None:
-        return None
-    p = np.asarray(points, dtype=np.float64)
-    c = np.asarray(centers, dtype=np.float64)
-    psi = np.asarray(headings, dtype=np.float64)
-    shape = np.broadcast_shapes(p.shape[:-1], c.shape[:-1], ax.shape[:-1], psi.shape)
-    flat = (int(np.prod(shape)), 3)
-    x, dist, normal = _kernels.nearest_on_ellipsoids(
-        np.broadcast_to(p, (*shape, 3)).reshape(flat),
-        np.broadcast_to(c, (*shape, 3)).reshape(flat),
-        np.broadcast_to(ax, (*shape, 3)).reshape(flat),
-        np.broadcast_to(psi, shape).reshape(-1),
-    )
-    return x.reshape(*shape, 3), dist.reshape(shape), normal.reshape(*shape, 3)
+    offset, dist, normal = _nearest(points, ctr, _check_axes(semi_axes), headings)
+    return offset + ctr, dist, normal
 
 
 def contains(
