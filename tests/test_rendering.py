@@ -86,7 +86,7 @@ def test_import_does_not_import_matplotlib():
 
 def test_rgb_array_frame():
     w = _world()
-    r = Renderer(w.config, mode="rgb_array")
+    r = Renderer(mode="rgb_array")
     try:
         frame = r.render(w)
         _check_frame(frame)
@@ -99,7 +99,7 @@ def test_rgb_array_frame():
 
 def test_frames_change_as_world_steps():
     w = _world()
-    r = Renderer(w.config)
+    r = Renderer()
     try:
         first = r.render(w)
         for _ in range(10):
@@ -113,8 +113,8 @@ def test_frames_change_as_world_steps():
 
 def test_figure_reused_and_trails_cleared_on_reset():
     w = _world(seed=3)
-    r = Renderer(w.config)
-    fresh = Renderer(w.config)
+    r = Renderer()
+    fresh = Renderer()
     try:
         r.render(w)
         fig = r.fig
@@ -132,7 +132,7 @@ def test_figure_reused_and_trails_cleared_on_reset():
 
 def test_close_is_idempotent_and_renderer_reusable():
     w = _world()
-    r = Renderer(w.config)
+    r = Renderer()
     r.render(w)
     r.close()
     r.close()
@@ -143,11 +143,11 @@ def test_close_is_idempotent_and_renderer_reusable():
 
 def test_invalid_arguments():
     with pytest.raises(ValueError, match="render mode"):
-        Renderer(None, mode="ansi")
+        Renderer(mode="ansi")
     with pytest.raises(ValueError):
-        Renderer(None, figsize=(0, 3))
+        Renderer(figsize=(0, 3))
     w = _world()
-    r = Renderer(w.config)
+    r = Renderer()
     with pytest.raises(IndexError):
         r.render(w, env=1)
     r.close()
@@ -156,7 +156,7 @@ def test_invalid_arguments():
 def test_batched_world_renders_selected_env():
     w = World({"scenario": "random"}, n_envs=3)
     w.reset(seed=5)
-    r = Renderer(w.config)
+    r = Renderer()
     try:
         frames = [r.render(w, env=i) for i in range(3)]
         for f in frames:
@@ -176,7 +176,7 @@ def test_batched_world_renders_selected_env():
 )
 def test_other_configurations(config):
     w = _world(seed=1, **config)
-    r = Renderer(w.config)
+    r = Renderer()
     try:
         for _ in range(3):
             w.step(_zero(w))
@@ -188,7 +188,7 @@ def test_other_configurations(config):
 def test_inactive_obstacles_and_scattered_formation():
     w = _world(n_obstacles=2)
     w.obstacles.active[0, 1] = False
-    r = Renderer(w.config, top_view=False)
+    r = Renderer(top_view=False)
     try:
         # Zero actions: the paper's UAVs drift apart; the view grows instead of losing them.
         for _ in range(300):
@@ -200,7 +200,7 @@ def test_inactive_obstacles_and_scattered_formation():
 
 def test_view_box_stable_between_frames():
     w = _world()
-    r = Renderer(w.config)
+    r = Renderer()
     try:
         widths = []
         for _ in range(12):
@@ -237,7 +237,7 @@ def test_save_frame(tmp_path):
     path = save_frame(w, tmp_path / "sub" / "frame.png")
     assert path.exists()
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    r = Renderer(w.config)
+    r = Renderer()
     for _ in range(5):
         w.step(_zero(w))
         r.render(w)
@@ -266,7 +266,7 @@ def test_human_mode_headless_does_not_crash():
         from uasep_env.rendering import Renderer
         from uasep_env.world import World
         w = World({"scenario": "paper"}); w.reset(seed=0)
-        r = Renderer(w.config, mode="human")
+        r = Renderer(mode="human")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             for _ in range(3):
@@ -284,7 +284,7 @@ def test_human_mode_headless_does_not_crash():
 
 def test_human_mode_in_process():
     w = _world()
-    r = Renderer(w.config, mode="human")
+    r = Renderer(mode="human")
     with pytest.warns(RuntimeWarning, match="interactive"):
         assert r.render(w) is None
     assert r.render(w) is None  # warns only once

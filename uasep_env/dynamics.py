@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["measure", "step_double_integrator", "transition_matrices"]
+__all__ = ["AXES", "measure", "step_double_integrator", "transition_matrices"]
+AXES: tuple[str, str, str] = ("x", "y", "z")  # NED axes (north, east, down), as metric and plot names
 
 
 def transition_matrices(dt: float) -> tuple[np.ndarray, np.ndarray]:
