@@ -395,3 +395,81 @@ def test_vector_env_render():
     env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     _check_frame(env.render())
     env.close()
+
+
+# ---------------------------------------------------------------------------- what is drawn
+def _pixel(r: Renderer, frame: np.ndarray, ax, east: float, north: float) -> np.ndarray:
+    """The frame's RGB at the projection of ``(east, north)`` on 2D axes ``ax``."""
+    x, y = ax.transData.transform((east, north))
+    return frame[frame.shape[0] - 1 - int(np.rint(y)), int(np.rint(x))].astype(int)
+
+
+def _near(colour: np.ndarray, hex_colour: str, tol: int = 40) -> bool:
+    want = np.array([int(hex_colour[k : k + 2], 16) for k in (1, 3, 5)])
+    return bool(np.abs(colour - want).max() <= tol)
+
+
+def test_top_view_draws_each_uav_at_its_position_in_its_colour():
+    from uasep_env.viz.style import UAV_COLOURS
+
+    w = _world(seed=2)
+    r = Renderer()
+    try:
+        frame = r.render(w)
+        top = r._art["ax2"]
+        for i, (north, east, _) in enumerate(w.uav_pos[0]):
+            assert _near(_pixel(r, frame, top, east, north), UAV_COLOURS[i]), i
+    finally:
+        r.close()
+
+
+def test_obstacle_region_is_drawn_at_the_projection_of_its_predicted_ellipsoid():
+    w = _world(seed=0)
+    while np.hypot(*(w.pred_center[0, 0, :2] - w.uav_pos[0].mean(axis=0)[:2])) > 100.0:
+        w.step(_zero(w))  # until the paper's obstacle comes into view
+        assert w.time[0] < 200.0
+    r = Renderer()
+    try:
+        frame = r.render(w)
+        top = r._art["ax2"]
+        north, east, down = w.pred_center[0, 0]
+        axes, heading = w.pred_axes[0, 0], float(w.pred_heading[0, 0])
+        # The top view's outline is the ellipsoid's horizontal section, around its centre.
+        outline = np.unique(r._art["obs"][0]["region2"].get_xy().round(9), axis=0)  # open ring
+        np.testing.assert_allclose(outline.mean(axis=0), [east, north], atol=1e-6 * axes.max())
+        # Its centre is tinted by the translucent red fill; a point two semi-axes out, not.
+        inside = _pixel(r, frame, top, east, north)
+        assert inside[0] > inside[1] + 8 and inside[0] > inside[2] + 8, inside
+        lateral = 2.5 * axes[1] * np.array([-math.sin(heading), math.cos(heading)])
+        outside = _pixel(r, frame, top, east + lateral[1], north + lateral[0])
+        assert abs(outside[0] - outside[1]) < 8, outside
+        # The 3D wireframe lies on the ellipsoid: body-frame points of norm 1.
+        e, n, alt = r._art["obs"][0]["wire3"].get_data_3d()
+        ok = np.isfinite(e)
+        dn, de, dd = n[ok] - north, e[ok] - east, -alt[ok] - down
+        lon = dn * math.cos(heading) + de * math.sin(heading)
+        lat = -dn * math.sin(heading) + de * math.cos(heading)
+        radius = np.sqrt((lon / axes[0]) ** 2 + (lat / axes[1]) ** 2 + (dd / axes[2]) ** 2)
+        np.testing.assert_allclose(radius, 1.0, atol=1e-9)
+    finally:
+        r.close()
+
+
+def test_trails_hold_the_last_trail_length_seconds_ending_at_the_uav():
+    w = _world()
+    dt = w.config.dt * w.config.decision_interval
+    r = Renderer(trail_length=5 * dt)
+    try:
+        seen = []
+        for _ in range(12):
+            r.render(w)
+            seen.append(np.array(w.uav_pos[0]))
+            w.step(_zero(w))
+        for i, u in enumerate(r._art["uav"]):
+            east, north = u["trail2"].get_data()
+            assert len(east) == 6  # now and the five frames of the last 5 dt
+            want = np.stack(seen[-6:])[:, i]
+            np.testing.assert_array_equal(east, want[:, 1])
+            np.testing.assert_array_equal(north, want[:, 0])
+    finally:
+        r.close()
