@@ -111,3 +111,26 @@ def test_to_dict_roundtrip():
     cfg = make_config(n_uavs=4, scenario="head_on")
     d = cfg.to_dict()
     assert make_config(d) == cfg
+
+
+def test_as_published_runs_the_papers_prediction():
+    """AS_PUBLISHED selects the terminal set and the paper's ellipsoid; the world uses them."""
+    import numpy as np
+
+    from uasep_env import reachable
+    from uasep_env.config import AS_PUBLISHED
+    from uasep_env.world import World
+
+    cfg = make_config(AS_PUBLISHED, scenario="paper")
+    assert (cfg.prediction.mode, cfg.prediction.fit) == ("terminal", "paper")
+    world = World(cfg, n_envs=1)
+    world.reset(seed=0)
+    axes = world.pred_axes[0, 0]
+    assert axes[1] == axes[2]  # a circular section across the heading
+    default = World(make_config(scenario="paper"), n_envs=1)
+    default.reset(seed=0)
+    assert np.all(default.pred_axes[0, 0] > axes)  # the enclosing one is larger everywhere
+    _, ref = reachable.ellipsoid(4.0, 0.013, 0.5, 10.0, 3.0, mode="terminal", fit="paper")
+    assert ref[1] == ref[2]
+    with pytest.raises(ValueError, match=r"prediction\.fit"):
+        make_config(prediction={"fit": "tight"})

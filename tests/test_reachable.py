@@ -680,3 +680,57 @@ def test_distance_broadcasting_and_no_nans():
     assert R.contains(pts, ctr, ax, hd).shape == (4, 5, 7)
     d1 = R.distance_to_ellipsoid(pts[2, 3, 0], ctr[0, 4], ax[4], hd[4])
     assert d1 == pytest.approx(d[2, 3, 4])
+
+
+# ----------------------------------------------------------------------------- the paper's fit
+@pytest.mark.parametrize("mode", ["swept", "terminal"])
+@pytest.mark.parametrize("params", SPECIAL[:8])
+def test_paper_fit_axes_are_the_sets_extents(params, mode):
+    """Eq. 17 as published: major axis = lateral extent (S3-S4), minor = S5 to the tip of S1,2;
+    semi-axes are half of them, centred on the middle of the extents."""
+    v, w, t, r, _ = params
+    c, lat, lon = R.ellipse(v, w, t, r, mode=mode, fit="paper")
+    poly = R.boundary(v, w, t, r, n=4001, mode=mode)
+    assert lat == pytest.approx(np.abs(poly[:, 0]).max(), rel=1e-6, abs=1e-9)
+    assert c + lon == pytest.approx(poly[:, 1].max(), rel=1e-6, abs=1e-9)
+    assert c - lon == pytest.approx(poly[:, 1].min(), rel=1e-6, abs=1e-6)
+
+
+def _outside_distance(poly, c, lat, lon):
+    """Distance (m) by which each boundary point lies outside the flat ellipse (<= 0 inside)."""
+    pts = np.stack([poly[:, 1] - c, poly[:, 0], np.zeros(len(poly))], axis=-1)
+    return R.distance_to_ellipsoid(pts, np.zeros(3), np.array([lon, lat, 1.0]), 0.0)
+
+
+@pytest.mark.parametrize(
+    ("params", "max_out", "missed"),
+    [(PAPER, (0.45, 0.55), (0.08, 0.12)), ((8.0, 0.1, 10.0, 3.0), (5.0, 6.0), (0.10, 0.15))],
+)
+def test_paper_fit_misses_the_shoulders(params, max_out, missed):
+    """The paper's ellipse does not enclose the terminal set: boundary points between the axes
+    lie outside it (the measured figures quoted in ``ellipse``'s docstring), the enclosing fit
+    leaves none outside."""
+    poly = R.boundary(*params, n=721, mode="terminal")
+    d = _outside_distance(poly, *R.ellipse(*params, mode="terminal", fit="paper"))
+    assert max_out[0] < d.max() < max_out[1]
+    assert np.mean(d > 1e-3) > 0.5  # most of the boundary is outside
+    enclosing = _outside_distance(poly, *R.ellipse(*params, mode="terminal"))
+    assert enclosing.max() <= 1e-9
+    # The set's area it misses, by Monte Carlo over the set's bounding box.
+    c, lat, lon = R.ellipse(*params, mode="terminal", fit="paper")
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(poly.min(axis=0), poly.max(axis=0), size=(40_000, 2))
+    in_set = _point_in_convex_polygon(poly, pts, 0.0)
+    in_ell = _inside_ellipse(pts, c, lat, lon)
+    assert missed[0] < np.mean(in_set & ~in_ell) / np.mean(in_set) < missed[1]
+
+
+def test_paper_fit_ellipsoid_has_a_circular_cross_section():
+    """3D as the text says: a circle of diameter a across the heading, whatever vz_max."""
+    for vz in (0.0, 0.5, 3.0):
+        c, axes = R.ellipsoid(4.0, 0.013, vz, 10.0, 3.0, mode="terminal", fit="paper")
+        c2, lat, lon = R.ellipse(4.0, 0.013, 10.0, 3.0, mode="terminal", fit="paper")
+        assert c == c2
+        np.testing.assert_array_equal(axes, [lon, lat, lat])
+    with pytest.raises(ValueError, match="fit must be 'enclosing' or 'paper', got 'exact'"):
+        R.ellipsoid(4.0, 0.013, 0.5, 10.0, 3.0, fit="exact")

@@ -22,6 +22,7 @@ import numpy as np
 
 __all__ = [
     "ACTION_MODES",
+    "AS_PUBLISHED",
     "FORMATION_PATTERNS",
     "SCENARIOS",
     "ActionConfig",
@@ -49,6 +50,12 @@ SCENARIOS = (
     "multi_obstacle",
     "large_formation",
 )
+
+#: Overrides that run the paper's prediction as published: the terminal set S1..S5 and the
+#: paper's (non-enclosing) ellipsoid of eqs. 17-18. ``make_config(AS_PUBLISHED,
+#: scenario="paper")``; on the command line ``--config prediction.mode=terminal --config
+#: prediction.fit=paper``.
+AS_PUBLISHED: dict[str, dict[str, str]] = {"prediction": {"mode": "terminal", "fit": "paper"}}
 
 T = TypeVar("T")
 
@@ -275,17 +282,24 @@ class PredictionConfig:
         horizon: Prediction horizon ``t`` (s); the paper uses 10 s.
         mode: ``"swept"`` (every point reachable within the horizon, the default used for
             separation) or ``"terminal"`` (reachable at exactly the horizon, the paper's S1..S5).
+        fit: ``"enclosing"`` (an ellipsoid that provably encloses the set, the default) or
+            ``"paper"`` (eqs. 17-18 as published: axes from the set's extents, a circular
+            section across the heading; it does not enclose the set). With
+            ``mode="terminal"`` this is the paper's prediction as published, see
+            :data:`AS_PUBLISHED`.
         kalman: Whether UAVs and obstacle tracks are Kalman filtered; off, the raw noisy
             measurements are used as estimates.
     """
 
     horizon: float = 10.0  # s
     mode: str = "swept"
+    fit: str = "enclosing"
     kalman: bool = True
 
     def __post_init__(self) -> None:
         _positive("prediction.horizon", self.horizon, hi=600.0)
         _one_of("prediction.mode", self.mode, ("swept", "terminal"))
+        _one_of("prediction.fit", self.fit, ("enclosing", "paper"))
         _check(isinstance(self.kalman, bool), "prediction.kalman", self.kalman, "must be a bool")
 
 

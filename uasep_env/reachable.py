@@ -147,7 +147,9 @@ __all__ = [
 ]
 
 Mode = Literal["swept", "terminal"]
+Fit = Literal["enclosing", "paper"]
 _MODES = ("swept", "terminal")
+_FITS = ("enclosing", "paper")
 FloatArray = NDArray[np.float64]
 
 #: Intervals of the enclosure certificate on ``[0, pi]`` (even, so that pi/2 is a node).
@@ -181,6 +183,13 @@ def _check_mode(mode: str) -> bool:
     if mode not in _MODES:
         raise ValueError(f"mode must be 'swept' or 'terminal', got {mode!r}")
     return mode == "swept"
+
+
+def _check_fit(fit: str) -> bool:
+    """True for ``"paper"``, False for ``"enclosing"``; raises on anything else."""
+    if fit not in _FITS:
+        raise ValueError(f"fit must be 'enclosing' or 'paper', got {fit!r}")
+    return fit == "paper"
 
 
 def _out(x: FloatArray) -> FloatArray:
@@ -750,19 +759,45 @@ def _ellipse_core(
     return c, lat, lon
 
 
+def _paper_core(
+    vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The paper's ellipse (eq. 17) ``(c, A, B)``: the set's extents, not an enclosure.
+
+    Major axis ``a`` = the lateral extent between S3 and S4 (twice the support at
+    ``theta = pi/2``), minor axis ``b`` = the extent along the heading from S5 to the tip of
+    S1,2 (the supports at ``0`` and ``pi``). Eq. 17 writes ``x = a cos alpha``,
+    ``y = b sin alpha``, but the text defines ``a`` and ``b`` as the *lengths* of the axes;
+    taken as semi-axes the ellipse would be twice the size of the set in both directions, so
+    the semi-axes are ``a / 2`` and ``b / 2``, centred on the middle of the extents (the
+    ellipse inscribed in the set's bounding box, Figure 3).
+    """
+    zero = np.zeros_like(vt)
+    h0 = r + vt * _h_unit(zero, phi, swept)
+    hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
+    hx = r + vt * _h_unit(zero + 0.5 * np.pi, phi, swept)
+    return 0.5 * (h0 - hpi), hx, 0.5 * (h0 + hpi)
+
+
 def ellipse(
     speed: ArrayLike,
     max_turn_rate: ArrayLike,
     horizon: ArrayLike,
     radius: ArrayLike,
     mode: Mode = "swept",
+    fit: Fit = "enclosing",
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Heading-aligned ellipse that provably encloses the reachable set plus the radius.
+    """Heading-aligned ellipse around the reachable set plus the radius.
 
-    Replaces the paper's eq. 17 (whose axes are read off the figure and do not enclose).
+    ``fit="enclosing"`` (default) provably encloses the set and replaces the paper's eq. 17.
     See the module docstring for the enclosure certificate and the measured area factors
     (median 1.0004, at most 1.007 / 1.03 times the minimum enclosing ellipse for the swept /
-    terminal set).
+    terminal set). ``fit="paper"`` is eq. 17 as published (axes = the set's extents, see
+    :func:`_paper_core`): it does **not** enclose the set; it misses the set's "shoulders"
+    between the axes. At the paper's example (terminal set, ``w_max = 0.013``, ``v = 4``,
+    ``t = 10``, ``r = 3``) boundary points lie up to 0.51 m outside it and it misses 10 % of
+    the set's area; with ``w_max = 0.1``, ``v = 8``, up to 5.5 m and 13 %
+    (``tests/test_reachable.py::test_paper_fit_misses_the_shoulders``).
 
     Args:
         speed: Horizontal speed ``v`` (m/s).
@@ -771,15 +806,17 @@ def ellipse(
         radius: Safety radius ``r`` (m).
         mode: ``"swept"`` (reachable at any time in ``[0, t]``, default) or ``"terminal"``
             (the S1..S5 region, reachable at exactly ``t``).
+        fit: ``"enclosing"`` (default) or ``"paper"`` (eq. 17 as published, not enclosing).
 
     Returns:
         ``(center_offset, lateral_semi_axis, longitudinal_semi_axis)`` (m), broadcast shape:
         the centre lies ``center_offset`` ahead of the obstacle along its heading.
 
     Raises:
-        ValueError: On a negative/non-finite parameter or an unknown mode.
+        ValueError: On a negative/non-finite parameter, an unknown mode or an unknown fit.
     """
     swept = _check_mode(mode)
+    core = _paper_core if _check_fit(fit) else _ellipse_core
     v = _nonneg("speed", speed)
     w = _nonneg("max_turn_rate", max_turn_rate)
     t = _nonneg("horizon", horizon)
@@ -789,7 +826,7 @@ def ellipse(
     vt = (v * t).ravel()
     phi = (w * t).ravel()
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        c, lat, lon = _ellipse_core(vt, phi, r.ravel().astype(np.float64), swept)
+        c, lat, lon = core(vt, phi, r.ravel().astype(np.float64), swept)
     return _out(c.reshape(shape)), _out(lat.reshape(shape)), _out(lon.reshape(shape))
 
 
@@ -800,14 +837,23 @@ def ellipsoid(
     horizon: ArrayLike,
     radius: ArrayLike,
     mode: Mode = "swept",
+    fit: Fit = "enclosing",
 ) -> tuple[FloatArray, FloatArray]:
-    """Heading-aligned ellipsoid that provably encloses the 3D reachable set (eq. 18, fixed).
+    """Heading-aligned ellipsoid around the 3D reachable set (eq. 18).
 
     Horizontal Dubins motion as in :func:`ellipse`, vertical speed ``|v_z| <= vz_max``,
-    everything inflated by a ball of radius ``r``. Semi-axes are ``sqrt(3/2)`` times the 2D
-    ellipse's and ``sqrt(3) (vz_max t + r)`` vertically (the least-volume ellipsoid of that
-    family containing the cylinder "2D ellipse x vertical extent"); the flat 2D ellipse when
-    ``vz_max t + r = 0``.
+    everything inflated by a ball of radius ``r``.
+
+    ``fit="enclosing"`` (default, eq. 18 fixed, provably enclosing): semi-axes are
+    ``sqrt(3/2)`` times the enclosing 2D ellipse's and ``sqrt(3) (vz_max t + r)`` vertically
+    (the least-volume ellipsoid of that family containing the cylinder "2D ellipse x
+    vertical extent"); the flat 2D ellipse when ``vz_max t + r = 0``.
+
+    ``fit="paper"`` (as published, not enclosing): the paper's 2D ellipse (axis lengths
+    ``a`` lateral, ``b`` along the heading, see :func:`ellipse`) and, as the text says, a
+    circular section of diameter ``a`` across the heading: the vertical semi-axis is
+    ``a / 2``, whatever ``vz_max``. The printed eq. 18 (vertical semi-axis ``b``)
+    contradicts that sentence (notes); the text is followed.
 
     Args:
         speed: Horizontal speed ``v`` (m/s).
@@ -816,6 +862,7 @@ def ellipsoid(
         horizon: Prediction horizon ``t`` (s).
         radius: Safety radius ``r`` (m).
         mode: ``"swept"`` (default) or ``"terminal"``.
+        fit: ``"enclosing"`` (default) or ``"paper"`` (as published, not enclosing).
 
     Returns:
         ``(center_offset, semi_axes)``: the offset ahead of the obstacle along its heading
@@ -823,9 +870,10 @@ def ellipsoid(
         vertical) (m).
 
     Raises:
-        ValueError: On a negative/non-finite parameter or an unknown mode.
+        ValueError: On a negative/non-finite parameter, an unknown mode or an unknown fit.
     """
     swept = _check_mode(mode)
+    paper = _check_fit(fit)
     v = _nonneg("speed", speed)
     w = _nonneg("max_turn_rate", max_turn_rate)
     vz = _nonneg("max_climb_rate", max_climb_rate)
@@ -834,9 +882,12 @@ def ellipsoid(
     v, w, vz, t, r = np.broadcast_arrays(v, w, vz, t, r)
     shape = v.shape
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        c, lat, lon = _ellipse_core(
+        c, lat, lon = (_paper_core if paper else _ellipse_core)(
             (v * t).ravel(), (w * t).ravel(), r.ravel().astype(float), swept
         )
+    if paper:
+        axes = np.stack([lon, lat, lat], axis=-1)
+        return _out(c.reshape(shape)), axes.reshape((*shape, 3))
     z = (vz * t + r).ravel()
     flat = z <= 0.0
     lam = np.where(flat, 1.0, np.sqrt(1.5))

@@ -318,6 +318,7 @@ class World:
                 pred.horizon,
                 ob.radius[mask] + wind_speed * pred.horizon + track_err,
                 mode=pred.mode,
+                fit=pred.fit,
             )
             self.pred_offset[mask] = offset
             self.pred_axes[mask] = axes
