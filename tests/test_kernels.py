@@ -9,6 +9,7 @@ import pytest
 
 # Importing the modules registers their twins.
 from uasep_env import _numba, formation, geometry, observation, reachable, rewards  # noqa: F401
+from uasep_env.reachable import distance
 
 pytestmark = pytest.mark.skipif(
     not _numba.available(), reason="numba not installed or UASEP_NUMBA=0"
@@ -21,11 +22,11 @@ def _kernel(name: str):
 
 
 def _numpy_nearest(points, centers, axes, headings):
-    q, cp, sp = reachable._to_body(points, centers, headings)
-    x, dist, n = reachable._nearest_body(q, axes)
+    q, cp, sp = distance._to_body(points, centers, headings)
+    x, dist, n = distance._nearest_body(q, axes)
     cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
-    offset = reachable._to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp)
-    return offset, dist, reachable._to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+    offset = distance._to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp)
+    return offset, dist, distance._to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
 
 
 def _cases(rng: np.random.Generator, k: int) -> tuple[np.ndarray, ...]:
