@@ -56,9 +56,9 @@ def test_nearest_point_kernel_matches_numpy_bit_for_bit():
 
 
 def test_parallel_and_serial_loops_agree():
-    from uasep_env import _kernels
+    from uasep_env._kernels import common
 
-    pts, ctr, ax, hd = _cases(np.random.default_rng(1), 2 * _kernels.PARALLEL_MIN)
+    pts, ctr, ax, hd = _cases(np.random.default_rng(1), 2 * common.PARALLEL_MIN)
     big = _kernel("nearest_on_ellipsoids")(pts, ctr, ax, hd)
     small = [_kernel("nearest_on_ellipsoids")(*(a[:100] for a in (pts, ctr, ax, hd)))]
     for b, s in zip(big, small[0], strict=True):
@@ -228,7 +228,7 @@ def test_episodes_are_bit_identical_with_and_without_numba(monkeypatch):
 
 
 def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
-    from uasep_env import _kernels
+    from uasep_env._kernels import common
 
     rng = np.random.default_rng(4)
     for e, n, m in ((1, 3, 1), (7, 4, 3), (600, 3, 2)):  # the last runs the parallel loop
@@ -241,7 +241,7 @@ def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
         got = _kernel("pairwise_distances")(pts, ctr, ax, hd)
         assert got.shape == (e, n, m)
         np.testing.assert_array_equal(got, want)
-    assert e * n * m >= _kernels.PARALLEL_MIN
+    assert e * n * m >= common.PARALLEL_MIN
 
 
 @pytest.mark.parametrize(
@@ -285,11 +285,11 @@ def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
 
 def test_norm_adds_in_einsum_order():
     """The kernels' distance is numpy's ``sqrt(einsum)`` to the bit (its summation order)."""
-    from uasep_env import _kernels
+    from uasep_env._kernels import common
 
     d = np.random.default_rng(8).normal(0, 100, size=(5000, 3))
     want = np.sqrt(np.einsum("...i,...i->...", d, d))
-    got = np.array([_kernels._dist3(*row) for row in d])
+    got = np.array([common._dist3(*row) for row in d])
     np.testing.assert_array_equal(got, want)
 
 
@@ -312,7 +312,7 @@ def test_separations_kernel_matches_numpy(monkeypatch, n_envs, n_obstacles):
 
 def test_formation_frame_kernel_matches_numpy_including_fallbacks():
     """The compiled frame (eq. 6) is rotation_from_velocity's, slow and vertical cases too."""
-    from uasep_env import _kernels
+    from uasep_env._kernels.observations import _frame
     from uasep_env.formation import MIN_FRAME_SPEED, rotation_from_velocity
 
     rng = np.random.default_rng(12)
@@ -326,7 +326,7 @@ def test_formation_frame_kernel_matches_numpy_including_fallbacks():
     want = rotation_from_velocity(vel, fallback)
     assert (np.linalg.norm(vel, axis=-1) < MIN_FRAME_SPEED).sum() > 100
     for v, f, w in zip(vel, fallback, want, strict=True):
-        ct, st, cp, sp = _kernels._frame(*v, *f, MIN_FRAME_SPEED)
+        ct, st, cp, sp = _frame(*v, *f, MIN_FRAME_SPEED)
         got = [[-st, cp * ct, -ct * sp], [ct, cp * st, -st * sp], [0.0, -sp, -cp]]
         np.testing.assert_array_equal(np.array(got), w)
 
@@ -391,10 +391,10 @@ def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel()
     """numba's GNU OpenMP layer would kill the child; forked children use the serial loops."""
     import multiprocessing
 
-    from uasep_env import _kernels
+    from uasep_env._kernels import common
 
     parent = _big_rollout()  # 2,100 agents: the parallel loops
-    assert _kernels._parallel(2100)
+    assert common._parallel(2100)
     with multiprocessing.get_context("fork").Pool(1) as pool:
         child = pool.apply_async(_big_rollout).get(timeout=120)
     np.testing.assert_array_equal(child, parent)
