@@ -37,8 +37,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from uasep_env.formation import rotation_from_velocity
+from uasep_env.viz.frame_artists import build_artists
 from uasep_env.viz.shapes import SPHERE_LINES, SPHERE_QUADS, ellipsoid_points, enu, unit_ring
-from uasep_env.viz.style import OBSTACLE_COLOUR, PLAN_COLOUR, UAV_COLOURS
+from uasep_env.viz.style import OBSTACLE_COLOUR
 
 if TYPE_CHECKING:
     from uasep_env.world import World
@@ -48,8 +49,6 @@ __all__ = ["RENDER_MODES", "Renderer", "save_frame"]
 #: Modes accepted by :class:`Renderer`.
 RENDER_MODES = ("rgb_array", "human")
 
-_FRAME_COLOURS = UAV_COLOURS[:8]  # not the grey of the plan
-_MAX_LEGEND_UAVS = 8
 _NON_INTERACTIVE = frozenset({"agg", "cairo", "pdf", "pgf", "ps", "svg", "template"})
 _GROW_STEP_M = 50.0  # the view grows in steps of this size
 _EPS_T = 1e-9
@@ -152,206 +151,11 @@ class Renderer:
 
     def _build(self, n_uavs: int, n_obstacles: int, horizon: float) -> None:
         """Create every artist once; frames only update their data."""
-        from matplotlib.lines import Line2D
-        from matplotlib.patches import Patch, Polygon
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
-        fig = self.fig
-        fig.clear()
-        fig.patch.set_facecolor("white")
-        if self.top_view:
-            ax3 = fig.add_axes((-0.04, 0.06, 0.66, 0.86), projection="3d")
-            ax2 = fig.add_axes((0.675, 0.15, 0.31, 0.72))
-        else:
-            ax3 = fig.add_axes((0.02, 0.07, 0.96, 0.84), projection="3d")
-            ax2 = None
-        ax3.view_init(elev=self.elev, azim=self.azim)
-        ax3.set_xlabel("east (m)", labelpad=6)
-        ax3.set_ylabel("north (m)", labelpad=6)
-        ax3.set_zlabel("altitude (m)", labelpad=2)
-        ax3.tick_params(labelsize=7, pad=1)
-        for axis in (ax3.xaxis, ax3.yaxis, ax3.zaxis):
-            axis.set_pane_color((0.96, 0.96, 0.97, 1.0))
-            axis.label.set_size(8)
-        clip = {"axlim_clip": True} if self._supports_axlim_clip(ax3) else {}
-
-        def p3(**kw: Any) -> Any:
-            return ax3.plot([], [], [], **kw, **clip)[0]
-
-        art: dict[str, Any] = {"ax3": ax3, "ax2": ax2, "uav": [], "obs": []}
-        art["plan3"] = p3(color=PLAN_COLOUR, lw=1.0, ls="--", alpha=0.8)
-        colours = self._uav_colours(n_uavs)
-        for i in range(n_uavs):
-            c = colours[i]
-            u = {
-                "trail3": p3(color=c, lw=1.6, alpha=0.85),
-                "track3": p3(color=c, lw=0.8, ls=(0, (1, 2)), alpha=0.6),
-                "drop3": p3(color=c, lw=0.6, ls=":", alpha=0.7),
-                "planned3": p3(marker="o", ms=8, mfc="none", mec=c, mew=1.3, ls="none"),
-                "dot3": p3(marker="o", ms=6.5, color=c, mec="k", mew=0.5, ls="none"),
-            }
-            art["uav"].append(u)
-        for _ in range(n_obstacles):
-            surf = Poly3DCollection(
-                np.zeros((len(SPHERE_QUADS), 4, 3)),
-                facecolor=OBSTACLE_COLOUR,
-                edgecolor="none",
-                alpha=0.07,
-                **clip,
-            )
-            ax3.add_collection3d(surf)
-            o = {
-                "surf3": surf,
-                "wire3": p3(color=OBSTACLE_COLOUR, lw=0.5, alpha=0.35),
-                "trail3": p3(color=OBSTACLE_COLOUR, lw=1.3, alpha=0.7),
-                "drop3": p3(color=OBSTACLE_COLOUR, lw=0.6, ls=":", alpha=0.7),
-                "dot3": p3(marker="X", ms=9, color=OBSTACLE_COLOUR, mec="k", mew=0.5, ls="none"),
-            }
-            art["obs"].append(o)
-
-        if ax2 is not None:
-            ax2.set_aspect("equal", adjustable="box")
-            ax2.set_xlabel("east (m)", fontsize=8)
-            ax2.set_ylabel("north (m)", fontsize=8)
-            ax2.tick_params(labelsize=7)
-            ax2.grid(True, lw=0.4, alpha=0.5)
-            ax2.set_title("top view", fontsize=9)
-            art["plan2"] = ax2.plot([], [], color=PLAN_COLOUR, lw=1.0, ls="--", alpha=0.8)[0]
-            for i, u in enumerate(art["uav"]):
-                c = colours[i]
-                u["trail2"] = ax2.plot([], [], color=c, lw=1.4, alpha=0.85)[0]
-                u["track2"] = ax2.plot([], [], color=c, lw=0.8, ls=(0, (1, 2)), alpha=0.6)[0]
-                u["planned2"] = ax2.plot([], [], "o", ms=8, mfc="none", mec=c, mew=1.3)[0]
-                u["dot2"] = ax2.plot([], [], "o", ms=6, color=c, mec="k", mew=0.5, zorder=5)[0]
-                u["label2"] = (
-                    ax2.annotate(
-                        str(i),
-                        (0.0, 0.0),
-                        xytext=(0, 6),
-                        textcoords="offset points",
-                        ha="center",
-                        va="bottom",
-                        fontsize=7,
-                        fontweight="bold",
-                        color=c,
-                        annotation_clip=True,
-                    )
-                    if n_uavs <= _MAX_LEGEND_UAVS
-                    else None
-                )
-            for o in art["obs"]:
-                o["region2"] = ax2.add_patch(
-                    Polygon(
-                        np.zeros((3, 2)),
-                        closed=True,
-                        facecolor=(0.84, 0.15, 0.16, 0.10),
-                        edgecolor=(0.84, 0.15, 0.16, 0.7),
-                        lw=0.9,
-                    )
-                )
-                o["trail2"] = ax2.plot([], [], color=OBSTACLE_COLOUR, lw=1.2, alpha=0.7)[0]
-                o["dot2"] = ax2.plot(
-                    [], [], "X", ms=8, color=OBSTACLE_COLOUR, mec="k", mew=0.5, zorder=5
-                )[0]
-
-        handles: list[Any] = []
-        if n_uavs <= _MAX_LEGEND_UAVS:
-            for i in range(n_uavs):
-                handles.append(
-                    Line2D(
-                        [],
-                        [],
-                        marker="o",
-                        ls="-",
-                        color=colours[i],
-                        mec="k",
-                        mew=0.5,
-                        ms=6,
-                        lw=1.4,
-                        label=f"uav_{i}",
-                    )
-                )
-        else:
-            handles.append(
-                Line2D(
-                    [],
-                    [],
-                    marker="o",
-                    ls="-",
-                    color=colours[0],
-                    mec="k",
-                    mew=0.5,
-                    ms=6,
-                    label=f"UAVs uav_0..uav_{n_uavs - 1}",
-                )
-            )
-        handles += [
-            Line2D(
-                [],
-                [],
-                marker="o",
-                ls="none",
-                mfc="none",
-                mec=PLAN_COLOUR,
-                mew=1.3,
-                ms=8,
-                label="planned position",
-            ),
-            Line2D([], [], color=PLAN_COLOUR, lw=1.0, ls="--", label="plan (centre)"),
-            Line2D([], [], color=PLAN_COLOUR, lw=0.8, ls=(0, (1, 2)), label="planned tracks"),
-        ]
-        if n_obstacles:
-            handles += [
-                Line2D(
-                    [],
-                    [],
-                    marker="X",
-                    ls="-",
-                    color=OBSTACLE_COLOUR,
-                    mec="k",
-                    mew=0.5,
-                    ms=8,
-                    lw=1.2,
-                    label="obstacle",
-                ),
-                Patch(
-                    facecolor=(0.84, 0.15, 0.16, 0.15),
-                    edgecolor=(0.84, 0.15, 0.16, 0.7),
-                    label=f"reachable set ({horizon:g} s)",
-                ),
-            ]
-        ncol = len(handles) if len(handles) <= 9 else math.ceil(len(handles) / 2)
-        fig.legend(
-            handles=handles,
-            loc="lower center",
-            ncol=ncol,
-            fontsize=8,
-            frameon=False,
-            bbox_to_anchor=(0.5, 0.0),
-            handlelength=2.2,
-            columnspacing=1.4,
-        )
-        art["title"] = fig.text(0.5, 0.965, "", ha="center", va="center", fontsize=11)
-        art["status"] = fig.text(0.5, 0.925, "", ha="center", va="center", fontsize=9)
-        self._art = art
+        self._art = build_artists(
+            self.fig, n_uavs, n_obstacles, horizon, top_view=self.top_view, elev=self.elev,
+            azim=self.azim,
+        )  # fmt: skip
         self._shape = (n_uavs, n_obstacles)
-
-    @staticmethod
-    def _supports_axlim_clip(ax3: Any) -> bool:
-        try:
-            ax3.plot([], [], [], axlim_clip=True)[0].remove()
-        except (TypeError, AttributeError):
-            return False
-        return True
-
-    @staticmethod
-    def _uav_colours(n: int) -> list[Any]:
-        if n <= len(_FRAME_COLOURS):
-            return list(_FRAME_COLOURS[:n])
-        from matplotlib import colormaps
-
-        cmap = colormaps["viridis"]
-        return [cmap(x) for x in np.linspace(0.0, 0.9, n)]
 
     # ------------------------------------------------------------------ history
     def _update_history(self, world: World, env: int) -> _History:
