@@ -19,9 +19,14 @@ numbers.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from uasep_env.config import EnvConfig
+
+if TYPE_CHECKING:
+    from uasep_env.policies.apf import APFGains
 
 __all__ = ["ResidualAPF"]
 
@@ -32,13 +37,16 @@ class ResidualAPF:
     Args:
         config: The environment config (its ``action.residual_scale`` bounds the correction;
             its mode may be either: the APF always reads the world part of the observation).
+        gains: The base APF's gains (default: :class:`~uasep_env.policies.apf.APFGains`, what
+            the environments use); other gains only to study a trained policy on another
+            base (``baselines/tradeoff.py``).
     """
 
-    def __init__(self, config: EnvConfig) -> None:
+    def __init__(self, config: EnvConfig, gains: APFGains | None = None) -> None:
         from uasep_env.policies.apf import APF  # here: the policies package imports this module
 
         self.scale = config.action.residual_scale
-        self.apf = APF(config.replace(action={"mode": "direct"}))
+        self.apf = APF(config.replace(action={"mode": "direct"}), gains)
         self.world_dim = self.apf.layout.dim
 
     def base(self, world_obs: np.ndarray) -> np.ndarray:

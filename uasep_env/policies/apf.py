@@ -39,24 +39,33 @@ position, the safe distance grows with the relative approach speed, always activ
 UAVs, with fixed influence distances.
 
 The attraction is the same for the three methods, so the comparison isolates how each
-treats conflicts. Gains are not given in the paper: the defaults below were chosen for
-the ``paper`` scenario and are documented with their units.
+treats conflicts. Gains are not given in the paper. :class:`APFGains` holds the reference
+gains, with their units; the gains that set each method's safety margin were then swept
+(``baselines/tradeoff.py``) and each method's ``default_gains`` is the knee of its own
+safety/efficiency front, so the three are compared at their best trade-offs, not at one
+shared margin.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, fields, replace
+from typing import ClassVar
 
 import numpy as np
 
 from uasep_env import reachable
-from uasep_env.config import EnvConfig
+from uasep_env.config import EnvConfig, _positive
 from uasep_env.observation import ObservationLayout
 
 __all__ = ["APF", "APFGains", "MotionStateAPF", "TraditionalAPF"]
 
 # Fractions of the horizon at which the straight-line prediction is checked.
 _PREDICTION_SAMPLES = np.linspace(0.0, 1.0, 11)
+# Gains that divide or bound a distance must be > 0; the others may be 0 (term off).
+_POSITIVE_GAINS = frozenset({"goal_saturation", "obs_safe_min", "horizon", "inner_safe_min"})
+_GAIN_MAX = 1e6  # any larger gain is a typo, whatever its unit
 
 
 @dataclass(frozen=True)
@@ -103,13 +112,18 @@ class APFGains:
     max_repulsion: float = 20.0
 
     def __post_init__(self) -> None:
+        # The config's range checks, so a bad gain reads like a bad config value.
         for f in fields(self):
-            v = getattr(self, f.name)
-            if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
-                raise ValueError(f"invalid APF gain {f.name}={v!r}: must be a finite number >= 0")
-        for name in ("goal_saturation", "obs_safe_min", "horizon", "inner_safe_min"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"invalid APF gain {name}={getattr(self, name)!r}: must be > 0")
+            _positive(
+                f"gains.{f.name}",
+                getattr(self, f.name),
+                allow_zero=f.name not in _POSITIVE_GAINS,
+                hi=_GAIN_MAX,
+            )
+
+    def scaled(self, names: Sequence[str], factor: float) -> APFGains:
+        """These gains with the named ones multiplied by ``factor`` (the trade-off sweeps)."""
+        return replace(self, **{n: getattr(self, n) * factor for n in names})
 
 
 def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
@@ -122,20 +136,27 @@ def _cap_norm(f: np.ndarray, cap: float) -> np.ndarray:
     return f * np.minimum(1.0, cap / np.maximum(n, 1e-12))[..., None]
 
 
-class _APFBase:
-    """Shared machinery: decoding, attraction, inner repulsion and the bounds."""
+class _APFBase(ABC):
+    """Shared machinery: decoding, attraction, inner repulsion and the bounds.
+
+    Args:
+        config: The environment config (layout, bounds and step duration).
+        gains: Controller gains (default: the class's :attr:`default_gains`).
+    """
 
     name = "apf-base"
+    #: The gains used when none are given; each method's come from its trade-off curve.
+    default_gains: ClassVar[APFGains] = APFGains()
 
     def __init__(self, config: EnvConfig, gains: APFGains | None = None) -> None:
         self.config = config
-        self.gains = gains if gains is not None else APFGains()
+        self.gains = gains if gains is not None else self.default_gains
         self.layout = ObservationLayout.from_config(config)
         self.max_accel = config.uav.max_accel
         self.max_speed = config.uav.max_speed
         self.dt = config.step_duration
 
-    def reset(self) -> None:
+    def reset(self) -> None:  # noqa: B027 -- a deliberate no-op: the APFs are memoryless
         """The APFs are memoryless."""
 
     # -- pieces --------------------------------------------------------------------
@@ -164,9 +185,9 @@ class _APFBase:
         f = mag[..., None] * (g.alpha * away + g.beta * vel_part)
         return _cap_norm(f, g.max_repulsion).sum(axis=-2)
 
+    @abstractmethod
     def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
-        """Repulsion from the obstacles (method-specific)."""
-        raise NotImplementedError
+        """Repulsion from the obstacles (method-specific), (..., 3) in m/s^2."""
 
     def bound(self, accel: np.ndarray, velocity: np.ndarray) -> np.ndarray:
         """Eq. 4 and the acceleration bound; returns normalised actions."""
@@ -197,9 +218,16 @@ class _APFBase:
 class APF(_APFBase):
     """The paper's method: reachable-set repulsion with entry prediction (eqs. 19-32).
 
+    Default gains: :class:`APFGains` as they are. They are the knee of the APF's trade-off
+    curve (``baselines/tradeoff.py``, ``docs/figures/tradeoff.md``): over margin scales
+    0.25-3 of ``obs_safe_min`` and ``obs_time`` on the 200-encounter bank, every setting is
+    collision-free and the mean max deviation grows from 33 to 45 m while the min
+    UAV-obstacle distance grows from 30 to 39 m; the knee (scale 1: 6 m and 2 s, 37 m and
+    33 m) is where more distance starts to cost more deviation per metre.
+
     Args:
         config: The environment config (layout, bounds and step duration).
-        gains: Controller gains (defaults: :class:`APFGains`).
+        gains: Controller gains (default: :attr:`default_gains`).
     """
 
     name = "apf"
@@ -245,9 +273,16 @@ class MotionStateAPF(_APFBase):
 
     The obstacle is a sphere of its safety radius around its current (estimated) position;
     the safe distance grows with the relative approach speed; always active inside it.
+
+    Default gains: ``obs_safe_min`` 9 m and ``obs_time`` 3 s (1.5 times the APF's), the knee
+    of its trade-off curve (``baselines/tradeoff.py``, bank): below it collisions rise
+    (12 % at the APF's 6 m / 2 s, 26 % at a quarter of them), above it each metre of
+    distance costs more deviation (collisions 11 %, max deviation 12 m, min distance 13 m
+    at the knee; 8.5 %, 16 m and 14 m at twice the margin).
     """
 
     name = "motion-state-apf"
+    default_gains = APFGains().scaled(("obs_safe_min", "obs_time"), 1.5)
 
     def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """Repulsion from the obstacle's current position and motion."""
@@ -266,9 +301,16 @@ class MotionStateAPF(_APFBase):
 
 
 class TraditionalAPF(_APFBase):
-    """Distance-only APF (Khatib): ``eta (1/rho - 1/rho_0) / rho^2`` away from each source."""
+    """Distance-only APF (Khatib): ``eta (1/rho - 1/rho_0) / rho^2`` away from each source.
+
+    Default gains: ``traditional_range`` (``rho_0`` from obstacles) 18.75 m, 0.75 times the
+    reference 25 m, the knee of its trade-off curve (``baselines/tradeoff.py``, bank):
+    collisions 11.5 % there against 14 % at half the range and 11-11.5 % at longer ranges,
+    while the deviation keeps growing (13 m at the knee, 16 m at three times the range).
+    """
 
     name = "traditional-apf"
+    default_gains = APFGains().scaled(("traditional_range",), 0.75)
 
     def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """Repulsion from the obstacle's current position, by distance only."""

@@ -24,13 +24,16 @@ import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from uasep_env.actions import ResidualAPF
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.observation import ObservationLayout
+
+if TYPE_CHECKING:
+    from uasep_env.policies.apf import APFGains
 
 __all__ = [
     "CHECKPOINT_FORMAT",
@@ -125,6 +128,9 @@ class LearnedPolicy:
         config: The environment config it will act in (default: its training config in
             ``direct`` mode).
         name: Label in reports.
+        base_gains: For a ``residual_apf`` policy acting in a ``direct`` environment, the
+            gains of the APF it corrects (default: the environments' default gains, which
+            it was trained on).
 
     Raises:
         CheckpointError: When the environment does not fit the checkpoint (number of UAVs,
@@ -139,6 +145,7 @@ class LearnedPolicy:
         obs_var: np.ndarray | None = None,
         config: EnvConfig | None = None,
         name: str = "learned",
+        base_gains: APFGains | None = None,
     ) -> None:
         trained = meta.env_config
         if config is None:
@@ -149,7 +156,7 @@ class LearnedPolicy:
         self.mode = trained.action.mode
         _check_fits(meta, trained, config)
         self._residual = (
-            ResidualAPF(trained)
+            ResidualAPF(trained, base_gains)
             if self.mode == "residual_apf" and config.action.mode == "direct"
             else None
         )
@@ -315,7 +322,10 @@ def _cached_read(path: str, mtime_ns: int, size: int) -> tuple:
 
 
 def load_policy(
-    path: str | Path, config: EnvConfig | None = None, name: str | None = None
+    path: str | Path,
+    config: EnvConfig | None = None,
+    name: str | None = None,
+    base_gains: APFGains | None = None,
 ) -> LearnedPolicy:
     """Load a policy checkpoint (read once per process while the file is unchanged).
 
@@ -323,6 +333,8 @@ def load_policy(
         path: The checkpoint (``.zip``).
         config: The environment config it will act in (default: its own, ``direct`` mode).
         name: Label in reports (default: the file's stem).
+        base_gains: The gains of the APF a residual policy corrects (see
+            :class:`LearnedPolicy`).
 
     Returns:
         The policy.
@@ -337,7 +349,9 @@ def load_policy(
         raise FileNotFoundError(f"no policy checkpoint at {p}")
     st = p.stat()
     meta, weights, mean, var = _cached_read(str(p.resolve()), st.st_mtime_ns, st.st_size)
-    return LearnedPolicy(meta, weights, mean, var, config=config, name=name or p.stem)
+    return LearnedPolicy(
+        meta, weights, mean, var, config=config, name=name or p.stem, base_gains=base_gains
+    )
 
 
 class SB3Policy:

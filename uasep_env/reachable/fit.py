@@ -322,7 +322,9 @@ def _paper_core(
     ``y = b sin alpha``, but the text defines ``a`` and ``b`` as the *lengths* of the axes;
     taken as semi-axes the ellipse would be twice the size of the set in both directions, so
     the semi-axes are ``a / 2`` and ``b / 2``, centred on the middle of the extents (the
-    ellipse inscribed in the set's bounding box, Figure 3).
+    ellipse inscribed in the set's bounding box, Figure 3). The extents are those of the
+    corrected set (S3/S4 centred on ``F(+-phi)``, the erratum of eqs. 13-14), read off its
+    support function.
     """
     zero = np.zeros_like(vt)
     h0 = r + vt * _h_unit(zero, phi, swept)

@@ -1,0 +1,541 @@
+"""Safety against efficiency for every controller: each one's gain sweep and Pareto front.
+
+    python baselines/tradeoff.py [--workers 2] [--paper-episodes 20] [--bank-episodes 200]
+
+A single setting per controller says little: the README's tables compare the APF keeping
+17 m from the obstacle with a motion-state APF keeping 11 m. Here each controller's safety
+margin is swept over a grid (:data:`METHODS`), every setting plays the same encounters as
+the paper experiment (the ``paper`` scenario, seeds 0-19, and the 200-encounter ``random``
+bank, seeds 100000-100199), and efficiency (max deviation, longest conflict resolution,
+acceleration fluctuation) is plotted against safety (min UAV-obstacle distance,
+loss-of-separation rate, collision rate), with 95 % intervals (Student-t for means, Wilson
+for rates) and each method's Pareto front.
+
+The knobs (``scale`` multiplies the gains that set the margin in the reference gains,
+:class:`~uasep_env.policies.apf.APFGains`'s field defaults; each method's own default, its
+``default_gains``, is the knee of its front on the bank, see :func:`knee`):
+
+* ``apf`` -- the proposed APF with the enclosing prediction (the default):
+  ``obs_safe_min`` and ``obs_time`` (``r_safe = r_min + K v cos delta``, eq. 24);
+* ``apf-published`` -- the same gains with the paper's prediction as published
+  (:data:`uasep_env.config.AS_PUBLISHED`: terminal set, eqs. 17-18 ellipsoid);
+* ``motion-state-apf`` -- ``obs_safe_min`` and ``obs_time`` (its sphere's safe distance);
+* ``traditional-apf`` -- ``traditional_range`` (Khatib's influence distance ``rho_0``);
+* ``ppo-residual`` -- the shipped residual policy on the APF whose ``obs_safe_min`` and
+  ``obs_time`` are scaled (its correction was trained on the default base);
+* ``ppo-shared`` -- the shipped pure policy has no gain; what sets its margin is the region it
+  observes, so the prediction horizon is swept (trained at 10 s; other horizons are outside
+  its training distribution).
+
+Writes ``docs/figures/tradeoff.csv`` (one row per method, setting and scenario: every
+statistic with its interval), ``docs/figures/tradeoff_{paper,bank}.png`` and
+``docs/figures/tradeoff.md`` (the tables the README quotes, from :func:`report`). Resumable: rows
+already in the CSV for the same episodes are kept, and only missing settings run (delete
+the CSV, or pass ``--fresh``, to start over). The motion-state and traditional APFs do not
+read the prediction, so their rows hold for both fits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uasep_env import make_config
+from uasep_env.config import AS_PUBLISHED, EnvConfig
+from uasep_env.evaluation import evaluate
+from uasep_env.metrics import t_interval, wilson_interval
+from uasep_env.policies import (
+    APF,
+    APFGains,
+    MotionStateAPF,
+    TraditionalAPF,
+    load_policy,
+)
+
+ROOT = Path(__file__).resolve().parent
+FIGURES = ROOT.parent / "docs" / "figures"
+CHECKPOINTS = ROOT / "checkpoints"
+#: The paper experiment's encounters (``baselines/paper_experiment.py``).
+PAPER_SEEDS = range(0, 20)
+BANK_FIRST_SEED = 100_000
+#: Margin scales: 9 settings from a quarter to three times the default margin.
+SCALES = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0)
+#: Prediction horizons (s) for the pure learned policy (trained at 10 s).
+HORIZONS_S = (4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0)
+
+
+def _scaled(names: Sequence[str], scale: float) -> APFGains:
+    """The reference gains (:class:`APFGains`'s field defaults) with ``names`` scaled."""
+    return APFGains().scaled(names, scale)
+
+
+_MARGIN = ("obs_safe_min", "obs_time")
+
+
+@dataclass(frozen=True)
+class Method:
+    """A controller and the knob swept over its safety margin.
+
+    Attributes:
+        name: Key in the CSV and figures.
+        label: Legend label.
+        knob: What the values set.
+        values: The grid.
+        default: The value that is the controller's default (its ``default_gains``).
+        policy: ``(config, value) -> policy`` for one setting.
+        config: Overrides of the environment config for one setting (default: none).
+    """
+
+    name: str
+    label: str
+    knob: str
+    values: tuple[float, ...]
+    default: float
+    policy: Callable[[EnvConfig, float], Any]
+    config: Callable[[float], dict[str, Any]] = lambda _v: {}
+
+
+def _residual(cfg: EnvConfig, s: float) -> Any:
+    return load_policy(
+        CHECKPOINTS / "ppo_residual_apf.zip",
+        cfg,
+        "ppo-residual",
+        base_gains=_scaled(_MARGIN, s),
+    )
+
+
+METHODS: tuple[Method, ...] = (
+    Method(
+        "apf",
+        "APF (proposed)",
+        "margin scale",
+        SCALES,
+        1.0,
+        lambda c, s: APF(c, _scaled(_MARGIN, s)),
+    ),
+    Method(
+        "apf-published",
+        "APF, paper's prediction",
+        "margin scale",
+        SCALES,
+        1.0,
+        lambda c, s: APF(c, _scaled(_MARGIN, s)),
+        lambda _s: AS_PUBLISHED,
+    ),
+    Method(
+        "motion-state-apf",
+        "motion-state APF",
+        "margin scale",
+        SCALES,
+        1.5,
+        lambda c, s: MotionStateAPF(c, _scaled(_MARGIN, s)),
+    ),
+    Method(
+        "traditional-apf",
+        "traditional APF",
+        "range scale",
+        SCALES,
+        0.75,
+        lambda c, s: TraditionalAPF(c, _scaled(("traditional_range",), s)),
+    ),
+    Method(
+        "ppo-residual",
+        "PPO residual on APF",
+        "base margin scale",
+        SCALES,
+        1.0,
+        _residual,
+    ),
+    Method(
+        "ppo-shared",
+        "PPO (pure)",
+        "prediction horizon (s)",
+        HORIZONS_S,
+        10.0,
+        lambda c, _h: load_policy(CHECKPOINTS / "ppo_shared.zip", c, "ppo-shared"),
+        lambda h: {"prediction": {"horizon": h}},
+    ),
+)
+
+#: (column, dotted episode metric or derived name, statistic, axis label, higher is safer)
+SAFETY = (
+    (
+        "min_obstacle_distance",
+        "min_obstacle_distance",
+        "mean",
+        "min UAV-obstacle distance (m)",
+    ),
+    ("loss_of_separation", "loss_of_separation", "rate", "loss-of-separation rate"),
+    ("collision", "collision", "rate", "collision rate"),
+)
+EFFICIENCY = (
+    ("max_deviation", "max_deviation", "mean", "max deviation from plan (m)"),
+    (
+        "conflict_duration",
+        "max_conflict_duration",
+        "mean",
+        "longest conflict resolution (s)",
+    ),
+    ("acc_fluctuation", "acc_fluctuation", "mean", "max acceleration std (m/s²)"),
+)
+#: Per-axis deviation of the middle UAV (the paper's UAV3: which axis it resolves in).
+AXES = (("uav2_dev_north", "x"), ("uav2_dev_east", "y"), ("uav2_dev_down", "z"))
+
+
+def _episode_values(result: Any, label: str) -> list[dict[str, Any]]:
+    """The per-episode metrics of one label, as ``{"episode": {...}, "uavs": [...]}``."""
+    return [e["metrics"] for e in result["results"][label]["episodes"]]
+
+
+def _row_stats(episodes: list[dict[str, Any]]) -> dict[str, float]:
+    """Every statistic of one setting, with intervals."""
+    ep = [m["episode"] for m in episodes]
+    values: dict[str, np.ndarray] = {
+        "min_obstacle_distance": np.array([e["min_obstacle_distance"] for e in ep], float),
+        "loss_of_separation": np.array([bool(e["loss_of_separation"]) for e in ep]),
+        "collision": np.array([bool(e["collision"]) for e in ep]),
+        "max_deviation": np.array([e["max_deviation"] for e in ep], float),
+        "max_conflict_duration": np.array(
+            [
+                np.nan if e["max_conflict_duration"] is None else e["max_conflict_duration"]
+                for e in ep
+            ],
+            float,
+        ),
+        "acc_fluctuation": np.array([max(e["max_acc_std"].values()) for e in ep], float),
+    }
+    out: dict[str, float] = {"n": float(len(ep))}
+    for col, key, stat, _ in SAFETY + EFFICIENCY:
+        v = values[key]
+        if stat == "rate":
+            k = int(v.sum())
+            lo, hi = wilson_interval(k, len(v))
+            out[col], out[f"{col}_lo"], out[f"{col}_hi"] = k / len(v), lo, hi
+        else:
+            v = v[np.isfinite(v)]
+            out[col] = float(v.mean()) if v.size else float("nan")
+            lo, hi = t_interval(v) if v.size > 1 else (float("nan"), float("nan"))
+            out[f"{col}_lo"], out[f"{col}_hi"] = lo, hi
+    for col, ax in AXES:
+        dev = [next(u for u in m["uavs"] if u["name"] == "uav_2") for m in episodes]
+        out[col] = float(np.mean([u["deviation"]["max_abs"][ax] for u in dev]))
+    return out
+
+
+def _datasets(paper_n: int, bank_n: int) -> dict[str, tuple[str, range]]:
+    return {
+        "paper": ("paper", range(PAPER_SEEDS.start, PAPER_SEEDS.start + paper_n)),
+        "bank": ("random", range(BANK_FIRST_SEED, BANK_FIRST_SEED + bank_n)),
+    }
+
+
+def _read(path: Path) -> list[dict[str, Any]]:
+    if not path.exists():
+        return []
+    with path.open() as f:
+        return [
+            {k: (v if k in ("method", "knob", "dataset") else float(v)) for k, v in r.items()}
+            for r in csv.DictReader(f)
+        ]
+
+
+def _write(path: Path, rows: list[dict[str, Any]]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cols = list(rows[0])
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols, lineterminator="\n")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+
+
+def run(
+    methods: Sequence[Method],
+    paper_n: int,
+    bank_n: int,
+    workers: int,
+    csv_path: Path,
+    fresh: bool = False,
+) -> list[dict[str, Any]]:
+    """Evaluate every missing (method, setting, dataset) and return all rows of the CSV."""
+    rows = [] if fresh else _read(csv_path)
+    sets = _datasets(paper_n, bank_n)
+    done = {(r["method"], r["value"], r["dataset"], r["n"]) for r in rows}
+    for m in methods:
+        for ds, (scenario, seeds) in sets.items():
+            todo = [v for v in m.values if (m.name, float(v), ds, float(len(seeds))) not in done]
+            if not todo:
+                continue
+            # Settings that share an environment config run in one call (one set of chunks).
+            by_config: dict[str, list[float]] = {}
+            for v in todo:
+                by_config.setdefault(repr(m.config(v)), []).append(v)
+            for values in by_config.values():
+                cfg = make_config(m.config(values[0]), scenario=scenario)
+                policies = {f"{m.name}@{v:g}": m.policy(cfg, v) for v in values}
+                result = evaluate(policies, cfg, seeds, workers=workers)
+                for v in values:
+                    stats = _row_stats(_episode_values(result, f"{m.name}@{v:g}"))
+                    rows.append(
+                        {
+                            "method": m.name,
+                            "knob": m.knob,
+                            "value": float(v),
+                            "dataset": ds,
+                            **stats,
+                        }
+                    )
+                    print(
+                        f"{m.name:18s} {m.knob} = {v:<5g} {ds:5s} "
+                        + " ".join(f"{c}={stats[c]:.3g}" for c, *_ in SAFETY + EFFICIENCY)
+                    )
+                _write(csv_path, rows)  # after every call: an interrupted run resumes here
+    return rows
+
+
+def pareto(safety: np.ndarray, cost: np.ndarray, higher_is_safer: bool) -> np.ndarray:
+    """Mask of the settings no other setting beats on both safety and cost."""
+    s = safety if higher_is_safer else -safety
+    keep = np.ones(len(s), bool)
+    for i in range(len(s)):
+        better = (s >= s[i]) & (cost <= cost[i]) & ((s > s[i]) | (cost < cost[i]))
+        keep[i] = not better.any()
+    return keep
+
+
+def knee(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The knee of a method's front of max deviation against min obstacle distance.
+
+    Among the settings that collide no more often than the method's safest setting (the
+    Wilson intervals overlap) and are on the Pareto front, the point farthest from the
+    chord between the front's ends, both axes scaled to [0, 1] (the "kneedle" rule): past
+    it, more distance costs more deviation per metre than before it.
+    """
+    rows = sorted(rows, key=lambda r: r["value"])
+    safest = min(r["collision"] for r in rows)
+    safest_hi = min(r["collision_hi"] for r in rows if r["collision"] == safest)
+    ok = [r for r in rows if r["collision_lo"] <= safest_hi]
+    s = np.array([r["min_obstacle_distance"] for r in ok])
+    c = np.array([r["max_deviation"] for r in ok])
+    front = [r for r, k in zip(ok, pareto(s, c, True), strict=True) if k]
+    if len(front) < 3:
+        return max(front, key=lambda r: r["min_obstacle_distance"])
+    x = np.array([r["min_obstacle_distance"] for r in front])
+    y = np.array([r["max_deviation"] for r in front])
+    x = (x - x.min()) / max(np.ptp(x), 1e-12)
+    y = (y - y.min()) / max(np.ptp(y), 1e-12)
+    i0, i1 = np.argmin(x), np.argmax(x)
+    d = np.abs((x[i1] - x[i0]) * (y[i0] - y) - (x[i0] - x) * (y[i1] - y[i0]))
+    return front[int(np.argmax(d))]
+
+
+def plot(rows: list[dict[str, Any]], dataset: str, path: Path, title: str) -> None:
+    """A 3 x 3 grid: efficiency (rows) against safety (columns), one curve per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 3, figsize=(15, 13), constrained_layout=True)
+    colours = plt.get_cmap("tab10")
+    for mi, m in enumerate(METHODS):
+        rs = sorted(
+            (r for r in rows if r["method"] == m.name and r["dataset"] == dataset),
+            key=lambda r: r["value"],
+        )
+        if not rs:
+            continue
+        for i, (ecol, _k, _s, elabel) in enumerate(EFFICIENCY):
+            for j, (scol, _k2, _s2, slabel) in enumerate(SAFETY):
+                ax = axes[i, j]
+                x = np.array([r[scol] for r in rs])
+                y = np.array([r[ecol] for r in rs])
+                xe = np.abs(np.array([[r[f"{scol}_lo"], r[f"{scol}_hi"]] for r in rs]).T - x)
+                ye = np.abs(np.array([[r[f"{ecol}_lo"], r[f"{ecol}_hi"]] for r in rs]).T - y)
+                front = pareto(x, y, scol == "min_obstacle_distance")
+                col = colours(mi)
+                ax.errorbar(
+                    x,
+                    y,
+                    xerr=np.nan_to_num(xe),
+                    yerr=np.nan_to_num(ye),
+                    color=col,
+                    alpha=0.35,
+                    fmt="none",
+                    lw=0.8,
+                )
+                ax.plot(x, y, "-", color=col, lw=0.8, alpha=0.6)
+                ax.plot(
+                    x[front],
+                    y[front],
+                    "o",
+                    color=col,
+                    ms=5,
+                    label=m.label if (i, j) == (0, 0) else None,
+                )
+                ax.plot(x[~front], y[~front], "o", mfc="none", color=col, ms=5)
+                default = [k for k, r in enumerate(rs) if r["value"] == m.default]
+                ax.plot(x[default], y[default], "*", color=col, ms=11, mec="k", mew=0.5)
+                ax.set_xlabel(slabel)
+                ax.set_ylabel(elabel)
+                ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8, loc="best")
+    fig.suptitle(
+        f"{title}: each controller's safety margin swept (filled = its Pareto front, "
+        "star = default setting, bars = 95 % intervals)"
+    )
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+#: Common min UAV-obstacle distances (m) at which the fronts are compared, per scenario.
+LEVELS_M = {"paper": (12.0, 13.0, 15.0, 17.0), "bank": (13.0, 20.0, 30.0)}
+
+
+def _method_rows(rows: list[dict[str, Any]], name: str, dataset: str) -> list[dict[str, Any]]:
+    return sorted(
+        (r for r in rows if r["method"] == name and r["dataset"] == dataset),
+        key=lambda r: r["value"],
+    )
+
+
+def at_distance(rs: list[dict[str, Any]], level: float, col: str) -> float | None:
+    """``col`` interpolated along a front at a min obstacle distance (None: out of reach)."""
+    x = np.array([r["min_obstacle_distance"] for r in rs])
+    y = np.array([r[col] for r in rs])
+    ok = np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if x.size == 0 or not x.min() <= level <= x.max():
+        return None
+    order = np.argsort(x, kind="stable")
+    return float(np.interp(level, x[order], y[order]))
+
+
+def _num(x: float) -> str:
+    return f"{x:.1f}" if np.isfinite(x) else "-"  # nan: no UAV ever left the plan
+
+
+def report(rows: list[dict[str, Any]]) -> str:
+    """The markdown summary the README quotes: defaults, equal-safety costs, resolution axes."""
+    present = [m for m in METHODS if _method_rows(rows, m.name, "bank")]
+    out = ["## Defaults: the knee of each front (bank)", "",
+           "| method | knob | knee | default |", "|---|---|---|---|"]  # fmt: skip
+    for m in present:
+        k = knee(_method_rows(rows, m.name, "bank"))
+        out.append(f"| {m.label} | {m.knob} | {k['value']:g} | {m.default:g} |")
+    for ds, title in (("paper", "Paper scenario"), ("bank", "Random encounter bank")):
+        levels = LEVELS_M[ds]
+        out += ["", f"## {title}: cost at equal min UAV-obstacle distance", "",
+                "max deviation (m) / longest conflict resolution (s), interpolated along each "
+                "front; - where the method's sweep does not reach that distance", "",
+                "| method | reaches (m) | " + " | ".join(f"at {v:g} m" for v in levels) + " |",
+                "|---|---|" + "---|" * len(levels)]  # fmt: skip
+        for m in present:
+            rs = _method_rows(rows, m.name, ds)
+            d = [r["min_obstacle_distance"] for r in rs]
+            cells = []
+            for v in levels:
+                dev, dur = (
+                    at_distance(rs, v, "max_deviation"),
+                    at_distance(rs, v, "conflict_duration"),
+                )
+                cells.append(
+                    "-" if dev is None else f"{dev:.1f} / {'-' if dur is None else f'{dur:.1f}'}"
+                )
+            out.append(f"| {m.label} | {min(d):.1f}-{max(d):.1f} | " + " | ".join(cells) + " |")
+        out += [
+            "",
+            f"## {title}: the safest loss-of-separation rate each reaches, and its cost",
+            "",
+            "| method | lowest rate | setting | collisions | min distance (m) | "
+            "max deviation (m) | conflict resolution (s) |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for m in present:
+            rs = _method_rows(rows, m.name, ds)
+            best = min(r["loss_of_separation"] for r in rs)
+            r = min((r for r in rs if r["loss_of_separation"] == best),
+                    key=lambda r: r["max_deviation"])  # fmt: skip
+            out.append(
+                f"| {m.label} | {best:.1%} | {m.knob} {r['value']:g} | {r['collision']:.1%} | "
+                f"{r['min_obstacle_distance']:.1f} | {r['max_deviation']:.1f} | "
+                f"{_num(r['conflict_duration'])} |"
+            )
+    out += [
+        "",
+        "## Paper scenario: the middle UAV's largest deviation by axis (m)",
+        "",
+        "mean over the 20 seeds of uav_2's largest deviation from its plan along each axis; "
+        "the plan flies north, so north is along the track, east lateral, down vertical",
+        "",
+        "| method | setting | along track | lateral | vertical |",
+        "|---|---|---|---|---|",
+    ]
+    for m in present:
+        rs = _method_rows(rows, m.name, "paper")
+        safe = [r for r in rs if r["loss_of_separation"] == 0.0]
+        picks = [r for r in rs if r["value"] == m.default]
+        if safe and safe[0]["value"] != m.default:
+            picks.append(safe[0])
+        for r in picks:
+            tag = "default" if r["value"] == m.default else "least margin without LoS"
+            out.append(
+                f"| {m.label} | {m.knob} {r['value']:g} ({tag}) | {r['uav2_dev_north']:.1f} | "
+                f"{r['uav2_dev_east']:.1f} | {r['uav2_dev_down']:.1f} |"
+            )
+    return "\n".join(out) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Run the sweep (resuming), then write the CSV and the figures."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--paper-episodes", type=int, default=len(PAPER_SEEDS))
+    p.add_argument("--bank-episodes", type=int, default=200)
+    p.add_argument(
+        "--methods",
+        default=",".join(m.name for m in METHODS),
+        help="comma-separated subset of: " + ", ".join(m.name for m in METHODS),
+    )
+    p.add_argument("--out", type=Path, default=FIGURES)
+    p.add_argument("--fresh", action="store_true", help="ignore the rows already in the CSV")
+    args = p.parse_args(argv)
+    known = {m.name: m for m in METHODS}
+    names = [n.strip() for n in args.methods.split(",") if n.strip()]
+    bad = [n for n in names if n not in known]
+    if bad:
+        p.error(f"unknown method(s) {', '.join(bad)}; choose from {', '.join(known)}")
+    csv_path = args.out / "tradeoff.csv"
+    rows = run(
+        [known[n] for n in names],
+        args.paper_episodes,
+        args.bank_episodes,
+        args.workers,
+        csv_path,
+        args.fresh,
+    )
+    plot(
+        rows,
+        "paper",
+        args.out / "tradeoff_paper.png",
+        f"Paper scenario ({args.paper_episodes} seeds)",
+    )
+    plot(
+        rows,
+        "bank",
+        args.out / "tradeoff_bank.png",
+        f"Random encounter bank ({args.bank_episodes} encounters)",
+    )
+    text = report(rows)
+    (args.out / "tradeoff.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,122 @@
+"""Tests of baselines/tradeoff.py: Pareto fronts, the knee rule, and a resumable small sweep."""
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BASELINES = Path(__file__).resolve().parents[1] / "baselines"
+sys.path.insert(0, str(BASELINES))
+
+import tradeoff  # noqa: E402
+
+
+def test_pareto_keeps_only_undominated_settings():
+    dist = np.array([10.0, 12.0, 11.0, 20.0, 20.0])
+    dev = np.array([5.0, 6.0, 7.0, 9.0, 10.0])
+    # 11 m at 7 m is beaten by 12 m at 6 m; 20 m at 10 m by 20 m at 9 m.
+    np.testing.assert_array_equal(
+        tradeoff.pareto(dist, dev, True), [True, True, False, True, False]
+    )
+    # For a rate, lower is safer.
+    rate = np.array([0.1, 0.0, 0.0])
+    np.testing.assert_array_equal(
+        tradeoff.pareto(rate, np.array([1.0, 2.0, 3.0]), False), [True, True, False]
+    )
+
+
+def _row(value, dist, dev, coll=0.0, lo=0.0, hi=0.02):
+    return {"value": value, "min_obstacle_distance": dist, "max_deviation": dev,
+            "collision": coll, "collision_lo": lo, "collision_hi": hi}  # fmt: skip
+
+
+def test_knee_is_where_distance_starts_to_cost_more():
+    # Deviation grows slowly up to 20 m, then steeply: the knee is the 20 m setting.
+    rows = [_row(v, d, c) for v, d, c in
+            [(0.5, 10, 5), (1.0, 15, 6), (1.5, 20, 7), (2.0, 25, 15), (3.0, 30, 30)]]  # fmt: skip
+    assert tradeoff.knee(rows)["value"] == 1.5
+    # A setting that collides more often than the safest one is never the knee.
+    rows[2] = _row(1.5, 20, 7, coll=0.3, lo=0.2, hi=0.4)
+    assert tradeoff.knee(rows)["value"] != 1.5
+
+
+def test_margin_scale_one_is_the_default_gains():
+    from uasep_env.policies import APFGains
+
+    assert tradeoff._scaled(tradeoff._MARGIN, 1.0) == APFGains()
+    scaled = tradeoff._scaled(tradeoff._MARGIN, 2.0)
+    assert scaled.obs_safe_min == 2 * APFGains().obs_safe_min
+    assert scaled.k_obs == APFGains().k_obs
+    for m in tradeoff.METHODS:
+        assert len(m.values) >= 8, m.name
+
+
+def test_small_sweep_writes_csv_and_figures_and_resumes(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    args = ["--methods", "apf,apf-published,traditional-apf", "--paper-episodes", "1",
+            "--bank-episodes", "1", "--workers", "1", "--out", str(tmp_path)]  # fmt: skip
+    tradeoff.main(args)
+    with (tmp_path / "tradeoff.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 3 * 9 * 2
+    assert {r["dataset"] for r in rows} == {"paper", "bank"}
+    for name in ("tradeoff_paper.png", "tradeoff_bank.png"):
+        assert (tmp_path / name).stat().st_size > 10_000
+    # The default setting on paper seed 0 is the paper experiment's APF episode.
+    apf = next(r for r in rows if r["method"] == "apf" and r["value"] == "1" and
+               r["dataset"] == "paper")  # fmt: skip
+    paper = json.loads((BASELINES / "results" / "paper.json").read_text())
+    ep0 = paper["results"]["apf"]["episodes"][0]["metrics"]["episode"]
+    assert float(apf["min_obstacle_distance"]) == pytest.approx(ep0["min_obstacle_distance"],
+                                                                rel=1e-5)  # fmt: skip
+    # The published prediction changes the APF's flight; the traditional APF ignores it.
+    pub = next(r for r in rows if r["method"] == "apf-published" and r["value"] == "1" and
+               r["dataset"] == "paper")  # fmt: skip
+    assert pub["max_deviation"] != apf["max_deviation"]
+
+    # Resumed: nothing is evaluated again, the CSV is unchanged.
+    def no_eval(*_a, **_k):
+        raise AssertionError("a finished setting was evaluated again")
+
+    before = (tmp_path / "tradeoff.csv").read_text()
+    monkeypatch.setattr(tradeoff, "evaluate", no_eval)
+    tradeoff.main(args)
+    assert (tmp_path / "tradeoff.csv").read_text() == before
+    with pytest.raises(SystemExit):
+        tradeoff.main(["--methods", "apf,fastest", "--out", str(tmp_path)])
+
+
+def test_each_controllers_default_is_the_knee_of_its_shipped_front():
+    """The defaults come from the curves (docs/figures/tradeoff.csv), not by hand."""
+    from uasep_env import make_config
+
+    rows = tradeoff._read(tradeoff.FIGURES / "tradeoff.csv")
+    cfg = make_config()
+    for m in tradeoff.METHODS:
+        bank = [r for r in rows if r["method"] == m.name and r["dataset"] == "bank"]
+        assert len(bank) == len(m.values), m.name
+        if m.name in ("apf", "motion-state-apf", "traditional-apf"):
+            assert tradeoff.knee(bank)["value"] == m.default, m.name
+            controller = m.policy(cfg, m.default)
+            assert controller.gains == type(controller)(cfg).gains, m.name
+
+
+def test_readme_quotes_the_tradeoff_tables_as_written():
+    """Every table of the README's trade-off section is in docs/figures/tradeoff.md as is."""
+    readme = (BASELINES.parent / "README.md").read_text()
+    start = readme.index("### Safety against efficiency")
+    section = readme[start : readme.index("\n### ", start + 10)]
+    written = (tradeoff.FIGURES / "tradeoff.md").read_text()
+    tables, cur = [], []
+    for line in [*section.splitlines(), ""]:
+        if line.strip().startswith("|"):
+            cur.append(line.strip())
+        elif cur:
+            tables.append("\n".join(cur))
+            cur = []
+    assert len(tables) >= 4
+    for table in tables:
+        assert table in written, table.splitlines()[0]
