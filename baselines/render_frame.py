@@ -10,28 +10,27 @@ from pathlib import Path
 
 import uasep_env
 from uasep_env.policies import APF
+from uasep_env.viz.frames import Renderer, save_frame
 
 
 def main() -> None:
-    """Fly the paper scenario with the APF until ``--time`` and save an RGB frame."""
+    """Fly the paper scenario with the APF until ``--time`` and save the frame as a PNG."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--time", type=float, default=112.0, help="simulated time (s)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=Path(__file__).parents[1] / "docs/frame.png")
     args = parser.parse_args()
-    import matplotlib.image
-
-    env = uasep_env.parallel_env(scenario="paper", render_mode="rgb_array")
+    env = uasep_env.parallel_env(scenario="paper")
     obs, _ = env.reset(seed=args.seed)
     apf = APF(env.config)
+    renderer = Renderer(mode="rgb_array")  # what the env's render() draws with
     while env.world.time[0] < args.time and env.agents:
         obs, *_ = env.step({a: apf(obs[a]) for a in env.agents})
         if env.world.time[0] > args.time - 30.0:
-            env.render()  # builds the trails of the last 30 s
-    frame = env.render()
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    matplotlib.image.imsave(args.out, frame)
-    print(f"wrote {args.out} ({frame.shape[1]}x{frame.shape[0]}) at t = {env.world.time[0]:.1f} s")
+            renderer.render(env.world)  # builds the trails of the last 30 s
+    path = save_frame(env.world, args.out, renderer=renderer)
+    renderer.close()
+    print(f"wrote {path} at t = {env.world.time[0]:.1f} s")
 
 
 if __name__ == "__main__":

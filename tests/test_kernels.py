@@ -7,19 +7,26 @@ import os
 import numpy as np
 import pytest
 
-from uasep_env import _numba, reachable
+# Importing the modules registers their twins.
+from uasep_env import _numba, formation, geometry, observation, reachable, rewards  # noqa: F401
+from uasep_env.reachable import distance
 
 pytestmark = pytest.mark.skipif(
     not _numba.available(), reason="numba not installed or UASEP_NUMBA=0"
 )
 
 
+def _kernel(name: str):
+    """The compiled kernel ``name`` with the constants its numpy module gives it."""
+    return _numba.TWINS[name].compiled()
+
+
 def _numpy_nearest(points, centers, axes, headings):
-    q, cp, sp = reachable._to_body(points, centers, headings)
-    x, dist, n = reachable._nearest_body(q, axes)
+    q, cp, sp = distance._to_body(points, centers, headings)
+    x, dist, n = distance._nearest_body(q, axes)
     cp, sp = np.broadcast_arrays(cp, sp, dist)[:2]
-    offset = reachable._to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp)
-    return offset, dist, reachable._to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
+    offset = distance._to_world(np.broadcast_to(x, (*dist.shape, 3)), cp, sp)
+    return offset, dist, distance._to_world(np.broadcast_to(n, (*dist.shape, 3)), cp, sp)
 
 
 def _cases(rng: np.random.Generator, k: int) -> tuple[np.ndarray, ...]:
@@ -39,24 +46,134 @@ def _cases(rng: np.random.Generator, k: int) -> tuple[np.ndarray, ...]:
 
 
 def test_nearest_point_kernel_matches_numpy_bit_for_bit():
-    from uasep_env import _kernels
 
     pts, ctr, ax, hd = _cases(np.random.default_rng(0), 4000)
     want = _numpy_nearest(pts, ctr, ax, hd)
-    got = _kernels.nearest_on_ellipsoids(pts, ctr, ax, hd)
+    got = _kernel("nearest_on_ellipsoids")(pts, ctr, ax, hd)
     for w, g in zip(want, got, strict=True):
         assert np.all(np.isfinite(g))
         np.testing.assert_array_equal(g, w)
 
 
 def test_parallel_and_serial_loops_agree():
-    from uasep_env import _kernels
+    from uasep_env._kernels import common
 
-    pts, ctr, ax, hd = _cases(np.random.default_rng(1), 2 * _kernels.PARALLEL_MIN)
-    big = _kernels.nearest_on_ellipsoids(pts, ctr, ax, hd)
-    small = [_kernels.nearest_on_ellipsoids(*(a[:100] for a in (pts, ctr, ax, hd)))]
+    pts, ctr, ax, hd = _cases(np.random.default_rng(1), 2 * common.PARALLEL_MIN)
+    big = _kernel("nearest_on_ellipsoids")(pts, ctr, ax, hd)
+    small = [_kernel("nearest_on_ellipsoids")(*(a[:100] for a in (pts, ctr, ax, hd)))]
     for b, s in zip(big, small[0], strict=True):
         np.testing.assert_array_equal(b[:100], s)
+
+
+def _copy(x):
+    """A deep copy of an argument: arrays and tuples of arrays copied, the rest shared."""
+    if isinstance(x, np.ndarray):
+        return x.copy()
+    if isinstance(x, tuple) and hasattr(x, "_fields"):
+        return type(x)(*(_copy(a) for a in x))
+    if isinstance(x, tuple):
+        return tuple(_copy(a) for a in x)
+    return x
+
+
+def _assert_same(got, want, where: str) -> None:
+    if isinstance(want, tuple):
+        assert isinstance(got, tuple) and len(got) == len(want), where
+        for k, (g, w) in enumerate(zip(got, want, strict=True)):
+            _assert_same(g, w, f"{where}[{k}]")
+    elif isinstance(want, np.ndarray):
+        assert isinstance(got, np.ndarray) and got.shape == want.shape, where
+        np.testing.assert_array_equal(got, want, err_msg=where)
+    else:
+        assert got == want, where
+
+
+def _world_case(n_envs: int = 40):
+    from uasep_env.envs.core import EnvCore
+
+    core = EnvCore({"n_uavs": 4, "n_obstacles": 3, "scenario": "random"}, n_envs)
+    core.reset(seed=3)
+    rng = np.random.default_rng(4)
+    for _ in range(8):
+        core.step(rng.uniform(-1, 1, size=(n_envs, 4, 3)))
+    core.world.obstacles.active[::4, 1] = False
+    return core
+
+
+def _case_nearest():
+    return _cases(np.random.default_rng(20), 500)
+
+
+def _case_pairwise():
+    rng = np.random.default_rng(21)
+    ax = rng.uniform(0, 30, size=(9, 3, 3))
+    ax[0, 0, 1] = 0.0
+    return (
+        rng.normal(0, 40, size=(9, 4, 3)),
+        rng.normal(0, 20, size=(9, 3, 3)),
+        ax,
+        rng.uniform(-np.pi, np.pi, size=(9, 3)),
+    )
+
+
+def _case_region():
+    w = _world_case().world
+    return (w.est_pos, w.pred_center, w.pred_axes, w.pred_heading, w.pred_cos, w.pred_sin,
+            w.obstacles.active)  # fmt: skip
+
+
+def _case_separations():
+    w = _world_case().world
+    return w.uav_pos, w.obstacles.pos, w.obstacles.active
+
+
+def _case_observations():
+    core = _world_case()
+    x = observation._gather_inputs(core.world, core.layout)
+    return x, core.layout, np.full(core._obs.shape, np.nan, dtype=np.float32)
+
+
+def _case_rewards():
+    core = _world_case()
+    w, cfg = core.world, core.config
+    x = rewards._Inputs(w.uav_pos, w.plan_pos, w.accel_cmd, w.prev_accel_cmd, w.min_uav_dist,
+                        w.min_obs_dist, w.region_distances())  # fmt: skip
+    weights, constants = rewards._vectors(cfg.reward, cfg.uav, cfg.max_steps)
+    return x, constants, weights
+
+
+def _case_plan():
+    w = _world_case().world
+    w.time[:] = np.arange(w.n_envs) * 7.3
+    return w.plan, w.time, w._plan_offsets
+
+
+#: One case per compiled twin; a new twin without a case fails the registry test.
+TWIN_CASES = {
+    "nearest_on_ellipsoids": _case_nearest,
+    "pairwise_distances": _case_pairwise,
+    "region_distances": _case_region,
+    "separations": _case_separations,
+    "assemble_observations": _case_observations,
+    "reward_terms": _case_rewards,
+    "plan_now": _case_plan,
+}
+
+
+def test_every_compiled_twin_has_a_case():
+    assert set(_numba.TWINS) == set(TWIN_CASES)
+
+
+@pytest.mark.parametrize("name", sorted(TWIN_CASES))
+def test_each_kernel_matches_its_numpy_reference_bit_for_bit(name):
+    """Return values and arrays filled in place, for every registered pair."""
+    twin = _numba.TWINS[name]
+    args = TWIN_CASES[name]()
+    want_args, got_args = _copy(args), _copy(args)
+    want = twin.reference(*want_args)
+    got = twin.compiled()(*got_args)
+    _assert_same(got, want, name)
+    _assert_same(got_args, want_args, f"{name} arguments")
 
 
 def test_public_functions_use_the_kernel_with_broadcasting(monkeypatch):
@@ -111,7 +228,7 @@ def test_episodes_are_bit_identical_with_and_without_numba(monkeypatch):
 
 
 def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
-    from uasep_env import _kernels
+    from uasep_env._kernels import common
 
     rng = np.random.default_rng(4)
     for e, n, m in ((1, 3, 1), (7, 4, 3), (600, 3, 2)):  # the last runs the parallel loop
@@ -121,10 +238,10 @@ def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
         ax[0, 0, 1] = 0.0  # a flat one
         hd = rng.uniform(-np.pi, np.pi, size=(e, m))
         want = _numpy_nearest(pts[:, :, None], ctr[:, None], ax[:, None], hd[:, None])[1]
-        got = _kernels.pairwise_distances(pts, ctr, ax, hd)
+        got = _kernel("pairwise_distances")(pts, ctr, ax, hd)
         assert got.shape == (e, n, m)
         np.testing.assert_array_equal(got, want)
-    assert e * n * m >= _kernels.PARALLEL_MIN
+    assert e * n * m >= common.PARALLEL_MIN
 
 
 @pytest.mark.parametrize(
@@ -142,7 +259,7 @@ def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
     ],
 )
 def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
-    from uasep_env import _kernels, observation
+    from uasep_env import observation
     from uasep_env.envs.core import EnvCore
 
     core = EnvCore(config, n_envs=700)  # 2,100+ agents: the parallel loop
@@ -154,12 +271,12 @@ def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
         x = observation._gather_inputs(core.world, core.layout)
         want = np.full(core._obs.shape, np.nan, dtype=np.float32)
         got = want.copy()
-        observation._assemble(x, core.layout, want)
-        _kernels.assemble_observations(x, core.layout, got)
+        observation._assemble.reference(x, core.layout, want)
+        _kernel("assemble_observations")(x, core.layout, got)
         assert not np.isnan(want).any()  # NaN-filled: every entry was written
         np.testing.assert_array_equal(got, want)
         small = want[:2].copy()
-        _kernels.assemble_observations(type(x)(*(a[:2] for a in x)), core.layout, small)
+        _kernel("assemble_observations")(type(x)(*(a[:2] for a in x)), core.layout, small)
         np.testing.assert_array_equal(small, want[:2])  # the serial loop
         absent += int(np.sum(core.layout.decode(want)["uav_mask"] == 0))
     if "observation" in config:
@@ -168,11 +285,11 @@ def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
 
 def test_norm_adds_in_einsum_order():
     """The kernels' distance is numpy's ``sqrt(einsum)`` to the bit (its summation order)."""
-    from uasep_env import _kernels
+    from uasep_env._kernels import common
 
     d = np.random.default_rng(8).normal(0, 100, size=(5000, 3))
     want = np.sqrt(np.einsum("...i,...i->...", d, d))
-    got = np.array([_kernels._dist3(*row) for row in d])
+    got = np.array([common._dist3(*row) for row in d])
     np.testing.assert_array_equal(got, want)
 
 
@@ -195,7 +312,7 @@ def test_separations_kernel_matches_numpy(monkeypatch, n_envs, n_obstacles):
 
 def test_formation_frame_kernel_matches_numpy_including_fallbacks():
     """The compiled frame (eq. 6) is rotation_from_velocity's, slow and vertical cases too."""
-    from uasep_env import _kernels
+    from uasep_env._kernels.observations import _frame
     from uasep_env.formation import MIN_FRAME_SPEED, rotation_from_velocity
 
     rng = np.random.default_rng(12)
@@ -209,7 +326,7 @@ def test_formation_frame_kernel_matches_numpy_including_fallbacks():
     want = rotation_from_velocity(vel, fallback)
     assert (np.linalg.norm(vel, axis=-1) < MIN_FRAME_SPEED).sum() > 100
     for v, f, w in zip(vel, fallback, want, strict=True):
-        ct, st, cp, sp = _kernels._frame(*v, *f, MIN_FRAME_SPEED)
+        ct, st, cp, sp = _frame(*v, *f, MIN_FRAME_SPEED)
         got = [[-st, cp * ct, -ct * sp], [ct, cp * st, -st * sp], [0.0, -sp, -cp]]
         np.testing.assert_array_equal(np.array(got), w)
 
@@ -274,10 +391,10 @@ def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel()
     """numba's GNU OpenMP layer would kill the child; forked children use the serial loops."""
     import multiprocessing
 
-    from uasep_env import _kernels
+    from uasep_env._kernels import common
 
     parent = _big_rollout()  # 2,100 agents: the parallel loops
-    assert _kernels._parallel(2100)
+    assert common._parallel(2100)
     with multiprocessing.get_context("fork").Pool(1) as pool:
         child = pool.apply_async(_big_rollout).get(timeout=120)
     np.testing.assert_array_equal(child, parent)

@@ -148,3 +148,36 @@ def test_import_does_not_import_matplotlib():
     out = run_python(code, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
+
+
+def test_figure_7_draws_the_region_at_closest_approach_and_the_uavs_tracks():
+    """The plan view's outline surrounds the predicted centre; each UAV's track is its path."""
+    from uasep_env.plotting import plot_trajectory_3d
+
+    ep = _episode()
+    fig = plot_trajectory_3d(ep, "apf")
+    top = fig.axes[1]
+    (m, k, _), *_ = closest_approach(ep)
+    lines = {line.get_label(): line for line in top.get_lines()}
+    region = next(v for lab, v in lines.items() if lab.startswith("reachable region at t"))
+    east, north = region.get_data()
+    centre = ep.pred_center[k, m]
+    np.testing.assert_allclose([east[:-1].mean(), north[:-1].mean()], centre[[1, 0]], atol=1e-9)
+    r = ep.record
+    for i, name in enumerate(r.names):
+        east, north = lines[name].get_data()
+        np.testing.assert_array_equal(east, r.uav_pos[:, i, 1])
+        np.testing.assert_array_equal(north, r.uav_pos[:, i, 0])
+
+
+def test_figure_9_plots_the_uav_distances():
+    from uasep_env.geometry import uav_distances
+    from uasep_env.plotting import plot_uav_distances
+
+    ep = _episode()
+    fig = plot_uav_distances(ep, "apf")
+    d = uav_distances(ep.record.uav_pos)
+    lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
+    names = ep.record.names
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        np.testing.assert_allclose(lines[f"{names[i]} – {names[j]}"].get_ydata(), d[:, i, j])

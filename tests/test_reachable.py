@@ -7,6 +7,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from uasep_env import reachable as R
+from uasep_env.reachable.optimal import optimal_shape
 
 PAPER = (4.0, 0.013, 10.0, 3.0)  # v (m/s), w_max (rad/s), t (s), r (m): the paper's example
 THIN = (60.0, 0.001, 60.0, 0.0, 0.0)  # thin triangle, r = 0: the least ellipse-like set
@@ -376,7 +377,7 @@ def test_area_ratio_against_set_and_optimum(mode):
     assert np.all(ratio_set >= 1.0)
     assert np.all(ratio_set <= 2.45)
     L = v * t + r
-    _, a_opt, b_opt = R._optimal_shape(w * t, r / L, mode == "swept", m=240, iters=50)
+    _, a_opt, b_opt = optimal_shape(w * t, r / L, mode == "swept", m=240, iters=50)
     ratio_opt = lat * lon / (a_opt * b_opt * L * L)
     assert np.all(ratio_opt >= 1.0 - 1e-3)  # the reference is itself a sampled optimum
     assert np.all(ratio_opt <= (1.03 if mode == "swept" else 1.06))

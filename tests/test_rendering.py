@@ -63,7 +63,7 @@ def test_import_does_not_import_matplotlib():
 
 def test_rgb_array_frame():
     w = _world()
-    r = Renderer(w.config, mode="rgb_array")
+    r = Renderer(mode="rgb_array")
     try:
         frame = r.render(w)
         _check_frame(frame)
@@ -76,7 +76,7 @@ def test_rgb_array_frame():
 
 def test_frames_change_as_world_steps():
     w = _world()
-    r = Renderer(w.config)
+    r = Renderer()
     try:
         first = r.render(w)
         for _ in range(10):
@@ -90,8 +90,8 @@ def test_frames_change_as_world_steps():
 
 def test_figure_reused_and_trails_cleared_on_reset():
     w = _world(seed=3)
-    r = Renderer(w.config)
-    fresh = Renderer(w.config)
+    r = Renderer()
+    fresh = Renderer()
     try:
         r.render(w)
         fig = r.fig
@@ -109,7 +109,7 @@ def test_figure_reused_and_trails_cleared_on_reset():
 
 def test_close_is_idempotent_and_renderer_reusable():
     w = _world()
-    r = Renderer(w.config)
+    r = Renderer()
     r.render(w)
     r.close()
     r.close()
@@ -120,11 +120,11 @@ def test_close_is_idempotent_and_renderer_reusable():
 
 def test_invalid_arguments():
     with pytest.raises(ValueError, match="render mode"):
-        Renderer(None, mode="ansi")
+        Renderer(mode="ansi")
     with pytest.raises(ValueError):
-        Renderer(None, figsize=(0, 3))
+        Renderer(figsize=(0, 3))
     w = _world()
-    r = Renderer(w.config)
+    r = Renderer()
     with pytest.raises(IndexError):
         r.render(w, env=1)
     r.close()
@@ -133,7 +133,7 @@ def test_invalid_arguments():
 def test_batched_world_renders_selected_env():
     w = World({"scenario": "random"}, n_envs=3)
     w.reset(seed=5)
-    r = Renderer(w.config)
+    r = Renderer()
     try:
         frames = [r.render(w, env=i) for i in range(3)]
         for f in frames:
@@ -153,7 +153,7 @@ def test_batched_world_renders_selected_env():
 )
 def test_other_configurations(config):
     w = _world(seed=1, **config)
-    r = Renderer(w.config)
+    r = Renderer()
     try:
         for _ in range(3):
             w.step(_zero(w))
@@ -165,7 +165,7 @@ def test_other_configurations(config):
 def test_inactive_obstacles_and_scattered_formation():
     w = _world(n_obstacles=2)
     w.obstacles.active[0, 1] = False
-    r = Renderer(w.config, top_view=False)
+    r = Renderer(top_view=False)
     try:
         # Zero actions: the paper's UAVs drift apart; the view grows instead of losing them.
         for _ in range(300):
@@ -177,7 +177,7 @@ def test_inactive_obstacles_and_scattered_formation():
 
 def test_view_box_stable_between_frames():
     w = _world()
-    r = Renderer(w.config)
+    r = Renderer()
     try:
         widths = []
         for _ in range(12):
@@ -214,7 +214,7 @@ def test_save_frame(tmp_path):
     path = save_frame(w, tmp_path / "sub" / "frame.png")
     assert path.exists()
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    r = Renderer(w.config)
+    r = Renderer()
     for _ in range(5):
         w.step(_zero(w))
         r.render(w)
@@ -243,7 +243,7 @@ def test_human_mode_headless_does_not_crash():
         from uasep_env.rendering import Renderer
         from uasep_env.world import World
         w = World({"scenario": "paper"}); w.reset(seed=0)
-        r = Renderer(w.config, mode="human")
+        r = Renderer(mode="human")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             for _ in range(3):
@@ -261,7 +261,7 @@ def test_human_mode_headless_does_not_crash():
 
 def test_human_mode_in_process():
     w = _world()
-    r = Renderer(w.config, mode="human")
+    r = Renderer(mode="human")
     with pytest.warns(RuntimeWarning, match="interactive"):
         assert r.render(w) is None
     assert r.render(w) is None  # warns only once
@@ -372,3 +372,81 @@ def test_vector_env_render():
     env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     _check_frame(env.render())
     env.close()
+
+
+# ---------------------------------------------------------------------------- what is drawn
+def _pixel(r: Renderer, frame: np.ndarray, ax, east: float, north: float) -> np.ndarray:
+    """The frame's RGB at the projection of ``(east, north)`` on 2D axes ``ax``."""
+    x, y = ax.transData.transform((east, north))
+    return frame[frame.shape[0] - 1 - int(np.rint(y)), int(np.rint(x))].astype(int)
+
+
+def _near(colour: np.ndarray, hex_colour: str, tol: int = 40) -> bool:
+    want = np.array([int(hex_colour[k : k + 2], 16) for k in (1, 3, 5)])
+    return bool(np.abs(colour - want).max() <= tol)
+
+
+def test_top_view_draws_each_uav_at_its_position_in_its_colour():
+    from uasep_env.viz.style import UAV_COLOURS
+
+    w = _world(seed=2)
+    r = Renderer()
+    try:
+        frame = r.render(w)
+        top = r._art["ax2"]
+        for i, (north, east, _) in enumerate(w.uav_pos[0]):
+            assert _near(_pixel(r, frame, top, east, north), UAV_COLOURS[i]), i
+    finally:
+        r.close()
+
+
+def test_obstacle_region_is_drawn_at_the_projection_of_its_predicted_ellipsoid():
+    w = _world(seed=0)
+    while np.hypot(*(w.pred_center[0, 0, :2] - w.uav_pos[0].mean(axis=0)[:2])) > 100.0:
+        w.step(_zero(w))  # until the paper's obstacle comes into view
+        assert w.time[0] < 200.0
+    r = Renderer()
+    try:
+        frame = r.render(w)
+        top = r._art["ax2"]
+        north, east, down = w.pred_center[0, 0]
+        axes, heading = w.pred_axes[0, 0], float(w.pred_heading[0, 0])
+        # The top view's outline is the ellipsoid's horizontal section, around its centre.
+        outline = np.unique(r._art["obs"][0]["region2"].get_xy().round(9), axis=0)  # open ring
+        np.testing.assert_allclose(outline.mean(axis=0), [east, north], atol=1e-6 * axes.max())
+        # Its centre is tinted by the translucent red fill; a point two semi-axes out, not.
+        inside = _pixel(r, frame, top, east, north)
+        assert inside[0] > inside[1] + 8 and inside[0] > inside[2] + 8, inside
+        lateral = 2.5 * axes[1] * np.array([-math.sin(heading), math.cos(heading)])
+        outside = _pixel(r, frame, top, east + lateral[1], north + lateral[0])
+        assert abs(outside[0] - outside[1]) < 8, outside
+        # The 3D wireframe lies on the ellipsoid: body-frame points of norm 1.
+        e, n, alt = r._art["obs"][0]["wire3"].get_data_3d()
+        ok = np.isfinite(e)
+        dn, de, dd = n[ok] - north, e[ok] - east, -alt[ok] - down
+        lon = dn * math.cos(heading) + de * math.sin(heading)
+        lat = -dn * math.sin(heading) + de * math.cos(heading)
+        radius = np.sqrt((lon / axes[0]) ** 2 + (lat / axes[1]) ** 2 + (dd / axes[2]) ** 2)
+        np.testing.assert_allclose(radius, 1.0, atol=1e-9)
+    finally:
+        r.close()
+
+
+def test_trails_hold_the_last_trail_length_seconds_ending_at_the_uav():
+    w = _world()
+    dt = w.config.dt * w.config.decision_interval
+    r = Renderer(trail_length=5 * dt)
+    try:
+        seen = []
+        for _ in range(12):
+            r.render(w)
+            seen.append(np.array(w.uav_pos[0]))
+            w.step(_zero(w))
+        for i, u in enumerate(r._art["uav"]):
+            east, north = u["trail2"].get_data()
+            assert len(east) == 6  # now and the five frames of the last 5 dt
+            want = np.stack(seen[-6:])[:, i]
+            np.testing.assert_array_equal(east, want[:, 1])
+            np.testing.assert_array_equal(north, want[:, 0])
+    finally:
+        r.close()

@@ -1,23 +1,33 @@
 """Optional numba support: the package runs without it, faster with it.
 
-numba is not a dependency (``pip install "uasep-env[fast]"`` adds it). Callers of a kernel
-that has a compiled form (:mod:`uasep_env._kernels`) ask :func:`available`; when numba is
-missing, or disabled with the environment variable ``UASEP_NUMBA=0``, they use its numpy
-form. Compiled kernels are cached on disk (``cache=True``), so only the first run of a
-new installation pays the compilation (about 30 s on one core for the kernels an evaluation
-uses). ``python -m uasep_env.precompile`` pays it at install time (``make eval`` and
-``make test`` run it after installing): :func:`warm_up` plays one episode through the code
-path of ``uasep-eval``, which compiles exactly the kernels such a run uses into the cache.
+numba is not a dependency (``pip install "uasep-env[fast]"`` adds it). A numpy function that
+has a compiled form in :mod:`uasep_env._kernels` is decorated with :func:`compiled_twin`: a
+call runs the compiled kernel when numba is in use and the numpy function (the reference)
+otherwise, missing numba or with the environment variable ``UASEP_NUMBA=0``. The pairs are
+listed in :data:`TWINS`, and ``tests/test_kernels.py`` checks each of them bit for bit.
+
+Compiled kernels are cached on disk (``cache=True``), so only the first run of a new
+installation pays the compilation (about 30 s on one core for the kernels an evaluation
+uses); ``python -m uasep_env.precompile`` pays it at install time.
+
+This module imports nothing of the package at import time, and :mod:`uasep_env._kernels`
+imports nothing of it at all: the constants a kernel shares with its reference are given
+to :func:`compiled_twin` by the numpy module that owns them and passed to the kernel as
+keyword arguments, so there is no import cycle.
 """
 
 from __future__ import annotations
 
+import functools
 import os
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
-__all__ = ["available", "kernels", "warm_up"]
+__all__ = ["TWINS", "Twin", "available", "compiled_twin", "kernels"]
 
 _state: dict[str, Any] = {}
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 def _numba() -> Any:
@@ -51,19 +61,54 @@ def kernels() -> Any:
     return _state["kernels"]
 
 
-def warm_up() -> float:
-    """Compile (or load from the disk cache) the kernels an evaluation uses; the seconds taken.
+@dataclass(frozen=True)
+class Twin:
+    """A numpy reference and the name of its compiled kernel in :mod:`uasep_env._kernels`.
 
-    Returns 0 without doing anything when compiled kernels are not in use.
+    Attributes:
+        kernel: The kernel's name; it takes the reference's arguments plus ``constants``.
+        reference: The numpy function (the fallback, and the numbers the kernel must give).
+        constants: Keyword arguments the kernel receives from the reference's module.
     """
-    if not available():
-        return 0.0
-    import time
 
-    from uasep_env.evaluation import evaluate
+    kernel: str
+    reference: Callable[..., Any]
+    constants: dict[str, Any] = field(default_factory=dict)
 
-    t0 = time.perf_counter()
-    # A whole episode: some call sites (the metrics' distances) meet new argument types
-    # only when the encounter comes. The compiled episode itself takes under a second.
-    evaluate(["apf"], {"scenario": "paper"}, [0])
-    return time.perf_counter() - t0
+    def compiled(self) -> Callable[..., Any]:
+        """The kernel with the constants bound (imports numba; only when it is in use)."""
+        return functools.partial(getattr(kernels(), self.kernel), **self.constants)
+
+
+#: Every numpy function with a compiled twin, by kernel name (filled as modules import).
+TWINS: dict[str, Twin] = {}
+
+
+def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
+    """Decorator: the numpy function runs as the kernel ``kernel`` when numba is in use.
+
+    The kernel takes the same positional arguments and returns the same numbers, bit for
+    bit; ``constants`` (values the numpy code owns, e.g. an iteration count or column
+    offsets) are passed to it as keyword arguments. The undecorated function stays
+    reachable as ``.reference``.
+
+    Args:
+        kernel: Name of the compiled form in :mod:`uasep_env._kernels`.
+        **constants: Keyword arguments for the kernel.
+    """
+
+    def wrap(reference: F) -> F:
+        twin = Twin(kernel, reference, dict(constants))
+        TWINS[kernel] = twin
+
+        @functools.wraps(reference)
+        def dispatch(*args: Any) -> Any:
+            compiled = kernels()
+            if compiled is None:
+                return reference(*args)
+            return getattr(compiled, kernel)(*args, **twin.constants)
+
+        dispatch.reference = reference  # type: ignore[attr-defined]
+        return dispatch  # type: ignore[return-value]
+
+    return wrap

@@ -70,24 +70,6 @@ class KalmanModel:
         self.gains = np.array(gains)
         self._steady_gain = tuple(float(g) for g in self.gains[-1].ravel())
         self.covariances = np.array(covs)
-        self._a = a
-        self._b = b
-
-    def initialise(
-        self,
-        meas_pos: np.ndarray,
-        meas_vel: np.ndarray,
-        est_pos: np.ndarray,
-        est_vel: np.ndarray,
-        mask: np.ndarray | None = None,
-    ) -> None:
-        """Start tracks at their first measurement (in place, where ``mask``)."""
-        if mask is None:
-            est_pos[...] = meas_pos
-            est_vel[...] = meas_vel
-        else:
-            est_pos[mask] = meas_pos[mask]
-            est_vel[mask] = meas_vel[mask]
 
     def update(
         self,

@@ -26,11 +26,13 @@ import math
 
 import numpy as np
 
+from uasep_env._numba import compiled_twin
+
 __all__ = [
     "PlannedTrajectory",
     "formation_center",
-    "formation_rotation",
     "pattern_slots",
+    "planned_state",
     "rotation_from_velocity",
     "segment_offsets",
     "slot_positions",
@@ -175,13 +177,6 @@ def rotate(rot: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     )
 
 
-def formation_rotation(
-    mean_vel: np.ndarray, planned_vel: np.ndarray, min_speed: float = MIN_FRAME_SPEED
-) -> np.ndarray:
-    """Eq. 6 with the notes' fallback to the planned heading at low speed."""
-    return rotation_from_velocity(mean_vel, planned_vel, min_speed)
-
-
 def slot_positions(
     center: np.ndarray, mean_vel: np.ndarray, planned_dir: np.ndarray, pattern: np.ndarray
 ) -> np.ndarray:
@@ -193,7 +188,7 @@ def slot_positions(
         planned_dir: ``(E, 3)`` planned direction, the frame below ``MIN_FRAME_SPEED``.
         pattern: ``(E, N, 3)`` the pattern's slots in the formation frame (m).
     """
-    return center[:, None, :] + rotate(formation_rotation(mean_vel, planned_dir), pattern)
+    return center[:, None, :] + rotate(rotation_from_velocity(mean_vel, planned_dir), pattern)
 
 
 def segment_offsets(direction: np.ndarray, slots: np.ndarray) -> np.ndarray:
@@ -330,3 +325,28 @@ class PlannedTrajectory:
     def finished(self, t: np.ndarray) -> np.ndarray:
         """Whether the centre's plan has reached its last way-point at ``t``."""
         return self.cruise_speed * t >= self.length - 1e-9
+
+
+@compiled_twin("plan_now")
+def planned_state(
+    plan: PlannedTrajectory, t: np.ndarray, offsets: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The plan at ``t``: centre, direction, and each UAV's position and velocity.
+
+    Args:
+        plan: The planned trajectories.
+        t: ``(E,)`` times (s).
+        offsets: ``(E, W - 1, N, 3)`` the slots rotated along each segment
+            (:func:`segment_offsets`) (m).
+
+    Returns:
+        ``(E, 3)`` planned centre (m) and unit direction, ``(E, N, 3)`` planned UAV
+        positions (m) and velocities (m/s): :meth:`PlannedTrajectory.uav_positions` with the
+        segment's rotated slots looked up rather than rotated again.
+    """
+    located = plan.locate(t)
+    center, center_vel, direction = plan.center_and_direction(t, located)
+    pos = center[:, None, :] + offsets[np.arange(len(t)), located[1]]
+    vel = np.empty_like(pos)
+    vel[...] = center_vel[:, None, :]
+    return center, direction, pos, vel

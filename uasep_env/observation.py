@@ -49,14 +49,15 @@ the rest of the vector, the command the agent's action corrects. It is not clipp
 
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
-from uasep_env import _numba
+from uasep_env._numba import compiled_twin
 from uasep_env.config import EnvConfig
-from uasep_env.formation import formation_center, slot_positions
+from uasep_env.formation import MIN_FRAME_SPEED, formation_center, slot_positions
 from uasep_env.world import World
 
 __all__ = ["ObservationLayout", "build_observations", "global_state", "state_dim"]
@@ -92,6 +93,30 @@ OBSTACLE_FIELDS: tuple[tuple[str, int, str], ...] = (
 
 def _width(spec: tuple[tuple[str, int, str], ...]) -> int:
     return sum(size for _, size, _ in spec)
+
+
+def _slices(spec: tuple[tuple[str, int, str], ...], prefix: str = "") -> dict[str, slice]:
+    """The columns of each field of ``spec``, from the start of its block."""
+    out, col = {}, 0
+    for name, size, _ in spec:
+        out[prefix + name] = slice(col, col + size)
+        col += size
+    return out
+
+
+# Where each feature is written, derived from the tables above: the one source of the layout
+# for the numpy assembly and the compiled kernel. Own-state fields count from the start of
+# the vector, ``uav_*`` and ``obstacle_*`` fields from the start of one neighbour's block.
+_FIELD_COLUMNS = {
+    **_slices(SELF_FIELDS),
+    **_slices(UAV_FIELDS, "uav_"),
+    **_slices(OBSTACLE_FIELDS, "obstacle_"),
+}
+Columns = namedtuple("Columns", [*_FIELD_COLUMNS, "uav_width", "obstacle_width"])
+#: The first column of every feature and the neighbour blocks' widths, for the kernel.
+COLUMNS = Columns(
+    *(cols.start for cols in _FIELD_COLUMNS.values()), _width(UAV_FIELDS), _width(OBSTACLE_FIELDS)
+)
 
 
 @dataclass(frozen=True)
@@ -253,8 +278,8 @@ def build_observations(
 
     The plan and the distances to the reachable ellipsoids come from the world; the
     estimated formation geometry (eqs. 5-7) and the per-agent assembly (relative vectors,
-    neighbour sorting, masks, scaling, clipping) are :func:`_assemble`, or its compiled form
-    in :mod:`uasep_env._kernels` when numba is in use (the same numbers bit for bit).
+    neighbour sorting, masks, scaling, clipping) are :func:`_assemble` (compiled when numba
+    is in use, the same numbers bit for bit).
 
     Args:
         world: The batched world.
@@ -269,11 +294,7 @@ def build_observations(
     e = world.n_envs if rows is None else len(rows)
     if out is None:
         out = np.empty((e, world.n_uavs, layout.world_dim), dtype=np.float32)
-    inputs = _gather_inputs(world, layout, rows)
-    if (_kernels := _numba.kernels()) is not None:
-        _kernels.assemble_observations(inputs, layout, out)
-    else:
-        _assemble(inputs, layout, out)
+    _assemble(_gather_inputs(world, layout, rows), layout, out)
     return out
 
 
@@ -312,8 +333,12 @@ def _gather_inputs(
     )
 
 
+@compiled_twin("assemble_observations", columns=COLUMNS, min_frame_speed=MIN_FRAME_SPEED)
 def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
-    """The numpy assembly of :func:`build_observations` (reference of the compiled form)."""
+    """The assembly of :func:`build_observations`: fills ``out`` in place.
+
+    Every column comes from :data:`COLUMNS`.
+    """
     e, n, _ = x.pos.shape
     m = x.region.shape[-1]
     ps, vs, acs = layout.pos_scale, layout.vel_scale, layout.acc_scale
@@ -323,17 +348,18 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
     slots = slot_positions(center, mean_vel, x.wp_dir, x.pattern)
     wp_dist = np.linalg.norm(x.final_wp - center, axis=-1)
 
-    # Own state (SELF_FIELDS order); broadcast fields are shared by the formation.
-    out[..., 0:3] = (slots - pos) / ps
-    out[..., 3:6] = (x.plan_pos - pos) / ps
-    out[..., 6:9] = vel / vs
-    out[..., 9:12] = x.plan_vel / vs
-    out[..., 12:15] = (mean_vel / vs)[:, None, :]
-    out[..., 15:18] = ((x.plan_center - center) / ps)[:, None, :]
-    out[..., 18:21] = x.wp_dir[:, None, :]
-    out[..., 21] = (wp_dist / ps)[:, None]
-    out[..., 22:25] = x.accel_cmd / acs
-    out[..., 25] = x.progress[:, None]
+    # Own state; broadcast fields are shared by the formation.
+    c, f = COLUMNS, _FIELD_COLUMNS
+    out[..., f["slot_offset"]] = (slots - pos) / ps
+    out[..., f["plan_offset"]] = (x.plan_pos - pos) / ps
+    out[..., f["velocity"]] = vel / vs
+    out[..., f["plan_velocity"]] = x.plan_vel / vs
+    out[..., f["formation_velocity"]] = (mean_vel / vs)[:, None, :]
+    out[..., f["goal_offset"]] = ((x.plan_center - center) / ps)[:, None, :]
+    out[..., f["waypoint_dir"]] = x.wp_dir[:, None, :]
+    out[..., c.waypoint_dist] = (wp_dist / ps)[:, None]
+    out[..., f["last_accel"]] = x.accel_cmd / acs
+    out[..., c.progress] = x.progress[:, None]
     col = layout.self_dim
 
     k_u = layout.k_uavs
@@ -347,17 +373,17 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
         other = (np.arange(e) * n).reshape(e, 1, 1) + order
         d_sel = dist.reshape(-1)[pair]
         present = (d_sel <= layout.sensing_range)[..., None]
-        w = _width(UAV_FIELDS)
+        w = c.uav_width
         block = np.reshape(out[..., col : col + k_u * w], (e, n, k_u, w), copy=False)
-        block[..., 0:3] = np.where(present, rel.reshape(-1, 3)[pair] / ps, 0.0)
+        block[..., f["uav_rel_pos"]] = np.where(present, rel.reshape(-1, 3)[pair] / ps, 0.0)
         relv = vel.reshape(-1, 3)[other] - vel[:, :, None, :]
-        block[..., 3:6] = np.where(present, relv / vs, 0.0)
-        block[..., 6] = np.where(present[..., 0], d_sel / ps, 0.0)
-        block[..., 7] = present[..., 0]
+        block[..., f["uav_rel_vel"]] = np.where(present, relv / vs, 0.0)
+        block[..., c.uav_dist] = np.where(present[..., 0], d_sel / ps, 0.0)
+        block[..., c.uav_mask] = present[..., 0]
         col += k_u * w
 
     k_o = layout.k_obstacles
-    w = _width(OBSTACLE_FIELDS)
+    w = c.obstacle_width
     block = np.reshape(out[..., col : col + k_o * w], (e, n, k_o, w), copy=False)
     kk = min(k_o, m)
     block[:, :, kk:] = 0.0
@@ -376,19 +402,17 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
         ob = (np.arange(e) * m).reshape(e, 1, 1) + order  # into (E * M)
         present = np.isfinite(key.reshape(-1)[pair])[..., None]
         reg = region.reshape(-1)[pair]
-        feats = (
-            (x.pred_center.reshape(-1, 3)[ob] - pos[:, :, None, :]) / ps,
-            x.pred_axes.reshape(-1, 3)[ob] / ps,
-            np.stack([x.cos_h.reshape(-1)[ob], x.sin_h.reshape(-1)[ob]], axis=-1),
-            obs_rel.reshape(-1, 3)[pair] / ps,
-            (x.obs_vel.reshape(-1, 3)[ob] - vel[:, :, None, :]) / vs,
-            (np.where(np.isfinite(reg), reg, 0.0) / ps)[..., None],
-        )
-        j = 0
-        for f in feats:
-            block[:, :, :kk, j : j + f.shape[-1]] = np.where(present, f, 0.0)
-            j += f.shape[-1]
-        block[:, :, :kk, j] = present[..., 0]
+        feats = {
+            "center": (x.pred_center.reshape(-1, 3)[ob] - pos[:, :, None, :]) / ps,
+            "axes": x.pred_axes.reshape(-1, 3)[ob] / ps,
+            "heading_cs": np.stack([x.cos_h.reshape(-1)[ob], x.sin_h.reshape(-1)[ob]], axis=-1),
+            "rel_pos": obs_rel.reshape(-1, 3)[pair] / ps,
+            "rel_vel": (x.obs_vel.reshape(-1, 3)[ob] - vel[:, :, None, :]) / vs,
+            "region_dist": (np.where(np.isfinite(reg), reg, 0.0) / ps)[..., None],
+        }
+        for name, value in feats.items():
+            block[:, :, :kk, f["obstacle_" + name]] = np.where(present, value, 0.0)
+        block[:, :, :kk, c.obstacle_mask] = present[..., 0]
 
     np.clip(out, -layout.clip, layout.clip, out=out)
 

@@ -61,7 +61,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from uasep_env import _numba
+from uasep_env._numba import compiled_twin
 from uasep_env.config import RewardWeights, UAVConfig
 from uasep_env.world import World
 
@@ -128,13 +128,25 @@ class _Inputs(NamedTuple):
     region: np.ndarray  # (E, N, M) signed distance to each reachable ellipsoid (m), inf if off
 
 
+class _Constants(NamedTuple):
+    """The scalars the terms use: the config's, :data:`DEVIATION_SCALE_M` and the cap."""
+
+    max_accel: float  # m/s^2
+    separation_distance: float  # m
+    obstacle_separation: float  # m
+    collision_distance: float  # m
+    deviation_scale: float  # m, DEVIATION_SCALE_M
+    region_cap: float  # REGION_TERM_CAP
+    max_steps: float  # the collision term's magnitude
+
+
 def compute_rewards(
     world: World, weights: RewardWeights, region: np.ndarray | None = None
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Rewards and their named terms after a step.
 
-    The terms and their weighted sum are :func:`_terms`, or its compiled form in
-    :mod:`uasep_env._kernels` when numba is in use (the same numbers bit for bit).
+    The terms and their weighted sum are :func:`_weighted_terms` (compiled when numba is
+    in use, the same numbers bit for bit).
 
     Args:
         world: The batched world, just stepped.
@@ -153,63 +165,66 @@ def compute_rewards(
         world.min_obs_dist,
         world.region_distances() if region is None else region,
     )
-    u = world.config.uav
-    w, c = _vectors(weights, u, world.config.max_steps)
-    if (_kernels := _numba.kernels()) is not None:
-        own, stacked = _kernels.reward_terms(x, c, w)
-        terms = dict(zip(REWARD_TERMS, stacked, strict=True))
-    else:
-        terms = _terms(x, u, world.config.max_steps)
-        own = np.zeros_like(x.min_uav_dist)
-        for k, name in enumerate(REWARD_TERMS):
-            own += w[k] * terms[name]
+    w, c = _vectors(weights, world.config.uav, world.config.max_steps)
+    own, stacked = _weighted_terms(x, c, w)
+    terms = dict(zip(REWARD_TERMS, stacked, strict=True))
     if weights.shared > 0.0:
         own = (1.0 - weights.shared) * own + weights.shared * team_mean(own)[:, None]
     return own, terms
 
 
 @functools.lru_cache(maxsize=64)
-def _vectors(weights: RewardWeights, u: UAVConfig, max_steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """The weights in term order and the kernel's constants (read-only; configs are frozen)."""
+def _vectors(weights: RewardWeights, u: UAVConfig, max_steps: int) -> tuple[np.ndarray, _Constants]:
+    """The weights in term order (read-only) and the constants (configs are frozen)."""
     w = np.array([getattr(weights, name) for name in REWARD_TERMS])
-    c = np.array(
-        [
-            u.max_accel,
-            u.separation_distance,
-            u.obstacle_separation,
-            u.collision_distance,
-            DEVIATION_SCALE_M,
-            REGION_TERM_CAP,
-            float(max_steps),
-        ]
+    w.flags.writeable = False
+    c = _Constants(
+        u.max_accel,
+        u.separation_distance,
+        u.obstacle_separation,
+        u.collision_distance,
+        DEVIATION_SCALE_M,
+        REGION_TERM_CAP,
+        float(max_steps),
     )
-    w.flags.writeable = c.flags.writeable = False
     return w, c
 
 
-def _terms(x: _Inputs, u: UAVConfig, max_steps: int) -> dict[str, np.ndarray]:
-    """The unweighted terms in numpy (the reference of the compiled form)."""
+@compiled_twin("reward_terms")
+def _weighted_terms(x: _Inputs, c: _Constants, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The unweighted terms and their weighted sum, before any team sharing.
+
+    Args:
+        x: The world's arrays.
+        c: The constants.
+        w: One weight per term, in :data:`REWARD_TERMS` order.
+
+    Returns:
+        ``(own, terms)``: ``(E, N)`` weighted sums and ``(T, E, N)`` unweighted terms in
+        :data:`REWARD_TERMS` order.
+    """
     d_region = x.region.min(axis=-1, initial=np.inf)
     dev = np.linalg.norm(x.uav_pos - x.plan_pos, axis=-1)
-    cmd = x.cmd / u.max_accel
-    dcmd = (x.cmd - x.prev_cmd) / u.max_accel
-    return {
-        "separation_inner": -(np.maximum(0.0, 1.0 - x.min_uav_dist / u.separation_distance) ** 2),
+    cmd = x.cmd / c.max_accel
+    dcmd = (x.cmd - x.prev_cmd) / c.max_accel
+    collided = _collided(x.min_uav_dist, x.min_obs_dist, c.collision_distance)
+    terms = {
+        "separation_inner": -(np.maximum(0.0, 1.0 - x.min_uav_dist / c.separation_distance) ** 2),
         "separation_obstacle": -(
-            np.maximum(0.0, 1.0 - x.min_obs_dist / u.obstacle_separation) ** 2
+            np.maximum(0.0, 1.0 - x.min_obs_dist / c.obstacle_separation) ** 2
         ),
         "separation_region": -np.minimum(
-            REGION_TERM_CAP, np.maximum(0.0, 1.0 - d_region / u.obstacle_separation)
+            c.region_cap, np.maximum(0.0, 1.0 - d_region / c.obstacle_separation)
         ),
-        "deviation": -(dev / (dev + DEVIATION_SCALE_M)),
+        "deviation": -(dev / (dev + c.deviation_scale)),
         "control": -np.einsum("...i,...i->...", cmd, cmd) / 3.0,
         "smoothness": -np.einsum("...i,...i->...", dcmd, dcmd) / 3.0,
-        "collision": -float(max_steps)
-        * np.broadcast_to(
-            _collided(x.min_uav_dist, x.min_obs_dist, u.collision_distance).any(
-                axis=-1, keepdims=True
-            ),
-            x.min_uav_dist.shape,
-        ),
+        "collision": -c.max_steps
+        * np.broadcast_to(collided.any(axis=-1, keepdims=True), x.min_uav_dist.shape),
         "progress": np.ones_like(x.min_uav_dist),
     }
+    stacked = np.stack([terms[name] for name in REWARD_TERMS])
+    own = np.zeros_like(x.min_uav_dist)
+    for k in range(len(REWARD_TERMS)):
+        own += w[k] * stacked[k]
+    return own, stacked

@@ -33,14 +33,12 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from uasep_env import _numba, reachable
+from uasep_env import reachable
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.dynamics import measure, step_double_integrator
 from uasep_env.estimation import KalmanModel
-from uasep_env.formation import (
-    PlannedTrajectory,
-    segment_offsets,
-)
+from uasep_env.formation import PlannedTrajectory, planned_state, segment_offsets
+from uasep_env.geometry import nearest_separations, obstacle_distances, uav_distances
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, sample_scenario
 
@@ -225,7 +223,6 @@ class World:
             nz.obstacle_position_std,
             nz.obstacle_velocity_std,
         )
-        self._offdiag = ~np.eye(n, dtype=bool)
         self._has_reset = False
 
     # ------------------------------------------------------------------ reset
@@ -442,20 +439,7 @@ class World:
         New arrays each time, read-only: what a caller keeps stays as it was.
         """
         if self._plan_now is None:
-            plan = self.plan
-            if (_kernels := _numba.kernels()) is not None:
-                center, direction, pos, vel = _kernels.plan_now(
-                    self.time, plan.cruise_speed, plan.length, plan.cum, plan.waypoints,
-                    plan.direction, self._plan_offsets,
-                )  # fmt: skip
-            else:
-                located = plan.locate(self.time)
-                center, center_vel, direction = plan.center_and_direction(self.time, located)
-                # plan.uav_positions, with the segment's rotated slots looked up.
-                offsets = self._plan_offsets[np.arange(self.n_envs), located[1]]
-                pos = center[:, None, :] + offsets
-                vel = np.empty_like(pos)
-                vel[...] = center_vel[:, None, :]
+            center, direction, pos, vel = planned_state(self.plan, self.time, self._plan_offsets)
             for arr in (center, direction, pos, vel):
                 arr.flags.writeable = False
             self._plan_now = (center, direction, pos, vel)
@@ -608,30 +592,22 @@ class World:
     def separations(self) -> tuple[np.ndarray, np.ndarray]:
         """Each UAV's distance to the nearest other UAV and to the nearest active obstacle.
 
-        True positions; ``inf`` where there is none. Compiled when numba is in use (the same
-        numbers bit for bit).
+        True positions; ``inf`` where there is none
+        (:func:`uasep_env.geometry.nearest_separations`).
 
         Returns:
             ``(uav, obstacle)``, each ``(E, N)`` (m).
         """
-        ob = self.obstacles
-        if (_kernels := _numba.kernels()) is not None:
-            return _kernels.separations(self.uav_pos, ob.pos, ob.active)
-        d_uav = np.where(self._offdiag, self.uav_distances(), np.inf).min(axis=-1)
-        return d_uav, self.obstacle_distances().min(axis=-1, initial=np.inf)
+        return nearest_separations(self.uav_pos, self.obstacles.pos, self.obstacles.active)
 
     def uav_distances(self, pos: np.ndarray | None = None) -> np.ndarray:
         """``(E, N, N)`` distances between UAVs (true positions unless ``pos`` given) (m)."""
-        p = self.uav_pos if pos is None else pos
-        diff = p[:, :, None, :] - p[:, None, :, :]
-        return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+        return uav_distances(self.uav_pos if pos is None else pos)
 
     def obstacle_distances(self, pos: np.ndarray | None = None) -> np.ndarray:
         """``(E, N, M)`` UAV-obstacle centre distances, inf for inactive obstacles (m)."""
         p = self.uav_pos if pos is None else pos
-        diff = p[:, :, None, :] - self.obstacles.pos[:, None, :, :]
-        d = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-        return np.where(self.obstacles.active[:, None, :], d, np.inf)
+        return obstacle_distances(p, self.obstacles.pos, self.obstacles.active)
 
     def region_distances(
         self, pos: np.ndarray | None = None, rows: np.ndarray | None = None
@@ -649,16 +625,10 @@ class World:
         p = self.uav_pos[sel] if pos is None else pos
         if not self.n_obstacles:
             return np.zeros((*p.shape[:2], 0))
-        if (_kernels := _numba.kernels()) is not None:
-            ob = self.obstacles
-            return _kernels.region_distances(
-                p, self.pred_center[sel], self.pred_axes[sel], self.pred_cos[sel],
-                self.pred_sin[sel], ob.active[sel],
-            )  # fmt: skip
-        d = reachable.pairwise_distances(
-            p, self.pred_center[sel], self.pred_axes[sel], self.pred_heading[sel]
-        )
-        return np.where(self.obstacles.active[sel, None, :], d, np.inf)
+        return reachable.region_distances(
+            p, self.pred_center[sel], self.pred_axes[sel], self.pred_heading[sel],
+            self.pred_cos[sel], self.pred_sin[sel], self.obstacles.active[sel],
+        )  # fmt: skip
 
     def obstacle_velocities(self) -> np.ndarray:
         """``(E, M, 3)`` true obstacle ground velocities (m/s)."""

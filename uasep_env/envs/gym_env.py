@@ -8,7 +8,7 @@ import gymnasium
 import numpy as np
 
 from uasep_env.config import EnvConfig, make_config
-from uasep_env.envs._render import RenderMixin
+from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS
 from uasep_env.world import check_seed
@@ -16,7 +16,7 @@ from uasep_env.world import check_seed
 __all__ = ["FormationEnv"]
 
 
-class FormationEnv(RenderMixin, gymnasium.Env):
+class FormationEnv(ViewMixin, gymnasium.Env):
     """All UAVs of the formation controlled by one (centralised) agent.
 
     The same world, observations and rewards as
@@ -59,11 +59,6 @@ class FormationEnv(RenderMixin, gymnasium.Env):
         self.action_space = gymnasium.spaces.Box(-1.0, 1.0, (n * 3,), np.float32)
         self._renderer: Any = None
         self._done = True  # no episode yet
-
-    @property
-    def world(self) -> Any:
-        """The underlying :class:`~uasep_env.world.World` (one environment)."""
-        return self.core.world
 
     def reset(
         self, *, seed: int | None = None, options: dict | None = None

@@ -11,7 +11,7 @@ import numpy as np
 from pettingzoo import ParallelEnv
 
 from uasep_env.config import EnvConfig, make_config
-from uasep_env.envs._render import RenderMixin
+from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import (
     EnvCore,
     StepResult,
@@ -28,7 +28,7 @@ __all__ = ["UAVSeparationParallelEnv", "env", "parallel_env"]
 _SPACE_KEYS = ("n_uavs", "n_obstacles", "observation")
 
 
-class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
+class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
     """A formation of UAVs keeping separation from each other and non-cooperative obstacles.
 
     ## Description
@@ -141,11 +141,6 @@ class UAVSeparationParallelEnv(RenderMixin, ParallelEnv):
     def _check_agent(self, agent: str) -> None:
         if agent not in self._index:
             raise ValueError(f"unknown agent {agent!r}; agents are {self.possible_agents}")
-
-    @property
-    def world(self) -> Any:
-        """The underlying batched :class:`~uasep_env.world.World` (one environment)."""
-        return self.core.world
 
     @property
     def layout(self) -> Any:

@@ -17,6 +17,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS, team_mean
 from uasep_env.world import check_positive_int, check_seed
@@ -54,7 +55,7 @@ def _masked(values: dict[str, np.ndarray], rows: np.ndarray | None) -> dict[str,
     return out
 
 
-class FormationVectorEnv(VectorEnv):
+class FormationVectorEnv(ViewMixin, VectorEnv):
     """``num_envs`` centralised formation environments in one batched world.
 
     Args:
@@ -119,11 +120,6 @@ class FormationVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._needs_reset = np.zeros(self.num_envs, dtype=bool)
         self._started = False
-
-    @property
-    def world(self) -> Any:
-        """The underlying batched :class:`~uasep_env.world.World`."""
-        return self.core.world
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict | None = None
@@ -238,17 +234,12 @@ class FormationVectorEnv(VectorEnv):
         return values
 
     def render(self) -> np.ndarray | None:
-        """An RGB frame of environment 0 (``render_mode="rgb_array"``)."""
-        if self.render_mode != "rgb_array":
-            return None
-        if self._renderer is None:
-            from uasep_env.rendering import Renderer
+        """An RGB frame of environment 0 (``render_mode="rgb_array"``; else ``None``)."""
+        return super().render() if self.render_mode == "rgb_array" else None
 
-            self._renderer = Renderer(self.config, mode="rgb_array")
-        return self._renderer.render(self.core.world, env=0)
+    # The vector API's close (it calls close_extras and marks the env closed), not the view's.
+    close = VectorEnv.close
 
     def close_extras(self, **kwargs: Any) -> None:
         """Close the renderer."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self.close_renderer()

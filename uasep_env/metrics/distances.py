@@ -1,9 +1,15 @@
-"""UAV-UAV and UAV-obstacle centre distances over a recorded episode (NED, metres)."""
+"""UAV-UAV and UAV-obstacle centre distances over a recorded episode (NED, metres).
+
+The world's own helpers (:mod:`uasep_env.geometry`), so the metrics measure exactly the
+distances the world's safety checks use (same summation order, same numbers).
+"""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from uasep_env.geometry import obstacle_distances, uav_distances
 
 __all__ = ["obstacle_distances", "pairwise_uav_distances"]
 
@@ -17,30 +23,4 @@ def pairwise_uav_distances(uav_pos: ArrayLike) -> NDArray[np.float64]:
     Returns:
         (T, N, N) distances (m), ``+inf`` on the diagonal.
     """
-    pos = np.asarray(uav_pos, dtype=np.float64)
-    diff = pos[:, :, None, :] - pos[:, None, :, :]
-    dist = np.linalg.norm(diff, axis=-1)
-    n = pos.shape[1]
-    dist[:, np.arange(n), np.arange(n)] = np.inf
-    return dist
-
-
-def obstacle_distances(
-    uav_pos: ArrayLike, obstacle_pos: ArrayLike, obstacle_active: ArrayLike
-) -> NDArray[np.float64]:
-    """Return UAV-obstacle centre distances, ``+inf`` where the obstacle is inactive.
-
-    Args:
-        uav_pos: (T, N, 3) UAV positions (m).
-        obstacle_pos: (T, M, 3) obstacle positions (m).
-        obstacle_active: (T, M) bool.
-
-    Returns:
-        (T, N, M) distances (m).
-    """
-    pos = np.asarray(uav_pos, dtype=np.float64)
-    obs = np.asarray(obstacle_pos, dtype=np.float64)
-    active = np.asarray(obstacle_active, dtype=bool)
-    with np.errstate(invalid="ignore"):
-        dist = np.linalg.norm(pos[:, :, None, :] - obs[:, None, :, :], axis=-1)
-    return np.where(active[:, None, :], dist, np.inf)
+    return uav_distances(uav_pos, self_distance=np.inf)

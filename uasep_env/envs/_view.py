@@ -1,4 +1,4 @@
-"""Rendering shared by the single-world views (matplotlib is imported on first render)."""
+"""What every env view shares: its world, and rendering it (matplotlib imported on first render)."""
 
 from __future__ import annotations
 
@@ -7,16 +7,20 @@ from typing import Any
 import gymnasium
 import numpy as np
 
-__all__ = ["RenderMixin"]
+__all__ = ["ViewMixin"]
 
 
-class RenderMixin:
-    """``render()`` / ``close()`` for views with ``config``, ``render_mode`` and ``core``."""
+class ViewMixin:
+    """``world``, ``render()`` and ``close()`` for views with ``render_mode`` and ``core``."""
 
-    config: Any
     render_mode: str | None
     core: Any
     _renderer: Any = None
+
+    @property
+    def world(self) -> Any:
+        """The underlying batched :class:`~uasep_env.world.World` (``core.world``)."""
+        return self.core.world
 
     def render(self) -> np.ndarray | None:
         """Render environment 0 with matplotlib: an RGB array or a window."""
@@ -24,13 +28,17 @@ class RenderMixin:
             gymnasium.logger.warn("render() called without a render_mode; returning None")
             return None
         if self._renderer is None:
-            from uasep_env.rendering import Renderer
+            from uasep_env.viz.frames import Renderer
 
-            self._renderer = Renderer(self.config, mode=self.render_mode)
+            self._renderer = Renderer(mode=self.render_mode)
         return self._renderer.render(self.core.world, env=0)
 
-    def close(self) -> None:
+    def close_renderer(self) -> None:
         """Close the renderer, if any."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+    def close(self) -> None:
+        """Close the renderer, if any."""
+        self.close_renderer()

@@ -1,0 +1,42 @@
+"""Compiled (numba) forms of the hot numerical kernels; imported only when numba is in use.
+
+Each kernel is the scalar, per-point transcription of a numpy function elsewhere in the
+package and returns the same numbers bit for bit (``tests/test_kernels.py`` checks it): the
+same operations in the same order, no ``fastmath``. The numpy forms stay the reference and
+the fallback when numba is missing: each is decorated with
+:func:`uasep_env._numba.compiled_twin`, which names its kernel here and the constants the
+kernel receives as keyword arguments. These modules import nothing else of the package.
+
+* :func:`nearest_on_ellipsoids` -- :func:`uasep_env.reachable.distance._nearest` (the body
+  frame solve with the heading rotation around it);
+* :func:`pairwise_distances` -- the same solve for every point against every ellipsoid of
+  its batch row (:func:`uasep_env.reachable.distance._pairwise`), without broadcast copies,
+  and :func:`region_distances`, the same from precomputed cosines and sines with the
+  inactive regions at ``inf`` (:func:`uasep_env.reachable.distance.region_distances`);
+* :func:`separations` -- :func:`uasep_env.geometry.nearest_separations`;
+* :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
+* :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`;
+* :func:`plan_now` -- :func:`uasep_env.formation.planned_state`.
+"""
+
+from __future__ import annotations
+
+from uasep_env._kernels.ellipsoids import (
+    nearest_on_ellipsoids,
+    pairwise_distances,
+    region_distances,
+)
+from uasep_env._kernels.observations import assemble_observations
+from uasep_env._kernels.plan import plan_now
+from uasep_env._kernels.rewards import reward_terms
+from uasep_env._kernels.separations import separations
+
+__all__ = [
+    "assemble_observations",
+    "nearest_on_ellipsoids",
+    "pairwise_distances",
+    "plan_now",
+    "region_distances",
+    "reward_terms",
+    "separations",
+]

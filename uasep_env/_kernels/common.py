@@ -1,0 +1,46 @@
+"""What the compiled kernels share: numba's options, the loop choice, 3-vector norms."""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numba
+
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+#: Points per call above which the loop is spread over the cores (thread start-up costs).
+PARALLEL_MIN = 2048
+# numba's OpenMP layer (GNU) kills a forked child that runs a parallel loop after its
+# parent has run one; forked children (multiprocessing workers) use the serial loops.
+_forked = [False]
+os.register_at_fork(after_in_child=lambda: _forked.__setitem__(0, True))
+
+
+def _parallel(size: int) -> bool:
+    """Whether a loop over ``size`` items is spread over the cores."""
+    return size >= PARALLEL_MIN and not _forked[0]
+
+
+@numba.njit(inline="always", **_JIT)
+def _sq3(a, b, c):  # noqa: ANN001, ANN202
+    """Squared norm in the order numpy's ``einsum("...i,...i")`` adds (two SIMD lanes)."""
+    return (a * a + c * c) + b * b
+
+
+@numba.njit(inline="always", **_JIT)
+def _dist3(a, b, c):  # noqa: ANN001, ANN202
+    """Euclidean norm as numpy's ``sqrt(einsum("...i,...i"))``."""
+    return math.sqrt(_sq3(a, b, c))
+
+
+@numba.njit(inline="always", **_JIT)
+def _gap(p, e, i, q, j):  # noqa: ANN001, ANN202
+    """Distance from ``p[e, i]`` to ``q[e, j]`` (3-vectors), as :func:`_dist3`."""
+    return _dist3(q[e, j, 0] - p[e, i, 0], q[e, j, 1] - p[e, i, 1], q[e, j, 2] - p[e, i, 2])
+
+
+@numba.njit(inline="always", **_JIT)
+def _norm3(a, b, c):  # noqa: ANN001, ANN202
+    """Euclidean norm in the order ``np.linalg.norm(axis=-1)`` adds (left to right)."""
+    return math.sqrt((a * a + b * b) + c * c)

@@ -1,0 +1,449 @@
+"""The heading-aligned ellipse and ellipsoid around a reachable set (eqs. 17-18).
+
+``fit="enclosing"`` (the default) is certified to enclose the set and is steered towards the
+minimum area by a shipped shape table (``data/ellipse_table.npz``, rebuilt by
+``tools/build_reachable_table.py`` from :mod:`uasep_env.reachable.optimal`); ``fit="paper"``
+is eq. 17 as published. The certificate and the measured area factors are derived in
+``docs/reachable_sets.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from uasep_env.reachable.sets import (
+    FloatArray,
+    Mode,
+    _check_mode,
+    _h_unit,
+    _nonneg,
+    _out,
+)
+
+__all__ = ["Fit", "ellipse", "ellipsoid"]
+
+Fit = Literal["enclosing", "paper"]
+_FITS = ("enclosing", "paper")
+
+#: Intervals of the enclosure certificate on ``[0, pi]`` (even, so that pi/2 is a node).
+_N_CERT = 96
+#: Geometrically spaced parameter nodes at each end of the ellipse's axes.
+_N_GEO = 14
+#: Nodes uniform in the normal angle, merged with those uniform in the ellipse's parameter.
+_UNIFORM_NODES = np.linspace(0.0, np.pi, 49)[1:-1]
+#: Relative absolute margin (of ``v t + r``) that absorbs floating-point rounding.
+_EPS_ABS = 1e-12
+#: Half-width (fraction of the set's length) and iterations of the centre's polishing search.
+_C_SEARCH = 0.02
+_C_ITERS = 8
+
+
+def _check_fit(fit: str) -> bool:
+    """True for ``"paper"``, False for ``"enclosing"``; raises on anything else."""
+    if fit not in _FITS:
+        raise ValueError(f"fit must be 'enclosing' or 'paper', got {fit!r}")
+    return fit == "paper"
+
+
+# ---------------------------------------------------------------------------- shape table
+# Shape table (``data/ellipse_table.npz``): the minimum-area enclosing ellipse's centre c and
+# longitudinal semi-axis B as fractions of the set's extent along the heading (c from the back
+# end), and its lateral semi-axis A as a fraction of the set's half-width, for the swept ("s")
+# and the terminal ("t") set, on a grid of u = sqrt((2/pi) atan2(2 r / (v t), phi)) ("al";
+# 0: r = 0, 1: phi = 0; 33 nodes) and log10(hypot(phi, 2 r / (v t))) ("lr"; -3..3, 49 nodes).
+# Made by ``tools/build_reachable_table.py`` (about a minute). It only steers the fit towards the
+# minimum area: whatever it holds, the returned ellipse passes the enclosure certificate.
+def _load_table() -> tuple[FloatArray, FloatArray, dict[bool, FloatArray]]:
+    """The shipped shape table: ``(u nodes, log10 radius nodes, {swept: (33, 49, 3)})``."""
+    path = Path(__file__).parents[1] / "data" / "ellipse_table.npz"
+    with np.load(path) as data:
+        return (
+            np.asarray(data["al"], dtype=np.float64),
+            np.asarray(data["lr"], dtype=np.float64),
+            {True: np.asarray(data["s"], np.float64), False: np.asarray(data["t"], np.float64)},
+        )
+
+
+_TAB_U, _TAB_LOGR, _TAB = _load_table()
+
+
+def _table_coords(phi: FloatArray, eps: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Table coordinates for ``phi = w t`` and ``eps = r / (v t)`` (may be inf)."""
+    finite = np.isfinite(eps)
+    e = np.where(finite, eps, 0.0)
+    u = np.sqrt(np.where(finite, np.arctan2(2.0 * e, phi) * (2.0 / np.pi), 1.0))
+    rad = np.where(finite, np.hypot(phi, 2.0 * e), np.inf)
+    with np.errstate(divide="ignore"):
+        logr = np.log10(rad)
+    return u, logr
+
+
+def _interp_table(swept: bool, u: FloatArray, logr: FloatArray) -> FloatArray:
+    """Bilinear interpolation of the shape table, ``(..., 3)`` = (c, B, A) fractions."""
+    tab = _TAB[swept]
+    na, nl = tab.shape[:2]
+    fa = np.clip((u - _TAB_U[0]) / (_TAB_U[1] - _TAB_U[0]), 0.0, na - 1.0)
+    fl = np.clip((logr - _TAB_LOGR[0]) / (_TAB_LOGR[1] - _TAB_LOGR[0]), 0.0, nl - 1.0)
+    fl = np.where(np.isnan(fl), 0.0, fl)
+    i0 = np.minimum(fa.astype(np.intp), na - 2)
+    j0 = np.minimum(fl.astype(np.intp), nl - 2)
+    ta = (fa - i0)[..., None]
+    tl = (fl - j0)[..., None]
+    return (
+        tab[i0, j0] * (1 - ta) * (1 - tl)
+        + tab[i0 + 1, j0] * ta * (1 - tl)
+        + tab[i0, j0 + 1] * (1 - ta) * tl
+        + tab[i0 + 1, j0 + 1] * ta * tl
+    )
+
+
+# ---------------------------------------------------------------------------- search
+def _golden_max(
+    f: Callable[[FloatArray], FloatArray], lo: FloatArray, hi: FloatArray, iters: int
+) -> FloatArray:
+    """Vectorised golden-section search for the maximiser of a unimodal ``f`` on ``[lo, hi]``."""
+    g = (np.sqrt(5.0) - 1.0) / 2.0
+    a, b = lo, hi
+    c1 = b - g * (b - a)
+    c2 = a + g * (b - a)
+    f1, f2 = f(c1), f(c2)
+    for _ in range(iters):
+        right = f1 < f2
+        a = np.where(right, c1, a)
+        b = np.where(right, b, c2)
+        new = np.where(right, a + g * (b - a), b - g * (b - a))
+        fn = f(new)
+        c1, c2, f1, f2 = (
+            np.where(right, c2, new),
+            np.where(right, new, c1),
+            np.where(right, f2, fn),
+            np.where(right, fn, f1),
+        )
+    return 0.5 * (a + b)
+
+
+# ---------------------------------------------------------------------------- ellipse fit
+class _Nodes:
+    """Certificate nodes on ``[0, pi]`` with their trigonometry and the set's support there."""
+
+    def __init__(
+        self, th: FloatArray, vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
+    ) -> None:
+        self.th = th
+        self.cos = np.cos(th)
+        self.c2 = self.cos**2
+        sin = np.sin(th)
+        self.s2 = sin**2
+        self.d2 = np.diff(th, axis=-1) ** 2 / 8.0
+        self.cos_in = self.cos[..., 1:-1]
+        self.c2_in = self.c2[..., 1:-1]
+        self.inv_s2_in = 1.0 / self.s2[..., 1:-1]
+        self.h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept, sin, self.cos)
+
+    def take(self, idx: NDArray[np.intp]) -> _Nodes:
+        """The nodes of the rows ``idx``."""
+        sub = object.__new__(_Nodes)
+        for name in ("th", "cos", "c2", "s2", "d2", "h", "cos_in", "c2_in", "inv_s2_in"):
+            setattr(sub, name, getattr(self, name)[idx])
+        return sub
+
+
+def _margins(
+    nd: _Nodes, lat: FloatArray, lon: FloatArray, r: FloatArray, eps_abs: FloatArray
+) -> FloatArray:
+    """Certificate margins ``max(max rho_E - r, 0) Delta^2 / 8`` at the nodes, ``(..., K)``."""
+    a2 = (lat * lat)[..., None]
+    b2 = (lon * lon)[..., None]
+    den = a2 * nd.s2
+    den += b2 * nd.c2
+    np.maximum(den, 1e-300, out=den)
+    rho = np.sqrt(den)
+    rho *= den
+    np.divide(a2 * b2, rho, out=rho)  # radius of curvature of the ellipse at the nodes
+    m_int = np.maximum(rho[..., 1:], rho[..., :-1])
+    m_int -= r[..., None]
+    np.maximum(m_int, 0.0, out=m_int)
+    m_int *= nd.d2
+    out = rho
+    out[..., 0] = m_int[..., 0]
+    out[..., -1] = m_int[..., -1]
+    np.maximum(m_int[..., 1:], m_int[..., :-1], out=out[..., 1:-1])
+    out += eps_abs[..., None]
+    return out
+
+
+def _axes_for(
+    nd: _Nodes, delta: FloatArray, c: FloatArray, lon: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Least axes ``(A, B >= lon)`` with ``h_E(theta_k) >= h_k + delta_k`` at every node."""
+    h = nd.h
+    lon = np.maximum(lon, h[..., 0] + delta[..., 0] - c)
+    lon = np.maximum(lon, h[..., -1] + delta[..., -1] + c)
+    need = c[..., None] * nd.cos_in
+    np.subtract(h[..., 1:-1], need, out=need)
+    need += delta[..., 1:-1]
+    np.maximum(need, 0.0, out=need)
+    need *= need
+    need -= (lon * lon)[..., None] * nd.c2_in
+    need *= nd.inv_s2_in
+    return np.sqrt(np.maximum(np.max(need, axis=-1), 0.0)), lon
+
+
+def _fit_axes(
+    nd: _Nodes,
+    c: FloatArray,
+    lat: FloatArray,
+    lon: FloatArray,
+    r: FloatArray,
+    eps_abs: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Least axes for the centre ``c`` with the margins of ``(lat, lon)`` plus 25%.
+
+    ``B`` only grows (to meet the tip constraints at 0 and pi); ``A`` is the least value with
+    ``c cos theta_k + sqrt(A^2 sin^2 + B^2 cos^2) >= h_k + delta_k`` at the inner nodes.
+    """
+    return _axes_for(nd, 1.25 * _margins(nd, lat, lon, r, eps_abs), c, lon)
+
+
+def _certified(
+    nd: _Nodes,
+    c: FloatArray,
+    lat: FloatArray,
+    lon: FloatArray,
+    r: FloatArray,
+    eps_abs: FloatArray,
+) -> NDArray[np.bool_]:
+    """Whether ``(c, A, B)`` passes the enclosure certificate (``docs/reachable_sets.md``)."""
+    delta = _margins(nd, lat, lon, r, eps_abs)
+    he = c[..., None] * nd.cos + np.sqrt(
+        (lat * lat)[..., None] * nd.s2 + (lon * lon)[..., None] * nd.c2
+    )
+    return np.all(he - nd.h >= delta, axis=-1)
+
+
+def _ellipse_core(
+    vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Certified near-minimal ellipse ``(c, A, B)`` for flat arrays of parameters."""
+    scale = vt + r
+    live = scale > 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eps = np.where(vt > 0.0, r / np.where(vt > 0.0, vt, 1.0), np.inf)
+    u, logr = _table_coords(phi, eps)
+    frac = _interp_table(swept, u, logr)
+    zero = np.zeros_like(vt)
+    h0 = r + vt * _h_unit(zero, phi, swept)
+    hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
+    hx = r + vt * _h_unit(zero + 0.5 * np.pi, phi, swept)
+    ext = h0 + hpi
+    c = frac[..., 0] * ext - hpi
+    lon = frac[..., 1] * ext
+    lat = frac[..., 2] * hx
+    eps_abs = _EPS_ABS * scale
+    # Nodes: uniform in the parametric angle of the table's ellipse, merged with nodes uniform
+    # in the normal angle, pi/2 and the kink of the swept set's support.
+    # Near the ends of a thin ellipse the normal turns fast, so the parameter is also refined
+    # geometrically towards 0, pi/2 and pi, down to a fifth of the aspect ratio.
+    lat_g = np.maximum(lat, 1e-9 * scale)
+    lon_g = np.maximum(lon, 1e-9 * scale)
+    step = np.pi / _N_CERT
+    t_lo = np.minimum(0.2 * np.minimum(lat_g, lon_g) / np.maximum(lat_g, lon_g), step)
+    geo = t_lo[..., None] * (step / t_lo)[..., None] ** np.linspace(0.0, 1.0, _N_GEO)
+    tpar = np.concatenate(
+        [
+            np.broadcast_to(np.linspace(0.0, np.pi, _N_CERT + 1), (*vt.shape, _N_CERT + 1)),
+            geo,
+            0.5 * np.pi - geo,
+            0.5 * np.pi + geo,
+            np.pi - geo,
+        ],
+        axis=-1,
+    )
+    th = np.arctan2(lon_g[..., None] * np.sin(tpar), lat_g[..., None] * np.cos(tpar))
+    th[..., 0] = 0.0
+    th[..., _N_CERT // 2] = 0.5 * np.pi
+    th[..., _N_CERT] = np.pi
+    kink = np.where(swept & (phi < np.pi), 0.5 * (np.pi + phi), 0.5 * np.pi)
+    uni = np.broadcast_to(_UNIFORM_NODES, (*th.shape[:-1], _UNIFORM_NODES.size))
+    th = np.sort(np.concatenate([th, uni, kink[..., None]], axis=-1), axis=-1)
+    nd = _Nodes(th, vt, phi, r, swept)
+    # The margins depend on (A, B): fit twice, taking the margins at the previous axes with a
+    # 25% allowance, then certify; rows that still fail grow until they pass.
+    delta = 1.25 * _margins(nd, lat_g, lon, r, eps_abs)
+    # Polish the centre by a short golden-section search on the area (margins held fixed).
+    half = _C_SEARCH * ext
+
+    def neg_area(cc: FloatArray) -> FloatArray:
+        a_, b_ = _axes_for(nd, delta, cc, lon)
+        return -(a_ * b_)
+
+    c = _golden_max(neg_area, c - half, c + half, _C_ITERS)
+    lat = lat_g
+    for _ in range(2):
+        lat, lon = _fit_axes(nd, c, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)
+    ok = _certified(nd, c, lat, lon, r, eps_abs) | ~live
+    grow = 1e-6
+    for _ in range(30):
+        if np.all(ok):
+            break
+        bad = np.flatnonzero(~ok)
+        lat[bad] *= 1.0 + grow
+        lon[bad] *= 1.0 + grow
+        ok[bad] = _certified(nd.take(bad), c[bad], lat[bad], lon[bad], r[bad], eps_abs[bad])
+        grow *= 8.0
+    # The circle of radius v t + r about the obstacle holds everything within reach; use it
+    # if the certificate never passed, or if it is smaller (sets that are nearly discs).
+    fallback = ~ok | (lat * lon > scale * scale)
+    c = np.where(fallback, 0.0, c)
+    lat = np.where(fallback, scale, lat)
+    lon = np.where(fallback, scale, lon)
+    # Exact special cases: a disc (v t = 0, includes a point) and a segment (phi = 0, r = 0).
+    disc = vt <= 0.0
+    seg = (phi <= 0.0) & (r <= 0.0) & ~disc
+    c = np.where(disc, 0.0, np.where(seg, 0.5 * vt, c))
+    lat = np.where(disc, r, np.where(seg, 0.0, lat))
+    lon = np.where(disc, r, np.where(seg, 0.5 * vt, lon))
+    return c, lat, lon
+
+
+def _paper_core(
+    vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The paper's ellipse (eq. 17) ``(c, A, B)``: the set's extents, not an enclosure.
+
+    Major axis ``a`` = the lateral extent between S3 and S4 (twice the support at
+    ``theta = pi/2``), minor axis ``b`` = the extent along the heading from S5 to the tip of
+    S1,2 (the supports at ``0`` and ``pi``). Eq. 17 writes ``x = a cos alpha``,
+    ``y = b sin alpha``, but the text defines ``a`` and ``b`` as the *lengths* of the axes;
+    taken as semi-axes the ellipse would be twice the size of the set in both directions, so
+    the semi-axes are ``a / 2`` and ``b / 2``, centred on the middle of the extents (the
+    ellipse inscribed in the set's bounding box, Figure 3). The extents are those of the
+    corrected set (S3/S4 centred on ``F(+-phi)``, the erratum of eqs. 13-14), read off its
+    support function.
+    """
+    zero = np.zeros_like(vt)
+    h0 = r + vt * _h_unit(zero, phi, swept)
+    hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
+    hx = r + vt * _h_unit(zero + 0.5 * np.pi, phi, swept)
+    return 0.5 * (h0 - hpi), hx, 0.5 * (h0 + hpi)
+
+
+def ellipse(
+    speed: ArrayLike,
+    max_turn_rate: ArrayLike,
+    horizon: ArrayLike,
+    radius: ArrayLike,
+    mode: Mode = "swept",
+    fit: Fit = "enclosing",
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Heading-aligned ellipse around the reachable set plus the radius.
+
+    ``fit="enclosing"`` (default) provably encloses the set and replaces the paper's eq. 17.
+    See ``docs/reachable_sets.md`` for the enclosure certificate and the measured area factors
+    (median 1.0004, at most 1.007 / 1.03 times the minimum enclosing ellipse for the swept /
+    terminal set). ``fit="paper"`` is eq. 17 as published (axes = the set's extents, see
+    :func:`_paper_core`): it does **not** enclose the set; it misses the set's "shoulders"
+    between the axes. At the paper's example (terminal set, ``w_max = 0.013``, ``v = 4``,
+    ``t = 10``, ``r = 3``) boundary points lie up to 0.51 m outside it and it misses 10 % of
+    the set's area; with ``w_max = 0.1``, ``v = 8``, up to 5.5 m and 13 %
+    (``tests/test_reachable.py::test_paper_fit_misses_the_shoulders``).
+
+    Args:
+        speed: Horizontal speed ``v`` (m/s).
+        max_turn_rate: ``w_max`` (rad/s); 0 (straight flight) is allowed.
+        horizon: Prediction horizon ``t`` (s).
+        radius: Safety radius ``r`` (m).
+        mode: ``"swept"`` (reachable at any time in ``[0, t]``, default) or ``"terminal"``
+            (the S1..S5 region, reachable at exactly ``t``).
+        fit: ``"enclosing"`` (default) or ``"paper"`` (eq. 17 as published, not enclosing).
+
+    Returns:
+        ``(center_offset, lateral_semi_axis, longitudinal_semi_axis)`` (m), broadcast shape:
+        the centre lies ``center_offset`` ahead of the obstacle along its heading.
+
+    Raises:
+        ValueError: On a negative/non-finite parameter, an unknown mode or an unknown fit.
+    """
+    swept = _check_mode(mode)
+    core = _paper_core if _check_fit(fit) else _ellipse_core
+    v = _nonneg("speed", speed)
+    w = _nonneg("max_turn_rate", max_turn_rate)
+    t = _nonneg("horizon", horizon)
+    r = _nonneg("radius", radius)
+    v, w, t, r = np.broadcast_arrays(v, w, t, r)
+    shape = v.shape
+    vt = (v * t).ravel()
+    phi = (w * t).ravel()
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        c, lat, lon = core(vt, phi, r.ravel().astype(np.float64), swept)
+    return _out(c.reshape(shape)), _out(lat.reshape(shape)), _out(lon.reshape(shape))
+
+
+def ellipsoid(
+    speed: ArrayLike,
+    max_turn_rate: ArrayLike,
+    max_climb_rate: ArrayLike,
+    horizon: ArrayLike,
+    radius: ArrayLike,
+    mode: Mode = "swept",
+    fit: Fit = "enclosing",
+) -> tuple[FloatArray, FloatArray]:
+    """Heading-aligned ellipsoid around the 3D reachable set (eq. 18).
+
+    Horizontal Dubins motion as in :func:`ellipse`, vertical speed ``|v_z| <= vz_max``,
+    everything inflated by a ball of radius ``r``.
+
+    ``fit="enclosing"`` (default, eq. 18 fixed, provably enclosing): semi-axes are
+    ``sqrt(3/2)`` times the enclosing 2D ellipse's and ``sqrt(3) (vz_max t + r)`` vertically
+    (the least-volume ellipsoid of that family containing the cylinder "2D ellipse x
+    vertical extent"); the flat 2D ellipse when ``vz_max t + r = 0``.
+
+    ``fit="paper"`` (as published, not enclosing): the paper's 2D ellipse (axis lengths
+    ``a`` lateral, ``b`` along the heading, see :func:`ellipse`) and, as the text says, a
+    circular section of diameter ``a`` across the heading: the vertical semi-axis is
+    ``a / 2``, whatever ``vz_max``. The printed eq. 18 (vertical semi-axis ``b``)
+    contradicts that sentence (notes); the text is followed.
+
+    Args:
+        speed: Horizontal speed ``v`` (m/s).
+        max_turn_rate: ``w_max`` (rad/s).
+        max_climb_rate: ``vz_max`` (m/s).
+        horizon: Prediction horizon ``t`` (s).
+        radius: Safety radius ``r`` (m).
+        mode: ``"swept"`` (default) or ``"terminal"``.
+        fit: ``"enclosing"`` (default) or ``"paper"`` (as published, not enclosing).
+
+    Returns:
+        ``(center_offset, semi_axes)``: the offset ahead of the obstacle along its heading
+        (m, broadcast shape) and the semi-axes ``(..., 3)`` ordered (longitudinal, lateral,
+        vertical) (m).
+
+    Raises:
+        ValueError: On a negative/non-finite parameter, an unknown mode or an unknown fit.
+    """
+    swept = _check_mode(mode)
+    paper = _check_fit(fit)
+    v = _nonneg("speed", speed)
+    w = _nonneg("max_turn_rate", max_turn_rate)
+    vz = _nonneg("max_climb_rate", max_climb_rate)
+    t = _nonneg("horizon", horizon)
+    r = _nonneg("radius", radius)
+    v, w, vz, t, r = np.broadcast_arrays(v, w, vz, t, r)
+    shape = v.shape
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        c, lat, lon = (_paper_core if paper else _ellipse_core)(
+            (v * t).ravel(), (w * t).ravel(), r.ravel().astype(float), swept
+        )
+    if paper:
+        axes = np.stack([lon, lat, lat], axis=-1)
+        return _out(c.reshape(shape)), axes.reshape((*shape, 3))
+    z = (vz * t + r).ravel()
+    flat = z <= 0.0
+    lam = np.where(flat, 1.0, np.sqrt(1.5))
+    axes = np.stack([lam * lon, lam * lat, np.sqrt(3.0) * z], axis=-1)
+    return _out(c.reshape(shape)), axes.reshape((*shape, 3))
