@@ -194,7 +194,7 @@ def test_envs_out_of_noise_lockstep_still_match_fresh_envs():
     w.reset(seed=[None, 42, None], mask=np.array([False, True, False]))
     fresh = World(cfg, 1, noise_block=16)
     fresh.reset(seed=42)
-    assert len(set(w._buf_pos.tolist())) > 1  # the gather path of _draw
+    assert len(set(w._noise.buf_pos.tolist())) > 1  # the gather path of NoiseStreams.draw
     for _ in range(40):  # crosses several block refills
         a = _actions(rng, 3, cfg.n_uavs)
         w.step(a)
@@ -226,22 +226,22 @@ def test_planned_state_follows_time_and_is_read_only():
 
 def test_noise_drawn_on_several_threads_is_bit_identical(monkeypatch):
     """Large batches refill their noise on a thread pool: the same numbers as one thread."""
-    import uasep_env.world as world_mod
+    import uasep_env.noise as noise_mod
 
     def run(chunk):
-        monkeypatch.setattr(world_mod, "REFILL_CHUNK", chunk)
+        monkeypatch.setattr(noise_mod, "REFILL_CHUNK", chunk)
         w = World(make_config(scenario="random", n_obstacles=2), 9, noise_block=8)
         w.reset(seed=4)
         return _run(w, 30)
 
     calls = []
-    real = world_mod._run_chunked
+    real = noise_mod._run_chunked
 
     def spy(fn, envs):
         calls.append(len(envs))
         real(fn, envs)
 
-    monkeypatch.setattr(world_mod, "_run_chunked", spy)
+    monkeypatch.setattr(noise_mod, "_run_chunked", spy)
     serial = run(10**9)
     threaded = run(2)
     assert max(calls) == 9 and len(calls) >= 4  # several refills of the whole batch
@@ -260,13 +260,13 @@ def test_noise_threads_work_in_a_forked_child(monkeypatch):
     """A child forked after the parent used the noise thread pool makes its own pool."""
     import multiprocessing
 
-    import uasep_env.world as world_mod
+    import uasep_env.noise as noise_mod
 
-    monkeypatch.setattr(world_mod, "REFILL_CHUNK", 2)
+    monkeypatch.setattr(noise_mod, "REFILL_CHUNK", 2)
     if (multiprocessing.cpu_count() or 1) < 2:
         pytest.skip("one core: the noise is drawn on one thread")
     parent = _threaded_rollout()
-    assert world_mod._pool  # the parent's pool exists when the child is forked
+    assert noise_mod._pool  # the parent's pool exists when the child is forked
     with multiprocessing.get_context("fork").Pool(1) as pool:
         child = pool.apply_async(_threaded_rollout).get(timeout=120)
     np.testing.assert_array_equal(child, parent)

@@ -39,12 +39,14 @@ at least a minute's flight from their encounter).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from uasep_env.config import EnvConfig
 from uasep_env.formation import PlannedTrajectory, pattern_slots
+from uasep_env.obstacles import ObstacleState
 
 __all__ = [
     "HELD_OUT_PAPER_SEEDS",
@@ -55,6 +57,7 @@ __all__ = [
     "VALIDATION_SEEDS",
     "ScenarioSpec",
     "check_training_seeds",
+    "place_obstacles",
     "sample_scenario",
 ]
 
@@ -347,3 +350,37 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
         obs_hold_until=obs_hold,
         wind=np.asarray(ob.wind, dtype=float),
     )
+
+
+#: The obstacle state's per-obstacle fields that a :class:`ScenarioSpec` gives (``obs_*``).
+_OBSTACLE_FIELDS = (
+    "pos",
+    "heading",
+    "speed",
+    "turn_rate",
+    "climb_rate",
+    "max_turn_rate",
+    "max_climb_rate",
+    "radius",
+    "alt_band",
+    "active",
+    "hold_until",
+)
+
+
+def place_obstacles(
+    obstacles: ObstacleState, mask: np.ndarray, specs: Sequence[ScenarioSpec], config: EnvConfig
+) -> None:
+    """Start the obstacles of ``specs`` in the environments selected by ``mask``.
+
+    Args:
+        obstacles: The batch's obstacle state, written in place.
+        mask: ``(E,)`` bool; the environments starting an episode.
+        specs: One spec per selected environment, in order.
+        config: The configuration (how often and how the pilots change their commands).
+    """
+    for name in _OBSTACLE_FIELDS:
+        getattr(obstacles, name)[mask] = np.stack([getattr(s, "obs_" + name) for s in specs])
+    obstacles.switch_prob[mask] = min(1.0, config.dt / config.obstacle.mean_switch_time)
+    obstacles.straight_prob[mask] = config.obstacle.straight_probability
+    obstacles.wind[mask] = np.stack([s.wind for s in specs])

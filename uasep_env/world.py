@@ -21,101 +21,29 @@ and then predicts each obstacle's reachable ellipsoid over the horizon from its 
 Randomness: each environment owns a :class:`numpy.random.Generator`, seeded at reset
 (``seed + i`` for environment ``i`` when one seed is given for the batch, the Gymnasium
 vector convention). Noise is drawn from it in blocks of ``noise_block`` physics steps, per
-environment, so environment ``i`` of a batch follows exactly the same episode as a
-single environment seeded with ``seed + i``, bit for bit.
+environment (:class:`uasep_env.noise.NoiseStreams`), so environment ``i`` of a batch
+follows exactly the same episode as a single environment seeded with ``seed + i``, bit for
+bit.
 """
 
 from __future__ import annotations
 
-import os
-from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Sequence
 
 import numpy as np
 
 from uasep_env import reachable
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.config.checks import check_positive_int, check_seed, is_int
 from uasep_env.dynamics import measure, step_double_integrator
 from uasep_env.estimation import KalmanModel
 from uasep_env.formation import PlannedTrajectory, planned_state, segment_offsets
 from uasep_env.geometry import nearest_separations, obstacle_distances, uav_distances
+from uasep_env.noise import NoiseStreams
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
-from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, sample_scenario
+from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, place_obstacles, sample_scenario
 
-__all__ = ["World", "check_positive_int", "check_seed"]
-
-#: Environments refilled per task when noise is drawn on several threads; below twice
-#: this, one thread does it all (a task costs more than it saves).
-REFILL_CHUNK = 256
-_pool: list[ThreadPoolExecutor] = []
-# A forked child has the pool object but none of its threads: it makes its own.
-os.register_at_fork(after_in_child=_pool.clear)
-
-
-def _run_chunked(fn: Callable[[np.ndarray], None], envs: np.ndarray) -> None:
-    """``fn(envs)``, split over the cores when ``envs`` is long.
-
-    Drawing noise is most of a large batch's step, and numpy's generators release the GIL
-    while they draw. Each environment's generator is used by one task only, in order, so
-    the numbers are the same as one thread's, bit for bit.
-    """
-    workers = min(os.cpu_count() or 1, len(envs) // REFILL_CHUNK)
-    if workers < 2:
-        fn(envs)
-        return
-    if not _pool:
-        _pool.append(ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="uasep-noise"))
-    for future in [_pool[0].submit(fn, part) for part in np.array_split(envs, workers)]:
-        future.result()
-
-
-def _is_int(x: object) -> bool:
-    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
-
-
-def check_positive_int(name: str, value: object) -> int:
-    """``value`` as an int when it is a positive integer (not a bool); else a named error.
-
-    Raises:
-        ValueError: ``{name} must be a positive integer, got {value!r}``.
-    """
-    if not _is_int(value) or value < 1:  # type: ignore[operator]
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return int(value)  # type: ignore[call-overload]
-
-
-def check_seed(seed: object, n_envs: int | None = None) -> None:
-    """Check a reset seed as Gymnasium does; name the bad value.
-
-    Args:
-        seed: ``None`` or a non-negative int; with ``n_envs`` (the batched views) also a
-            sequence of ``n_envs`` entries, each ``None`` or a non-negative int.
-        n_envs: The batch size when sequences are accepted, else ``None``.
-
-    Raises:
-        TypeError: A seed that is not None, an int (bools, floats and strings are not) or,
-            for batches, a list/tuple/array of them.
-        ValueError: A negative seed, or a sequence of the wrong length.
-    """
-    if seed is None:
-        return
-    if _is_int(seed):
-        if seed < 0:  # type: ignore[operator]
-            raise ValueError(f"seed must be >= 0, got {seed!r}")
-        return
-    kinds = "None or a non-negative int"
-    if n_envs is None or not isinstance(seed, (list, tuple, np.ndarray)):
-        if n_envs is not None:
-            kinds += f", or a list of {n_envs} of them (one per environment)"
-        raise TypeError(f"seed must be {kinds}, got {seed!r}")
-    seeds = list(seed)
-    if len(seeds) != n_envs:
-        raise ValueError(f"expected {n_envs} seeds, got {len(seeds)}: {seed!r}")
-    for i, s in enumerate(seeds):
-        if s is not None and not _is_int(s):
-            raise TypeError(f"seed[{i}] must be None or a non-negative int, got {s!r}")
-        if s is not None and s < 0:
-            raise ValueError(f"seed[{i}] must be >= 0, got {s!r}")
+__all__ = ["World"]
 
 
 class World:
@@ -171,23 +99,16 @@ class World:
         self.noise_block = int(noise_block)
         nz = cfg.noise
         self._uav_kf = KalmanModel(cfg.dt, nz.accel_std, nz.position_std, nz.velocity_std)
-        self._n_normal = n * 9 + m * 6
-        # Each standard normal's standard deviation, by column: the buffers hold the noise
-        # itself, scaled once per refill rather than once per use.
-        self._normal_std = np.concatenate(
+        # Each standard normal's standard deviation, by column: accelerations, then each
+        # UAV's and each obstacle's measured position and velocity.
+        normal_std = np.concatenate(
             [
                 np.full(n * 3, nz.accel_std),
                 np.tile(np.repeat([nz.position_std, nz.velocity_std], 3), n),
                 np.tile(np.repeat([nz.obstacle_position_std, nz.obstacle_velocity_std], 3), m),
             ]
         )
-        self._n_unif = m * N_UNIFORMS
-        self._rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(e)]
-        # Step-major: one physics step's noise for the whole batch is one contiguous slab.
-        self._normal_buf = np.zeros((self.noise_block, e, self._n_normal))
-        self._unif_buf = np.zeros((self.noise_block, e, self._n_unif))
-        self._buf_pos = np.full(e, self.noise_block, dtype=np.int64)
-        self._sync_lockstep()
+        self._noise = NoiseStreams(e, self.noise_block, normal_std, m * N_UNIFORMS)
 
         self.time = np.zeros(e)
         self.steps = np.zeros(e, dtype=np.int64)
@@ -254,7 +175,7 @@ class World:
         seeds: list[int | None]
         if seed is None:
             seeds = [None] * e
-        elif _is_int(seed):
+        elif is_int(seed):
             seeds = [int(seed) + i for i in range(e)]  # type: ignore[arg-type]
         else:
             seeds = list(seed)  # type: ignore[arg-type]
@@ -263,10 +184,8 @@ class World:
         for i in idx:
             s = seeds[i]
             if s is not None:
-                self._rngs[i] = np.random.default_rng(int(s))
-                self._buf_pos[i] = self.noise_block  # drop noise drawn from the old stream
-                self._lockstep = False  # until the next masked draw checks again
-            specs.append(sample_scenario(self._rngs[i], self.config))
+                self._noise.reseed(i, s)
+            specs.append(sample_scenario(self._noise.rngs[i], self.config))
             self.families[i] = specs[-1].family
         if len(idx) == 0:
             return
@@ -292,20 +211,7 @@ class World:
         self.prev_accel_cmd[mask] = 0.0
         ob = self.obstacles
         if self.n_obstacles:
-            ob.pos[mask] = stack("obs_pos")
-            ob.heading[mask] = stack("obs_heading")
-            ob.speed[mask] = stack("obs_speed")
-            ob.turn_rate[mask] = stack("obs_turn_rate")
-            ob.climb_rate[mask] = stack("obs_climb_rate")
-            ob.max_turn_rate[mask] = stack("obs_max_turn_rate")
-            ob.max_climb_rate[mask] = stack("obs_max_climb_rate")
-            ob.radius[mask] = stack("obs_radius")
-            ob.alt_band[mask] = stack("obs_alt_band")
-            ob.active[mask] = stack("obs_active")
-            ob.switch_prob[mask] = min(1.0, cfg.dt / cfg.obstacle.mean_switch_time)
-            ob.straight_prob[mask] = cfg.obstacle.straight_probability
-            ob.wind[mask] = stack("wind")
-            ob.hold_until[mask] = stack("obs_hold_until")
+            place_obstacles(ob, mask, specs, cfg)
             # The ellipsoid's shape is fixed by the obstacle's performance; only its pose moves.
             # Inflations keep the true obstacle inside despite wind drift and the track error.
             pred = cfg.prediction
@@ -327,59 +233,6 @@ class World:
         self._predict_regions(mask)
         self._update_safety(reset_mask=mask)
         self._refresh_plan()
-
-    # ------------------------------------------------------------------ noise
-    def _draw(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """This physics step's Gaussian noise (scaled by ``_normal_std``) and uniforms.
-
-        Environments outside ``active`` consume nothing (their values are discarded).
-        """
-        if active is None and self._lockstep:
-            # Every environment at the same place in its block (the usual case): a view,
-            # and no array checks (they show at small batches).
-            at = self._lock_pos
-            if at >= self.noise_block:
-                _run_chunked(self._refill, np.arange(self.n_envs))
-                self._buf_pos[:] = at = 0
-            self._lock_pos = at + 1
-            self._buf_pos += 1
-            return self._normal_buf[at], self._unif_buf[at]
-        due = self._buf_pos >= self.noise_block
-        if active is not None:
-            due &= active
-        refill = np.flatnonzero(due)
-        if len(refill):
-            _run_chunked(self._refill, refill)
-            self._buf_pos[refill] = 0
-        at = np.minimum(self._buf_pos, self.noise_block - 1)
-        if (at == at[0]).all():
-            # Still in lockstep (a masked draw that every environment took part in): a view.
-            normals = self._normal_buf[at[0]]
-            unifs = self._unif_buf[at[0]]
-        else:
-            rows = np.arange(self.n_envs)
-            normals = self._normal_buf[at, rows]
-            unifs = self._unif_buf[at, rows]
-        if active is None:
-            self._buf_pos += 1
-        else:
-            self._buf_pos += active
-        self._sync_lockstep()
-        return normals, unifs
-
-    def _sync_lockstep(self) -> None:
-        """Note whether every environment is at the same place in its noise block."""
-        self._lockstep = bool((self._buf_pos == self._buf_pos[0]).all())
-        self._lock_pos = int(self._buf_pos[0])
-
-    def _refill(self, envs: np.ndarray) -> None:
-        """Draw the next ``noise_block`` physics steps of noise for each of ``envs``."""
-        shape_n = (self.noise_block, self._n_normal)
-        shape_u = (self.noise_block, self._n_unif)
-        for i in envs:
-            rng = self._rngs[i]
-            np.multiply(rng.standard_normal(shape_n), self._normal_std, out=self._normal_buf[:, i])
-            self._unif_buf[:, i] = rng.random(shape_u)
 
     # ------------------------------------------------------------------ step
     def step(self, accel_cmd: np.ndarray, active: np.ndarray | None = None) -> None:
@@ -502,7 +355,7 @@ class World:
     def _physics_step(self, active: np.ndarray | None = None) -> None:
         cfg = self.config
         n, m = self.n_uavs, self.n_obstacles
-        normals, unifs = self._draw(active)
+        normals, unifs = self._noise.draw(active)
         acc_noise = normals[:, : n * 3].reshape(self.n_envs, n, 3)
         applied = step_double_integrator(
             self.uav_pos,
@@ -535,7 +388,7 @@ class World:
         n, m = self.n_uavs, self.n_obstacles
         if normals is None:
             # Initial measurements use the next noise draw too (consumed only by those envs).
-            normals, _ = self._draw(mask)
+            normals, _ = self._noise.draw(mask)
         # The environments measured: all, or those in ``mask`` (a partial reset).
         r = slice(None) if mask is None else mask
         z = normals[r]

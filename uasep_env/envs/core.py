@@ -10,7 +10,6 @@ it; none of them steps the world another way.
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -19,6 +18,7 @@ import numpy as np
 
 from uasep_env.actions import ResidualAPF
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.config.checks import is_real
 from uasep_env.observation import ObservationLayout, build_observations, global_state
 from uasep_env.rewards import REWARD_TERMS, collisions, compute_rewards
 from uasep_env.world import World
@@ -51,15 +51,6 @@ def _short(value: Any, limit: int = 120) -> str:
     return text if len(text) <= limit else text[:limit] + "..."
 
 
-def _is_real(x: Any) -> bool:
-    """A real number: Python int/float (or other ``numbers.Real``), numpy int/float, not bool."""
-    if isinstance(x, (bool, np.bool_)):
-        return False
-    if isinstance(x, np.ndarray):
-        return x.ndim == 0 and x.dtype.kind in "fiu"
-    return isinstance(x, (numbers.Real, np.integer, np.floating))
-
-
 def _real_array(actions: Any, where: str) -> np.ndarray:
     """``actions`` as an array of an integer or floating dtype; anything else is named."""
     if isinstance(actions, np.ndarray) and actions.dtype.kind in "fiu":
@@ -82,7 +73,7 @@ def _real_array(actions: Any, where: str) -> np.ndarray:
         ) from err
     flat = arr.ravel()
     for i, x in enumerate(flat):
-        if not _is_real(x):
+        if not is_real(x, any_real=True):
             idx = tuple(int(j) for j in np.unravel_index(i, arr.shape))
             what = "a nested sequence (ragged)" if isinstance(x, (list, tuple, np.ndarray)) else ""
             raise ActionTypeError(

@@ -11,6 +11,7 @@ import numpy as np
 from pettingzoo import ParallelEnv
 
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.config.checks import check_positive_int, check_seed
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import (
     EnvCore,
@@ -20,7 +21,6 @@ from uasep_env.envs.core import (
     prepare_actions,
 )
 from uasep_env.observation import state_dim
-from uasep_env.world import check_positive_int, check_seed
 
 __all__ = ["UAVSeparationParallelEnv", "env", "parallel_env"]
 
@@ -198,11 +198,11 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
                 "create a new environment instead"
             )
         config = make_config(self.config, **changes)
-        seed_state = self.core.world._rngs  # keep each environment's random stream going
+        seed_state = self.core.world._noise.rngs  # keep each environment's random stream going
         self.config = config
         self.render_mode = config.render_mode
         self.core = EnvCore(config, n_envs=1)
-        self.core.world._rngs = seed_state
+        self.core.world._noise.rngs = seed_state
 
     def step(
         self, actions: dict[str, np.ndarray]

@@ -26,9 +26,9 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.config.checks import check_seed
 from uasep_env.envs.core import EnvCore, prepare_actions
 from uasep_env.rollout import DEFAULT_SETTLE_TIME_S
-from uasep_env.world import check_seed
 
 __all__ = ["UAVSharedVecEnv"]
 

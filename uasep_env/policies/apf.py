@@ -56,7 +56,8 @@ from typing import ClassVar
 import numpy as np
 
 from uasep_env import reachable
-from uasep_env.config import EnvConfig, _positive
+from uasep_env.config import EnvConfig
+from uasep_env.config.checks import check_positive
 from uasep_env.observation import ObservationLayout
 
 __all__ = ["APF", "APFGains", "MotionStateAPF", "TraditionalAPF"]
@@ -114,7 +115,7 @@ class APFGains:
     def __post_init__(self) -> None:
         # The config's range checks, so a bad gain reads like a bad config value.
         for f in fields(self):
-            _positive(
+            check_positive(
                 f"gains.{f.name}",
                 getattr(self, f.name),
                 allow_zero=f.name not in _POSITIVE_GAINS,

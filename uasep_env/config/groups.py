@@ -1,0 +1,328 @@
+"""The configuration's groups: frozen, validated dataclasses, one per part of the simulator.
+
+:class:`UAVConfig` (limits of the cooperative UAVs), :class:`NoiseConfig`,
+:class:`ObstacleConfig`, :class:`PredictionConfig`, :class:`ObservationConfig`,
+:class:`RewardWeights` and :class:`ActionConfig`; :class:`~uasep_env.config.EnvConfig` holds
+one of each. Every numeric field is bounded to a physically meaningful range
+(:mod:`uasep_env.config.checks`); an invalid value raises a :class:`ValueError` naming the
+dotted field.
+
+Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+from uasep_env.config.checks import (
+    MAX_ACCEL,
+    MAX_DIST,
+    MAX_OBS,
+    MAX_SPEED,
+    MAX_TIME,
+    MAX_TURN_RATE,
+    MAX_WEIGHT,
+    check,
+    check_finite,
+    check_int_in,
+    check_one_of,
+    check_positive,
+    check_vector,
+)
+
+__all__ = [
+    "ACTION_MODES",
+    "ActionConfig",
+    "NoiseConfig",
+    "ObservationConfig",
+    "ObstacleConfig",
+    "PredictionConfig",
+    "RewardWeights",
+    "UAVConfig",
+]
+
+
+@dataclass(frozen=True)
+class UAVConfig:
+    """Physical limits of the cooperative UAVs (paper eqs. 3-4).
+
+    Attributes:
+        max_speed: ``V_max``, the speed never exceeded after a step (m/s).
+        max_accel: Bound on each axis of the commanded acceleration (m/s^2). The action
+            ``[-1, 1]^3`` is scaled by it.
+        collision_distance: ``r_safe_min``: centre distance below which two aircraft
+            collide (m).
+        separation_distance: UAV-UAV loss-of-separation threshold (m).
+        obstacle_separation: UAV-obstacle loss-of-separation threshold (m), measured
+            between centres.
+        lost_distance: A UAV farther than this from its planned position is lost: the
+            episode ends (terminated) (m). The default is almost three times the APF's
+            largest deviation on the random bank (112 m), so it never ends a controlled
+            flight; it ends the flights of untrained policies before they drift for
+            kilometres, where no reward term can tell them the way back.
+    """
+
+    max_speed: float = 10.0  # m/s
+    max_accel: float = 2.0  # m/s^2, per axis
+    collision_distance: float = 3.0  # m
+    separation_distance: float = 8.0  # m
+    obstacle_separation: float = 10.0  # m
+    lost_distance: float = 300.0  # m
+
+    def __post_init__(self) -> None:
+        check_positive("uav.max_speed", self.max_speed, hi=MAX_SPEED)
+        check_positive("uav.max_accel", self.max_accel, hi=MAX_ACCEL)
+        check_positive("uav.collision_distance", self.collision_distance, hi=MAX_DIST)
+        check_positive("uav.separation_distance", self.separation_distance, hi=MAX_DIST)
+        check_positive("uav.obstacle_separation", self.obstacle_separation, hi=MAX_DIST)
+        check_positive("uav.lost_distance", self.lost_distance, hi=MAX_DIST)
+        check(
+            self.separation_distance >= self.collision_distance,
+            "uav.separation_distance",
+            self.separation_distance,
+            "must be >= uav.collision_distance",
+        )
+        check(
+            self.obstacle_separation >= self.collision_distance,
+            "uav.obstacle_separation",
+            self.obstacle_separation,
+            "must be >= uav.collision_distance",
+        )
+        check(
+            self.lost_distance > max(self.separation_distance, self.obstacle_separation),
+            "uav.lost_distance",
+            self.lost_distance,
+            "must be > uav.separation_distance and uav.obstacle_separation",
+        )
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Process and measurement noise (paper eqs. 1-2). Zero turns a source off.
+
+    Attributes:
+        accel_std: ``S_w``: std of the Gaussian noise added to each UAV's commanded
+            acceleration, per axis (m/s^2).
+        position_std: ``S_v``: std of a UAV's sensed position, per axis (m).
+        velocity_std: ``S_v``: std of a UAV's sensed velocity, per axis (m/s).
+        obstacle_position_std: std of the radar/ADS-B track of an obstacle's position (m).
+        obstacle_velocity_std: std of an obstacle track's velocity (m/s).
+    """
+
+    accel_std: float = 0.05  # m/s^2
+    position_std: float = 0.5  # m
+    velocity_std: float = 0.1  # m/s
+    obstacle_position_std: float = 2.0  # m
+    obstacle_velocity_std: float = 0.3  # m/s
+
+    def __post_init__(self) -> None:
+        bounds = {
+            "accel_std": MAX_ACCEL,
+            "position_std": MAX_DIST,
+            "velocity_std": MAX_SPEED,
+            "obstacle_position_std": MAX_DIST,
+            "obstacle_velocity_std": MAX_SPEED,
+        }
+        for f in fields(self):
+            check_positive(
+                f"noise.{f.name}", getattr(self, f.name), allow_zero=True, hi=bounds[f.name]
+            )
+
+    @classmethod
+    def off(cls) -> NoiseConfig:
+        """All noise sources switched off (runs are deterministic given the actions)."""
+        return cls(0.0, 0.0, 0.0, 0.0, 0.0)
+
+    @property
+    def is_off(self) -> bool:
+        """Whether every noise source is zero."""
+        return all(getattr(self, f.name) == 0.0 for f in fields(self))
+
+
+@dataclass(frozen=True)
+class ObstacleConfig:
+    """Motion model of the non-cooperative obstacles (3D Dubins, paper eq. 8).
+
+    Scenarios that randomise obstacles draw around these values (see
+    :mod:`uasep_env.scenarios`); the ``paper`` scenario uses them as given.
+
+    Attributes:
+        speed: Constant horizontal airspeed ``v`` (m/s).
+        max_turn_rate: ``w_max``, bound on the turn rate (rad/s).
+        max_climb_rate: ``vz_max``, bound on the climb/descent rate (m/s).
+        radius: Safety radius ``r`` added around the obstacle's reachable positions (m).
+        mean_switch_time: Mean time between the pilot's random changes of the turn and
+            climb commands (s); a command changes in a step with probability ``dt / mean``.
+        straight_probability: Probability that a new command is "fly straight and level".
+        wind: Steady wind added to the obstacles' ground velocity, NED (m/s).
+    """
+
+    speed: float = 4.0  # m/s
+    max_turn_rate: float = 0.013  # rad/s
+    max_climb_rate: float = 0.5  # m/s
+    radius: float = 3.0  # m
+    mean_switch_time: float = 30.0  # s
+    straight_probability: float = 0.5
+    wind: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s, NED
+
+    def __post_init__(self) -> None:
+        check_positive("obstacle.speed", self.speed, hi=MAX_SPEED)
+        check_positive(
+            "obstacle.max_turn_rate", self.max_turn_rate, allow_zero=True, hi=MAX_TURN_RATE
+        )
+        check_positive(
+            "obstacle.max_climb_rate", self.max_climb_rate, allow_zero=True, hi=MAX_SPEED
+        )
+        check_positive("obstacle.radius", self.radius, allow_zero=True, hi=MAX_DIST)
+        check_positive("obstacle.mean_switch_time", self.mean_switch_time, hi=MAX_TIME)
+        check_finite("obstacle.straight_probability", self.straight_probability)
+        check(
+            0.0 <= self.straight_probability <= 1.0,
+            "obstacle.straight_probability",
+            self.straight_probability,
+            "must be in [0, 1]",
+        )
+        wind = check_vector("obstacle.wind", self.wind, 3, MAX_SPEED)  # NED
+        object.__setattr__(self, "wind", wind)
+
+
+@dataclass(frozen=True)
+class PredictionConfig:
+    """Reachable-set prediction of the obstacles (paper eqs. 9-18, see notes).
+
+    Attributes:
+        horizon: Prediction horizon ``t`` (s); the paper uses 10 s.
+        mode: ``"swept"`` (every point reachable within the horizon, the default used for
+            separation) or ``"terminal"`` (reachable at exactly the horizon, the paper's S1..S5).
+        fit: ``"enclosing"`` (an ellipsoid that provably encloses the set, the default) or
+            ``"paper"`` (eqs. 17-18 as published: axes from the set's extents, a circular
+            section across the heading; it does not enclose the set). With
+            ``mode="terminal"`` this is the paper's prediction as published, see
+            :data:`AS_PUBLISHED`.
+        kalman: Whether UAVs and obstacle tracks are Kalman filtered; off, the raw noisy
+            measurements are used as estimates.
+    """
+
+    horizon: float = 10.0  # s
+    mode: str = "swept"
+    fit: str = "enclosing"
+    kalman: bool = True
+
+    def __post_init__(self) -> None:
+        check_positive("prediction.horizon", self.horizon, hi=600.0)
+        check_one_of("prediction.mode", self.mode, ("swept", "terminal"))
+        check_one_of("prediction.fit", self.fit, ("enclosing", "paper"))
+        check(isinstance(self.kalman, bool), "prediction.kalman", self.kalman, "must be a bool")
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """What each agent observes (see :mod:`uasep_env.observation`).
+
+    Attributes:
+        k_uavs: Number of nearest other UAVs observed (``None``: all others, at most 6).
+        k_obstacles: Number of nearest obstacles observed (``None``: all, at least 1 slot).
+        position_scale: Divisor that normalises positions (m).
+        clip: Normalised values are clipped to ``[-clip, clip]``. The default, 12, leaves
+            room for the distance to the final way-point of a default plan (1,000 m and the
+            formation's start offset; at 10 it read 1,000 m where the truth was up to
+            1,012 m).
+        sensing_range: Obstacles and UAVs farther than this are not observed (m); at most
+            ``clip * position_scale``, the farthest distance an observation can express.
+    """
+
+    k_uavs: int | None = None
+    k_obstacles: int | None = None
+    position_scale: float = 100.0  # m
+    clip: float = 12.0
+    sensing_range: float = 1000.0  # m
+
+    def __post_init__(self) -> None:
+        if self.k_uavs is not None:
+            check_int_in("observation.k_uavs", self.k_uavs, 1, 31)
+        if self.k_obstacles is not None:
+            check_int_in("observation.k_obstacles", self.k_obstacles, 1, 8)
+        check_positive("observation.position_scale", self.position_scale, hi=MAX_OBS)
+        check_positive("observation.clip", self.clip, hi=MAX_OBS)
+        check_positive("observation.sensing_range", self.sensing_range, hi=MAX_OBS)
+        reach = self.clip * self.position_scale
+        check(
+            self.sensing_range <= reach,
+            "observation.sensing_range",
+            self.sensing_range,
+            f"must be <= observation.clip * observation.position_scale ({reach:g} m): "
+            "farther objects would be observed with clipped distances",
+        )
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the named reward terms (see :mod:`uasep_env.rewards`).
+
+    Each agent's reward is ``sum_k w_k * term_k`` over its own terms, mixed with the
+    team's mean by ``shared``: ``r_i = (1 - shared) * own_i + shared * mean_j(own_j)``.
+
+    Attributes:
+        separation_inner: Weight of the UAV-UAV separation term (<= 0 penalty).
+        separation_obstacle: Weight of the UAV-obstacle distance term.
+        separation_region: Weight of the reachable-region intrusion term.
+        deviation: Weight of the planned-trajectory deviation term.
+        control: Weight of the control-effort term.
+        smoothness: Weight of the acceleration-change term.
+        collision: Weight of the collision term (``-max_steps`` on a collision).
+        progress: Weight of the per-step alive bonus.
+        shared: Share of the team-mean reward in each agent's reward, in [0, 1].
+    """
+
+    # Defaults: a step's reward is in [0, 1] and a collision costs a whole episode (why:
+    # uasep_env.rewards).
+    separation_inner: float = 0.25
+    separation_obstacle: float = 0.4
+    separation_region: float = 0.05
+    deviation: float = 0.2
+    control: float = 0.0
+    smoothness: float = 0.0125
+    collision: float = 1.0
+    progress: float = 1.0
+    shared: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            check_finite(f"reward.{f.name}", getattr(self, f.name), MAX_WEIGHT)
+        check(0.0 <= self.shared <= 1.0, "reward.shared", self.shared, "must be in [0, 1]")
+
+
+#: Names accepted for ``ActionConfig.mode`` (see :mod:`uasep_env.actions`).
+ACTION_MODES = ("direct", "residual_apf")
+
+
+@dataclass(frozen=True)
+class ActionConfig:
+    """What an agent's action means (see :mod:`uasep_env.actions`).
+
+    Attributes:
+        mode: ``"direct"``: the action is the commanded acceleration, as a fraction of
+            ``uav.max_accel`` per axis. ``"residual_apf"``: the action is a bounded
+            correction added to the paper's APF command for the same observation; the
+            observation then ends with that APF command (3 more entries).
+        residual_scale: In ``residual_apf`` mode, the largest correction per axis, as a
+            fraction of ``uav.max_accel`` (the sum is clipped to the acceleration bound).
+        strict: Finite actions outside the action box ``[-1, 1]`` raise a ``ValueError``
+            naming them. Off (the default, the ecosystem's convention), they are clipped to
+            the box and counted in the step's infos (``clipped_actions``).
+    """
+
+    mode: str = "direct"
+    residual_scale: float = 0.5  # fraction of uav.max_accel
+    strict: bool = False
+
+    def __post_init__(self) -> None:
+        check(self.mode in ACTION_MODES, "action.mode", self.mode, f"must be one of {ACTION_MODES}")
+        check_finite("action.residual_scale", self.residual_scale)
+        check(
+            0.0 < self.residual_scale <= 2.0,
+            "action.residual_scale",
+            self.residual_scale,
+            "must be in (0, 2]",
+        )
+        check(isinstance(self.strict, bool), "action.strict", self.strict, "must be a bool")

@@ -1,0 +1,138 @@
+"""Per-environment random streams, their noise drawn in blocks (on threads for large batches).
+
+Each environment of a :class:`~uasep_env.world.World` owns a
+:class:`numpy.random.Generator`. :class:`NoiseStreams` draws from it ``noise_block``
+physics steps of noise at once (Gaussian noise, already scaled, and uniforms), per
+environment, so that environment ``i`` of a batch reads exactly the numbers a single
+environment with the same seed reads, bit for bit, whatever the batch and whichever
+environments take part in a step. Drawing is most of a large batch's step: the refills
+are split over a thread pool (:func:`_run_chunked`), each generator used by one task only.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+__all__ = ["REFILL_CHUNK", "NoiseStreams"]
+
+#: Environments refilled per task when noise is drawn on several threads; below twice
+#: this, one thread does it all (a task costs more than it saves).
+REFILL_CHUNK = 256
+_pool: list[ThreadPoolExecutor] = []
+# A forked child has the pool object but none of its threads: it makes its own.
+os.register_at_fork(after_in_child=_pool.clear)
+
+
+def _run_chunked(fn: Callable[[np.ndarray], None], envs: np.ndarray) -> None:
+    """``fn(envs)``, split over the cores when ``envs`` is long.
+
+    Drawing noise is most of a large batch's step, and numpy's generators release the GIL
+    while they draw. Each environment's generator is used by one task only, in order, so
+    the numbers are the same as one thread's, bit for bit.
+    """
+    workers = min(os.cpu_count() or 1, len(envs) // REFILL_CHUNK)
+    if workers < 2:
+        fn(envs)
+        return
+    if not _pool:
+        _pool.append(ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="uasep-noise"))
+    for future in [_pool[0].submit(fn, part) for part in np.array_split(envs, workers)]:
+        future.result()
+
+
+class NoiseStreams:
+    """The random streams of ``n_envs`` environments and their buffered noise.
+
+    Args:
+        n_envs: Number of environments ``E``.
+        noise_block: Physics steps of noise drawn at once per environment.
+        normal_std: ``(K,)`` standard deviation of each Gaussian column; the buffers hold
+            the noise itself, scaled once per refill rather than once per use.
+        n_uniform: Uniforms per environment and physics step.
+
+    Attributes:
+        rngs: Each environment's generator (fresh entropy until :meth:`reseed`).
+        buf_pos: ``(E,)`` each environment's next row in its noise block (``noise_block``:
+            the block is used up, the next draw refills it).
+    """
+
+    def __init__(
+        self, n_envs: int, noise_block: int, normal_std: np.ndarray, n_uniform: int
+    ) -> None:
+        self.n_envs = n_envs
+        self.noise_block = noise_block
+        self._normal_std = normal_std
+        self._n_normal = len(normal_std)
+        self._n_unif = n_uniform
+        self.rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n_envs)]
+        # Step-major: one physics step's noise for the whole batch is one contiguous slab.
+        self._normal_buf = np.zeros((noise_block, n_envs, self._n_normal))
+        self._unif_buf = np.zeros((noise_block, n_envs, self._n_unif))
+        self.buf_pos = np.full(n_envs, noise_block, dtype=np.int64)
+        self._sync_lockstep()
+
+    def reseed(self, env: int, seed: int) -> None:
+        """Restart environment ``env``'s stream from ``seed``, dropping noise already drawn."""
+        self.rngs[env] = np.random.default_rng(int(seed))
+        self.buf_pos[env] = self.noise_block  # drop noise drawn from the old stream
+        self._lockstep = False  # until the next masked draw checks again
+
+    def draw(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """This physics step's Gaussian noise (scaled by ``normal_std``) and uniforms.
+
+        Environments outside ``active`` consume nothing (their values are discarded).
+
+        Returns:
+            ``(normals, uniforms)``, ``(E, K)`` and ``(E, n_uniform)``; possibly views of
+            the buffers, valid until the next draw.
+        """
+        if active is None and self._lockstep:
+            # Every environment at the same place in its block (the usual case): a view,
+            # and no array checks (they show at small batches).
+            at = self._lock_pos
+            if at >= self.noise_block:
+                _run_chunked(self._refill, np.arange(self.n_envs))
+                self.buf_pos[:] = at = 0
+            self._lock_pos = at + 1
+            self.buf_pos += 1
+            return self._normal_buf[at], self._unif_buf[at]
+        due = self.buf_pos >= self.noise_block
+        if active is not None:
+            due &= active
+        refill = np.flatnonzero(due)
+        if len(refill):
+            _run_chunked(self._refill, refill)
+            self.buf_pos[refill] = 0
+        at = np.minimum(self.buf_pos, self.noise_block - 1)
+        if (at == at[0]).all():
+            # Still in lockstep (a masked draw that every environment took part in): a view.
+            normals = self._normal_buf[at[0]]
+            unifs = self._unif_buf[at[0]]
+        else:
+            rows = np.arange(self.n_envs)
+            normals = self._normal_buf[at, rows]
+            unifs = self._unif_buf[at, rows]
+        if active is None:
+            self.buf_pos += 1
+        else:
+            self.buf_pos += active
+        self._sync_lockstep()
+        return normals, unifs
+
+    def _sync_lockstep(self) -> None:
+        """Note whether every environment is at the same place in its noise block."""
+        self._lockstep = bool((self.buf_pos == self.buf_pos[0]).all())
+        self._lock_pos = int(self.buf_pos[0])
+
+    def _refill(self, envs: np.ndarray) -> None:
+        """Draw the next ``noise_block`` physics steps of noise for each of ``envs``."""
+        shape_n = (self.noise_block, self._n_normal)
+        shape_u = (self.noise_block, self._n_unif)
+        for i in envs:
+            rng = self.rngs[i]
+            np.multiply(rng.standard_normal(shape_n), self._normal_std, out=self._normal_buf[:, i])
+            self._unif_buf[:, i] = rng.random(shape_u)
