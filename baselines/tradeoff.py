@@ -48,8 +48,8 @@ import numpy as np
 
 from uasep_env import make_config
 from uasep_env.config import AS_PUBLISHED, EnvConfig
-from uasep_env.evaluation import EvaluationResult, evaluate
-from uasep_env.metrics import t_interval, wilson_interval
+from uasep_env.evaluation import PolicyResult, evaluate
+from uasep_env.metrics import t_interval
 from uasep_env.policies import (
     APF,
     APFGains,
@@ -74,9 +74,6 @@ HORIZONS_S = (4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0)
 def _scaled(names: Sequence[str], scale: float) -> APFGains:
     """The reference gains (:class:`APFGains`'s field defaults) with ``names`` scaled."""
     return APFGains().scaled(names, scale)
-
-
-_MARGIN = ("obs_safe_min", "obs_time")
 
 
 @dataclass(frozen=True)
@@ -107,7 +104,7 @@ def _residual(cfg: EnvConfig, s: float) -> Any:
         CHECKPOINTS / "ppo_residual_apf.zip",
         cfg,
         "ppo-residual",
-        base_gains=_scaled(_MARGIN, s),
+        base_gains=_scaled(APF.margin_gains, s),
     )
 
 
@@ -118,7 +115,7 @@ METHODS: tuple[Method, ...] = (
         "margin scale",
         SCALES,
         1.0,
-        lambda c, s: APF(c, _scaled(_MARGIN, s)),
+        lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
     ),
     Method(
         "apf-published",
@@ -126,7 +123,7 @@ METHODS: tuple[Method, ...] = (
         "margin scale",
         SCALES,
         1.0,
-        lambda c, s: APF(c, _scaled(_MARGIN, s)),
+        lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
         lambda _s: AS_PUBLISHED,
     ),
     Method(
@@ -135,7 +132,7 @@ METHODS: tuple[Method, ...] = (
         "margin scale",
         SCALES,
         1.5,
-        lambda c, s: MotionStateAPF(c, _scaled(_MARGIN, s)),
+        lambda c, s: MotionStateAPF(c, _scaled(MotionStateAPF.margin_gains, s)),
     ),
     Method(
         "traditional-apf",
@@ -143,7 +140,7 @@ METHODS: tuple[Method, ...] = (
         "range scale",
         SCALES,
         0.75,
-        lambda c, s: TraditionalAPF(c, _scaled(("traditional_range",), s)),
+        lambda c, s: TraditionalAPF(c, _scaled(TraditionalAPF.margin_gains, s)),
     ),
     Method(
         "ppo-residual",
@@ -189,43 +186,25 @@ EFFICIENCY = (
 AXES = (("uav2_dev_north", "x"), ("uav2_dev_east", "y"), ("uav2_dev_down", "z"))
 
 
-def _episode_values(result: EvaluationResult, label: str) -> list[dict[str, Any]]:
-    """The per-episode metrics of one label, as ``{"episode": {...}, "uavs": [...]}``."""
-    return [e.metrics.to_dict() for e in result.results[label].episodes]
+def _row_stats(res: PolicyResult) -> dict[str, float]:
+    """Every statistic of one setting, with intervals: the evaluation's own aggregate.
 
-
-def _row_stats(episodes: list[dict[str, Any]]) -> dict[str, float]:
-    """Every statistic of one setting, with intervals."""
-    ep = [m["episode"] for m in episodes]
-    values: dict[str, np.ndarray] = {
-        "min_obstacle_distance": np.array([e["min_obstacle_distance"] for e in ep], float),
-        "loss_of_separation": np.array([bool(e["loss_of_separation"]) for e in ep]),
-        "collision": np.array([bool(e["collision"]) for e in ep]),
-        "max_deviation": np.array([e["max_deviation"] for e in ep], float),
-        "max_conflict_duration": np.array(
-            [
-                np.nan if e["max_conflict_duration"] is None else e["max_conflict_duration"]
-                for e in ep
-            ],
-            float,
-        ),
-        "acc_fluctuation": np.array([max(e["max_acc_std"].values()) for e in ep], float),
-    }
-    out: dict[str, float] = {"n": float(len(ep))}
+    Only the acceleration fluctuation (the largest of the three axes' stds, per episode) is
+    not an aggregated metric; its mean and interval follow :func:`~uasep_env.metrics.aggregate`.
+    """
+    agg = dict(res.aggregate)
+    fluct = np.array([max(e.metrics.episode.max_acc_std) for e in res.episodes], float)
+    fluct = fluct[np.isfinite(fluct)]
+    lo, hi = t_interval(fluct)
+    agg["episode.acc_fluctuation"] = {
+        "mean": float(fluct.mean()) if fluct.size else float("nan"), "ci_low": lo, "ci_high": hi
+    }  # fmt: skip
+    out: dict[str, float] = {"n": float(len(res.episodes))}
     for col, key, stat, _ in SAFETY + EFFICIENCY:
-        v = values[key]
-        if stat == "rate":
-            k = int(v.sum())
-            lo, hi = wilson_interval(k, len(v))
-            out[col], out[f"{col}_lo"], out[f"{col}_hi"] = k / len(v), lo, hi
-        else:
-            v = v[np.isfinite(v)]
-            out[col] = float(v.mean()) if v.size else float("nan")
-            lo, hi = t_interval(v) if v.size > 1 else (float("nan"), float("nan"))
-            out[f"{col}_lo"], out[f"{col}_hi"] = lo, hi
+        s = agg[f"episode.{key}"]
+        out[col], out[f"{col}_lo"], out[f"{col}_hi"] = s[stat], s["ci_low"], s["ci_high"]
     for col, ax in AXES:
-        dev = [next(u for u in m["uavs"] if u["name"] == "uav_2") for m in episodes]
-        out[col] = float(np.mean([u["deviation"]["max_abs"][ax] for u in dev]))
+        out[col] = agg[f"uav.uav_2.deviation.max_abs.{ax}"]["mean"]
     return out
 
 
@@ -282,7 +261,7 @@ def run(
                 policies = {f"{m.name}@{v:g}": m.policy(cfg, v) for v in values}
                 result = evaluate(policies, cfg, seeds, workers=workers)
                 for v in values:
-                    stats = _row_stats(_episode_values(result, f"{m.name}@{v:g}"))
+                    stats = _row_stats(result.results[f"{m.name}@{v:g}"])
                     rows.append(
                         {
                             "method": m.name,

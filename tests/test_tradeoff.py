@@ -46,8 +46,8 @@ def test_knee_is_where_distance_starts_to_cost_more():
 def test_margin_scale_one_is_the_default_gains():
     from uasep_env.policies import APFGains
 
-    assert tradeoff._scaled(tradeoff._MARGIN, 1.0) == APFGains()
-    scaled = tradeoff._scaled(tradeoff._MARGIN, 2.0)
+    assert tradeoff._scaled(tradeoff.APF.margin_gains, 1.0) == APFGains()
+    scaled = tradeoff._scaled(tradeoff.APF.margin_gains, 2.0)
     assert scaled.obs_safe_min == 2 * APFGains().obs_safe_min
     assert scaled.k_obs == APFGains().k_obs
     for m in tradeoff.METHODS:

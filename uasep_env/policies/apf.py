@@ -146,6 +146,8 @@ class _APFBase(ABC):
     """
 
     name = "apf-base"
+    #: The gains that set the method's safety margin (what its trade-off curve sweeps).
+    margin_gains: ClassVar[tuple[str, ...]] = ("obs_safe_min", "obs_time")
     #: The gains used when none are given; each method's come from its trade-off curve.
     default_gains: ClassVar[APFGains] = APFGains()
 
@@ -283,7 +285,7 @@ class MotionStateAPF(_APFBase):
     """
 
     name = "motion-state-apf"
-    default_gains = APFGains().scaled(("obs_safe_min", "obs_time"), 1.5)
+    default_gains = APFGains().scaled(_APFBase.margin_gains, 1.5)
 
     def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """Repulsion from the obstacle's current position and motion."""
@@ -311,7 +313,8 @@ class TraditionalAPF(_APFBase):
     """
 
     name = "traditional-apf"
-    default_gains = APFGains().scaled(("traditional_range",), 0.75)
+    margin_gains = ("traditional_range",)
+    default_gains = APFGains().scaled(margin_gains, 0.75)
 
     def obstacle_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """Repulsion from the obstacle's current position, by distance only."""

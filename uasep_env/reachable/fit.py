@@ -226,6 +226,17 @@ def _certified(
     return np.all(he - nd.h >= delta, axis=-1)
 
 
+def _extents(
+    vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The set's supports ahead (``0``), behind (``pi``) and to the side (``pi / 2``) (m)."""
+    zero = np.zeros_like(vt)
+    h0 = r + vt * _h_unit(zero, phi, swept)
+    hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
+    hx = r + vt * _h_unit(zero + 0.5 * np.pi, phi, swept)
+    return h0, hpi, hx
+
+
 def _ellipse_core(
     vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -236,10 +247,7 @@ def _ellipse_core(
         eps = np.where(vt > 0.0, r / np.where(vt > 0.0, vt, 1.0), np.inf)
     u, logr = _table_coords(phi, eps)
     frac = _interp_table(swept, u, logr)
-    zero = np.zeros_like(vt)
-    h0 = r + vt * _h_unit(zero, phi, swept)
-    hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
-    hx = r + vt * _h_unit(zero + 0.5 * np.pi, phi, swept)
+    h0, hpi, hx = _extents(vt, phi, r, swept)
     ext = h0 + hpi
     c = frac[..., 0] * ext - hpi
     lon = frac[..., 1] * ext
@@ -326,10 +334,7 @@ def _paper_core(
     corrected set (S3/S4 centred on ``F(+-phi)``, the erratum of eqs. 13-14), read off its
     support function.
     """
-    zero = np.zeros_like(vt)
-    h0 = r + vt * _h_unit(zero, phi, swept)
-    hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
-    hx = r + vt * _h_unit(zero + 0.5 * np.pi, phi, swept)
+    h0, hpi, hx = _extents(vt, phi, r, swept)
     return 0.5 * (h0 - hpi), hx, 0.5 * (h0 + hpi)
 
 
