@@ -48,6 +48,7 @@ import numpy as np
 
 from uasep_env import make_config
 from uasep_env.config import AS_PUBLISHED, EnvConfig
+from uasep_env.config.checks import check_positive_int
 from uasep_env.evaluation import PolicyResult, evaluate
 from uasep_env.metrics import t_interval
 from uasep_env.policies import (
@@ -478,12 +479,17 @@ def report(rows: list[dict[str, Any]]) -> str:
     return "\n".join(out) + "\n"
 
 
+def positive_int(text: str) -> int:
+    """An argparse type: a positive integer (argparse names the flag and the bad value)."""
+    return check_positive_int("value", int(text))
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     """Run the sweep (resuming), then write the CSV and the figures."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--paper-episodes", type=int, default=len(PAPER_SEEDS))
-    p.add_argument("--bank-episodes", type=int, default=200)
+    p.add_argument("--workers", type=positive_int, default=2)
+    p.add_argument("--paper-episodes", type=positive_int, default=len(PAPER_SEEDS))
+    p.add_argument("--bank-episodes", type=positive_int, default=200)
     p.add_argument(
         "--methods",
         default=",".join(m.name for m in METHODS),

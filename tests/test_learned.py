@@ -253,3 +253,21 @@ def test_readme_shows_the_held_out_results_as_written():
     for section in (bank, targets):
         table = section[section.index("| ") :].strip()
         assert table in readme
+
+
+def test_base_gains_only_for_a_residual_policy_flying_its_own_base():
+    """A residual checkpoint in a direct env flies the given base; anywhere else it is named."""
+    from uasep_env.policies import APFGains
+
+    cfg = make_config(scenario="random")
+    wide = APFGains().scaled(("obs_safe_min",), 2.0)
+    residual = load_policy(CHECKPOINTS / "ppo_residual_apf.zip", cfg, base_gains=wide)
+    assert residual._residual.apf.gains == wide
+    with pytest.raises(ValueError, match=r"base_gains=APFGains\(.*a direct policy in a direct"):
+        load_policy(CHECKPOINTS / "ppo_shared.zip", cfg, base_gains=wide)
+    with pytest.raises(ValueError, match="a residual_apf policy in a residual_apf environment"):
+        load_policy(
+            CHECKPOINTS / "ppo_residual_apf.zip",
+            cfg.replace(action={"mode": "residual_apf"}),
+            base_gains=wide,
+        )

@@ -89,6 +89,15 @@ def test_small_sweep_writes_csv_and_figures_and_resumes(tmp_path, monkeypatch):
         tradeoff.main(["--methods", "apf,fastest", "--out", str(tmp_path)])
 
 
+@pytest.mark.parametrize("flag", ["--workers", "--paper-episodes", "--bank-episodes"])
+@pytest.mark.parametrize("bad", ["0", "-3", "two"])
+def test_bad_counts_are_named(flag, bad, capsys):
+    with pytest.raises(SystemExit):
+        tradeoff.main([flag, bad])
+    err = capsys.readouterr().err
+    assert f"argument {flag}: invalid positive_int value: '{bad}'" in err
+
+
 def test_each_controllers_default_is_the_knee_of_its_shipped_front():
     """The defaults come from the curves (docs/figures/tradeoff.csv), not by hand."""
     from uasep_env import make_config

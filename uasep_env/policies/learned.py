@@ -131,7 +131,7 @@ class LearnedPolicy:
         name: Label in reports.
         base_gains: For a ``residual_apf`` policy acting in a ``direct`` environment, the
             gains of the APF it corrects (default: the environments' default gains, which
-            it was trained on).
+            it was trained on). Anywhere else it is an error (nothing would use it).
 
     Raises:
         CheckpointError: When the environment does not fit the checkpoint (number of UAVs,
@@ -161,6 +161,12 @@ class LearnedPolicy:
             if self.mode == "residual_apf" and config.action.mode == "direct"
             else None
         )
+        if base_gains is not None and self._residual is None:
+            raise ValueError(
+                f"base_gains={base_gains!r}: only a residual_apf policy acting in a direct "
+                f"environment computes its base APF (this is a {self.mode} policy in a "
+                f"{config.action.mode} environment)"
+            )
         self._layers = [(np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in weights]
         self._act = _ACTIVATIONS[meta.activation]
         if meta.obs_norm:
