@@ -9,6 +9,9 @@ place (``docs/real_traffic.md``):
   and its altitude is within [-2,000, 45,000] ft. Barometric altitude is used as the height
   (gliders report no geometric altitude); its offset from the geometric height is nearly
   constant over a track, and tracks are relative to their first sample.
+* **Stale reports**: a record at exactly the previous record's latitude, longitude and
+  altitude while reporting at least :data:`STALE_KT` of ground speed repeats a stale
+  position (some fire-fighting aircraft repeat one position for minutes) and is dropped.
 * **Outliers**: a sample whose implied speed from the previous kept sample *and* to the next
   one both exceed :data:`MAX_SPEED` horizontally (or :data:`MAX_CLIMB` vertically) is a spike
   and is dropped (repeated until none is left); duplicated timestamps keep the first record.
@@ -94,6 +97,9 @@ MAX_CLIMB = 60.0
 MIN_SAMPLES = 10
 MIN_DURATION_S = 60.0
 ALT_RANGE_FT = (-2000.0, 45000.0)
+#: A record at exactly the previous one's position while reporting this ground speed (kt)
+#: or more is a stale repeat (the receiver re-sent the last position) and is dropped.
+STALE_KT = 20.0
 _FIELDS = ("latitude", "longitude", "altitude", "groundspeed", "track", "vertical_rate")
 _CALFIRE = (
     (re.compile(r"^AA?\d+$"), "fixed_wing", "CAL FIRE designator A/AA (air attack)"),
@@ -166,6 +172,12 @@ def _aircraft_tracks(
     recs = [r for r, f in zip(recs, first, strict=True) if f]
     t_ms = t_ms[first]
     v = np.array([[_num(r[f]) for f in _FIELDS] for r in recs], dtype=np.float64)
+    # A moving aircraft at exactly the previous record's position: a repeated, stale report.
+    stale = np.zeros(len(recs), dtype=bool)
+    stale[1:] = np.all(v[1:, :3] == v[:-1, :3], axis=1) & (v[1:, 3] >= STALE_KT)
+    dropped["stale"] += int(np.sum(stale))
+    recs = [r for r, s in zip(recs, stale, strict=True) if not s]
+    t_ms, v = t_ms[~stale], v[~stale]
     lat, lon, alt_m = v[:, 0], v[:, 1], v[:, 2] * FEET
     t = (t_ms - t_ms[0]) / 1000.0
     ned = ned_about(lat, lon, alt_m, (float(lat[0]), float(lon[0]), float(alt_m[0])))
@@ -275,6 +287,7 @@ def build(
         dropped = dict.fromkeys(
             ("missing_field", "on_ground", "altitude_range", "duplicate_time", "spike"), 0
         )
+        dropped["stale"] = 0
         dropped["short_piece"] = 0
         by_icao: dict[str, list[dict[str, Any]]] = {}
         for r in records:
@@ -318,6 +331,7 @@ def build(
             "min_samples": MIN_SAMPLES,
             "min_duration_s": MIN_DURATION_S,
             "altitude_range_ft": list(ALT_RANGE_FT),
+            "stale_kt": STALE_KT,
             "quantisation": "positions cm, velocities cm/s, times ms",
         },
         "split_rule": "by flight id; per class, in the order of sha256('uasep-real-traffic:' "
