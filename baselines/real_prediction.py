@@ -352,13 +352,19 @@ def evaluate_class(
     obs = _observed(tracks, max_gap)
     per_h: dict[float, list[Windows]] = {h: [] for h in horizons}
     radii: dict[float, list[np.ndarray]] = {h: [] for h in horizons}
+    errors = []
     for tr in tracks:
         est_p, est_v = estimate(tr, cfg, np.random.default_rng([seed, tr.index]), max_gap)
+        err = np.linalg.norm(est_p - tr.positions, axis=1)
+        errors.append(err[np.isfinite(err)])
         r = inflation(cfg, kalman_for(tr, cfg))
         for h in horizons:
             win = windows(tr, est_p, est_v, h, max_gap)
             per_h[h].append(win)
             radii[h].append(np.full(win.n, r))
+    err = np.concatenate(errors)
+    # How far the env's filter is from the recorded position at the sample times (m).
+    obs["median_estimate_error_m"] = float(np.median(err)) if len(err) else math.nan
     w0, vz0 = cfg.obstacle.max_turn_rate, cfg.obstacle.max_climb_rate
     rows = []
     for h in horizons:

@@ -83,15 +83,15 @@ def render_markdown(res: dict[str, Any]) -> str:
         "## Observed",
         "",
         "| class | tracks | median speed (m/s) | p95 turn rate (rad/s) | p95 vertical speed (m/s) "
-        "| median spacing (s) |",
-        "|---|---|---|---|---|---|",
+        "| median spacing (s) | median estimate error (m) |",
+        "|---|---|---|---|---|---|---|",
     ]
     for cls, c in res["classes"].items():
         o = c["observed"]
         lines.append(
             f"| {cls} | {c['tracks']} | {o['median_speed_m_s']:.1f} | "
             f"{o['p95_turn_rate_rad_s']:.3f} | {o['p95_vertical_speed_m_s']:.2f} | "
-            f"{o['median_spacing_s']:g} |"
+            f"{o['median_spacing_s']:g} | {o['median_estimate_error_m']:.1f} |"
         )
     return "\n".join(lines) + "\n"
 
