@@ -33,7 +33,7 @@ __all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz
 #: Version of the layout above; a reader refuses any other.
 FORMAT_VERSION = 1
 #: Limits on what a reader accepts (bytes): the file, one member once inflated, the JSON
-#: (the shipped file is 0.4 MB, its largest member 0.5 MB inflated).
+#: (the shipped file is 0.42 MB, its largest member 0.27 MB inflated).
 MAX_FILE_BYTES = 32 * 2**20
 MAX_MEMBER_BYTES = 32 * 2**20
 MAX_META_BYTES = 16 * 2**20
