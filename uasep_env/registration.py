@@ -8,9 +8,9 @@ __all__ = ["ENV_IDS", "register_envs"]
 
 #: id -> default config overrides.
 ENV_IDS: dict[str, dict] = {
-    "uasep/Formation-v1": {"scenario": "random"},
-    "uasep/PaperEncounter-v1": {"scenario": "paper"},
-    "uasep/LargeFormation-v1": {
+    "uasep/Formation-v2": {"scenario": "random"},
+    "uasep/PaperEncounter-v2": {"scenario": "paper"},
+    "uasep/LargeFormation-v2": {
         "scenario": "large_formation",
         "n_uavs": 8,
         "formation": "wedge",

@@ -212,14 +212,28 @@ def _aim(
         side = 1.0 if rng.random() < 0.5 else -1.0
         heading = plan_heading + side * rng.uniform(math.pi / 4, 3 * math.pi / 4)
     offset = np.array([0.0, 0.0, rng.uniform(-8.0, 8.0)])
+    floor, ceiling = _airspace(config)
     if family == "climbing":
         climb = (1.0 if rng.random() < 0.5 else -1.0) * vz_max
         offset[2] = 0.0
+        # Start in the airspace: a climber that would start below its floor (or a descender
+        # above the ceiling) climbs more slowly, still meeting the target on time.
+        target_alt = -float(target[2])
+        climb = min(
+            max(climb, (target_alt - ceiling) / meet_time), (target_alt - floor) / meet_time
+        )
     horiz = speed * np.array([math.cos(heading), math.sin(heading)])
     start = target + offset.copy()
     start[:2] -= horiz * meet_time
     start[2] += climb * meet_time  # NED: climbing means z decreases over time
+    start[2] = -min(max(-start[2], floor), ceiling)  # a no-op unless the airspace is narrow
     return start, heading, speed, w_max, vz_max, climb
+
+
+def _airspace(config: EnvConfig) -> tuple[float, float]:
+    """The altitudes obstacles start between (m, positive up): ground + margin, ceiling."""
+    air = config.airspace
+    return air.ground_altitude + air.obstacle_margin, air.ceiling_altitude
 
 
 def _separated_start(slots: np.ndarray, pos: np.ndarray, separation: float) -> np.ndarray:
@@ -298,6 +312,8 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
             heading = _PAPER_OBSTACLE_HEADING_RAD
             start = target + np.array([0.0, 0.0, _PAPER_OBSTACLE_BELOW_M])
             start[:2] -= ob.speed * meet * np.array([math.cos(heading), math.sin(heading)])
+            floor, ceiling = _airspace(config)
+            start[2] = -min(max(-start[2], floor), ceiling)  # as in _aim
             obs_pos[k], obs_heading[k] = start, heading
             # The pilot flies straight until the encounter draws near, then reacts at random.
             obs_hold[k] = max(0.0, meet - _PAPER_REACTION_LEAD_S)
@@ -326,10 +342,12 @@ def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
     alt_band = np.tile(
         [_ALTITUDE_M - _ALT_BAND_HALF_WIDTH_M, _ALTITUDE_M + _ALT_BAND_HALF_WIDTH_M], (m, 1)
     )
-    # Obstacles starting outside the band (steep climbers) get a band that contains them.
+    # Obstacles starting outside the band (steep climbers) get a band that contains them,
+    # within the airspace (where every family starts its obstacles).
+    floor, ceiling = _airspace(config)
     alts = -obs_pos[:, 2]
-    alt_band[:, 0] = np.minimum(alt_band[:, 0], alts)
-    alt_band[:, 1] = np.maximum(alt_band[:, 1], alts)
+    alt_band[:, 0] = np.maximum(np.minimum(alt_band[:, 0], alts), floor)
+    alt_band[:, 1] = np.minimum(np.maximum(alt_band[:, 1], alts), ceiling)
     return ScenarioSpec(
         family=family,
         waypoints=waypoints,
@@ -384,3 +402,4 @@ def place_obstacles(
     obstacles.switch_prob[mask] = min(1.0, config.dt / config.obstacle.mean_switch_time)
     obstacles.straight_prob[mask] = config.obstacle.straight_probability
     obstacles.wind[mask] = np.stack([s.wind for s in specs])
+    obstacles.ground[mask] = config.airspace.ground_altitude

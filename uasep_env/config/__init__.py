@@ -17,7 +17,9 @@ from __future__ import annotations
 from uasep_env.config.env import AS_PUBLISHED, FORMATION_PATTERNS, SCENARIOS, EnvConfig, make_config
 from uasep_env.config.groups import (
     ACTION_MODES,
+    FLIGHT_ALTITUDE,
     ActionConfig,
+    AirspaceConfig,
     NoiseConfig,
     ObservationConfig,
     ObstacleConfig,
@@ -29,9 +31,11 @@ from uasep_env.config.groups import (
 __all__ = [
     "ACTION_MODES",
     "AS_PUBLISHED",
+    "FLIGHT_ALTITUDE",
     "FORMATION_PATTERNS",
     "SCENARIOS",
     "ActionConfig",
+    "AirspaceConfig",
     "EnvConfig",
     "NoiseConfig",
     "ObservationConfig",

@@ -30,6 +30,7 @@ from uasep_env.config.checks import (
 )
 from uasep_env.config.groups import (
     ActionConfig,
+    AirspaceConfig,
     NoiseConfig,
     ObservationConfig,
     ObstacleConfig,
@@ -83,6 +84,7 @@ class EnvConfig:
         uav: UAV limits.
         noise: Noise levels (``False`` for none).
         obstacle: Obstacle model.
+        airspace: The ground, the obstacles' placement margin above it and the ceiling.
         prediction: Reachable-set prediction and filtering.
         observation: Observation options.
         reward: Reward weights.
@@ -103,6 +105,7 @@ class EnvConfig:
     uav: UAVConfig = field(default_factory=UAVConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     obstacle: ObstacleConfig = field(default_factory=ObstacleConfig)
+    airspace: AirspaceConfig = field(default_factory=AirspaceConfig)
     prediction: PredictionConfig = field(default_factory=PredictionConfig)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     reward: RewardWeights = field(default_factory=RewardWeights)
@@ -188,6 +191,7 @@ _NESTED: dict[str, type] = {
     "uav": UAVConfig,
     "noise": NoiseConfig,
     "obstacle": ObstacleConfig,
+    "airspace": AirspaceConfig,
     "prediction": PredictionConfig,
     "observation": ObservationConfig,
     "reward": RewardWeights,

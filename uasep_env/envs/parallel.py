@@ -90,7 +90,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
     """
 
     metadata = {  # noqa: RUF012 - PettingZoo reads it as a class attribute
-        "name": "uasep_formation_v1",
+        "name": "uasep_formation_v2",
         "render_modes": ["human", "rgb_array"],
         "is_parallelizable": True,
         "render_fps": 10,
