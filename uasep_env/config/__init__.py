@@ -14,7 +14,7 @@ Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 
 from __future__ import annotations
 
-from uasep_env.config.env import AS_PUBLISHED, FORMATION_PATTERNS, SCENARIOS, EnvConfig, make_config
+from uasep_env.config.env import AS_PUBLISHED, FORMATION_PATTERNS, EnvConfig, make_config
 from uasep_env.config.groups import (
     ACTION_MODES,
     FLIGHT_ALTITUDE,
@@ -27,6 +27,16 @@ from uasep_env.config.groups import (
     RewardWeights,
     UAVConfig,
 )
+
+
+def __getattr__(name: str) -> object:
+    # SCENARIOS is read from the scenario registry when asked for (see config.env).
+    if name == "SCENARIOS":
+        from uasep_env.config import env
+
+        return env.SCENARIOS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "ACTION_MODES",
