@@ -7,6 +7,11 @@ the first with background traffic) and assembles the :class:`ScenarioSpec`
 (:func:`assemble`). Each draws from the generator in a fixed order, so a seed fixes the
 episode.
 
+Every random encounter: a random plan (heading; up to two turns of at most 45 degrees), the
+UAVs' start scattered by up to 8 m and 1 m/s; each obstacle aimed at a UAV's planned position
+at 60-140 s, with ``w_max`` 0.01-0.15 rad/s and ``vz_max`` 0.2-2 m/s, holding its course
+until 10-40 s before the meeting.
+
 Encounters are laid out on a fixed timeline, whatever the episode's length: a shorter
 episode is the first part of the same encounter, a longer one flies on along the last leg.
 """

@@ -110,11 +110,7 @@ def _encounter(name: str, kind: str) -> ScenarioFamily:
     )
 
 
-_ENCOUNTER_PARAMETERS = (
-    "Random plan (heading; up to two turns of at most 45°), start scattered ±8 m, ±1 m/s. "
-    "Obstacle aimed at a random UAV's planned position at 60-140 s, `w_max` 0.01-0.15 rad/s, "
-    "`vz_max` 0.2-2 m/s, holding course until 10-40 s before. "
-)
+_ENCOUNTER_PARAMETERS = "Meets a random UAV's plan at 60-140 s; "
 _SUMMARIES = {
     "crossing": "An obstacle crosses the formation's track from either side.",
     "head_on": "An obstacle comes head-on.",
@@ -122,13 +118,12 @@ _SUMMARIES = {
     "climbing": "An obstacle climbs or descends through the formation's altitude.",
 }
 _KIND_PARAMETERS = {
-    "crossing": "Speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
-    "head_on": "Speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
-    "overtaking": "Speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
+    "crossing": "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
+    "head_on": "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
+    "overtaking": "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
     "climbing": (
-        "Speed 3-12 m/s, 45-135° off the track, climbing or descending at `vz_max` "
-        "(slower where it would start below the ground + `airspace.obstacle_margin` or above "
-        "the ceiling)."
+        "speed 3-12 m/s, 45-135° off the track, climbing or descending at `vz_max` (slower "
+        "where it would start below ground + `airspace.obstacle_margin` or above the ceiling)."
     ),
 }
 
@@ -202,10 +197,9 @@ register(
         name="paper",
         summary="Section 4's encounter: an obstacle crosses the track of three UAVs in line.",
         parameters=(
-            "Fixed: the UAVs set out scattered, form up and fly north at 100 m; the obstacle "
-            "(4 m/s, `w_max` 0.013 rad/s) comes from the north-north-east 10 m below, aimed at "
-            "the middle UAV at 115 s, flying straight until 25 s before. Only its later "
-            "manoeuvres and the noise depend on the seed."
+            "Fixed geometry (north at 100 m; the obstacle 10 m below from the north-north-east, "
+            "meeting the middle UAV at 115 s); only its manoeuvres from 90 s on and the noise "
+            "depend on the seed."
         ),
         generate=_paper,
         gym_name="PaperEncounter",
