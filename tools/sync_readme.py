@@ -51,7 +51,9 @@ _BLOCK = re.compile(
 )
 
 
-_SCENARIOS = re.compile(r"(?P<open><!-- scenarios -->\n).*?(?P<close><!-- /scenarios -->)", re.DOTALL)
+_SCENARIOS = re.compile(
+    r"(?P<open><!-- scenarios -->\n).*?(?P<close><!-- /scenarios -->)", re.DOTALL
+)
 
 
 def scenario_table() -> str:
