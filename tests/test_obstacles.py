@@ -76,3 +76,40 @@ def test_velocity_includes_wind():
     ob.wind[:] = [1.0, -2.0, 0.0]
     v = obstacle_velocity(ob)
     np.testing.assert_allclose(np.linalg.norm(v[..., :2] - ob.wind[:, None, :2], axis=-1), 5.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    vz_max=st.floats(0.0, 5.0),
+    wind_down=st.floats(-5.0, 10.0),
+    ground=st.floats(-50.0, 60.0),
+    dt=st.floats(0.01, 2.0),
+    seed=st.integers(0, 2**31),
+)
+def test_obstacles_never_fly_below_the_ground(vz_max, wind_down, ground, dt, seed):
+    """Descents are bounded near the ground (|c| <= vz_max kept); a downdraft rests them there."""
+    rng = np.random.default_rng(seed)
+    ob = _make(4, 3, rng, 0.1, vz_max, 8.0)
+    ob.alt_band[..., 0] = -1e9  # only the ground holds them up
+    ob.pos[..., 2] = -(ground + rng.uniform(0.0, 20.0, size=(4, 3)))
+    ob.ground[...] = ground
+    ob.wind[:, 2] = wind_down
+    ob.switch_prob[...] = 0.5
+    for _ in range(200):
+        step_obstacles(ob, rng.random((4, 3, N_UNIFORMS)), dt)
+        assert np.all(-ob.pos[..., 2] >= ground)
+        assert np.all(np.abs(ob.climb_rate) <= vz_max + 1e-12)
+
+
+def test_the_ground_rule_is_a_no_op_in_the_air():
+    """High above the ground the model moves exactly as without it (episodes in the air kept)."""
+    rng = np.random.default_rng(3)
+    a = _make(4, 3, rng, 0.1, 2.0, 8.0)
+    b = _make(4, 3, np.random.default_rng(3), 0.1, 2.0, 8.0)
+    b.ground[...] = -1e9
+    for _ in range(300):
+        u = rng.random((4, 3, N_UNIFORMS))
+        step_obstacles(a, u, 0.2)
+        step_obstacles(b, u, 0.2)
+    np.testing.assert_array_equal(a.pos, b.pos)
+    np.testing.assert_array_equal(a.climb_rate, b.climb_rate)

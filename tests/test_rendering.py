@@ -326,7 +326,7 @@ def test_pettingzoo_render_test_parallel_equivalent():
 
 def test_gymnasium_env_frames_for_video():
     """The frames a video recorder would get: constant shape, even sizes, uint8."""
-    env = gymnasium.make("uasep/PaperEncounter-v1", render_mode="rgb_array", episode_duration=4.0)
+    env = gymnasium.make("uasep/PaperEncounter-v2", render_mode="rgb_array", episode_duration=4.0)
     env.reset(seed=0)
     frames = [env.render()]
     done = False
@@ -348,7 +348,7 @@ def test_gymnasium_record_video(tmp_path):
     pytest.importorskip("moviepy", reason="gymnasium's RecordVideo needs moviepy")
     from gymnasium.wrappers import RecordVideo
 
-    env = gymnasium.make("uasep/PaperEncounter-v1", render_mode="rgb_array", episode_duration=4.0)
+    env = gymnasium.make("uasep/PaperEncounter-v2", render_mode="rgb_array", episode_duration=4.0)
     videos = tmp_path / "videos"
     env = RecordVideo(env, video_folder=str(videos), episode_trigger=lambda ep: True)
     env.reset(seed=0)
@@ -363,7 +363,7 @@ def test_gymnasium_record_video(tmp_path):
 
 def test_vector_env_render():
     env = gymnasium.make_vec(
-        "uasep/PaperEncounter-v1",
+        "uasep/PaperEncounter-v2",
         num_envs=2,
         vectorization_mode="vector_entry_point",
         render_mode="rgb_array",

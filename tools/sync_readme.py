@@ -10,6 +10,10 @@ the heading of its section there (the first table after that heading is taken)::
     | metric | ... |
     <!-- /results -->
 
+The table of scenario families stands between ``<!-- scenarios -->`` and
+``<!-- /scenarios -->``; it is written from the scenario registry
+(:data:`uasep_env.scenarios.FAMILIES`: each family's summary, parameters and gym id).
+
 ``pretty`` writes the controllers as the README names them (``APF (proposed)``, ...) and
 units with superscripts (``m/s²``). The tables are re-laid out by
 :func:`uasep_env.tables.render_table`, so the README says exactly what the results say.
@@ -25,6 +29,8 @@ import re
 import sys
 from pathlib import Path
 
+from uasep_env.registration import ENV_VERSION
+from uasep_env.scenarios import FAMILIES
 from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,6 +49,27 @@ _BLOCK = re.compile(
     r".*?(?P<close><!-- /results -->)",
     re.DOTALL,
 )
+
+
+_SCENARIOS = re.compile(
+    r"(?P<open><!-- scenarios -->\n).*?(?P<close><!-- /scenarios -->)", re.DOTALL
+)
+
+
+def scenario_table() -> str:
+    """The markdown table of the registered scenario families."""
+    rows = [
+        [
+            f"`{f.name}`",
+            f.summary,
+            f.parameters,
+            f"`uasep/{f.gym_name}-v{ENV_VERSION}`" if f.gym_name else "",
+        ]
+        for f in FAMILIES.values()
+    ]
+    header = ["scenario", "encounter", "drawn per episode", "gym id"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows])
 
 
 def _cells(line: str) -> list[str]:
@@ -85,7 +112,7 @@ def _prettify(cell: str) -> str:
 
 
 def render_readme(readme: str, results: Path = RESULTS) -> str:
-    """The README with every marked table rewritten from its results file.
+    """The README with every marked table rewritten from its source.
 
     Args:
         readme: The README's text.
@@ -104,7 +131,10 @@ def render_readme(readme: str, results: Path = RESULTS) -> str:
             rows = [[_prettify(c) for c in r] for r in rows]
         return m["open"] + render_table(header, rows, markdown=True) + "\n" + m["close"]
 
-    return _BLOCK.sub(block, readme)
+    readme = _SCENARIOS.sub(
+        lambda m: m["open"] + scenario_table() + "\n" + m["close"], _BLOCK.sub(block, readme)
+    )
+    return readme
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-ENV_NAME = "uasep_formation_v1"
+ENV_NAME = "uasep_formation_v2"
 POLICY = "shared"
 
 

@@ -9,6 +9,16 @@ exponential reaction time); a new command is "straight and level" with probabili
 ``straight_probability``, else turn and climb rates uniform within their bounds. An
 obstacle that would leave its altitude band holds its altitude instead.
 
+The ground (``ground``, m of altitude) is never flown through. Near it the descent command
+is bounded: the climb command ``c`` is raised to at least ``min(vz_max, w_d + (g - h) / dt)``
+(``h`` the altitude, ``g`` the ground, ``w_d`` the wind's downward component), so the next
+altitude is at or above the ground whenever the obstacle can out-climb the wind. The command
+stays within ``|c| <= vz_max``, so the reachable-set prediction's enclosing fit remains
+valid. Only a downward wind stronger than ``vz_max`` could still push it lower; then the
+obstacle rests on the ground (its altitude is floored there), which only shortens the wind's
+drift and so stays inside the prediction's wind inflation (``|wind| * horizon``). Above the
+ground (and its band's floor) neither rule acts, so flights in the air are unchanged.
+
 The horizontal motion over a step is integrated exactly (a circular arc: the chord has
 length ``v dt sinc(omega dt / 2)`` and direction ``psi + omega dt / 2``), so the bounds of the
 model hold exactly and the reachable-set prediction (:mod:`uasep_env.reachable`) is sound.
@@ -44,6 +54,7 @@ class ObstacleState:
         switch_prob: Per-step command-change probability.
         straight_prob: Probability of a straight-and-level command.
         hold_until: Time before which the pilot keeps the initial commands (s).
+        ground: Altitude of the ground, never flown below (m, positive up).
         wind: ``(E, 3)`` steady wind (m/s, NED).
     """
 
@@ -63,6 +74,7 @@ class ObstacleState:
         self.switch_prob = np.zeros(shape)
         self.straight_prob = np.zeros(shape)
         self.hold_until = np.zeros(shape)
+        self.ground = np.zeros(shape)
         self.wind = np.zeros((n_envs, 3))
 
 
@@ -112,6 +124,12 @@ def step_obstacles(
         (alt_next < obs.alt_band[..., 0]) & (obs.climb_rate < 0)
     )
     obs.climb_rate = np.where(leave, 0.0, obs.climb_rate)
+    # Near the ground the descent is bounded (a no-op higher up: the bound is then far below
+    # -vz_max); |c| <= vz_max still holds, so the prediction stays sound.
+    least = np.minimum(
+        obs.max_climb_rate, obs.wind[:, None, 2] + (obs.ground + obs.pos[..., 2]) / dt
+    )
+    obs.climb_rate = np.maximum(obs.climb_rate, least)
 
     half = 0.5 * obs.turn_rate * dt
     # np.sinc(half / pi) written out, the same operations: its own overhead shows at one
@@ -133,4 +151,6 @@ def step_obstacles(
         heading = np.where(active, heading, obs.heading)
     for axis, move in enumerate(moves):
         obs.pos[..., axis] += move
+    # Only a downward wind stronger than vz_max (or rounding) reaches here: rest on the ground.
+    np.minimum(obs.pos[..., 2], -obs.ground, out=obs.pos[..., 2])
     obs.heading = heading

@@ -1,21 +1,25 @@
-"""Gymnasium registration of the ``uasep`` ids (idempotent; runs on ``import uasep_env``)."""
+"""Gymnasium registration of the ``uasep`` ids (idempotent; runs on ``import uasep_env``).
+
+The ids come from the scenario registry: every family with a ``gym_name`` registers
+``uasep/<gym_name>-v<ENV_VERSION>`` (:data:`ENV_IDS`).
+"""
 
 from __future__ import annotations
 
 import gymnasium
 
-__all__ = ["ENV_IDS", "register_envs"]
+from uasep_env.scenarios import FAMILIES
+
+__all__ = ["ENV_IDS", "ENV_VERSION", "register_envs"]
+
+#: The env ids' version: bumped whenever episodes or rewards change (see CHANGELOG.md).
+ENV_VERSION = 2
 
 #: id -> default config overrides.
 ENV_IDS: dict[str, dict] = {
-    "uasep/Formation-v1": {"scenario": "random"},
-    "uasep/PaperEncounter-v1": {"scenario": "paper"},
-    "uasep/LargeFormation-v1": {
-        "scenario": "large_formation",
-        "n_uavs": 8,
-        "formation": "wedge",
-        "n_obstacles": 2,
-    },
+    f"uasep/{f.gym_name}-v{ENV_VERSION}": {"scenario": f.name, **f.gym_defaults}
+    for f in FAMILIES.values()
+    if f.gym_name is not None
 }
 
 

@@ -14,10 +14,12 @@ Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 
 from __future__ import annotations
 
-from uasep_env.config.env import AS_PUBLISHED, FORMATION_PATTERNS, SCENARIOS, EnvConfig, make_config
+from uasep_env.config.env import AS_PUBLISHED, FORMATION_PATTERNS, EnvConfig, make_config
 from uasep_env.config.groups import (
     ACTION_MODES,
+    FLIGHT_ALTITUDE,
     ActionConfig,
+    AirspaceConfig,
     NoiseConfig,
     ObservationConfig,
     ObstacleConfig,
@@ -26,12 +28,24 @@ from uasep_env.config.groups import (
     UAVConfig,
 )
 
+
+def __getattr__(name: str) -> object:
+    # SCENARIOS is read from the scenario registry when asked for (see config.env).
+    if name == "SCENARIOS":
+        from uasep_env.config import env
+
+        return env.SCENARIOS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = [
     "ACTION_MODES",
     "AS_PUBLISHED",
+    "FLIGHT_ALTITUDE",
     "FORMATION_PATTERNS",
     "SCENARIOS",
     "ActionConfig",
+    "AirspaceConfig",
     "EnvConfig",
     "NoiseConfig",
     "ObservationConfig",

@@ -3,7 +3,8 @@
 :func:`make_config` builds an :class:`EnvConfig` from keyword arguments or a (nested) dict;
 unknown keys raise a :class:`TypeError` (Python's convention for an unexpected keyword) and
 invalid or out-of-range values a :class:`ValueError`, each naming the dotted field. Also the
-names the top-level fields accept (:data:`SCENARIOS`, :data:`FORMATION_PATTERNS`) and the
+names the top-level fields accept (:data:`SCENARIOS`, read from the scenario registry, and
+:data:`FORMATION_PATTERNS`) and the
 overrides of the paper's prediction as published (:data:`AS_PUBLISHED`).
 
 Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
@@ -30,6 +31,7 @@ from uasep_env.config.checks import (
 )
 from uasep_env.config.groups import (
     ActionConfig,
+    AirspaceConfig,
     NoiseConfig,
     ObservationConfig,
     ObstacleConfig,
@@ -37,23 +39,21 @@ from uasep_env.config.groups import (
     RewardWeights,
     UAVConfig,
 )
+from uasep_env.scenarios.registry import scenario_names
 
-__all__ = ["AS_PUBLISHED", "FORMATION_PATTERNS", "SCENARIOS", "EnvConfig", "make_config"]
+__all__ = ["AS_PUBLISHED", "FORMATION_PATTERNS", "SCENARIOS", "EnvConfig", "make_config"]  # noqa: F822
 
 #: Names accepted for ``EnvConfig.formation`` (see :mod:`uasep_env.formation`).
 FORMATION_PATTERNS = ("line_abreast", "paper", "column", "v", "wedge", "grid", "circle")
 
-#: Names accepted for ``EnvConfig.scenario`` (see :mod:`uasep_env.scenarios`).
-SCENARIOS = (
-    "paper",
-    "random",
-    "crossing",
-    "head_on",
-    "overtaking",
-    "climbing",
-    "multi_obstacle",
-    "large_formation",
-)
+
+def __getattr__(name: str) -> Any:
+    # SCENARIOS: the registered scenario families, read from the registry when asked for
+    # (importing the registry registers the families: the scenarios package's init).
+    if name == "SCENARIOS":
+        return scenario_names()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: Overrides that run the paper's prediction as published: the terminal set S1..S5 and the
 #: paper's (non-enclosing) ellipsoid of eqs. 17-18. ``make_config(AS_PUBLISHED,
@@ -71,7 +71,8 @@ class EnvConfig:
     Attributes:
         n_uavs: Number of cooperative UAVs (2-32).
         n_obstacles: Number of obstacle slots (0-8). Scenarios may leave some inactive.
-        scenario: Scenario family, one of :data:`SCENARIOS`.
+        scenario: Scenario family, one of the registered families (:data:`SCENARIOS`, see
+            :mod:`uasep_env.scenarios`).
         formation: Pattern name (one of :data:`FORMATION_PATTERNS`) or an explicit
             ``((x, y, z), ...)`` of slots in the formation frame (m, ``Y_f`` forward,
             ``X_f`` lateral horizontal, ``Z_f`` down), one per UAV.
@@ -83,6 +84,7 @@ class EnvConfig:
         uav: UAV limits.
         noise: Noise levels (``False`` for none).
         obstacle: Obstacle model.
+        airspace: The ground, the obstacles' placement margin above it and the ceiling.
         prediction: Reachable-set prediction and filtering.
         observation: Observation options.
         reward: Reward weights.
@@ -103,6 +105,7 @@ class EnvConfig:
     uav: UAVConfig = field(default_factory=UAVConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     obstacle: ObstacleConfig = field(default_factory=ObstacleConfig)
+    airspace: AirspaceConfig = field(default_factory=AirspaceConfig)
     prediction: PredictionConfig = field(default_factory=PredictionConfig)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     reward: RewardWeights = field(default_factory=RewardWeights)
@@ -112,7 +115,7 @@ class EnvConfig:
     def __post_init__(self) -> None:
         check_int_in("n_uavs", self.n_uavs, 2, 32)
         check_int_in("n_obstacles", self.n_obstacles, 0, 8)
-        check_one_of("scenario", self.scenario, SCENARIOS)
+        check_one_of("scenario", self.scenario, scenario_names())
         if isinstance(self.formation, str):
             check(
                 self.formation in FORMATION_PATTERNS,
@@ -188,6 +191,7 @@ _NESTED: dict[str, type] = {
     "uav": UAVConfig,
     "noise": NoiseConfig,
     "obstacle": ObstacleConfig,
+    "airspace": AirspaceConfig,
     "prediction": PredictionConfig,
     "observation": ObservationConfig,
     "reward": RewardWeights,

@@ -30,9 +30,14 @@ from uasep_env.config.checks import (
     check_vector,
 )
 
+#: Altitude of every scenario's planned trajectory (m, positive up).
+FLIGHT_ALTITUDE = 100.0
+
 __all__ = [
     "ACTION_MODES",
+    "FLIGHT_ALTITUDE",
     "ActionConfig",
+    "AirspaceConfig",
     "NoiseConfig",
     "ObservationConfig",
     "ObstacleConfig",
@@ -184,6 +189,49 @@ class ObstacleConfig:
         )
         wind = check_vector("obstacle.wind", self.wind, 3, MAX_SPEED)  # NED
         object.__setattr__(self, "wind", wind)
+
+
+@dataclass(frozen=True)
+class AirspaceConfig:
+    """The airspace obstacles fly in: the ground, a placement margin above it and a ceiling.
+
+    Altitudes are positive up (m; NED ``z = -altitude``). Every scenario places its
+    obstacles between ``ground_altitude + obstacle_margin`` and ``ceiling_altitude`` (a
+    climbing obstacle climbs more slowly rather than start lower), and the obstacle model
+    (:mod:`uasep_env.obstacles`) never flies below ``ground_altitude``: near the ground its
+    descent command is bounded. The scenarios' formations fly at 100 m, which must lie
+    between the two.
+
+    Attributes:
+        ground_altitude: Altitude of the ground (m).
+        obstacle_margin: Least height above the ground an obstacle starts at (m).
+        ceiling_altitude: Highest altitude an obstacle starts at (m).
+    """
+
+    ground_altitude: float = 0.0  # m
+    obstacle_margin: float = 20.0  # m
+    ceiling_altitude: float = 500.0  # m
+
+    def __post_init__(self) -> None:
+        check_finite("airspace.ground_altitude", self.ground_altitude, MAX_DIST)
+        check_positive(
+            "airspace.obstacle_margin", self.obstacle_margin, allow_zero=True, hi=MAX_DIST
+        )
+        check_finite("airspace.ceiling_altitude", self.ceiling_altitude, 2 * MAX_DIST)
+        floor = self.ground_altitude + self.obstacle_margin
+        check(
+            floor < FLIGHT_ALTITUDE,
+            "airspace.ground_altitude",
+            self.ground_altitude,
+            f"ground_altitude + obstacle_margin ({floor:g} m) must be below the scenarios' "
+            f"flight altitude ({FLIGHT_ALTITUDE:g} m)",
+        )
+        check(
+            self.ceiling_altitude > FLIGHT_ALTITUDE,
+            "airspace.ceiling_altitude",
+            self.ceiling_altitude,
+            f"must be above the scenarios' flight altitude ({FLIGHT_ALTITUDE:g} m)",
+        )
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from uasep_env.envs.core import (
     prepare_actions,
 )
 from uasep_env.observation import state_dim
+from uasep_env.registration import ENV_VERSION
 
 __all__ = ["UAVSeparationParallelEnv", "env", "parallel_env"]
 
@@ -90,7 +91,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
     """
 
     metadata = {  # noqa: RUF012 - PettingZoo reads it as a class attribute
-        "name": "uasep_formation_v1",
+        "name": f"uasep_formation_v{ENV_VERSION}",
         "render_modes": ["human", "rgb_array"],
         "is_parallelizable": True,
         "render_fps": 10,

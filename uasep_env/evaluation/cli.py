@@ -11,13 +11,13 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from uasep_env.config import SCENARIOS
 from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.report import format_summary
 from uasep_env.evaluation.runner import DEFAULT_HOLD_TIME_S, evaluate
 from uasep_env.policies import POLICIES, check_policy_name, make_policy
 from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
+from uasep_env.scenarios import scenario_names
 
 __all__ = ["build_parser", "main"]
 
@@ -126,9 +126,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--scenario",
         default="paper",
-        choices=SCENARIOS,
+        choices=scenario_names(),
         metavar="NAME",
-        help=f"scenario family: {', '.join(SCENARIOS)} (default: paper)",
+        help=f"scenario family: {', '.join(scenario_names())} (default: paper)",
     )
     p.add_argument(
         "--episodes",

@@ -1,0 +1,144 @@
+"""Write the digest of the seeded encounter banks the published results were computed on.
+
+Every results file compares controllers on fixed banks of seeded scenarios: the held-out
+bank (``random``, seeds 5,000,000-5,000,499, and its 20 ``paper`` runs), the validation
+encounters ``train/select_checkpoint.py`` chooses checkpoints on, and the paper experiment's
+and trade-off's runs (``paper`` seeds 0-19, ``random`` seeds 100,000-100,199). The digest
+records, per seed, the family drawn, a readable summary of the first obstacle (start
+altitude, speed, climb rate) and a hash of every array of the scenario (rounded to 1e-6, so
+that last-bit differences of a maths library do not count). ``tests/test_banks.py``
+regenerates it and fails if any bank moved: then every results file is stale.
+
+    python tools/digest_banks.py           # rewrite tests/data/banks.json
+    python tools/digest_banks.py --check   # exit 1 if a bank moved
+
+After a change that moves a bank (and bumps the env ids' version), regenerate the digest
+AND every results file: ``baselines/paper_experiment.py``, ``baselines/learned_vs_apf.py``,
+``baselines/tradeoff.py --fresh``, then ``tools/sync_readme.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uasep_env.config import make_config
+from uasep_env.registration import ENV_VERSION
+from uasep_env.scenarios import (
+    HELD_OUT_PAPER_SEEDS,
+    HELD_OUT_SEEDS,
+    VALIDATION_SEEDS,
+    ScenarioSpec,
+    sample_scenario,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+DIGEST = ROOT / "tests" / "data" / "banks.json"
+
+#: Bank name -> (scenario, seeds, where it is used).
+BANKS: dict[str, tuple[str, range, str]] = {
+    "held_out": ("random", HELD_OUT_SEEDS, "baselines/learned_vs_apf.py (held-out bank)"),
+    "held_out_paper": ("paper", HELD_OUT_PAPER_SEEDS, "baselines/learned_vs_apf.py"),
+    "validation": (
+        "random",
+        VALIDATION_SEEDS[:100],
+        "train/select_checkpoint.py (--episodes 100, the shipped checkpoints' selection)",
+    ),
+    "paper_runs": ("paper", range(0, 20), "baselines/paper_experiment.py, baselines/tradeoff.py"),
+    "random_bank": (
+        "random",
+        range(100_000, 100_200),
+        "baselines/paper_experiment.py, baselines/tradeoff.py",
+    ),
+}
+
+
+def spec_hash(spec: ScenarioSpec) -> str:
+    """16 hex digits of a SHA-256 of every array of ``spec``, rounded to 1e-6."""
+    h = hashlib.sha256(spec.family.encode())
+    for name, value in vars(spec).items():
+        if name == "family":
+            continue
+        arr = np.round(np.asarray(value, dtype=float), 6) + 0.0  # + 0.0: no negative zeros
+        h.update(name.encode() + arr.tobytes())
+    return h.hexdigest()[:16]
+
+
+def entry(seed: int, spec: ScenarioSpec) -> list[Any]:
+    """``[seed, family, hash, alt_m, speed_mps, climb_mps]`` of the first obstacle."""
+    if len(spec.obstacle_pos) == 0:
+        return [seed, spec.family, spec_hash(spec), None, None, None]
+    return [
+        seed,
+        spec.family,
+        spec_hash(spec),
+        round(-float(spec.obstacle_pos[0, 2]), 1),
+        round(float(spec.obstacle_speed[0]), 2),
+        round(float(spec.obstacle_climb_rate[0]), 2),
+    ]
+
+
+def digest() -> dict[str, Any]:
+    """The digest of every bank (only scenarios are sampled; no episode is flown)."""
+    banks = {}
+    for name, (scenario, seeds, used_by) in BANKS.items():
+        cfg = make_config(scenario=scenario)
+        banks[name] = {
+            "scenario": scenario,
+            "seeds": [seeds.start, seeds.stop],
+            "used_by": used_by,
+            "columns": ["seed", "family", "hash", "alt_m", "speed_mps", "climb_mps"],
+            "entries": [entry(s, sample_scenario(np.random.default_rng(s), cfg)) for s in seeds],
+        }
+    return {"env_version": ENV_VERSION, "banks": banks}
+
+
+def dumps(data: dict[str, Any]) -> str:
+    """The digest as JSON, one entry a line (readable diffs)."""
+    lines = ["{", f'  "env_version": {data["env_version"]},', '  "banks": {']
+    names = list(data["banks"])
+    for i, name in enumerate(names):
+        bank = data["banks"][name]
+        head = {k: v for k, v in bank.items() if k != "entries"}
+        lines.append(f"    {json.dumps(name)}: {{")
+        lines += [f"      {json.dumps(k)}: {json.dumps(v)}," for k, v in head.items()]
+        lines.append('      "entries": [')
+        rows = [f"        {json.dumps(e)}" for e in bank["entries"]]
+        lines.append(",\n".join(rows))
+        lines.append("      ]")
+        lines.append("    }" + ("," if i < len(names) - 1 else ""))
+    lines += ["  }", "}", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Rewrite the digest (or, with ``--check``, say whether a bank moved)."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--check", action="store_true", help="exit 1 if a bank moved")
+    args = p.parse_args(argv)
+    text = dumps(digest())
+    if args.check:
+        if not DIGEST.exists() or DIGEST.read_text() != text:
+            print(f"a bank moved: {DIGEST} is stale (see this script's help)", file=sys.stderr)
+            return 1
+        return 0
+    DIGEST.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=DIGEST.parent, suffix=".tmp")
+    with os.fdopen(fd, "w") as fh:
+        fh.write(text)
+    os.chmod(tmp, 0o644)
+    os.replace(tmp, DIGEST)  # atomic: a reader never sees half a digest
+    print(f"wrote {DIGEST}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,240 @@
+"""The scenario families, each one registered object: its generator and its documentation.
+
+This file is the one place families are declared and registered (in the order
+``EnvConfig.scenario``'s names are listed). A family's generator builds its episode from
+the shared blocks of :mod:`uasep_env.scenarios.building`; an encounter kind (how an
+obstacle approaches the UAV it is aimed at) is an :data:`~uasep_env.scenarios.building.Approach`
+in :data:`APPROACHES`. Two mixes are declared here, once: :data:`RANDOM_MIX` (the families
+the ``random`` scenario draws per episode) and :data:`TRAFFIC_MIX` (the encounter kinds of
+background traffic and of ``multi_obstacle``). Adding a family: write its generator, register
+it below (and add it to a mix if ``random`` should draw it), test it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from uasep_env.scenarios.building import (
+    SPEED_RANGE_MPS,
+    TIMELINE_S,
+    Approach,
+    Layout,
+    ObstacleStart,
+    aimed_obstacle,
+    airspace,
+    assemble,
+    layout,
+    obstacle_slots,
+    planned_position,
+    random_layout,
+    straight_plan,
+)
+from uasep_env.scenarios.registry import FAMILIES, Mix, ScenarioFamily, register
+from uasep_env.scenarios.spec import ScenarioSpec
+
+if TYPE_CHECKING:
+    from uasep_env.config import EnvConfig
+
+__all__ = ["APPROACHES", "RANDOM_MIX", "TRAFFIC_MIX"]
+
+
+# ---- Encounter kinds: how an obstacle approaches its target ---------------------------------
+def _from_either_side(
+    rng: np.random.Generator, config: EnvConfig, plan_heading: float
+) -> tuple[float, float]:
+    speed = rng.uniform(*SPEED_RANGE_MPS)
+    side = 1.0 if rng.random() < 0.5 else -1.0
+    return speed, plan_heading + side * rng.uniform(math.pi / 4, 3 * math.pi / 4)
+
+
+def _from_the_front(
+    rng: np.random.Generator, config: EnvConfig, plan_heading: float
+) -> tuple[float, float]:
+    speed = rng.uniform(*SPEED_RANGE_MPS)
+    return speed, plan_heading + math.pi + rng.uniform(-0.35, 0.35)
+
+
+def _from_behind(
+    rng: np.random.Generator, config: EnvConfig, plan_heading: float
+) -> tuple[float, float]:
+    speed = config.cruise_speed + rng.uniform(3.0, 8.0)  # faster than the formation
+    return speed, plan_heading + rng.uniform(-0.25, 0.25)
+
+
+def _level(rng: np.random.Generator, vz_max: float) -> float | None:
+    return None
+
+
+def _climbing_or_descending(rng: np.random.Generator, vz_max: float) -> float | None:
+    return (1.0 if rng.random() < 0.5 else -1.0) * vz_max
+
+
+#: Encounter kind -> its approach (horizontal, then vertical).
+APPROACHES: dict[str, Approach] = {
+    "crossing": (_from_either_side, _level),
+    "head_on": (_from_the_front, _level),
+    "overtaking": (_from_behind, _level),
+    "climbing": (_from_either_side, _climbing_or_descending),
+}
+
+#: The encounter kinds of background traffic (and of every ``multi_obstacle`` slot).
+TRAFFIC_MIX = Mix({"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1})
+
+
+def _background(rng: np.random.Generator, config: EnvConfig, lay: Layout) -> ObstacleStart:
+    """Traffic aimed at a random UAV at another time, of a kind drawn from TRAFFIC_MIX."""
+    kind = TRAFFIC_MIX.draw(rng)
+    return aimed_obstacle(rng, config, lay, APPROACHES[kind])
+
+
+def _encounter(name: str, kind: str) -> ScenarioFamily:
+    """A family of one encounter of ``kind`` aimed at a random UAV, plus background."""
+
+    def generate(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
+        lay = random_layout(rng, config)
+        obstacles = obstacle_slots(
+            config,
+            lambda: aimed_obstacle(rng, config, lay, APPROACHES[kind]),
+            lambda: _background(rng, config, lay),
+        )
+        return assemble(name, config, lay, obstacles)
+
+    return ScenarioFamily(
+        name=name,
+        summary=_SUMMARIES[kind],
+        parameters=_ENCOUNTER_PARAMETERS + _KIND_PARAMETERS[kind],
+        generate=generate,
+    )
+
+
+_ENCOUNTER_PARAMETERS = "Meets a random UAV's plan at 60-140 s; "
+_SUMMARIES = {
+    "crossing": "An obstacle crosses the formation's track from either side.",
+    "head_on": "An obstacle comes head-on.",
+    "overtaking": "A faster obstacle overtakes the formation from behind.",
+    "climbing": "An obstacle climbs or descends through the formation's altitude.",
+}
+_KIND_PARAMETERS = {
+    "crossing": "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
+    "head_on": "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
+    "overtaking": "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
+    "climbing": (
+        "speed 3-12 m/s, 45-135° off the track, climbing or descending at `vz_max` (slower "
+        "where it would start below ground + `airspace.obstacle_margin` or above the ceiling)."
+    ),
+}
+
+
+# ---- The paper's encounter (section 4; constants chosen here, the paper gives none) ---------
+_PAPER_MEET_TIME_S = 115.0
+_PAPER_OBSTACLE_BELOW_M = 10.0
+_PAPER_REACTION_LEAD_S = 25.0  # the obstacle's pilot starts manoeuvring 25 s before
+_PAPER_OBSTACLE_HEADING_RAD = np.pi + 0.35  # south-south-west: crosses the track east to west
+_PAPER_START = np.array(  # initial positions relative to the planned slots (m, NED)
+    [[-12.0, -9.0, 4.0], [-4.0, 7.0, -5.0], [-18.0, 6.0, 2.0]]
+)
+_PAPER_START_VEL = np.array([[4.0, 1.0, 0.0], [5.5, -1.0, 0.5], [3.0, 0.0, -0.3]])  # m/s
+
+
+def _paper(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
+    n, ob = config.n_uavs, config.obstacle
+
+    def start(slots: np.ndarray, plan_dir: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        vel = np.resize(_PAPER_START_VEL, (n, 3)).copy()
+        vel *= min(1.0, config.uav.max_speed / 6.0)
+        return slots + np.resize(_PAPER_START, (n, 3)), vel
+
+    lay = layout(config, straight_plan(config), start=start)
+
+    def first() -> ObstacleStart:
+        meet = min(_PAPER_MEET_TIME_S, 0.575 * TIMELINE_S)  # 115 s, as its float was
+        target = planned_position(lay.plan, meet, lay.slots)[n - 1 if n == 3 else n // 2]
+        heading = _PAPER_OBSTACLE_HEADING_RAD
+        pos = target + np.array([0.0, 0.0, _PAPER_OBSTACLE_BELOW_M])
+        pos[:2] -= ob.speed * meet * np.array([math.cos(heading), math.sin(heading)])
+        floor, ceiling = airspace(config)
+        pos[2] = -min(max(-pos[2], floor), ceiling)  # a no-op unless the airspace is narrow
+        # The pilot flies straight until the encounter draws near, then reacts at random.
+        hold = max(0.0, meet - _PAPER_REACTION_LEAD_S)
+        return ObstacleStart(pos, heading, ob.speed, ob.max_turn_rate, ob.max_climb_rate, 0.0, hold)
+
+    obstacles = obstacle_slots(config, first, lambda: _background(rng, config, lay))
+    return assemble("paper", config, lay, obstacles)
+
+
+def _multi_obstacle(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
+    lay = random_layout(rng, config)
+    obstacles = obstacle_slots(
+        config, lambda: _background(rng, config, lay), lambda: _background(rng, config, lay)
+    )
+    return assemble("multi_obstacle", config, lay, obstacles)
+
+
+def _large_formation(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
+    lay = random_layout(rng, config, "wedge" if config.formation == "paper" else None)
+    middle = int(np.argmin(np.linalg.norm(lay.slots, axis=1)))
+    obstacles = obstacle_slots(
+        config,
+        lambda: aimed_obstacle(rng, config, lay, APPROACHES["crossing"], who=middle),
+        lambda: _background(rng, config, lay),
+    )
+    return assemble("large_formation", config, lay, obstacles)
+
+
+def _random(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
+    return FAMILIES[RANDOM_MIX.draw(rng)].generate(rng, config)
+
+
+#: The families the ``random`` scenario draws per episode, with their integer weights.
+RANDOM_MIX = Mix({"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1, "multi_obstacle": 1})
+
+# ---- The registry, in the order the names are listed ----------------------------------------
+register(
+    ScenarioFamily(
+        name="paper",
+        summary="Section 4's encounter: an obstacle crosses the track of three UAVs in line.",
+        parameters=(
+            "Fixed geometry (north at 100 m; the obstacle 10 m below from the north-north-east, "
+            "meeting the middle UAV at 115 s); only its manoeuvres from 90 s on and the noise "
+            "depend on the seed."
+        ),
+        generate=_paper,
+        gym_name="PaperEncounter",
+    )
+)
+register(
+    ScenarioFamily(
+        name="random",
+        summary="One of the families below, drawn per episode.",
+        parameters="Weights: " + RANDOM_MIX.describe() + ".",
+        generate=_random,
+        gym_name="Formation",
+        mix=RANDOM_MIX,
+    )
+)
+for _kind in APPROACHES:
+    register(_encounter(_kind, _kind))
+register(
+    ScenarioFamily(
+        name="multi_obstacle",
+        summary="Every obstacle slot aimed at the formation, each of a random kind.",
+        parameters="Each slot's kind drawn from " + TRAFFIC_MIX.describe() + ".",
+        generate=_multi_obstacle,
+    )
+)
+register(
+    ScenarioFamily(
+        name="large_formation",
+        summary="A crossing through the middle of a large formation (use `n_uavs` >= 6).",
+        parameters=(
+            "A crossing encounter aimed at the UAV nearest the formation's centre; the "
+            "`paper` pattern becomes a wedge."
+        ),
+        generate=_large_formation,
+        gym_name="LargeFormation",
+        gym_defaults={"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
+    )
+)

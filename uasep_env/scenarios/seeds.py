@@ -1,0 +1,35 @@
+"""Seed ranges of learned baselines: training, validation and the held-out bank never meet."""
+
+from __future__ import annotations
+
+__all__ = [
+    "HELD_OUT_PAPER_SEEDS",
+    "HELD_OUT_SEEDS",
+    "TRAINING_SEEDS",
+    "VALIDATION_SEEDS",
+    "check_training_seeds",
+]
+
+#: Seeds training environments may be created with (environment ``e`` of a batch seeded
+#: ``seed`` starts from ``seed + e`` and then continues its own generator).
+TRAINING_SEEDS = range(0, 1_000_000)
+#: Seeds of the encounters a training run checks itself on (``random`` scenario).
+VALIDATION_SEEDS = range(4_000_000, 4_001_000)
+#: The held-out bank: 500 ``random`` encounters, the seeds every controller is compared on
+#: and training never draws.
+HELD_OUT_SEEDS = range(5_000_000, 5_000_500)
+#: The held-out bank's ``paper`` scenario runs (noise and the pilot's late manoeuvres).
+HELD_OUT_PAPER_SEEDS = range(5_000_000, 5_000_020)
+
+
+def check_training_seeds(seed: int, n_envs: int) -> None:
+    """Raise ``ValueError`` unless ``[seed, seed + n_envs)`` lies in :data:`TRAINING_SEEDS`."""
+    if not (
+        isinstance(seed, int)
+        and seed >= TRAINING_SEEDS.start
+        and seed + n_envs <= TRAINING_SEEDS.stop
+    ):
+        raise ValueError(
+            f"seed={seed!r}: training seeds [seed, seed + n_envs) must lie in "
+            f"[{TRAINING_SEEDS.start}, {TRAINING_SEEDS.stop}), disjoint from the held-out bank"
+        )
