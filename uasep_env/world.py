@@ -9,7 +9,8 @@ One environment step (``decision_interval`` physics steps of ``dt``) does, per p
 
 1. UAVs: the commanded accelerations, bounded per axis, plus process noise, through the
    double integrator with the speed limit (:mod:`uasep_env.dynamics`, eqs. 1-4);
-2. obstacles: the 3D Dubins model with random pilot commands (:mod:`uasep_env.obstacles`);
+2. obstacles: the 3D Dubins model with random pilot commands (:mod:`uasep_env.obstacles`),
+   or recorded tracks replayed (``obstacle.model="replay"``, :mod:`uasep_env.replay`);
 3. sensing and estimation: noisy measurements of every UAV and obstacle, Kalman filtered
    (:mod:`uasep_env.estimation`);
 4. safety: the minimum UAV-UAV and UAV-obstacle distances over the physics steps, so that a
@@ -41,6 +42,7 @@ from uasep_env.formation import PlannedTrajectory, planned_state, segment_offset
 from uasep_env.geometry import nearest_separations, obstacle_distances, uav_distances
 from uasep_env.noise import NoiseStreams
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
+from uasep_env.replay import ReplayTracks
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, place_obstacles, sample_scenario
 
 __all__ = ["World"]
@@ -121,6 +123,12 @@ class World:
         self.est_pos = np.zeros((e, n, 3))
         self.est_vel = np.zeros((e, n, 3))
         self.obstacles = ObstacleState(e, m)
+        # Recorded tracks, one sample per physics step of an episode (replay model only).
+        self.replay = (
+            ReplayTracks(e, m, cfg.max_steps * cfg.decision_interval + 1, cfg.dt)
+            if cfg.obstacle.model == "replay"
+            else None
+        )
         self.obs_est_pos = np.zeros((e, m, 3))
         self.obs_est_vel = np.zeros((e, m, 3))
         self.pred_offset = np.zeros((e, m))
@@ -228,6 +236,8 @@ class World:
             )
             self.pred_offset[mask] = offset
             self.pred_axes[mask] = axes
+            if self.replay is not None:  # after the ellipsoid: it uses the median speed
+                self.replay.start(ob, mask, specs)
         # First measurements start the tracks.
         self._sense(mask, initialise=True)
         self._predict_regions(mask)
@@ -338,7 +348,7 @@ class World:
         "min_uav_dist",
         "min_obs_dist",
     )
-    _OBSTACLE_STATE = ("pos", "heading", "turn_rate", "climb_rate")
+    _OBSTACLE_STATE = ("pos", "heading", "speed", "turn_rate", "climb_rate")
 
     def _snapshot(self, mask: np.ndarray) -> dict[str, np.ndarray]:
         snap = {name: getattr(self, name)[mask].copy() for name in self._STATE}
@@ -371,6 +381,8 @@ class World:
             step_obstacles(
                 self.obstacles, unifs.reshape(self.n_envs, m, N_UNIFORMS), cfg.dt, self.time
             )
+            if self.replay is not None:
+                self.replay.step(self.obstacles, self.time)
         self.time += cfg.dt
         self._sense(None, initialise=False, normals=normals, known_accel=applied - acc_noise)
         self._update_safety()

@@ -39,7 +39,7 @@ from uasep_env.config.groups import (
     RewardWeights,
     UAVConfig,
 )
-from uasep_env.scenarios.registry import scenario_names
+from uasep_env.scenarios.registry import get_family, scenario_names
 
 __all__ = ["AS_PUBLISHED", "FORMATION_PATTERNS", "SCENARIOS", "EnvConfig", "make_config"]  # noqa: F822
 
@@ -161,6 +161,15 @@ class EnvConfig:
                 getattr(self, name),
                 f"must be a {cls.__name__} (use make_config to build from dicts)",
             )
+        # The scenario places the obstacles for one motion model (recorded tracks: replay).
+        needs = get_family(self.scenario).obstacle_model
+        check(
+            self.obstacle.model == needs,
+            "obstacle.model",
+            self.obstacle.model,
+            f"scenario={self.scenario!r} needs obstacle.model={needs!r}"
+            + (" (recorded tracks: scenario 'real_traffic')" if needs == "dubins" else ""),
+        )
         check(
             self.action.mode != "residual_apf" or self.observation.clip >= 1.0,
             "observation.clip",

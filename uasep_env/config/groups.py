@@ -33,9 +33,22 @@ from uasep_env.config.checks import (
 #: Altitude of every scenario's planned trajectory (m, positive up).
 FLIGHT_ALTITUDE = 100.0
 
+#: ``obstacle.model`` values: the 3D Dubins model, or a recorded track replayed.
+OBSTACLE_MODELS = ("dubins", "replay")
+#: ``obstacle.replay_split`` values (the real-traffic dataset's splits, by flight).
+REPLAY_SPLITS = ("train", "validation", "test")
+#: Physical range of ``obstacle.replay_speed_scale``: from a recorded glider's 34 m/s down to
+#: under 2 m/s, up to twice a recorded speed (fixed wing at 160 m/s, within ``MAX_SPEED``).
+REPLAY_SPEED_SCALE_RANGE = (0.05, 2.0)
+#: Longest interval between recorded samples a replay interpolates over (s).
+MAX_REPLAY_GAP_S = 60.0
+
 __all__ = [
     "ACTION_MODES",
     "FLIGHT_ALTITUDE",
+    "OBSTACLE_MODELS",
+    "REPLAY_SPEED_SCALE_RANGE",
+    "REPLAY_SPLITS",
     "ActionConfig",
     "AirspaceConfig",
     "NoiseConfig",
@@ -146,10 +159,14 @@ class NoiseConfig:
 
 @dataclass(frozen=True)
 class ObstacleConfig:
-    """Motion model of the non-cooperative obstacles (3D Dubins, paper eq. 8).
+    """Motion model of the non-cooperative obstacles (3D Dubins, paper eq. 8, or replay).
 
     Scenarios that randomise obstacles draw around these values (see
-    :mod:`uasep_env.scenarios`); the ``paper`` scenario uses them as given.
+    :mod:`uasep_env.scenarios`); the ``paper`` scenario uses them as given. With
+    ``model="replay"`` (the ``real_traffic`` scenario, which requires it) every obstacle flies
+    a recorded track instead (:mod:`uasep_env.replay`); ``speed``, ``max_turn_rate`` and
+    ``max_climb_rate`` then only shape its predicted reachable set (the speed: the placed
+    track's median), as the predictor assumes a Dubins aircraft of these bounds.
 
     Attributes:
         speed: Constant horizontal airspeed ``v`` (m/s).
@@ -159,7 +176,17 @@ class ObstacleConfig:
         mean_switch_time: Mean time between the pilot's random changes of the turn and
             climb commands (s); a command changes in a step with probability ``dt / mean``.
         straight_probability: Probability that a new command is "fly straight and level".
-        wind: Steady wind added to the obstacles' ground velocity, NED (m/s).
+        wind: Steady wind added to the obstacles' ground velocity, NED (m/s). A replayed
+            track is a recorded ground track: the wind does not move it.
+        model: ``"dubins"`` (the 3D Dubins model) or ``"replay"`` (recorded tracks).
+        replay_split: Which flights a replay draws from: ``"train"``, ``"validation"`` or
+            ``"test"`` (the dataset's split by flight, :mod:`uasep_env.real_traffic`).
+        replay_speed_scale: Replayed tracks are scaled about their closest approach by this
+            factor (dimensionless, 0.05-2): speeds and climb rates scale by it, turn rates
+            and the timing of manoeuvres stay as recorded (1: the recorded speeds).
+        replay_max_gap: Longest interval between recorded samples a replay interpolates
+            over, linearly (s, 0-60); a track is only replayed over stretches without a
+            longer gap.
     """
 
     speed: float = 4.0  # m/s
@@ -169,9 +196,24 @@ class ObstacleConfig:
     mean_switch_time: float = 30.0  # s
     straight_probability: float = 0.5
     wind: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s, NED
+    model: str = "dubins"
+    replay_split: str = "train"
+    replay_speed_scale: float = 1.0  # dimensionless
+    replay_max_gap: float = 20.0  # s
 
     def __post_init__(self) -> None:
         check_positive("obstacle.speed", self.speed, hi=MAX_SPEED)
+        check_one_of("obstacle.model", self.model, OBSTACLE_MODELS)
+        check_one_of("obstacle.replay_split", self.replay_split, REPLAY_SPLITS)
+        lo, hi = REPLAY_SPEED_SCALE_RANGE
+        check_finite("obstacle.replay_speed_scale", self.replay_speed_scale)
+        check(
+            lo <= self.replay_speed_scale <= hi,
+            "obstacle.replay_speed_scale",
+            self.replay_speed_scale,
+            f"must be in [{lo}, {hi}] (a factor on the recorded speeds)",
+        )
+        check_positive("obstacle.replay_max_gap", self.replay_max_gap, hi=MAX_REPLAY_GAP_S)
         check_positive(
             "obstacle.max_turn_rate", self.max_turn_rate, allow_zero=True, hi=MAX_TURN_RATE
         )

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from uasep_env.scenarios import real_traffic as _real_traffic
 from uasep_env.scenarios.building import (
     SPEED_RANGE_MPS,
     TIMELINE_S,
@@ -236,5 +237,24 @@ register(
         generate=_large_formation,
         gym_name="LargeFormation",
         gym_defaults={"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
+    )
+)
+
+# Recorded aircraft (issue 20): not in RANDOM_MIX, so no existing bank moves.
+register(
+    ScenarioFamily(
+        name="real_traffic",
+        summary="A recorded glider, helicopter or fixed-wing track placed to meet the formation.",
+        parameters=(
+            "Needs `obstacle.model='replay'`. Each slot replays a distinct recorded track of "
+            "`obstacle.replay_split` (default training flights), scaled by "
+            "`obstacle.replay_speed_scale`, rotated and shifted so that its closest approach to "
+            "a random UAV's plan is at 60-140 s and 0-10 m; it stays between ground + "
+            "`airspace.obstacle_margin` and the ceiling."
+        ),
+        generate=_real_traffic.generate,
+        gym_name="RealTraffic",
+        gym_defaults={"obstacle": {"model": "replay"}},
+        obstacle_model="replay",
     )
 )

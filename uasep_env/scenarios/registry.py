@@ -73,6 +73,8 @@ class ScenarioFamily:
             (``None``: no gym id of its own).
         gym_defaults: The id's config overrides beside ``scenario``.
         mix: For a family that draws another family per episode (``random``), that mix.
+        obstacle_model: The ``obstacle.model`` its episodes need (``"dubins"``, or
+            ``"replay"`` for a family of recorded tracks); the config checks it.
     """
 
     name: str
@@ -82,6 +84,7 @@ class ScenarioFamily:
     gym_name: str | None = None
     gym_defaults: Mapping[str, Any] = field(default_factory=dict)
     mix: Mix | None = None
+    obstacle_model: str = "dubins"
 
 
 #: Every registered family by name, in registration order.

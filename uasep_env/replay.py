@@ -1,0 +1,130 @@
+"""Replayed obstacles: recorded tracks flown sample by sample (``obstacle.model="replay"``).
+
+A replayed obstacle flies a recorded track (:mod:`uasep_env.real_traffic`) that its scenario
+(``real_traffic``, :mod:`uasep_env.scenarios.real_traffic`) has resampled at the physics
+step ``dt`` and placed: ``(K, 3)`` positions, one per physics step from the reset, ``K`` =
+the episode's physics steps + 1. :class:`ReplayTracks` holds them for the batch, ``(E, M,
+K, 3)``, and writes each obstacle's state into the world's :class:`~uasep_env.obstacles.ObstacleState`
+after the Dubins step (:meth:`ReplayTracks.step`, called from
+:meth:`uasep_env.world.World.step`): the position from the track, and heading, airspeed and
+climb rate such that :func:`~uasep_env.obstacles.obstacle_velocity` gives the track's
+velocity (central differences of the positions; one-sided at the ends). Everything
+downstream (sensing, the Kalman filter, the reachable-set prediction, the observations)
+reads that state as it reads a Dubins obstacle's.
+
+Past the last sample (an episode run beyond its length) the obstacle flies on at its last
+velocity, never below the ground. The Dubins step still runs for the replayed slots (its
+uniforms are drawn either way, so the noise streams keep their layout); its result is
+overwritten. No randomness here: the scenario drew everything at reset.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from uasep_env.obstacles import ObstacleState
+
+__all__ = ["ReplayTracks", "track_velocities"]
+
+
+def track_velocities(pos: np.ndarray, dt: float) -> np.ndarray:
+    """Velocities of tracks sampled every ``dt``: central differences, one-sided at the ends.
+
+    Args:
+        pos: ``(..., K, 3)`` positions (m), ``K >= 2``.
+        dt: Sample interval (s).
+
+    Returns:
+        ``(..., K, 3)`` velocities (m/s).
+    """
+    return np.gradient(pos, dt, axis=-2)
+
+
+class ReplayTracks:
+    """The replayed tracks of a batch of worlds.
+
+    Args:
+        n_envs: ``E``.
+        n_obstacles: ``M``.
+        n_samples: ``K``: samples per track (the episode's physics steps + 1).
+        dt: Physics step (s).
+
+    Attributes:
+        pos: ``(E, M, K, 3)`` positions at physics step ``k`` after the reset (m, NED).
+        vel: ``(E, M, K, 3)`` their velocities (m/s).
+        on: ``(E, M)`` which slots replay a track (the others fly the Dubins model).
+    """
+
+    def __init__(self, n_envs: int, n_obstacles: int, n_samples: int, dt: float) -> None:
+        self.dt = float(dt)
+        self.n_samples = int(n_samples)
+        self.pos = np.zeros((n_envs, n_obstacles, n_samples, 3))
+        self.vel = np.zeros((n_envs, n_obstacles, n_samples, 3))
+        self.on = np.zeros((n_envs, n_obstacles), dtype=bool)
+
+    def start(self, obs: ObstacleState, mask: np.ndarray, specs: Sequence[Any]) -> None:
+        """Load the tracks of ``specs`` into the environments of ``mask`` and start them.
+
+        Args:
+            obs: The batch's obstacle state (position, heading, airspeed and climb rate of
+                the replayed slots are written).
+            mask: ``(E,)`` bool; the environments starting an episode.
+            specs: Their scenarios, in order; a spec without ``obstacle_track`` replays
+                nothing.
+
+        Raises:
+            ValueError: A track of the wrong length (named).
+        """
+        idx = np.flatnonzero(mask)
+        m, k = self.pos.shape[1], self.n_samples
+        for i, spec in zip(idx, specs, strict=True):
+            track = getattr(spec, "obstacle_track", None)
+            if track is None:
+                self.on[i] = False
+                continue
+            if track.shape != (m, k, 3):
+                raise ValueError(
+                    f"obstacle_track of a {spec.family!r} scenario has shape {track.shape}, "
+                    f"expected ({m}, {k}, 3): one position per physics step of the episode"
+                )
+            self.on[i] = spec.obstacle_replay
+            self.pos[i] = track
+            self.vel[i] = track_velocities(track, self.dt)
+        self._write(obs, mask, np.zeros(len(idx), dtype=np.int64))
+
+    def step(self, obs: ObstacleState, time: np.ndarray) -> None:
+        """Move the replayed obstacles to their next sample (after the Dubins step).
+
+        Args:
+            obs: The batch's obstacle state, written in place.
+            time: ``(E,)`` the time before this physics step (s).
+        """
+        if self.on.any():
+            self._write(obs, slice(None), np.rint(time / self.dt).astype(np.int64) + 1)
+
+    def _write(self, obs: ObstacleState, rows: Any, step: np.ndarray) -> None:
+        """Set the replayed slots of ``rows`` to their tracks at physics step ``step``."""
+        on = self.on[rows]
+        if not on.any():
+            return
+        last = self.n_samples - 1
+        k = np.minimum(step, last)
+        beyond = ((step - k) * self.dt)[:, None, None]  # flown on at the last velocity
+        envs = np.arange(self.pos.shape[0])[rows][:, None]
+        slots = np.arange(self.pos.shape[1])[None, :]
+        pos = self.pos[envs, slots, k[:, None]]
+        vel = self.vel[envs, slots, k[:, None]]
+        if (beyond > 0).any():
+            pos = pos + vel * beyond
+            np.minimum(pos[..., 2], -obs.ground[rows], out=pos[..., 2])
+        # Heading, airspeed and climb such that obstacle_velocity() is the track's velocity.
+        air = vel - obs.wind[rows][:, None, :]
+        on3 = on[..., None]
+        obs.pos[rows] = np.where(on3, pos, obs.pos[rows])
+        obs.heading[rows] = np.where(on, np.arctan2(air[..., 1], air[..., 0]), obs.heading[rows])
+        obs.speed[rows] = np.where(on, np.hypot(air[..., 0], air[..., 1]), obs.speed[rows])
+        obs.climb_rate[rows] = np.where(on, -air[..., 2], obs.climb_rate[rows])
+        obs.turn_rate[rows] = np.where(on, 0.0, obs.turn_rate[rows])
