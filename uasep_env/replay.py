@@ -3,13 +3,13 @@
 A replayed obstacle flies a recorded track (:mod:`uasep_env.real_traffic`) that its scenario
 (``real_traffic``, :mod:`uasep_env.scenarios.real_traffic`) has resampled at the physics
 step ``dt`` and placed: ``(K, 3)`` positions, one per physics step from the reset, ``K`` =
-the episode's physics steps + 1. :class:`ReplayTracks` holds them for the batch, ``(E, M,
-K, 3)``, and writes each obstacle's state into the world's :class:`~uasep_env.obstacles.ObstacleState`
-after the Dubins step (:meth:`ReplayTracks.step`, called from
-:meth:`uasep_env.world.World.step`): the position from the track, and heading, airspeed and
-climb rate such that :func:`~uasep_env.obstacles.obstacle_velocity` gives the track's
-velocity (central differences of the positions; one-sided at the ends). Everything
-downstream (sensing, the Kalman filter, the reachable-set prediction, the observations)
+the episode's physics steps + 1. :class:`ReplayTracks` holds them for the batch,
+``(E, M, K, 3)``. After the Dubins step (:meth:`ReplayTracks.step`, called from
+:meth:`uasep_env.world.World.step`) it writes each replayed obstacle's state into the
+world's :class:`~uasep_env.obstacles.ObstacleState`: the position from the track, and
+heading, airspeed and climb rate such that :func:`~uasep_env.obstacles.obstacle_velocity`
+gives the track's velocity (central differences of the positions; one-sided at the ends).
+Everything downstream (sensing, the Kalman filter, the reachable-set prediction, the observations)
 reads that state as it reads a Dubins obstacle's.
 
 Past the last sample (an episode run beyond its length) the obstacle flies on at its last
