@@ -3,7 +3,8 @@
 Every results file compares controllers on fixed banks of seeded scenarios: the held-out
 bank (``random``, seeds 5,000,000-5,000,499, and its 20 ``paper`` runs), the validation
 encounters ``train/select_checkpoint.py`` chooses checkpoints on, and the paper experiment's
-and trade-off's runs (``paper`` seeds 0-19, ``random`` seeds 100,000-100,199). The digest
+and trade-off's runs (``paper`` seeds 0-19, ``random`` seeds 100,000-100,199), and the
+real-traffic bank (``real_traffic`` on the test flights, seeds 6,000,000-6,000,299). The digest
 records, per seed, the family drawn, a readable summary of the first obstacle (start
 altitude, speed, climb rate) and a hash of every array of the scenario (rounded to 1e-6, so
 that last-bit differences of a maths library do not count). ``tests/test_banks.py``
@@ -35,10 +36,12 @@ from uasep_env.registration import ENV_VERSION
 from uasep_env.scenarios import (
     HELD_OUT_PAPER_SEEDS,
     HELD_OUT_SEEDS,
+    REAL_TRAFFIC_TEST_SEEDS,
     VALIDATION_SEEDS,
     ScenarioSpec,
     sample_scenario,
 )
+from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK
 
 ROOT = Path(__file__).resolve().parents[1]
 DIGEST = ROOT / "tests" / "data" / "banks.json"
@@ -58,7 +61,14 @@ BANKS: dict[str, tuple[str, range, str]] = {
         range(100_000, 100_200),
         "baselines/paper_experiment.py, baselines/tradeoff.py",
     ),
+    "real_traffic_test": (
+        "real_traffic",
+        REAL_TRAFFIC_TEST_SEEDS,
+        "baselines/real_traffic_eval.py (recorded tracks of the test flights)",
+    ),
 }
+#: Bank name -> its config overrides beside ``scenario`` (banks not named: none).
+CONFIGS: dict[str, dict[str, Any]] = {"real_traffic_test": REAL_TRAFFIC_BANK}
 
 
 def spec_hash(spec: ScenarioSpec) -> str:
@@ -90,9 +100,10 @@ def digest() -> dict[str, Any]:
     """The digest of every bank (only scenarios are sampled; no episode is flown)."""
     banks = {}
     for name, (scenario, seeds, used_by) in BANKS.items():
-        cfg = make_config(scenario=scenario)
+        cfg = make_config({**CONFIGS.get(name, {}), "scenario": scenario})
         banks[name] = {
             "scenario": scenario,
+            **({"config": CONFIGS[name]} if name in CONFIGS else {}),
             "seeds": [seeds.start, seeds.stop],
             "used_by": used_by,
             "columns": ["seed", "family", "hash", "alt_m", "speed_mps", "climb_mps"],

@@ -44,6 +44,7 @@ from uasep_env.noise import NoiseStreams
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.replay import ReplayTracks
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, place_obstacles, sample_scenario
+from uasep_env.scenarios.real_traffic import check_replay_tracks
 
 __all__ = ["World"]
 
@@ -124,11 +125,10 @@ class World:
         self.est_vel = np.zeros((e, n, 3))
         self.obstacles = ObstacleState(e, m)
         # Recorded tracks, one sample per physics step of an episode (replay model only).
-        self.replay = (
-            ReplayTracks(e, m, cfg.max_steps * cfg.decision_interval + 1, cfg.dt)
-            if cfg.obstacle.model == "replay"
-            else None
-        )
+        self.replay: ReplayTracks | None = None
+        if cfg.obstacle.model == "replay":
+            check_replay_tracks(cfg)  # enough distinct tracks: say so now, not at reset
+            self.replay = ReplayTracks(e, m, cfg.max_steps * cfg.decision_interval + 1, cfg.dt)
         self.obs_est_pos = np.zeros((e, m, 3))
         self.obs_est_vel = np.zeros((e, m, 3))
         self.pred_offset = np.zeros((e, m))

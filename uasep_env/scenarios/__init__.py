@@ -43,6 +43,7 @@ from uasep_env.scenarios.registry import (
 from uasep_env.scenarios.seeds import (
     HELD_OUT_PAPER_SEEDS,
     HELD_OUT_SEEDS,
+    REAL_TRAFFIC_TEST_SEEDS,
     TRAINING_SEEDS,
     VALIDATION_SEEDS,
     check_training_seeds,
@@ -59,6 +60,7 @@ __all__ = [
     "N_WAYPOINTS",
     "RANDOM_FAMILIES",
     "RANDOM_MIX",
+    "REAL_TRAFFIC_TEST_SEEDS",
     "TRAFFIC_MIX",
     "TRAINING_SEEDS",
     "VALIDATION_SEEDS",

@@ -53,12 +53,19 @@ if TYPE_CHECKING:
 
 __all__ = [
     "MISS_DISTANCE_RANGE_M",
+    "REAL_TRAFFIC_BANK",
     "ReplaySpec",
     "check_replay_tracks",
     "generate",
     "usable_tracks",
 ]
 
+#: The real-traffic bank's config (seeds :data:`~uasep_env.scenarios.REAL_TRAFFIC_TEST_SEEDS`):
+#: recorded tracks of the test flights only, at their recorded speeds.
+REAL_TRAFFIC_BANK: dict = {
+    "scenario": "real_traffic",
+    "obstacle": {"model": "replay", "replay_split": "test"},
+}
 #: Miss distance of an encounter: the placed track's closest approach to its target's plan.
 MISS_DISTANCE_RANGE_M = (0.0, 10.0)
 #: Least distance of a placed track's start from every UAV's planned start (m).

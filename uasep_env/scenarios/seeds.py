@@ -5,6 +5,7 @@ from __future__ import annotations
 __all__ = [
     "HELD_OUT_PAPER_SEEDS",
     "HELD_OUT_SEEDS",
+    "REAL_TRAFFIC_TEST_SEEDS",
     "TRAINING_SEEDS",
     "VALIDATION_SEEDS",
     "check_training_seeds",
@@ -20,6 +21,10 @@ VALIDATION_SEEDS = range(4_000_000, 4_001_000)
 HELD_OUT_SEEDS = range(5_000_000, 5_000_500)
 #: The held-out bank's ``paper`` scenario runs (noise and the pilot's late manoeuvres).
 HELD_OUT_PAPER_SEEDS = range(5_000_000, 5_000_020)
+#: The real-traffic bank: 300 ``real_traffic`` encounters with tracks of the TEST flights
+#: only (``obstacle.replay_split="test"``; config:
+#: :data:`uasep_env.scenarios.real_traffic.REAL_TRAFFIC_BANK`).
+REAL_TRAFFIC_TEST_SEEDS = range(6_000_000, 6_000_300)
 
 
 def check_training_seeds(seed: int, n_envs: int) -> None:
