@@ -86,6 +86,9 @@ class ReplaySpec(ScenarioSpec):
         obstacle_replay: ``(M,)`` which slots replay their track (all).
         obstacle_track_index: ``(M,)`` the tracks' indices in the dataset.
         obstacle_track_start: ``(M,)`` time into each track at the reset (s).
+        obstacle_rotation: ``(M,)`` the angle each track is rotated by about the vertical
+            (rad, from north towards east); it is scaled by ``obstacle.replay_speed_scale``
+            about its position at the meeting time first.
         obstacle_target: ``(M,)`` the UAV each is aimed at.
         obstacle_meet_time: ``(M,)`` the time of its closest approach to the target's plan (s).
         obstacle_miss_distance: ``(M,)`` the distance then (m).
@@ -95,6 +98,7 @@ class ReplaySpec(ScenarioSpec):
     obstacle_replay: np.ndarray
     obstacle_track_index: np.ndarray
     obstacle_track_start: np.ndarray
+    obstacle_rotation: np.ndarray
     obstacle_target: np.ndarray
     obstacle_meet_time: np.ndarray
     obstacle_miss_distance: np.ndarray
@@ -230,6 +234,7 @@ def _replayed(
         "track": pos[:k_ep],
         "index": track,
         "start": float(seg.start[0]),
+        "rotation": float(theta),
         "target": who,
         "meet": j_c * dt,
         "miss": miss,
@@ -259,6 +264,7 @@ def generate(rng: np.random.Generator, config: EnvConfig) -> ReplaySpec:
         obstacle_replay=np.ones(m, dtype=bool),
         obstacle_track_index=column("index", int),
         obstacle_track_start=column("start"),
+        obstacle_rotation=column("rotation"),
         obstacle_target=column("target", int),
         obstacle_meet_time=column("meet"),
         obstacle_miss_distance=column("miss"),
