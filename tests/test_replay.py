@@ -225,7 +225,7 @@ def test_bad_input_names_the_field_and_value():
     with pytest.raises(ValueError, match=r"obstacle\.replay_max_gap=0"):
         _cfg(obstacle={"model": "replay", "replay_max_gap": 0})
     with pytest.raises(ValueError, match=r"obstacle\.model='dubins'.*real_traffic.*'replay'"):
-        make_config(scenario="real_traffic")
+        make_config(scenario="real_traffic", obstacle={"model": "dubins"})
     with pytest.raises(ValueError, match=r"obstacle\.model='replay'.*crossing"):
         make_config(scenario="crossing", obstacle={"model": "replay"})
     # More distinct tracks than the split holds: named at construction, with the count.
@@ -239,6 +239,15 @@ def test_bad_input_names_the_field_and_value():
                             "ceiling_altitude": 101.0})  # fmt: skip
     with pytest.raises(ValueError, match=r"airspace\.ceiling_altitude"):
         _spec(0, narrow)
+
+
+def test_the_obstacle_model_follows_the_scenario_unless_given():
+    assert make_config().obstacle.model == "dubins"
+    cfg = make_config(scenario="real_traffic")
+    assert cfg.obstacle.model == "replay"
+    assert cfg.replace(scenario="crossing").obstacle.model == "dubins"
+    assert cfg.replace(obstacle={"replay_speed_scale": 0.5}).obstacle.model == "replay"
+    assert make_config(cfg.to_dict()) == cfg  # the written config reads back
 
 
 def test_the_gym_id():

@@ -161,8 +161,11 @@ class EnvConfig:
                 getattr(self, name),
                 f"must be a {cls.__name__} (use make_config to build from dicts)",
             )
-        # The scenario places the obstacles for one motion model (recorded tracks: replay).
+        # The scenario places the obstacles for one motion model (recorded tracks: replay);
+        # an unset model is the scenario's.
         needs = get_family(self.scenario).obstacle_model
+        if self.obstacle.model is None:
+            object.__setattr__(self, "obstacle", dataclasses.replace(self.obstacle, model=needs))
         check(
             self.obstacle.model == needs,
             "obstacle.model",
@@ -242,7 +245,17 @@ def _build(cls: type[T], base: T | None, values: Mapping[str, Any], prefix: str)
                     f"must be a dict or {sub.__name__}"
                 )
         current[key] = value
+    if cls is EnvConfig and "scenario" in values and not _names_model(values.get("obstacle")):
+        # A new scenario brings its own obstacle model unless one is given with it.
+        current["obstacle"] = dataclasses.replace(current["obstacle"], model=None)
     return cls(**current)
+
+
+def _names_model(obstacle: Any) -> bool:
+    """Whether an ``obstacle`` override sets ``model`` (a dict naming it, or a whole group)."""
+    return isinstance(obstacle, ObstacleConfig) or (
+        isinstance(obstacle, Mapping) and "model" in obstacle
+    )
 
 
 def make_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwargs: Any) -> EnvConfig:

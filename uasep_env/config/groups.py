@@ -178,7 +178,9 @@ class ObstacleConfig:
         straight_probability: Probability that a new command is "fly straight and level".
         wind: Steady wind added to the obstacles' ground velocity, NED (m/s). A replayed
             track is a recorded ground track: the wind does not move it.
-        model: ``"dubins"`` (the 3D Dubins model) or ``"replay"`` (recorded tracks).
+        model: ``"dubins"`` (the 3D Dubins model) or ``"replay"`` (recorded tracks); ``None``
+            (the default): the one the scenario needs (``"replay"`` for ``real_traffic``,
+            else ``"dubins"``), filled in by :class:`~uasep_env.config.EnvConfig`.
         replay_split: Which flights a replay draws from: ``"train"``, ``"validation"`` or
             ``"test"`` (the dataset's split by flight, :mod:`uasep_env.real_traffic`).
         replay_speed_scale: Replayed tracks are scaled about their closest approach by this
@@ -196,14 +198,14 @@ class ObstacleConfig:
     mean_switch_time: float = 30.0  # s
     straight_probability: float = 0.5
     wind: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s, NED
-    model: str = "dubins"
+    model: str | None = None
     replay_split: str = "train"
     replay_speed_scale: float = 1.0  # dimensionless
     replay_max_gap: float = 20.0  # s
 
     def __post_init__(self) -> None:
         check_positive("obstacle.speed", self.speed, hi=MAX_SPEED)
-        check_one_of("obstacle.model", self.model, OBSTACLE_MODELS)
+        check_one_of("obstacle.model", self.model, (None, *OBSTACLE_MODELS))
         check_one_of("obstacle.replay_split", self.replay_split, REPLAY_SPLITS)
         lo, hi = REPLAY_SPEED_SCALE_RANGE
         check_finite("obstacle.replay_speed_scale", self.replay_speed_scale)

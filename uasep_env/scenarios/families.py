@@ -246,15 +246,14 @@ register(
         name="real_traffic",
         summary="A recorded glider, helicopter or fixed-wing track placed to meet the formation.",
         parameters=(
-            "Needs `obstacle.model='replay'`. Each slot replays a distinct recorded track of "
-            "`obstacle.replay_split` (default training flights), scaled by "
+            "Obstacle model `replay` (its default here). Each slot replays a distinct recorded "
+            "track of `obstacle.replay_split` (default training flights), scaled by "
             "`obstacle.replay_speed_scale`, rotated and shifted so that its closest approach to "
             "a random UAV's plan is at 60-140 s and 0-10 m; it stays between ground + "
             "`airspace.obstacle_margin` and the ceiling."
         ),
         generate=_real_traffic.generate,
         gym_name="RealTraffic",
-        gym_defaults={"obstacle": {"model": "replay"}},
         obstacle_model="replay",
     )
 )
