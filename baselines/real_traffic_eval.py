@@ -10,6 +10,10 @@ unpickling) play the same encounters twice:
   :data:`uasep_env.scenarios.real_traffic.REAL_TRAFFIC_BANK`): a recorded glider or
   helicopter of the TEST flights (never drawn in training), at its recorded speed, placed to
   pass 0-10 m from a UAV's plan at 60-140 s;
+* the same 300 seeds with the tracks slowed x0.2 (``obstacle.replay_speed_scale``,
+  :data:`~uasep_env.scenarios.real_traffic.REAL_TRAFFIC_SLOW_BANK`) to the synthetic
+  obstacles' speeds, turn rates and manoeuvre timing as recorded (the placement is drawn
+  again, so the encounters differ in detail): speed apart from manoeuvres;
 * the synthetic held-out bank: the 500 ``random`` encounters of
   ``baselines/learned_vs_apf.py`` (:data:`uasep_env.scenarios.HELD_OUT_SEEDS`), run again
   here so that both columns come from the same code.
@@ -37,7 +41,7 @@ from uasep_env import make_config, real_traffic
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.metrics.statistics import wilson_interval
 from uasep_env.scenarios import HELD_OUT_SEEDS, REAL_TRAFFIC_TEST_SEEDS, sample_scenario
-from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK
+from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK, REAL_TRAFFIC_SLOW_BANK
 from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parent
@@ -59,19 +63,20 @@ def _cell(agg: dict[str, Any], key: str, stat: str, fmt: str) -> str:
     return f"{s[stat]:{fmt}} [{s['ci_low']:{fmt}}, {s['ci_high']:{fmt}}]"
 
 
-def summary(synthetic: EvaluationResult | None, real: EvaluationResult) -> str:
-    """Controllers as rows; each metric on the synthetic bank, then on the real one."""
+def summary(banks: dict[str, EvaluationResult | None], rows: tuple = SUMMARY) -> str:
+    """Controllers as rows; each metric on each bank (``name -> result``) in turn."""
     headers = ["controller"]
-    for name, *_ in SUMMARY:
-        headers += [f"{name}, synthetic", f"{name}, real"]
+    for name, *_ in rows:
+        headers += [f"{name}, {bank}" for bank in banks]
     body = []
-    for label, res in real.results.items():
+    labels = next(r for r in banks.values() if r is not None).results
+    for label in labels:
         row = [label]
-        for _, key, stat, fmt in SUMMARY:
-            syn = "-"
-            if synthetic is not None:
-                syn = _cell(synthetic.results[label].aggregate, key, stat, fmt)
-            row += [syn, _cell(res.aggregate, key, stat, fmt)]
+        for _, key, stat, fmt in rows:
+            row += [
+                "-" if r is None else _cell(r.results[label].aggregate, key, stat, fmt)
+                for r in banks.values()
+            ]
         body.append(row)
     return render_table(headers, body, markdown=True)
 
@@ -137,6 +142,7 @@ def main(argv: list[str] | None = None) -> str:
     p.add_argument("--episodes", type=int, default=len(REAL_TRAFFIC_TEST_SEEDS))
     p.add_argument("--synthetic-episodes", type=int, default=len(HELD_OUT_SEEDS))
     p.add_argument("--out", type=Path, default=ROOT / "results")
+    p.add_argument("--no-slow", dest="slow", action="store_false", help="skip the x0.2 bank")
     args = p.parse_args(argv)
     if not 1 <= args.episodes <= len(REAL_TRAFFIC_TEST_SEEDS):
         p.error(f"argument --episodes: must be in [1, {len(REAL_TRAFFIC_TEST_SEEDS)}]")
@@ -154,6 +160,11 @@ def main(argv: list[str] | None = None) -> str:
     t0 = time.perf_counter()
     real = evaluate(policies, make_config(REAL_TRAFFIC_BANK), real_seeds, workers=args.workers)
     t_real = time.perf_counter() - t0
+    slow = None
+    if args.slow:
+        slow = evaluate(
+            policies, make_config(REAL_TRAFFIC_SLOW_BANK), real_seeds, workers=args.workers
+        )
     synthetic = None
     if syn_seeds:
         synthetic = evaluate(
@@ -174,7 +185,7 @@ def main(argv: list[str] | None = None) -> str:
         "### Synthetic vs real traffic",
         f"Synthetic: the held-out bank ({syn_what}). Real: the real-traffic bank ({real_what}). "
         "Rates with 95 % Wilson intervals, means with 95 % Student-t intervals.",
-        summary(synthetic, real),
+        summary({"synthetic": synthetic, "real": real}),
         f"### Real-traffic bank: {real_what}",
         table(real, TABLE_ROWS),
         "### Real-traffic bank by aircraft class",
@@ -182,16 +193,29 @@ def main(argv: list[str] | None = None) -> str:
         "### The real-traffic bank",
         bank_table(classes),
     ]
+    if slow is not None:
+        sections += [
+            "### Real tracks slowed to synthetic speeds",
+            f"The same seeds with `obstacle.replay_speed_scale=0.2` ({real_what}, tracks "
+            "slowed x0.2; turn rates and timing as recorded).",
+            summary({"synthetic": synthetic, "real": real, "real x0.2": slow}, SUMMARY[:2]),
+            f"### Real-traffic bank slowed x0.2: {real_what}",
+            table(slow, TABLE_ROWS),
+        ]
     if synthetic is not None:
         sections += [f"### Held-out bank: {syn_what}", table(synthetic, TABLE_ROWS)]
     sections.append(
         f"Run time: {t_real:.0f} s for the real-traffic bank, {t_all:.0f} s in all "
-        f"(--workers {args.workers})."
+        f"(`python baselines/real_traffic_eval.py --workers {args.workers}`, 2 shared cores)."
     )
     text = "\n\n".join(sections) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     _write_text(args.out / "real_traffic_eval.md", text)
-    results = {"real_traffic": real, **({"random": synthetic} if synthetic else {})}
+    results = {
+        "real_traffic": real,
+        **({"real_traffic_slow": slow} if slow else {}),
+        **({"random": synthetic} if synthetic else {}),
+    }
     write_json(
         {"meta": {"run_time_s": t_all, "real_traffic_s": t_real, "bank": REAL_TRAFFIC_BANK},
          **results},

@@ -41,7 +41,7 @@ from uasep_env.scenarios import (
     ScenarioSpec,
     sample_scenario,
 )
-from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK
+from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK, REAL_TRAFFIC_SLOW_BANK
 
 ROOT = Path(__file__).resolve().parents[1]
 DIGEST = ROOT / "tests" / "data" / "banks.json"
@@ -66,9 +66,17 @@ BANKS: dict[str, tuple[str, range, str]] = {
         REAL_TRAFFIC_TEST_SEEDS,
         "baselines/real_traffic_eval.py (recorded tracks of the test flights)",
     ),
+    "real_traffic_test_slow": (
+        "real_traffic",
+        REAL_TRAFFIC_TEST_SEEDS,
+        "baselines/real_traffic_eval.py (the same tracks slowed x0.2)",
+    ),
 }
 #: Bank name -> its config overrides beside ``scenario`` (banks not named: none).
-CONFIGS: dict[str, dict[str, Any]] = {"real_traffic_test": REAL_TRAFFIC_BANK}
+CONFIGS: dict[str, dict[str, Any]] = {
+    "real_traffic_test": REAL_TRAFFIC_BANK,
+    "real_traffic_test_slow": REAL_TRAFFIC_SLOW_BANK,
+}
 
 
 def spec_hash(spec: ScenarioSpec) -> str:

@@ -54,6 +54,7 @@ if TYPE_CHECKING:
 __all__ = [
     "MISS_DISTANCE_RANGE_M",
     "REAL_TRAFFIC_BANK",
+    "REAL_TRAFFIC_SLOW_BANK",
     "ReplaySpec",
     "check_replay_tracks",
     "generate",
@@ -65,6 +66,12 @@ __all__ = [
 REAL_TRAFFIC_BANK: dict = {
     "scenario": "real_traffic",
     "obstacle": {"model": "replay", "replay_split": "test"},
+}
+#: The same seeds with the recorded tracks slowed to the synthetic obstacles' speeds (x0.2:
+#: gliders at about 8 m/s, helicopters at 12 m/s; turn rates and timing as recorded).
+REAL_TRAFFIC_SLOW_BANK: dict = {
+    "scenario": "real_traffic",
+    "obstacle": {"model": "replay", "replay_split": "test", "replay_speed_scale": 0.2},
 }
 #: Miss distance of an encounter: the placed track's closest approach to its target's plan.
 MISS_DISTANCE_RANGE_M = (0.0, 10.0)
