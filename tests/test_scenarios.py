@@ -7,9 +7,9 @@ from hypothesis import strategies as st
 
 from uasep_env.config import make_config
 from uasep_env.envs.vector import FormationVectorEnv
-from uasep_env.scenarios import RANDOM_FAMILIES, sample_scenario
+from uasep_env.scenarios import sample_scenario, scenario_names
 
-FAMILIES = ["paper", *RANDOM_FAMILIES, "random", "large_formation"]
+FAMILIES = list(scenario_names())  # every registered family
 
 
 @pytest.mark.parametrize("family", FAMILIES)

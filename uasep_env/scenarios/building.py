@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
 
 __all__ = [
-    "Approach",
+    "Encounter",
     "Layout",
     "ObstacleStart",
     "aimed_obstacle",
@@ -95,12 +95,23 @@ class ObstacleStart:
     hold_until: float
 
 
-#: How an encounter approaches its target: ``(rng, config, plan_heading) -> (speed,
-#: heading)``, then ``(rng, vz_max) -> climb`` (``None``: level, at a random altitude offset).
-Approach = tuple[
-    Callable[[np.random.Generator, "EnvConfig", float], tuple[float, float]],
-    Callable[[np.random.Generator, float], float | None],
-]
+@dataclass(frozen=True)
+class Encounter:
+    """A kind of encounter: how an obstacle approaches the UAV it is aimed at.
+
+    Attributes:
+        horizontal: ``(rng, config, plan_heading) -> (speed, heading)`` (m/s, rad).
+        vertical: ``(rng, vz_max) -> climb`` (m/s, positive up) at which it climbs through
+            its target's altitude, or ``None``: level, at a random altitude offset.
+        summary: One line: what encounter it makes (the family's, for a one-encounter
+            family).
+        parameters: What it draws (units).
+    """
+
+    horizontal: Callable[[np.random.Generator, EnvConfig, float], tuple[float, float]]
+    vertical: Callable[[np.random.Generator, float], float | None]
+    summary: str
+    parameters: str
 
 
 def planned_position(plan: PlannedTrajectory, t: float, slots: np.ndarray) -> np.ndarray:
@@ -201,13 +212,13 @@ def aimed_obstacle(
     rng: np.random.Generator,
     config: EnvConfig,
     lay: Layout,
-    approach: Approach,
+    encounter: Encounter,
     who: int | None = None,
 ) -> ObstacleStart:
     """An obstacle aimed at UAV ``who``'s planned position at a random meeting time.
 
     Draws the meeting time, the UAV (if ``who`` is None), ``w_max``, ``vz_max``, the
-    approach's speed and heading, an altitude offset, the approach's climb and the pilot's
+    encounter's speed and heading, an altitude offset, the encounter's climb and the pilot's
     reaction lead, in that order. The obstacle starts between the ground (plus
     ``airspace.obstacle_margin``) and the ceiling: a climb that would start it outside
     them is slowed (it still meets the target on time).
@@ -219,11 +230,10 @@ def aimed_obstacle(
     plan_dir = lay.plan.heading_velocity(np.array([meet]))[0]
     w_max = rng.uniform(*TURN_RATE_RANGE_RADPS)
     vz_max = rng.uniform(*CLIMB_RATE_RANGE_MPS)
-    horizontal, vertical = approach
-    speed, heading = horizontal(rng, config, math.atan2(plan_dir[1], plan_dir[0]))
+    speed, heading = encounter.horizontal(rng, config, math.atan2(plan_dir[1], plan_dir[0]))
     offset = np.array([0.0, 0.0, rng.uniform(*ALTITUDE_OFFSET_RANGE_M)])
     floor, ceiling = airspace(config)
-    climb = vertical(rng, vz_max)
+    climb = encounter.vertical(rng, vz_max)
     if climb is None:
         climb = 0.0
     else:

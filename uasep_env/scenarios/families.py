@@ -3,11 +3,13 @@
 This file is the one place families are declared and registered (in the order
 ``EnvConfig.scenario``'s names are listed). A family's generator builds its episode from
 the shared blocks of :mod:`uasep_env.scenarios.building`; an encounter kind (how an
-obstacle approaches the UAV it is aimed at) is an :data:`~uasep_env.scenarios.building.Approach`
-in :data:`APPROACHES`. Two mixes are declared here, once: :data:`RANDOM_MIX` (the families
+obstacle approaches the UAV it is aimed at, with its documentation) is an
+:class:`~uasep_env.scenarios.building.Encounter` in :data:`ENCOUNTERS`, and each is also a
+family of one such encounter. Two mixes are declared here, once: :data:`RANDOM_MIX` (the families
 the ``random`` scenario draws per episode) and :data:`TRAFFIC_MIX` (the encounter kinds of
-background traffic and of ``multi_obstacle``). Adding a family: write its generator, register
-it below (and add it to a mix if ``random`` should draw it), test it.
+background traffic and of ``multi_obstacle``). Adding a family: an entry in
+:data:`ENCOUNTERS` (for one encounter of a new kind) or a generator registered below; add it
+to a mix only if ``random`` should draw it (that moves every bank: see ``tests/test_banks.py``).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from uasep_env.scenarios import real_traffic as _real_traffic
 from uasep_env.scenarios.building import (
     SPEED_RANGE_MPS,
     TIMELINE_S,
-    Approach,
+    Encounter,
     Layout,
     ObstacleStart,
     aimed_obstacle,
@@ -39,7 +41,7 @@ from uasep_env.scenarios.spec import ScenarioSpec
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
 
-__all__ = ["APPROACHES", "RANDOM_MIX", "TRAFFIC_MIX"]
+__all__ = ["ENCOUNTERS", "RANDOM_MIX", "TRAFFIC_MIX"]
 
 
 # ---- Encounter kinds: how an obstacle approaches its target ---------------------------------
@@ -73,12 +75,38 @@ def _climbing_or_descending(rng: np.random.Generator, vz_max: float) -> float | 
     return (1.0 if rng.random() < 0.5 else -1.0) * vz_max
 
 
-#: Encounter kind -> its approach (horizontal, then vertical).
-APPROACHES: dict[str, Approach] = {
-    "crossing": (_from_either_side, _level),
-    "head_on": (_from_the_front, _level),
-    "overtaking": (_from_behind, _level),
-    "climbing": (_from_either_side, _climbing_or_descending),
+_MEETS = "Meets a random UAV's plan at 60-140 s; "
+_CLIMBING = (
+    "climbing or descending at `vz_max` (slower where it would start below ground + "
+    "`airspace.obstacle_margin` or above the ceiling)."
+)
+
+#: The kinds of encounter; each is also a family of one such encounter (registered below).
+ENCOUNTERS: dict[str, Encounter] = {
+    "crossing": Encounter(
+        _from_either_side,
+        _level,
+        "An obstacle crosses the formation's track from either side.",
+        _MEETS + "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
+    ),
+    "head_on": Encounter(
+        _from_the_front,
+        _level,
+        "An obstacle comes head-on.",
+        _MEETS + "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
+    ),
+    "overtaking": Encounter(
+        _from_behind,
+        _level,
+        "A faster obstacle overtakes the formation from behind.",
+        _MEETS + "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
+    ),
+    "climbing": Encounter(
+        _from_either_side,
+        _climbing_or_descending,
+        "An obstacle climbs or descends through the formation's altitude.",
+        _MEETS + "speed 3-12 m/s, 45-135° off the track, " + _CLIMBING,
+    ),
 }
 
 #: The encounter kinds of background traffic (and of every ``multi_obstacle`` slot).
@@ -88,45 +116,23 @@ TRAFFIC_MIX = Mix({"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1})
 def _background(rng: np.random.Generator, config: EnvConfig, lay: Layout) -> ObstacleStart:
     """Traffic aimed at a random UAV at another time, of a kind drawn from TRAFFIC_MIX."""
     kind = TRAFFIC_MIX.draw(rng)
-    return aimed_obstacle(rng, config, lay, APPROACHES[kind])
+    return aimed_obstacle(rng, config, lay, ENCOUNTERS[kind])
 
 
-def _encounter(name: str, kind: str) -> ScenarioFamily:
-    """A family of one encounter of ``kind`` aimed at a random UAV, plus background."""
+def _encounter(kind: str) -> ScenarioFamily:
+    """The family of one encounter of ``kind`` aimed at a random UAV, plus background."""
+    encounter = ENCOUNTERS[kind]
 
     def generate(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
         lay = random_layout(rng, config)
         obstacles = obstacle_slots(
             config,
-            lambda: aimed_obstacle(rng, config, lay, APPROACHES[kind]),
+            lambda: aimed_obstacle(rng, config, lay, encounter),
             lambda: _background(rng, config, lay),
         )
-        return assemble(name, config, lay, obstacles)
+        return assemble(kind, config, lay, obstacles)
 
-    return ScenarioFamily(
-        name=name,
-        summary=_SUMMARIES[kind],
-        parameters=_ENCOUNTER_PARAMETERS + _KIND_PARAMETERS[kind],
-        generate=generate,
-    )
-
-
-_ENCOUNTER_PARAMETERS = "Meets a random UAV's plan at 60-140 s; "
-_SUMMARIES = {
-    "crossing": "An obstacle crosses the formation's track from either side.",
-    "head_on": "An obstacle comes head-on.",
-    "overtaking": "A faster obstacle overtakes the formation from behind.",
-    "climbing": "An obstacle climbs or descends through the formation's altitude.",
-}
-_KIND_PARAMETERS = {
-    "crossing": "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
-    "head_on": "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
-    "overtaking": "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
-    "climbing": (
-        "speed 3-12 m/s, 45-135° off the track, climbing or descending at `vz_max` (slower "
-        "where it would start below ground + `airspace.obstacle_margin` or above the ceiling)."
-    ),
-}
+    return ScenarioFamily(kind, encounter.summary, encounter.parameters, generate)
 
 
 # ---- The paper's encounter (section 4; constants chosen here, the paper gives none) ---------
@@ -179,7 +185,7 @@ def _large_formation(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpe
     middle = int(np.argmin(np.linalg.norm(lay.slots, axis=1)))
     obstacles = obstacle_slots(
         config,
-        lambda: aimed_obstacle(rng, config, lay, APPROACHES["crossing"], who=middle),
+        lambda: aimed_obstacle(rng, config, lay, ENCOUNTERS["crossing"], who=middle),
         lambda: _background(rng, config, lay),
     )
     return assemble("large_formation", config, lay, obstacles)
@@ -216,8 +222,8 @@ register(
         mix=RANDOM_MIX,
     )
 )
-for _kind in APPROACHES:
-    register(_encounter(_kind, _kind))
+for _kind in ENCOUNTERS:
+    register(_encounter(_kind))
 register(
     ScenarioFamily(
         name="multi_obstacle",
