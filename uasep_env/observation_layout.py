@@ -1,9 +1,14 @@
 """The observation vector's layout: the feature table and :class:`ObservationLayout`.
 
-Every agent gets one flat ``float32`` vector; the layout is fixed by the config and
-described by :class:`ObservationLayout`, which also decodes a vector back into SI
-quantities. The reference APF controllers act on decoded observations, so they and
-learned policies see exactly the same information.
+Every agent gets one flat ``float32`` vector; the layout (which features of
+:data:`FEATURES`, in which order, their widths and offsets) is built per config by
+:meth:`ObservationLayout.from_config`, and the compiled assembly receives it as data
+(:attr:`ObservationLayout.columns`). :class:`ObservationLayout` also decodes a vector back
+into SI quantities and names its entries (checkpoints record the names). The reference APF
+controllers act on decoded observations, so they and learned policies see exactly the same
+information. Optional features (``Feature.default`` false) are added by naming them in
+``observation.optional_features``; there are none yet (``docs/extending.md`` shows how to
+add one).
 
 All vectors are expressed along the NED axes (x north, y east, z down), relative to the
 observing UAV. Positions are divided by ``observation.position_scale`` (m), velocities by
