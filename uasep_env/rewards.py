@@ -9,9 +9,9 @@ Term                       Value per agent (unweighted)
 =========================  ===========================================================
 ``separation_inner``       ``-max(0, 1 - d_uav / d_sep)^2``: closest UAV over the step
                            (``d_sep`` = ``uav.separation_distance``); 0 when separated
-``separation_obstacle``    ``-max(0, 1 - d_obs / d_obs_sep)^2``: closest obstacle centre
-                           over the step (``d_obs_sep`` = ``uav.obstacle_separation``)
-``separation_region``      ``-min(2, max(0, 1 - d_region / d_obs_sep))``: signed distance
+``separation_obstacle``    ``-max(0, 1 - d_obstacle / d_osep)^2``: closest obstacle
+                           centre over the step (``d_osep`` = ``uav.obstacle_separation``)
+``separation_region``      ``-min(2, max(0, 1 - d_region / d_osep))``: signed distance
                            to the nearest predicted reachable ellipsoid; grows as the UAV
                            moves towards and into the region
 ``deviation``              ``-d / (d + 20 m)``, ``d = |p - p_planned|``: in ``(-1, 0]``,
@@ -147,7 +147,9 @@ def team_mean(x: np.ndarray) -> np.ndarray:
 
 def collisions(world: World) -> np.ndarray:
     """``(E, N)`` whether each UAV collided during the last step (true state)."""
-    return _collided(world.min_uav_dist, world.min_obs_dist, world.config.uav.collision_distance)
+    return _collided(
+        world.min_uav_dist, world.min_obstacle_dist, world.config.uav.collision_distance
+    )
 
 
 def _collided(d_uav: np.ndarray, d_obstacle: np.ndarray, d_col: float) -> np.ndarray:
@@ -214,7 +216,7 @@ def _gather_inputs(world: World, region: np.ndarray | None = None) -> _Inputs:
         cmd=world.accel_cmd,
         prev_cmd=world.prev_accel_cmd,
         min_uav_dist=world.min_uav_dist,
-        min_obstacle_dist=world.min_obs_dist,
+        min_obstacle_dist=world.min_obstacle_dist,
         region=world.region_distances() if region is None else region,
     )
 

@@ -19,7 +19,7 @@ def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     n = x.uav_pos.shape[1]
     e = k // n
     i = k % n
-    max_acc, d_sep, d_ob_sep = c.max_accel, c.separation_distance, c.obstacle_separation
+    max_acc, d_sep, d_osep = c.max_accel, c.separation_distance, c.obstacle_separation
     d_col, dev_scale = c.collision_distance, c.deviation_scale
     region_cap, max_steps = c.region_cap, c.max_steps
     d_uav, d_obstacle = x.min_uav_dist[e, i], x.min_obstacle_dist[e, i]
@@ -28,9 +28,9 @@ def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
         d_region = min(d_region, x.region[e, i, j])
     t = max(0.0, 1.0 - d_uav / d_sep)
     terms[ix.separation_inner, e, i] = -(t * t)
-    t = max(0.0, 1.0 - d_obstacle / d_ob_sep)
+    t = max(0.0, 1.0 - d_obstacle / d_osep)
     terms[ix.separation_obstacle, e, i] = -(t * t)
-    terms[ix.separation_region, e, i] = -min(region_cap, max(0.0, 1.0 - d_region / d_ob_sep))
+    terms[ix.separation_region, e, i] = -min(region_cap, max(0.0, 1.0 - d_region / d_osep))
     dev = _norm3(
         x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0],
         x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
