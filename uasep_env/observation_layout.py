@@ -235,7 +235,7 @@ class ObservationLayout:
     @property
     def slices(self) -> dict[str, slice]:
         """The columns of each feature it has, by key (neighbour ones within one block)."""
-        return _slices(self.features)
+        return dict(_slices(self.features))  # a copy: the cached one is shared
 
     @property
     def columns(self) -> Columns:
