@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from uasep_env.atomic import atomic_write
+
 __all__ = ["OMIT", "PLAIN", "dumps", "to_plain", "write_json"]
 
 #: Field-metadata key: a function applied to the field's value before conversion.
@@ -83,7 +85,8 @@ def write_json(value: Any, path: str | Path) -> Path:
     """Write :func:`dumps` (indented, newline-terminated) to ``path``, creating its folders.
 
     A path ending in ``.gz`` is gzip-compressed with a zero time stamp, so the same value
-    gives the same bytes (per-episode results of large banks shrink about tenfold).
+    gives the same bytes (per-episode results of large banks shrink about tenfold). The file
+    is written atomically (:func:`uasep_env.atomic.atomic_write`).
 
     Args:
         value: Anything :func:`to_plain` takes.
@@ -93,11 +96,7 @@ def write_json(value: Any, path: str | Path) -> Path:
         The path written.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     data = (dumps(value, indent=2) + "\n").encode("utf-8")
     if path.suffix == ".gz":
-        with path.open("wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz:
-            gz.write(data)
-    else:
-        path.write_bytes(data)
-    return path
+        data = gzip.compress(data, mtime=0)
+    return atomic_write(path, data)
