@@ -17,6 +17,7 @@ import dataclasses
 import gzip
 import json
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ import numpy as np
 
 from uasep_env.atomic import atomic_write
 
-__all__ = ["OMIT", "PLAIN", "dumps", "to_plain", "write_json"]
+__all__ = ["OMIT", "PLAIN", "dumps", "json_depth", "to_plain", "write_json"]
 
 #: Field-metadata key: a function applied to the field's value before conversion.
 PLAIN = "uasep_plain"
@@ -100,3 +101,22 @@ def write_json(value: Any, path: str | Path) -> Path:
     if path.suffix == ".gz":
         data = gzip.compress(data, mtime=0)
     return atomic_write(path, data)
+
+
+def json_depth(text: str) -> int:
+    """Deepest ``[``/``{`` nesting of JSON text, found without parsing it (strings skipped).
+
+    Lets a reader refuse deeply nested input before :func:`json.loads` recurses into it.
+
+    Args:
+        text: JSON text (need not be valid).
+
+    Returns:
+        The largest number of open brackets at any point.
+    """
+    # The unrolled form keeps the regex engine from stacking one frame per character.
+    bare = re.sub(r'"[^"\\]*(?:\\.[^"\\]*)*"', '""', text)
+    codes = np.frombuffer(bare.encode("utf-8"), np.uint8)
+    opens = (codes == ord("[")) | (codes == ord("{"))
+    closes = (codes == ord("]")) | (codes == ord("}"))
+    return int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))

@@ -13,7 +13,6 @@ import io
 import itertools
 import json
 import math
-import re
 import struct
 import zipfile
 import zlib
@@ -24,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from uasep_env.jsonio import json_depth
 from uasep_env.policies.checkpoint import (
     ACTIVATIONS,
     ALGORITHMS,
@@ -138,16 +138,6 @@ def _read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo, limit: int) -> bytes
     return data
 
 
-def _json_depth(text: str) -> int:
-    """Deepest ``[``/``{`` nesting of JSON text (strings skipped), without parsing it."""
-    bare = re.sub(r'"(?:[^"\\]|\\.)*"', '""', text)
-    steps = np.frombuffer(bare.encode("utf-8"), np.uint8)
-    delta = np.isin(steps, (ord("["), ord("{"))).astype(np.int64) - np.isin(
-        steps, (ord("]"), ord("}"))
-    )
-    return int(np.cumsum(delta).max(initial=0))
-
-
 def _integer(p: Path, name: str, value: Any, low: int, high: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
         raise _fail(p, f"{name} must be an integer in [{low}, {high}], got {_short(value)}")
@@ -197,7 +187,7 @@ _FIELDS = {
 def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyCheckpoint, int]:
     """Parse and check the JSON description; returns it and its number of layers."""
     text = raw.decode("utf-8")
-    depth = _json_depth(text)
+    depth = json_depth(text)
     if depth > limits.json_depth:
         raise _fail(p, f"{META} nests {depth} levels deep, limit {limits.json_depth}")
     desc = json.loads(text)
