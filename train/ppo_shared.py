@@ -44,6 +44,8 @@ import collections
 import dataclasses
 import io
 import json
+import os
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -215,16 +217,19 @@ def save_checkpoint(
 ) -> None:
     """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
 
-    Each file is written atomically and ``state.json`` last: a folder without it is an
-    incomplete checkpoint (a kill while saving), which ``--resume`` names.
+    The folder is written under a temporary name and renamed into place when complete
+    (:func:`rundir.publish_dir`), so ``directory`` is either the old checkpoint or the new
+    one; ``state.json`` is written last (a folder without it is incomplete).
     """
     import torch
+    from rundir import publish_dir
 
     from uasep_env.atomic import atomic_write
     from uasep_env.jsonio import dumps
 
-    directory.mkdir(parents=True, exist_ok=True)
-    (directory / "state.json").unlink(missing_ok=True)  # incomplete until rewritten
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
     buf = io.BytesIO()
     torch.save(
         {
@@ -234,7 +239,7 @@ def save_checkpoint(
         },
         buf,
     )
-    atomic_write(directory / "state.pt", buf.getvalue())
+    atomic_write(tmp / "state.pt", buf.getvalue())
     o, r = venv.obs_rms, venv.ret_rms
     buf = io.BytesIO()
     np.savez(
@@ -242,11 +247,11 @@ def save_checkpoint(
         obs_mean=o.mean, obs_var=o.var, obs_count=o.count,
         ret_mean=r.mean, ret_var=r.var, ret_count=r.count,
     )  # fmt: skip
-    atomic_write(directory / "normalization.npz", buf.getvalue())
-    export_policy(model, venv, config, args, directory / "policy.zip", info)
-    atomic_write(
-        directory / "state.json", dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
-    )
+    atomic_write(tmp / "normalization.npz", buf.getvalue())
+    export_policy(model, venv, config, args, tmp / "policy.zip", info)
+    state = dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+    atomic_write(tmp / "state.json", state)
+    publish_dir(tmp, directory)
 
 
 def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
@@ -355,7 +360,8 @@ def make_callback(
                     self.episodes += 1
             if self.bar is not None:
                 self.bar.update(self.num_timesteps - self.bar.n)
-            if self.num_timesteps >= self.next_ckpt:
+            # The last one is saved at the end (after the final update), not twice.
+            if self.next_ckpt <= self.num_timesteps < total:
                 self.checkpoint()
                 self.next_ckpt += args.checkpoint_every
             return self.wall() < args.max_minutes * 60.0
@@ -424,16 +430,19 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
         rewind(out, CSV_FIELDS, model.num_timesteps)
         print(f"resumed from {resume} at {model.num_timesteps:,} agent-steps")
     remaining = max(0, args.total_timesteps - model.num_timesteps)
-    callback = make_callback(
-        args, config, venv, float(resumed.get("wall_s", 0.0)), args.total_timesteps, resumed
-    )
-    model.learn(
-        total_timesteps=remaining,
-        callback=callback,
-        reset_num_timesteps=resume is None,
-        tb_log_name=args.action_mode,
-    )
-    info = callback.info()
+    if remaining or resume is None:
+        callback = make_callback(
+            args, config, venv, float(resumed.get("wall_s", 0.0)), args.total_timesteps, resumed
+        )
+        model.learn(
+            total_timesteps=remaining,
+            callback=callback,
+            reset_num_timesteps=resume is None,
+            tb_log_name=args.action_mode,
+        )
+        info = callback.info()
+    else:  # resumed at the end: only the final outputs are (re)written
+        info = {k: v for k, v in resumed.items() if k not in ("window", "args")}
     policy_path = export_policy(model, venv, config, args, out / "policy.zip", info)
     plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS, f"PPO ({args.action_mode})")
 

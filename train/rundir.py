@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write
+from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write, fsync_dir
 
 #: What a run writes in its folder (``--overwrite`` deletes these, and only these).
 RUN_FILES = ("progress.csv", "curves.png", "policy.zip", "validation.json")
@@ -115,8 +115,10 @@ def rewind(out: Path, fields: tuple[str, ...], agent_steps: int) -> None:
     moment when a kill would leave it truncated), and checkpoints saved after it are deleted
     (they belong to the abandoned continuation).
     """
-    for tmp in out.rglob(".*.tmp*"):  # a killed process's unfinished atomic writes
-        if tmp.is_file() or tmp.is_symlink():
+    for tmp in [*out.glob(".*.tmp*"), *out.glob("checkpoints/.*")]:  # a killed process's
+        if tmp.is_dir() and not tmp.is_symlink():  # unfinished writes
+            shutil.rmtree(tmp)
+        else:
             tmp.unlink()
     progress = out / "progress.csv"
     if progress.exists():
@@ -129,6 +131,24 @@ def rewind(out: Path, fields: tuple[str, ...], agent_steps: int) -> None:
     resumed = out / "checkpoints" / f"step_{agent_steps}"
     if resumed.is_dir():
         atomic_symlink(resumed.name, out / "checkpoints" / "latest")
+
+
+def publish_dir(tmp: Path, final: Path) -> None:
+    """Move the complete folder ``tmp`` to ``final`` (replacing an older one of that name).
+
+    A new name is one atomic rename. Replacing takes two (the old folder aside, the new one
+    in): a kill between them leaves no ``final``, which ``--resume`` reports as missing
+    (never a mix of old and new files).
+    """
+    fsync_dir(tmp)
+    if final.exists():
+        old = final.with_name(f".{final.name}.old-{os.getpid()}")
+        os.rename(final, old)
+        os.rename(tmp, final)
+        shutil.rmtree(old)
+    else:
+        os.rename(tmp, final)
+    fsync_dir(final.parent)
 
 
 class ProgressLog:
