@@ -221,15 +221,27 @@ def save_checkpoint(
     (:func:`rundir.publish_dir`), so ``directory`` is either the old checkpoint or the new
     one; ``state.json`` is written last (a folder without it is incomplete).
     """
-    import torch
     from rundir import publish_dir
-
-    from uasep_env.atomic import atomic_write
-    from uasep_env.jsonio import dumps
 
     directory.parent.mkdir(parents=True, exist_ok=True)
     tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        _write_checkpoint(model, venv, config, args, tmp, info)
+        publish_dir(tmp, directory)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)  # the previous checkpoint stays as it was
+        raise
+
+
+def _write_checkpoint(
+    model: Any, venv: Any, config: Any, args: Args, tmp: Path, info: dict
+) -> None:
+    import torch
+
+    from uasep_env.atomic import atomic_write
+    from uasep_env.jsonio import dumps
+
     buf = io.BytesIO()
     torch.save(
         {
@@ -251,7 +263,6 @@ def save_checkpoint(
     export_policy(model, venv, config, args, tmp / "policy.zip", info)
     state = dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
     atomic_write(tmp / "state.json", state)
-    publish_dir(tmp, directory)
 
 
 def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
