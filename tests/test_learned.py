@@ -264,7 +264,7 @@ def test_base_gains_only_for_a_residual_policy_flying_its_own_base():
     from uasep_env.policies import APFGains
 
     cfg = make_config(scenario="random")
-    wide = APFGains().scaled(("obs_safe_min",), 2.0)
+    wide = APFGains().scaled(("obstacle_safe_min",), 2.0)
     residual = load_policy(CHECKPOINTS / "ppo_residual_apf.zip", cfg, base_gains=wide)
     assert residual._residual.apf.gains == wide
     with pytest.raises(ValueError, match=r"base_gains=APFGains\(.*a direct policy in a direct"):
