@@ -134,7 +134,7 @@ def test_same_seed_same_episode_in_the_pettingzoo_and_vector_views():
         w1.step(np.zeros((2, 3, 3)))
         w2.step(np.zeros((1, 3, 3)))
     np.testing.assert_array_equal(w1.obstacles.pos[1], w2.obstacles.pos[0])
-    np.testing.assert_array_equal(w1.obs_est_pos[1], w2.obs_est_pos[0])
+    np.testing.assert_array_equal(w1.obstacle_est_pos[1], w2.obstacle_est_pos[0])
     assert not np.array_equal(_run(pz, 6)[5]["uav_0"], _run(pz, 5)[5]["uav_0"])
 
 
@@ -157,7 +157,7 @@ def test_per_env_reset_by_mask_and_frozen_envs():
         fresh.step(np.zeros((1, 3, 3)))
     np.testing.assert_array_equal(w.obstacles.pos[[0, 2]], ref.obstacles.pos[[0, 2]])
     np.testing.assert_array_equal(w.obstacles.pos[1], fresh.obstacles.pos[0])
-    np.testing.assert_array_equal(w.obs_est_vel[1], fresh.obs_est_vel[0])
+    np.testing.assert_array_equal(w.obstacle_est_vel[1], fresh.obstacle_est_vel[0])
     # A frozen environment (inactive) keeps its replayed obstacle where it was.
     before = w.obstacles.pos.copy()
     w.step(zeros, active=np.array([True, False, True]))
