@@ -174,14 +174,16 @@ def test_replayed_tracks_stay_in_the_sky():
         for seed in range(20):
             alt = -_spec(seed, cfg).obstacle_track[..., 2]
             assert alt.min() >= floor and alt.max() <= cfg.airspace.ceiling_altitude
-    # Flown past its last sample (a world stepped beyond the episode): never below ground.
-    cfg = _cfg(episode_duration=2.0)
+    # Past the recorded 200 s (a longer episode): level flight at the last horizontal velocity.
+    cfg = _cfg(episode_duration=210.0)
     w = World(cfg, n_envs=1)
     w.reset(seed=3)
-    w.replay.vel[..., 2] = 50.0  # straight down at 50 m/s once the track has run out
-    for _ in range(200):
+    last = _spec(3, cfg).obstacle_track[0, -1]
+    for _ in range(cfg.max_steps):
         w.step(np.zeros((1, 3, 3)))
-    assert -w.obstacles.pos[0, 0, 2] >= cfg.airspace.ground_altitude
+    v = w.replay.vel[0, 0, -1]
+    np.testing.assert_allclose(w.obstacles.pos[0, 0], last + np.array([v[0], v[1], 0.0]) * 10)
+    assert w.obstacle_velocities()[0, 0, 2] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_training_draws_only_training_flights_and_the_splits_never_meet():

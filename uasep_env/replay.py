@@ -2,20 +2,23 @@
 
 A replayed obstacle flies a recorded track (:mod:`uasep_env.real_traffic`) that its scenario
 (``real_traffic``, :mod:`uasep_env.scenarios.real_traffic`) has resampled at the physics
-step ``dt`` and placed: ``(K, 3)`` positions, one per physics step from the reset, ``K`` =
-the episode's physics steps + 1. :class:`ReplayTracks` holds them for the batch,
-``(E, M, K, 3)``. After the Dubins step (:meth:`ReplayTracks.step`, called from
-:meth:`uasep_env.world.World.step`) it writes each replayed obstacle's state into the
-world's :class:`~uasep_env.obstacles.ObstacleState`: the position from the track, and
-heading, airspeed and climb rate such that :func:`~uasep_env.obstacles.obstacle_velocity`
-gives the track's velocity (central differences of the positions; one-sided at the ends).
-Everything downstream (sensing, the Kalman filter, the reachable-set prediction, the observations)
-reads that state as it reads a Dubins obstacle's.
+step ``dt`` and placed: ``(K, 3)`` positions, one per physics step from the reset (``K``:
+the episode's physics steps + 1, at most the 200 s timeline's). :class:`ReplayTracks` holds
+them for the batch, ``(E, M, K, 3)``. After the Dubins step (:meth:`ReplayTracks.step`,
+called from :meth:`uasep_env.world.World.step`) it writes each replayed obstacle's state
+into the world's :class:`~uasep_env.obstacles.ObstacleState`: the position from the track,
+and heading, airspeed and climb rate such that
+:func:`~uasep_env.obstacles.obstacle_velocity` gives the track's velocity (central
+differences of the positions; one-sided at the ends). Everything downstream (sensing, the
+Kalman filter, the reachable-set prediction, the observations) reads that state as it reads
+a Dubins obstacle's.
 
-Past the last sample (an episode run beyond its length) the obstacle flies on at its last
-velocity, never below the ground. The Dubins step still runs for the replayed slots (its
-uniforms are drawn either way, so the noise streams keep their layout); its result is
-overwritten. No randomness here: the scenario drew everything at reset.
+Past the last sample (an episode longer than the 200 s its scenario draws, or a world
+stepped beyond its episode) the obstacle flies on level at its last horizontal velocity: it
+stays at the altitude of its last sample, inside the airspace its scenario placed it in.
+The Dubins step still runs for the replayed slots (its uniforms are drawn either way, so the
+noise streams keep their layout); its result is overwritten. No randomness here: the
+scenario drew everything at reset.
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ class ReplayTracks:
     Args:
         n_envs: ``E``.
         n_obstacles: ``M``.
-        n_samples: ``K``: samples per track (the episode's physics steps + 1).
+        n_samples: ``K``: samples per track (one per physics step from the reset).
         dt: Physics step (s).
 
     Attributes:
@@ -112,14 +115,14 @@ class ReplayTracks:
             return
         last = self.n_samples - 1
         k = np.minimum(step, last)
-        beyond = ((step - k) * self.dt)[:, None, None]  # flown on at the last velocity
+        beyond = ((step - k) * self.dt)[:, None, None]
         envs = np.arange(self.pos.shape[0])[rows][:, None]
         slots = np.arange(self.pos.shape[1])[None, :]
         pos = self.pos[envs, slots, k[:, None]]
         vel = self.vel[envs, slots, k[:, None]]
-        if (beyond > 0).any():
+        if (beyond > 0).any():  # past the record: level, at the last horizontal velocity
+            vel = np.where(beyond > 0, vel * [1.0, 1.0, 0.0], vel)
             pos = pos + vel * beyond
-            np.minimum(pos[..., 2], -obs.ground[rows], out=pos[..., 2])
         # Heading, airspeed and climb such that obstacle_velocity() is the track's velocity.
         air = vel - obs.wind[rows][:, None, :]
         on3 = on[..., None]

@@ -46,7 +46,7 @@ from uasep_env.noise import NoiseStreams
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.replay import ReplayTracks
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, place_obstacles, sample_scenario
-from uasep_env.scenarios.real_traffic import check_replay_tracks
+from uasep_env.scenarios.real_traffic import check_replay_tracks, replay_samples
 
 __all__ = ["World"]
 
@@ -130,7 +130,7 @@ class World(RenamedAttributes):
         self.replay: ReplayTracks | None = None
         if cfg.obstacle.model == "replay":
             check_replay_tracks(cfg)  # enough distinct tracks: say so now, not at reset
-            self.replay = ReplayTracks(e, m, cfg.max_steps * cfg.decision_interval + 1, cfg.dt)
+            self.replay = ReplayTracks(e, m, replay_samples(cfg), cfg.dt)
         self.obstacle_est_pos = np.zeros((e, m, 3))
         self.obstacle_est_vel = np.zeros((e, m, 3))
         self.pred_offset = np.zeros((e, m))

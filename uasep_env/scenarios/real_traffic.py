@@ -58,6 +58,7 @@ __all__ = [
     "ReplaySpec",
     "check_replay_tracks",
     "generate",
+    "replay_samples",
     "usable_tracks",
 ]
 
@@ -89,7 +90,8 @@ class ReplaySpec(ScenarioSpec):
 
     Attributes:
         obstacle_track: ``(M, K, 3)`` each obstacle's position at every physics step from
-            the reset (m, NED); ``K`` = the episode's physics steps + 1.
+            the reset (m, NED); ``K`` = the episode's physics steps + 1, at most the 200 s
+            timeline's (:func:`replay_samples`).
         obstacle_replay: ``(M,)`` which slots replay their track (all).
         obstacle_track_index: ``(M,)`` the tracks' indices in the dataset.
         obstacle_track_start: ``(M,)`` time into each track at the reset (s).
@@ -120,11 +122,17 @@ def _dataset():  # noqa: ANN202 -- the dataset, loaded on first use (cached by t
 def _durations(config: EnvConfig) -> tuple[int, float]:
     """``K`` (samples of the episode's track) and the length of the stretch drawn (s).
 
-    The stretch covers the timeline in shorter episodes (their encounters are the start of
-    the same encounter, as in the synthetic families).
+    The stretch is the 200 s timeline, whatever the episode's length: a shorter episode is
+    the start of the same encounter (as in the synthetic families), and in a longer one the
+    obstacle flies on level at its last horizontal velocity (:mod:`uasep_env.replay`).
     """
-    k = config.max_steps * config.decision_interval + 1
-    return k, max(k - 1, round(TIMELINE_S / config.dt)) * config.dt
+    n = round(TIMELINE_S / config.dt)
+    return min(config.max_steps * config.decision_interval, n) + 1, n * config.dt
+
+
+def replay_samples(config: EnvConfig) -> int:
+    """Samples of each replayed track: one per physics step, up to the 200 s timeline."""
+    return _durations(config)[0]
 
 
 @lru_cache(maxsize=32)
@@ -227,7 +235,7 @@ def _replayed(
             f"({ceiling:g} m) (obstacle.replay_speed_scale={ob.replay_speed_scale:g})"
         )
     vel = (pos[1] - pos[0]) / dt
-    air = np.linalg.norm(np.diff(pos[:k_ep, :2], axis=0), axis=-1) / dt
+    air = np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=-1) / dt  # the whole stretch
     start = ObstacleStart(
         pos=pos[0],
         heading=math.atan2(vel[1], vel[0]),
