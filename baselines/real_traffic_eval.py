@@ -21,15 +21,14 @@ unpickling) play the same encounters twice:
 Same metrics and intervals as ``learned_vs_apf.py`` (means with 95 % Student-t intervals,
 rates with 95 % Wilson intervals). Writes ``baselines/results/real_traffic_eval.md`` (the
 tables; the README shows the first) and ``real_traffic_eval.json.gz`` (every metric of every
-episode), and prints the tables.
+real-traffic episode; the synthetic bank's aggregates, its episodes being those of
+``learned_vs_apf.json.gz``), and prints the tables.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env import make_config, real_traffic
+from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.metrics.statistics import wilson_interval
 from uasep_env.scenarios import HELD_OUT_SEEDS, REAL_TRAFFIC_TEST_SEEDS, sample_scenario
@@ -127,12 +127,16 @@ def bank_table(classes: dict[int, tuple[str, str, float]]) -> str:
     return render_table(headers, body, markdown=True)
 
 
-def _write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)  # atomic: a reader never sees half a file
+def synthetic_aggregates(result: EvaluationResult) -> dict[str, Any]:
+    """The synthetic bank's seeds and aggregates only.
+
+    Its per-episode records are ``learned_vs_apf.json.gz``'s (the same seeds and controllers).
+    """
+    return {
+        "seeds": list(result.seeds),
+        "episodes": "baselines/results/learned_vs_apf.json.gz",
+        "aggregate": {label: res.aggregate for label, res in result.results.items()},
+    }
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -210,11 +214,11 @@ def main(argv: list[str] | None = None) -> str:
     )
     text = "\n\n".join(sections) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
-    _write_text(args.out / "real_traffic_eval.md", text)
+    atomic_write(args.out / "real_traffic_eval.md", text.encode("utf-8"))
     results = {
         "real_traffic": real,
         **({"real_traffic_slow": slow} if slow else {}),
-        **({"random": synthetic} if synthetic else {}),
+        **({"random": synthetic_aggregates(synthetic)} if synthetic else {}),
     }
     write_json(
         {"meta": {"run_time_s": t_all, "real_traffic_s": t_real, "bank": REAL_TRAFFIC_BANK},
