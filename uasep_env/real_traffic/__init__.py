@@ -221,31 +221,13 @@ class RealTrafficDataset:
         for name, val in (("duration", duration), ("dt", dt), ("max_gap", max_gap)):
             if not np.isfinite(val) or val <= 0:
                 raise ValueError(f"{name} must be positive and finite, got {val!r}")
-        chosen = self.select(split, aircraft_class)
-        # Stretches without a gap over max_gap: (track, first time, last possible start).
-        spans = []
-        for tr in chosen:
-            cuts = np.flatnonzero(np.diff(tr.times) > max_gap)
-            lo = np.concatenate([[0], cuts + 1])
-            hi = np.concatenate([cuts, [len(tr.times) - 1]])
-            for a, b in zip(lo, hi, strict=True):
-                if tr.times[b] - tr.times[a] >= duration:
-                    spans.append((tr.index, tr.times[a], tr.times[b] - duration))
-        if not spans:
-            raise ValueError(
-                f"no {split or 'any'}-split {aircraft_class or 'any-class'} track has "
-                f"{duration} s without a gap over {max_gap} s"
-            )
-        idx = np.array([s[0] for s in spans])
-        first = np.array([s[1] for s in spans])
-        room = np.array([s[2] for s in spans]) - first
-        cum = np.cumsum(room)
+        idx, first, room, cum = self._spans(split, aircraft_class, duration, max_gap)
         if cum[-1] > 0:
             u = rng.random(n) * cum[-1]
-            which = np.minimum(np.searchsorted(cum, u, side="right"), len(spans) - 1)
+            which = np.minimum(np.searchsorted(cum, u, side="right"), len(idx) - 1)
             start = first[which] + np.clip(u - (cum[which] - room[which]), 0.0, room[which])
         else:  # every stretch is exactly `duration` long: pick one uniformly
-            which = np.minimum((rng.random(n) * len(spans)).astype(int), len(spans) - 1)
+            which = np.minimum((rng.random(n) * len(idx)).astype(int), len(idx) - 1)
             start = first[which]
         k = int(np.floor(duration / dt + 1e-9)) + 1
         steps = dt * np.arange(k)
@@ -258,6 +240,36 @@ class RealTrafficDataset:
                 pos[i, :, ax] = np.interp(times, tr.times, tr.positions[:, ax])
                 vel[i, :, ax] = np.interp(times, tr.times, tr.velocities[:, ax])
         return Segments(track=idx[which], start=start, positions=pos, velocities=vel)
+
+    def _spans(
+        self, split: str | None, aircraft_class: str | None, duration: float, max_gap: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Stretches without a gap over ``max_gap``: track, first time, room, cumulative room.
+
+        Computed once per arguments (a replayed scenario draws many segments; the dataset is
+        immutable).
+        """
+        key = (split, aircraft_class, duration, max_gap)
+        cache = self.__dict__.setdefault("_span_cache", {})
+        if key not in cache:
+            spans = []
+            for tr in self.select(split, aircraft_class):
+                cuts = np.flatnonzero(np.diff(tr.times) > max_gap)
+                lo = np.concatenate([[0], cuts + 1])
+                hi = np.concatenate([cuts, [len(tr.times) - 1]])
+                for a, b in zip(lo, hi, strict=True):
+                    if tr.times[b] - tr.times[a] >= duration:
+                        spans.append((tr.index, tr.times[a], tr.times[b] - duration))
+            if not spans:
+                raise ValueError(
+                    f"no {split or 'any'}-split {aircraft_class or 'any-class'} track has "
+                    f"{duration} s without a gap over {max_gap} s"
+                )
+            idx = np.array([s[0] for s in spans])
+            first = np.array([s[1] for s in spans])
+            room = np.array([s[2] for s in spans]) - first
+            cache[key] = (idx, first, room, np.cumsum(room))
+        return cache[key]
 
 
 @lru_cache(maxsize=4)
