@@ -21,6 +21,7 @@ from uasep_env.envs.core import (
     prepare_actions,
 )
 from uasep_env.observation import state_dim
+from uasep_env.viz.requirements import available_render_modes
 
 __all__ = ["UAVSeparationParallelEnv", "env", "parallel_env"]
 
@@ -91,7 +92,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
 
     metadata = {  # noqa: RUF012 - PettingZoo reads it as a class attribute
         "name": "uasep_formation_v1",
-        "render_modes": ["human", "rgb_array"],
+        "render_modes": available_render_modes(("human", "rgb_array")),  # none without viz
         "is_parallelizable": True,
         "render_fps": 10,
     }
