@@ -21,7 +21,11 @@ from uasep_env.config.checks import check_positive_int, check_seed
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS, team_mean
-from uasep_env.viz.requirements import available_render_modes, require_matplotlib
+from uasep_env.viz.requirements import (
+    available_render_modes,
+    checked_render_mode,
+    require_matplotlib,
+)
 
 __all__ = ["FormationVectorEnv"]
 
@@ -110,7 +114,7 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
             "render_fps": 10,
             "autoreset_mode": self.autoreset_mode,
         }
-        self.render_mode = self.config.render_mode
+        self.render_mode = checked_render_mode(self.config.render_mode)
         self.num_envs = int(num_envs)
         self.core = EnvCore(self.config, n_envs=self.num_envs)
         n, d = self.config.n_uavs, self.core.obs_dim

@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CHECKPOINT_FORMAT",
+    "SB3_ALGORITHMS",
     "CheckpointError",
     "LearnedPolicy",
     "PolicyCheckpoint",
@@ -56,7 +57,9 @@ _ACTIVATIONS = {
     "tanh": np.tanh,
     "relu": lambda x: np.maximum(x, 0.0),
 }
-_ALGORITHMS = ("PPO", "SAC", "TD3", "A2C", "DDPG")
+#: The stable-baselines3 algorithms :func:`load_sb3_policy` loads (``uasep-eval --algorithm``).
+SB3_ALGORITHMS = ("PPO", "SAC", "TD3", "A2C", "DDPG")
+_ALGORITHMS = SB3_ALGORITHMS
 
 
 class CheckpointError(ValueError):
@@ -337,7 +340,8 @@ def load_policy(
     """Load a policy checkpoint (read once per process while the file is unchanged).
 
     Args:
-        path: The checkpoint (``.zip``).
+        path: The checkpoint (``.zip``), or the name of a shipped policy (``"ppo_shared"``,
+            :func:`~uasep_env.policies.shipped.shipped_policies`) when no such file exists.
         config: The environment config it will act in (default: its own, ``direct`` mode).
         name: Label in reports (default: the file's stem).
         base_gains: The gains of the APF a residual policy corrects (see
@@ -352,8 +356,12 @@ def load_policy(
             ``config`` (the mismatch is named).
     """
     p = Path(path)
+    if not p.exists() and isinstance(path, str):
+        from uasep_env.policies.shipped import shipped_policy_path
+
+        p = shipped_policy_path(path) or p
     if not p.is_file():
-        raise FileNotFoundError(f"no policy checkpoint at {p}")
+        raise FileNotFoundError(f"no policy checkpoint at {p} (and no shipped policy {path!r})")
     st = p.stat()
     meta, weights, mean, var = _cached_read(str(p.resolve()), st.st_mtime_ns, st.st_size)
     return LearnedPolicy(
@@ -452,4 +460,7 @@ def _load_sb3(path: str, mtime_ns: int, algorithm: str) -> Any:
     try:
         return getattr(sb3, algorithm).load(path, device="cpu")
     except Exception as err:  # SB3 raises many types for a bad file
-        raise CheckpointError(f"could not load {path} as {algorithm}: {err}") from err
+        raise CheckpointError(
+            f"could not load {path} as {algorithm} (saved by another algorithm? choose it with "
+            f"algorithm= / uasep-eval --algorithm, one of {SB3_ALGORITHMS}): {err}"
+        ) from err
