@@ -297,10 +297,10 @@ def test_sb3_sac_on_the_shared_adapter():
 
     venv = UAVSharedVecEnv(n_envs=2, seed=0, **SHORT)  # 6 UAVs, one shared SAC policy
     model = sb3.SAC(
-        "MlpPolicy", venv, learning_starts=60, batch_size=64, buffer_size=2000, seed=0, device="cpu"
+        "MlpPolicy", venv, learning_starts=30, batch_size=32, buffer_size=1000, seed=0, device="cpu"
     )
-    model.learn(total_timesteps=600)  # 100 steps of 6 UAVs: crosses episode ends
-    assert model.num_timesteps >= 600 and model.replay_buffer.size() > 0
+    model.learn(total_timesteps=330)  # 55 steps of 6 UAVs: crosses the episode end (50)
+    assert model.num_timesteps >= 330 and model.replay_buffer.size() > 0
     mean, _ = evaluate_policy(model, venv, n_eval_episodes=6)
     assert np.isfinite(mean)
 
