@@ -50,13 +50,14 @@ test: lint
 # Every CI job, in order (.ci/run).
 ci: test test-floors test-package
 
-# The floors, exactly, and the package resolved against them (pip fails if a declared range
-# excludes a floor); the tests run on this checkout. No numba: its kernels hide numpy paths.
+# The floors, exactly, and the package's requirements resolved against them (pip fails if a
+# declared range excludes a floor; --dry-run: no build/ left in the tree); the tests run on
+# this checkout. No numba (its kernels hide the numpy paths), no matplotlib, no torch.
 $(FLOORS_VENV)/.floors: .ci/floors.txt pyproject.toml
 	rm -rf $(FLOORS_VENV)
 	$(PYTHON) -m venv $(FLOORS_VENV)
 	$(FLOORS_VENV)/bin/python -m pip install --quiet -r .ci/floors.txt "pytest>=8"
-	$(FLOORS_VENV)/bin/python -m pip install --quiet -c .ci/floors.txt .
+	$(FLOORS_VENV)/bin/python -m pip install --quiet --dry-run -c .ci/floors.txt .
 	touch $@
 
 FLOORS_TESTS := tests/test_envs.py tests/test_vector.py tests/test_conventions.py \
@@ -80,10 +81,10 @@ test-package: $(VENV)/.all
 		--config episode_duration=20 --json run.json
 	cd $(PKG_DIR) && ! venv/bin/python -c "import matplotlib" 2>/dev/null
 	cd $(PKG_DIR) && mkdir sdist && tar xzf dist/*.tar.gz -C sdist --strip-components 1
-	cd $(PKG_DIR)/sdist && $(CURDIR)/$(BIN)/python -m pytest -q -p no:cacheprovider \
+	cd $(PKG_DIR)/sdist && $(abspath $(BIN))/python -m pytest -q -p no:cacheprovider \
 		--collect-only tests > collect.log || (tail -30 collect.log && false)
-	cd $(PKG_DIR)/sdist && $(CURDIR)/$(BIN)/python -m pytest -q -p no:cacheprovider \
-		tests/test_packaging.py -k "shipped or metadata or links or floors"
+	cd $(PKG_DIR)/sdist && UASEP_NUMBA=0 $(abspath $(BIN))/python -m pytest -q \
+		-p no:cacheprovider tests/test_packaging.py -k "shipped or metadata or links or floors"
 
 bench: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[bench]"
