@@ -201,7 +201,8 @@ def evaluate(
 
     Args:
         policies: A policy name (``"apf"``, ``"motion-state-apf"``, ``"traditional-apf"``,
-            ``"zero"``, ``"random"``) or the path of a saved SB3 model, a sequence of those,
+            ``"zero"``, ``"random"``, or a shipped policy such as ``"ppo_shared"``) or the
+            path of a checkpoint or saved SB3 model, a sequence of those,
             or a mapping ``label -> name / path / Policy object``. Names are rebuilt fresh for
             every chunk (reproducible for any ``workers``); a policy object is reused as is
             (with ``workers > 1`` it is pickled to the workers).
