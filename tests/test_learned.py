@@ -94,8 +94,9 @@ def test_residual_checkpoint_in_a_direct_env_equals_the_residual_env(tmp_path):
 @pytest.mark.parametrize(
     ("env", "message"),
     [
-        ({"n_uavs": 4}, "n_uavs: trained with 3, this env has 4"),
-        ({"n_obstacles": 2}, "observation width: the network reads"),
+        ({"n_uavs": 4}, r"k_uavs: the network reads the 2 nearest UAVs, this env gives 3 "
+         r"\(set observation.k_uavs=2"),
+        ({"n_obstacles": 2}, "k_obstacles: the network reads the 1 nearest obstacles"),
         ({"action": {"mode": "residual_apf"}}, "action.mode: trained with 'direct'"),
     ],
 )
@@ -167,13 +168,16 @@ def test_tampered_checkpoints_are_rejected(tmp_path):
 
     with pytest.raises(CheckpointError, match="unknown checkpoint format"):
         load_policy(write("a.zip", {**desc, "format": "other/9"}, raw))
-    with pytest.raises(CheckpointError, match="layer 0 has shapes"):
+    with pytest.raises(CheckpointError, match="layout is 58 wide, obs_dim says 59"):
         load_policy(write("b.zip", {**desc, "obs_dim": desc["obs_dim"] + 1}, raw))
+    with pytest.raises(CheckpointError, match=r"layer0.weight.npy: shape \(16, 58\), expected"):
+        v1 = {k: v for k, v in desc.items() if k != "layout"}
+        load_policy(write("b1.zip", {**v1, "format": "uasep-policy/1", "obs_dim": 59}, raw))
     with pytest.raises(CheckpointError, match="invalid checkpoint description"):
         load_policy(write("c.zip", {**desc, "config": {"n_uavs": 99}}, raw))
     buf = io.BytesIO()
     np.savez(buf, obj=np.array([{"a": 1}], dtype=object))
-    with pytest.raises(CheckpointError, match=r"unreadable weights|missing weights"):
+    with pytest.raises(CheckpointError, match=r"unexpected member\(s\) 'obj.npy'"):
         load_policy(write("d.zip", desc, buf.getvalue()))
 
 
@@ -260,7 +264,7 @@ def test_base_gains_only_for_a_residual_policy_flying_its_own_base():
     from uasep_env.policies import APFGains
 
     cfg = make_config(scenario="random")
-    wide = APFGains().scaled(("obs_safe_min",), 2.0)
+    wide = APFGains().scaled(("obstacle_safe_min",), 2.0)
     residual = load_policy(CHECKPOINTS / "ppo_residual_apf.zip", cfg, base_gains=wide)
     assert residual._residual.apf.gains == wide
     with pytest.raises(ValueError, match=r"base_gains=APFGains\(.*a direct policy in a direct"):
@@ -271,3 +275,25 @@ def test_base_gains_only_for_a_residual_policy_flying_its_own_base():
             cfg.replace(action={"mode": "residual_apf"}),
             base_gains=wide,
         )
+
+
+def test_uasep_eval_loads_an_sb3_sac_model_with_algorithm(tmp_path, capsys):
+    """Issue 23 item 6: --allow-pickle loaded every SB3 file as PPO; --algorithm picks it."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+
+    venv = UAVSharedVecEnv(n_envs=1, seed=0, episode_duration=4.0)
+    model = sb3.SAC(
+        "MlpPolicy", venv, learning_starts=8, batch_size=8, buffer_size=64, seed=0, device="cpu"
+    )
+    model.learn(total_timesteps=16)
+    path = tmp_path / "sac.zip"
+    model.save(path)
+    args = ["--policy", str(path), "--allow-pickle", "--config", "episode_duration=4", "--quiet"]
+    assert eval_main(args) == 2  # loaded as PPO: refused, with the way out named
+    assert "--algorithm" in capsys.readouterr().err
+    out = tmp_path / "r.json"
+    assert eval_main([*args, "--algorithm", "SAC", "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["policies"] == ["sac"]  # labelled by the file stem
+    assert eval_main([*args, "--algorithm", "SACC"]) == 2
+    assert "--algorithm" in capsys.readouterr().err

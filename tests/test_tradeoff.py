@@ -48,8 +48,8 @@ def test_margin_scale_one_is_the_default_gains():
 
     assert tradeoff._scaled(tradeoff.APF.margin_gains, 1.0) == APFGains()
     scaled = tradeoff._scaled(tradeoff.APF.margin_gains, 2.0)
-    assert scaled.obs_safe_min == 2 * APFGains().obs_safe_min
-    assert scaled.k_obs == APFGains().k_obs
+    assert scaled.obstacle_safe_min == 2 * APFGains().obstacle_safe_min
+    assert scaled.k_obstacle == APFGains().k_obstacle
     for m in tradeoff.METHODS:
         assert len(m.values) >= 8, m.name
 
@@ -114,4 +114,3 @@ def test_each_controllers_default_is_the_knee_of_its_shipped_front():
             assert dist.get(m.default, 0.0) >= 0.98 * max(dist.values()), (m.name, dist)
             controller = m.policy(cfg, m.default)
             assert controller.gains == type(controller)(cfg).gains, m.name
-

@@ -29,6 +29,7 @@ import re
 import sys
 from pathlib import Path
 
+from uasep_env.atomic import atomic_write
 from uasep_env.registration import ENV_VERSION
 from uasep_env.scenarios import FAMILIES
 from uasep_env.tables import render_table
@@ -151,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         return 0
     if new != old:
-        README.write_text(new)
+        atomic_write(README, new)
         print(f"rewrote the result tables of {README}")
     return 0
 

@@ -15,18 +15,24 @@ from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.report import format_summary
 from uasep_env.evaluation.runner import DEFAULT_HOLD_TIME_S, evaluate
-from uasep_env.policies import POLICIES, check_policy_name, make_policy
+from uasep_env.policies import POLICIES, check_policy_name, make_policy, shipped_policies
+from uasep_env.policies.checkpoint import ALGORITHMS as SB3_ALGORITHMS
 from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
 from uasep_env.scenarios import scenario_names
+from uasep_env.viz.requirements import VIZ_HINT, matplotlib_available
 
 __all__ = ["build_parser", "main"]
 
 
 def _split_policy_args(values: Iterable[str]) -> list[str]:
-    """Split repeatable, comma-separated ``--policy`` values; keep order, drop duplicates."""
+    """Split repeatable, comma-separated ``--policy`` values; keep order, drop duplicates.
+
+    A value that is the path of an existing file is taken whole, commas and all.
+    """
     names: list[str] = []
     for value in values:
-        for part in value.split(","):
+        whole = value.strip()
+        for part in [whole] if whole and Path(whole).is_file() else value.split(","):
             part = part.strip()
             if part and part not in names:
                 names.append(part)
@@ -59,6 +65,22 @@ class _OneLineParser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         """Print ``prog: error: message`` and a pointer to ``--help``; exit with status 2."""
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _one_line(err: BaseException, limit: int = 400) -> str:
+    """An exception as one non-empty line, cut to about ``limit`` characters."""
+    text = " ".join(str(err).split()) or type(err).__name__
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text):,} chars)"
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name the same file (resolved, or the same inode when both exist)."""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
 
 
 def _output_problem(path: Path, directory: bool) -> str | None:
@@ -112,7 +134,8 @@ def build_parser() -> argparse.ArgumentParser:
             "  uasep-eval --policy apf --scenario random --episodes 100 --workers 4 "
             "--json out.json\n"
             "  uasep-eval --config noise=false --config obstacle.speed=6 --csv out.csv\n"
-            f"policies: {', '.join(POLICIES)} or the path of a policy checkpoint (.zip)"
+            f"policies: {', '.join([*POLICIES, *shipped_policies()])} or the path of a "
+            "policy checkpoint (.zip)"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -121,14 +144,16 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         metavar="NAME",
         help="policy to evaluate; repeatable or comma-separated, all on the same seeds "
-        "(default: apf)",
+        "(default: apf); a value naming an existing file is one path, commas included",
     )
     p.add_argument(
         "--scenario",
         default="paper",
         choices=scenario_names(),
         metavar="NAME",
-        help=f"scenario family: {', '.join(scenario_names())} (default: paper)",
+        help=f"scenario family: {', '.join(scenario_names())} (default: paper); a family's "
+        "own defaults come with it (large_formation: 8 UAVs in a wedge, as its gym id), "
+        "--config overrides them",
     )
     p.add_argument(
         "--episodes",
@@ -222,6 +247,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="let a stable-baselines3 model file be unpickled, which runs code from it; "
         "only for files you trust (policy checkpoints never need it)",
     )
+    p.add_argument(
+        "--algorithm",
+        choices=SB3_ALGORITHMS,
+        default=None,
+        metavar="NAME",
+        help="the stable-baselines3 algorithm that saved a model file given with "
+        f"--allow-pickle: {', '.join(SB3_ALGORITHMS)} (default: PPO)",
+    )
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return p
 
@@ -248,7 +281,7 @@ def _run(argv: Sequence[str] | None) -> int:
         try:
             check_policy_name(name)
         except ValueError as err:
-            parser.error(f"argument --policy: {err}")
+            parser.error(f"argument --policy: {_one_line(err)}")
     if args.deviation_threshold <= 0:
         parser.error(
             f"argument --deviation-threshold: must be > 0, got {args.deviation_threshold:g}"
@@ -261,15 +294,24 @@ def _run(argv: Sequence[str] | None) -> int:
         problem = None if path is None else _output_problem(path, directory)
         if problem is not None:
             parser.error(f"argument {flag}: cannot write {str(path)!r}: {problem}")
+    if args.plot is not None and not matplotlib_available():  # before hours of evaluation
+        parser.error(f"argument --plot: the figures need matplotlib: {VIZ_HINT}")
+    # An output must not overwrite an input, nor another output.
+    if args.json is not None and args.csv is not None and _same_file(args.json, args.csv):
+        parser.error(f"arguments --json and --csv: both write {str(args.json)!r}")
+    for flag, path in (("--json", args.json), ("--csv", args.csv)):
+        for name in names if path is not None else ():
+            if name not in POLICIES and _same_file(path, Path(name)):
+                parser.error(f"argument {flag}: {str(path)!r} is the policy being evaluated")
     try:
         cfg = build_config(args.scenario, args.config)
-    except (TypeError, ValueError) as err:
-        parser.error(f"argument --config: {err}")
+    except (TypeError, ValueError, RecursionError) as err:
+        parser.error(f"argument --config: {_one_line(err)}")
     for name in names:  # fail early on models that do not load
         try:
-            make_policy(name, cfg, args.allow_pickle)
+            make_policy(name, cfg, args.allow_pickle, args.algorithm)
         except Exception as err:
-            parser.error(f"argument --policy: cannot load {name!r}: {err}")
+            parser.error(f"argument --policy: cannot load {name!r}: {_one_line(err)}")
 
     seeds = list(range(args.seed, args.seed + args.episodes))
     bar = _progress_bar(len(names) * len(seeds), args.quiet)
@@ -287,6 +329,7 @@ def _run(argv: Sequence[str] | None) -> int:
             progress=bar.update if bar is not None else None,
             allow_pickle=args.allow_pickle,
             ray=args.ray,
+            algorithm=args.algorithm,
         )
     finally:
         if bar is not None:
@@ -344,5 +387,5 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(code, file=sys.stderr)
         return 1
     except OSError as err:
-        print(f"uasep-eval: error: {err}", file=sys.stderr)
+        print(f"uasep-eval: error: {_one_line(err)}", file=sys.stderr)
         return 1
