@@ -280,13 +280,11 @@ def pareto(safety: np.ndarray, cost: np.ndarray, higher_is_safer: bool) -> np.nd
     return keep
 
 
-def knee(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """The knee of a method's front of max deviation against min obstacle distance.
+def knee_distances(rows: list[dict[str, Any]]) -> list[tuple[dict[str, Any], float]]:
+    """The front of :func:`knee`, each setting with its distance from the chord.
 
-    Among the settings that collide no more often than the method's safest setting (the
-    Wilson intervals overlap) and are on the Pareto front, the point farthest from the
-    chord between the front's ends, both axes scaled to [0, 1] (the "kneedle" rule): past
-    it, more distance costs more deviation per metre than before it.
+    Both axes scaled to [0, 1]; settings off the front or colliding more often than the
+    safest one are left out. With fewer than 3 settings on the front, the safest has 1.
     """
     rows = sorted(rows, key=lambda r: r["value"])
     safest = min(r["collision"] for r in rows)
@@ -296,14 +294,26 @@ def knee(rows: list[dict[str, Any]]) -> dict[str, Any]:
     c = np.array([r["max_deviation"] for r in ok])
     front = [r for r, k in zip(ok, pareto(s, c, True), strict=True) if k]
     if len(front) < 3:
-        return max(front, key=lambda r: r["min_obstacle_distance"])
+        best = max(front, key=lambda r: r["min_obstacle_distance"])
+        return [(r, 1.0 if r is best else 0.0) for r in front]
     x = np.array([r["min_obstacle_distance"] for r in front])
     y = np.array([r["max_deviation"] for r in front])
     x = (x - x.min()) / max(np.ptp(x), 1e-12)
     y = (y - y.min()) / max(np.ptp(y), 1e-12)
     i0, i1 = np.argmin(x), np.argmax(x)
     d = np.abs((x[i1] - x[i0]) * (y[i0] - y) - (x[i0] - x) * (y[i1] - y[i0]))
-    return front[int(np.argmax(d))]
+    return [(r, float(di)) for r, di in zip(front, d, strict=True)]
+
+
+def knee(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The knee of a method's front of max deviation against min obstacle distance.
+
+    Among the settings that collide no more often than the method's safest setting (the
+    Wilson intervals overlap) and are on the Pareto front, the point farthest from the
+    chord between the front's ends, both axes scaled to [0, 1] (the "kneedle" rule): past
+    it, more distance costs more deviation per metre than before it.
+    """
+    return max(knee_distances(rows), key=lambda rd: rd[1])[0]
 
 
 def plot(rows: list[dict[str, Any]], dataset: str, path: Path, title: str) -> None:

@@ -113,3 +113,39 @@ def test_the_ground_rule_is_a_no_op_in_the_air():
         step_obstacles(b, u, 0.2)
     np.testing.assert_array_equal(a.pos, b.pos)
     np.testing.assert_array_equal(a.climb_rate, b.climb_rate)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    vz_max=st.floats(0.1, 3.0),
+    wind_down=st.floats(0.0, 6.0),
+    height=st.floats(0.0, 15.0),
+    seed=st.integers(0, 2**31),
+)
+def test_the_prediction_still_encloses_obstacles_at_the_ground(vz_max, wind_down, height, seed):
+    """Bounded descents and resting on the ground stay inside the enclosing prediction.
+
+    The world's prediction: the obstacle's reachable ellipsoid (swept, enclosing fit) about
+    its position and heading, its radius inflated by ``|wind| * horizon``. Start just above
+    the ground in a downdraft (stronger than vz_max in some examples) and check every
+    position over the horizon.
+    """
+    from uasep_env import reachable
+
+    rng = np.random.default_rng(seed)
+    dt, horizon, steps = 0.2, 10.0, 50
+    ob = _make(4, 3, rng, 0.1, vz_max, 6.0)
+    ob.alt_band[..., 0] = -1e9
+    ob.pos[..., 2] = -height
+    ob.ground[...] = 0.0
+    ob.wind[:] = [1.0, -0.5, wind_down]
+    ob.switch_prob[...] = 0.3
+    ob.climb_rate[...] = -vz_max  # descending towards the ground
+    p0, psi0 = ob.pos.copy(), ob.heading.copy()
+    r = 1.0 + np.linalg.norm(ob.wind[0]) * horizon
+    offset, axes = reachable.ellipsoid(6.0, 0.1, vz_max, horizon, r)
+    center = p0 + offset * np.stack([np.cos(psi0), np.sin(psi0), np.zeros_like(psi0)], -1)
+    for _ in range(steps):
+        step_obstacles(ob, rng.random((4, 3, N_UNIFORMS)), dt)
+        assert np.all(-ob.pos[..., 2] >= 0.0)
+        assert np.all(reachable.contains(ob.pos, center, axes, psi0))

@@ -17,7 +17,7 @@ ENV_VERSION = 2
 
 #: id -> default config overrides.
 ENV_IDS: dict[str, dict] = {
-    f"uasep/{f.gym_name}-v{ENV_VERSION}": {"scenario": f.name, **f.gym_defaults}
+    f"uasep/{f.gym_name}-v{ENV_VERSION}": {"scenario": f.name, **f.defaults}
     for f in FAMILIES.values()
     if f.gym_name is not None
 }

@@ -38,6 +38,7 @@ from uasep_env.scenarios.registry import (
     ScenarioFamily,
     get_family,
     register,
+    scenario_defaults,
     scenario_names,
 )
 from uasep_env.scenarios.seeds import (
@@ -61,6 +62,7 @@ __all__ = [
     "RANDOM_FAMILIES",
     "RANDOM_MIX",
     "REAL_TRAFFIC_TEST_SEEDS",
+    "SCENARIO_DEFAULTS",
     "TRAFFIC_MIX",
     "TRAINING_SEEDS",
     "VALIDATION_SEEDS",
@@ -72,11 +74,17 @@ __all__ = [
     "place_obstacles",
     "register",
     "sample_scenario",
+    "scenario_defaults",
     "scenario_names",
 ]
 
 #: Families drawn by the ``random`` scenario (its mix's names).
 RANDOM_FAMILIES = RANDOM_MIX.names
+#: Family -> the config it is meant to be flown with, applied where a scenario is chosen by
+#: name (the gym ids, ``uasep-eval --scenario``) before overrides; from the registry.
+SCENARIO_DEFAULTS: dict[str, dict] = {
+    name: dict(f.defaults) for name, f in FAMILIES.items() if f.defaults
+}
 
 
 def sample_scenario(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:

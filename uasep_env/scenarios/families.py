@@ -242,7 +242,7 @@ register(
         ),
         generate=_large_formation,
         gym_name="LargeFormation",
-        gym_defaults={"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
+        defaults={"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
     )
 )
 

@@ -20,7 +20,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FAMILIES", "Mix", "ScenarioFamily", "get_family", "register", "scenario_names"]
+__all__ = [
+    "FAMILIES",
+    "Mix",
+    "ScenarioFamily",
+    "get_family",
+    "register",
+    "scenario_defaults",
+    "scenario_names",
+]
 
 
 @dataclass(frozen=True)
@@ -69,9 +77,10 @@ class ScenarioFamily:
         summary: One line: what encounter it makes.
         parameters: What it draws per episode and from which ranges (units).
         generate: ``(rng, config: EnvConfig) -> ScenarioSpec``; all randomness from ``rng``.
-        gym_name: Registers ``uasep/<gym_name>-v<version>`` with :attr:`gym_defaults`
+        gym_name: Registers ``uasep/<gym_name>-v<version>`` with :attr:`defaults`
             (``None``: no gym id of its own).
-        gym_defaults: The id's config overrides beside ``scenario``.
+        defaults: The config the family is meant to be flown with, applied where it is
+            chosen by name (its gym id, ``uasep-eval --scenario``) before any override.
         mix: For a family that draws another family per episode (``random``), that mix.
         obstacle_model: The ``obstacle.model`` its episodes need (``"dubins"``, or
             ``"replay"`` for a family of recorded tracks); the config checks it.
@@ -82,7 +91,7 @@ class ScenarioFamily:
     parameters: str
     generate: Callable[[np.random.Generator, Any], Any]
     gym_name: str | None = None
-    gym_defaults: Mapping[str, Any] = field(default_factory=dict)
+    defaults: Mapping[str, Any] = field(default_factory=dict)
     mix: Mix | None = None
     obstacle_model: str = "dubins"
 
@@ -102,6 +111,11 @@ def register(family: ScenarioFamily) -> ScenarioFamily:
 def scenario_names() -> tuple[str, ...]:
     """The names ``EnvConfig.scenario`` accepts, in registration order."""
     return tuple(FAMILIES)
+
+
+def scenario_defaults(name: str) -> dict[str, Any]:
+    """The config family ``name`` is meant to be flown with (empty if it has none)."""
+    return dict(get_family(name).defaults)
 
 
 def get_family(name: str) -> ScenarioFamily:
