@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 # A local CPU build; a plain "torch" requirement would pull a multi-GB CUDA build.
 TORCH  := torch==2.13.0
 
-.PHONY: eval test lint bench clean
+.PHONY: eval test lint bench clean docs
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,12 @@ lint: $(VENV)/.all
 # The client tests must run (not skip) here; the Ray tests share one local Ray per worker.
 test: lint
 	UASEP_REQUIRE_CLIENTS=1 $(BIN)/python -m pytest -n 2 --dist loadgroup -q
+
+# The documentation site (Sphinx), warnings as errors; the pages' examples run in make test.
+docs: $(VENV)/.all
+	$(BIN)/python -m pip install --quiet -e ".[docs]" "$(TORCH)"
+	rm -rf docs/api  # the API pages are generated from the docstrings: none left over
+	$(BIN)/python -m sphinx -b html -W --keep-going -q docs docs/_build/html
 
 bench: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[bench]"

@@ -10,7 +10,7 @@ Families (``EnvConfig.scenario``):
 * ``paper`` -- section 4: three UAVs in line abreast (slots ``[-20,0,0], [20,0,0],
   [0,0,0]``) set out from scattered positions with different velocities, form up, and fly
   north at 100 m altitude; an obstacle (4 m/s, ``w_max`` = 0.013 rad/s, the paper's values)
-  comes towards them from the north-north-east and crosses their track, 5 m below them,
+  comes towards them from the north-north-east and crosses their track, 10 m below them,
   aimed at the middle UAV's planned position at t = 115 s (the paper's encounter is at
   100-130 s). Its pilot flies straight until 25 s before the encounter and manoeuvres at
   random from then on; only those manoeuvres and the noise depend on the seed.
