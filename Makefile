@@ -41,7 +41,6 @@ test: lint
 # The documentation site (Sphinx), warnings as errors; the pages' examples run in make test.
 docs: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[docs]" "$(TORCH)"
-	rm -rf docs/api  # the API pages are generated from the docstrings: none left over
 	$(BIN)/python -m sphinx -b html -W --keep-going -q docs docs/_build/html
 
 bench: $(VENV)/.all

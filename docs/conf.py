@@ -15,7 +15,6 @@ copyright = "uasep-env developers, MIT licence"
 extensions = [
     "myst_parser",
     "sphinx.ext.autodoc",
-    "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
@@ -31,9 +30,8 @@ exclude_patterns = ["_build", "figures"]
 myst_enable_extensions = ["colon_fence", "deflist", "dollarmath"]
 myst_heading_anchors = 3
 
-# API reference: one page per public module, generated from the docstrings (Google style).
-autosummary_generate = True
-autosummary_imported_members = False
+# API reference: one page per public module (written by _write_api_pages below), generated
+# from the docstrings (Google style).
 # Each name is documented once, where it is defined (packages re-export names in __all__).
 autodoc_default_options = {"members": True, "show-inheritance": True, "ignore-module-all": True}
 autodoc_member_order = "bysource"
@@ -48,3 +46,118 @@ napoleon_use_ivar = True  # "Attributes:" as fields: properties keep their own e
 html_theme = "furo"
 html_title = "uasep-env"
 html_static_path: list[str] = []
+
+
+def _canonical(target: str, module: str | None) -> str | None:
+    """The defining ``module.qualname`` of a name a package re-exports, or None."""
+    import importlib
+    import inspect
+
+    def lookup(path: str) -> object | None:
+        parts = path.split(".")
+        for i in range(len(parts), 0, -1):
+            try:
+                obj: object = importlib.import_module(".".join(parts[:i]))
+            except ImportError:
+                continue
+            try:
+                for part in parts[i:]:
+                    obj = getattr(obj, part)
+            except AttributeError:
+                return None
+            return obj
+        return None
+
+    for path in (f"{module}.{target}" if module else None, target):
+        obj = lookup(path) if path else None
+        if inspect.ismodule(obj):
+            return obj.__name__
+        name = getattr(obj, "__qualname__", None)
+        if name and getattr(obj, "__module__", "").startswith("uasep_env"):
+            return f"{obj.__module__}.{name}"
+    return None
+
+
+def _resolve_reexports(app, env, node, contnode):  # noqa: ANN001, ANN202 (Sphinx's hook)
+    """Let a re-exported (``uasep_env.config.EnvConfig``) or short name link to its entry."""
+    if node.get("refdomain") != "py":
+        return None
+    target = node["reftarget"].lstrip("~.")
+    domain = env.get_domain("py")
+    canonical = _canonical(target, node.get("py:module"))
+    if canonical is None or canonical == target:
+        # A short or re-exported name: the one documented object of that name, if unique.
+        last = "." + target.rsplit(".", 1)[-1]
+        found = [name for name in domain.objects if name.endswith(last)]
+        if len(found) != 1:
+            return None
+        canonical = found[0]
+    return domain.resolve_xref(
+        env, node["refdoc"], app.builder, node["reftype"], canonical, node, contnode
+    )
+
+
+def _restore_attribute_prose(app, what, name, obj, options, lines):  # noqa: ANN001, ANN202
+    """Undo napoleon reading ``#: The registry: ...`` as the type ``The registry``.
+
+    Napoleon takes the text before a first-line colon of a data/attribute docstring as its
+    type; the project's annotations give the types, so prose before a colon is put back.
+    """
+    if what not in ("data", "attribute"):
+        return
+    for i, line in enumerate(lines):
+        if line.startswith(":type: ") and " " in line[7:].strip():
+            prose = line[7:].strip()
+            del lines[i]
+            first = next(j for j, ln in enumerate(lines) if ln.strip())
+            lines[first] = f"{prose}: {lines[first].lstrip()}"
+            return
+
+
+def _public_modules() -> list[str]:
+    """``uasep_env`` and its modules, without private (``_``) parts, in import order."""
+    import pkgutil
+
+    import uasep_env
+
+    walk = pkgutil.walk_packages(uasep_env.__path__, prefix="uasep_env.")
+    names = [info.name for info in walk]
+    return ["uasep_env", *(n for n in names if not any(p.startswith("_") for p in n.split(".")))]
+
+
+def _write_api_pages(app) -> None:  # noqa: ANN001 (Sphinx's hook)
+    """One ``api/<module>.rst`` per public module (written only when it changes).
+
+    Not autosummary's recursive mode: it resolves ``uasep_env.metrics.aggregate`` to the
+    function the package re-exports under the module's name, not to the module.
+    """
+    import importlib
+
+    out = Path(app.srcdir) / "api"
+    out.mkdir(exist_ok=True)
+    modules = _public_modules()
+    for name in modules:
+        children = [m for m in modules if m.rpartition(".")[0] == name]
+        title = name.replace("_", r"\_")
+        text = f"{title}\n{'=' * len(title)}\n\n.. automodule:: {name}\n"
+        if children:
+            text += "\nModules\n-------\n\n"
+            for child in children:
+                doc = (importlib.import_module(child).__doc__ or "").strip().split("\n\n")[0]
+                doc = " ".join(doc.split())  # the first paragraph, on one line
+                text += f"* :doc:`{child}` -- {doc}\n"
+            text += "\n.. toctree::\n   :hidden:\n\n"
+            text += "".join(f"   {child}\n" for child in children)
+        page = out / f"{name}.rst"
+        if not page.exists() or page.read_text() != text:
+            page.write_text(text)
+    for page in out.glob("*.rst"):
+        if page.stem not in modules:
+            page.unlink()  # a module that was removed or renamed
+
+
+def setup(app):  # noqa: ANN001, ANN201 (Sphinx's entry point)
+    """Write the API pages; resolve references to re-exported names; keep attribute prose."""
+    app.connect("builder-inited", _write_api_pages)
+    app.connect("missing-reference", _resolve_reexports)
+    app.connect("autodoc-process-docstring", _restore_attribute_prose, priority=600)
