@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -42,6 +43,9 @@ napoleon_numpy_docstring = False
 napoleon_use_rtype = False
 napoleon_use_ivar = True  # "Attributes:" as fields: properties keep their own entries
 
+
+#: Where links to repository files outside docs/ point on the site.
+REPOSITORY_FILES = "https://github.com/uasep/uasep-env/blob/main/"
 
 html_theme = "furo"
 html_title = "uasep-env"
@@ -156,8 +160,21 @@ def _write_api_pages(app) -> None:  # noqa: ANN001 (Sphinx's hook)
             page.unlink()  # a module that was removed or renamed
 
 
+_OUTSIDE_DOCS = re.compile(r"\]\(\.\./([^)\s]+)\)")
+
+
+def _link_outside_docs(app, docname, source):  # noqa: ANN001, ANN202 (Sphinx's hook)
+    """``[x](../tests/a.py)`` (right on GitHub's view of a page) -> the repository's file.
+
+    The site holds only docs/: a page's relative link to a repository file becomes a link
+    to that file in the repository, so pages keep plain relative links.
+    """
+    source[0] = _OUTSIDE_DOCS.sub(lambda m: f"]({REPOSITORY_FILES}{m[1]})", source[0])
+
+
 def setup(app):  # noqa: ANN001, ANN201 (Sphinx's entry point)
-    """Write the API pages; resolve references to re-exported names; keep attribute prose."""
+    """Write the API pages, link outside docs/, resolve re-exported names, keep prose."""
+    app.connect("source-read", _link_outside_docs)
     app.connect("builder-inited", _write_api_pages)
     app.connect("missing-reference", _resolve_reexports)
     app.connect("autodoc-process-docstring", _restore_attribute_prose, priority=600)
