@@ -16,13 +16,13 @@ The knobs (``scale`` multiplies the gains that set the margin in the reference g
 ``default_gains``, is the knee of its front on the bank, see :func:`knee`):
 
 * ``apf`` -- the proposed APF with the enclosing prediction (the default):
-  ``obs_safe_min`` and ``obs_time`` (``r_safe = r_min + K v cos delta``, eq. 24);
+  ``obstacle_safe_min`` and ``obstacle_time`` (``r_safe = r_min + K v cos delta``, eq. 24);
 * ``apf-published`` -- the same gains with the paper's prediction as published
   (:data:`uasep_env.config.AS_PUBLISHED`: terminal set, eqs. 17-18 ellipsoid);
-* ``motion-state-apf`` -- ``obs_safe_min`` and ``obs_time`` (its sphere's safe distance);
+* ``motion-state-apf`` -- ``obstacle_safe_min`` and ``obstacle_time`` (its sphere's safe distance);
 * ``traditional-apf`` -- ``traditional_range`` (Khatib's influence distance ``rho_0``);
-* ``ppo-residual`` -- the shipped residual policy on the APF whose ``obs_safe_min`` and
-  ``obs_time`` are scaled (its correction was trained on the default base);
+* ``ppo-residual`` -- the shipped residual policy on the APF whose ``obstacle_safe_min`` and
+  ``obstacle_time`` are scaled (its correction was trained on the default base);
 * ``ppo-shared`` -- the shipped pure policy has no gain; what sets its margin is the region it
   observes, so the prediction horizon is swept (trained at 10 s; other horizons are outside
   its training distribution).
