@@ -28,6 +28,7 @@ import re
 import sys
 from pathlib import Path
 
+from uasep_env.atomic import atomic_write
 from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -129,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         stale.append(page)
         if not args.check:
-            page.write_text(new)
+            atomic_write(page, new)
             print(f"rewrote the result tables of {page.relative_to(ROOT)}")
     if args.check and stale:
         names = ", ".join(str(page.relative_to(ROOT)) for page in stale)

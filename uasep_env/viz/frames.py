@@ -374,9 +374,12 @@ class Renderer:
         """
         if self.fig is None or not self._art:
             raise RuntimeError("nothing rendered yet: call render(world) first")
+        from uasep_env.atomic import atomic_output  # all or nothing, like every output
+
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.fig.savefig(path, dpi=self.dpi, facecolor="white")
+        with atomic_output(path) as fh:
+            fig_format = path.suffix[1:] or "png"
+            self.fig.savefig(fh, format=fig_format, dpi=self.dpi, facecolor="white")
         return path
 
     def close(self) -> None:
