@@ -9,7 +9,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # document this checkout's uasep_env, not an installed copy
 
+import uasep_env  # noqa: E402 (after the path insert above)
+
 project = "uasep-env"
+release = version = uasep_env.__version__
 author = "uasep-env developers"
 copyright = "uasep-env developers, MIT licence"
 
