@@ -52,6 +52,10 @@ class Args:
     scenario: str = "random"
     n_uavs: int = 3
     n_obstacles: int = 1
+    # Fixed K (observation.k_uavs / k_obstacles): the observation's width does not depend on
+    # n_uavs or n_obstacles, so the policy flies any formation size / obstacle count.
+    k_uavs: int = 2  # nearest other UAVs observed (all of them at 3 UAVs)
+    k_obstacles: int = 1  # nearest obstacles observed (by distance to its predicted region)
     episode_duration: float = 200.0  # s
     config: str = ""  # more env overrides, space-separated KEY=VALUE ("reward.collision=0.5")
     total_timesteps: int = 150_000_000  # agent-steps (the wall budget usually ends a run first)
@@ -85,10 +89,11 @@ class Args:
 def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:
     """Build :class:`Args` from the command line (one ``--kebab-case`` flag per field)."""
     base = defaults or Args()
+    cls = type(base)  # a recipe may extend Args (train/mappo.py)
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawTextHelpFormatter
     )
-    for f in dataclasses.fields(Args):
+    for f in dataclasses.fields(cls):
         flag = "--" + f.name.replace("_", "-")
         default = getattr(base, f.name)
         if f.type in ("bool", bool):
@@ -96,7 +101,7 @@ def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> A
         else:
             cast = {"int": int, "float": float, "str": str}[str(f.type)]
             parser.add_argument(flag, type=cast, default=default)
-    args = Args(**vars(parser.parse_args(argv)))
+    args = cls(**vars(parser.parse_args(argv)))
     if args.action_mode not in ("direct", "residual_apf"):
         parser.error(
             f"argument --action-mode: must be direct or residual_apf, got {args.action_mode!r}"
@@ -120,6 +125,7 @@ def make_env_config(args: Args) -> Any:
         n_obstacles=args.n_obstacles,
         episode_duration=args.episode_duration,
         action={"mode": args.action_mode, "residual_scale": args.residual_scale},
+        observation={"k_uavs": args.k_uavs, "k_obstacles": args.k_obstacles},
     )
     return base.replace(**parse_config_overrides(args.config.split()))
 
@@ -405,11 +411,6 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     args = parse_args(argv, defaults)
     import torch  # lazy: the training extra
 
-    from uasep_env.evaluation import evaluate
-    from uasep_env.jsonio import dumps
-    from uasep_env.policies import load_policy
-    from uasep_env.scenarios import VALIDATION_SEEDS
-
     torch.set_num_threads(args.torch_threads)
     config = make_env_config(args)
     out = Path(args.out_dir)
@@ -432,8 +433,20 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     policy_path = export_policy(model, venv, config, args, out / "policy.zip", info)
     plot_curves(out / "progress.csv", out / "curves.png", f"PPO ({args.action_mode})")
 
+    return write_validation(out, config, policy_path, info, args.eval_episodes)
+
+
+def write_validation(
+    out: Path, config: Any, policy_path: Path, info: dict, episodes: int
+) -> dict:
+    """The policy and the APF on ``episodes`` validation encounters: ``validation.json``."""
+    from uasep_env.evaluation import evaluate
+    from uasep_env.jsonio import dumps
+    from uasep_env.policies import load_policy
+    from uasep_env.scenarios import VALIDATION_SEEDS
+
     eval_cfg = config.replace(action={"mode": "direct"})
-    seeds = list(VALIDATION_SEEDS)[: args.eval_episodes]
+    seeds = list(VALIDATION_SEEDS)[:episodes]
     summary: dict = {"training": info, "policy": str(policy_path), "validation": {}}
     if seeds:
         policies = {"learned": load_policy(policy_path, eval_cfg), "apf": "apf"}

@@ -201,12 +201,13 @@ class LearnedPolicy:
 
 def _check_fits(meta: PolicyCheckpoint, trained: EnvConfig, config: EnvConfig) -> None:
     problems = []
-    if config.n_uavs != trained.n_uavs:
-        problems.append(f"n_uavs: trained with {trained.n_uavs}, this env has {config.n_uavs}")
     if trained.action.mode == "direct" and config.action.mode != "direct":
         problems.append(f"action.mode: trained with 'direct', this env uses {config.action.mode!r}")
     env_layout = ObservationLayout.from_config(config.replace(action=asdict(trained.action)))
     if env_layout.dim != meta.obs_dim:
+        # Only the layout matters (a fixed-K policy flies any n_uavs); name n_uavs if it moved.
+        if config.n_uavs != trained.n_uavs:
+            problems.append(f"n_uavs: trained with {trained.n_uavs}, this env has {config.n_uavs}")
         problems.append(
             f"observation width: the network reads {meta.obs_dim}, this env gives "
             f"{env_layout.dim} (k_uavs/k_obstacles/n_obstacles differ)"

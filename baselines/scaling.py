@@ -1,0 +1,445 @@
+"""Safety and deviation against the number of UAVs and of obstacles, on a held-out bank.
+
+    python baselines/scaling.py --policy apf,motion-state-apf,traditional-apf \\
+        --episodes 50 --out baselines/results/scaling
+    python baselines/scaling.py --policy apf,baselines/checkpoints/ppo_residual_apf.zip \\
+        --policy mypackage.policies:make_policy --episodes 100 --out runs/scaling
+
+Every policy plays the same ``random`` encounters (crossing, head-on, overtaking, climbing,
+multi-obstacle) drawn from :data:`SCALING_SEEDS` (6,000,000-6,000,999: disjoint from the
+training, validation and held-out seeds of :mod:`uasep_env.scenarios` and from the
+trade-off bank), in two sweeps: formations of ``--uavs`` (3, 8, 16, 32) UAVs with
+``--base-obstacles`` (1) obstacle, and ``--obstacles`` (1, 2, 4) obstacles around
+``--base-uavs`` (3) UAVs (``--full-grid``: every combination). The formation is the
+paper's at 3 UAVs and a square ``grid`` (spacing 20 m) above (``--formation`` to choose
+one pattern for every size). Each obstacle is aimed at a UAV of the formation.
+
+Policies (``--policy``, comma-separated or repeated):
+
+* a built-in name (``apf``, ``motion-state-apf``, ``traditional-apf``, ``zero``, ...),
+  observing the environment's default layout;
+* a policy checkpoint (``.zip`` in the project's format): it reads the observation layout
+  it was trained with (its K nearest UAVs and obstacles, :func:`checkpoint_layout`), so a
+  checkpoint trained on 3 UAVs flies every size zero-shot;
+* ``module:callable``: a factory called with each cell's :class:`~uasep_env.EnvConfig`
+  and returning a policy (``actions = policy(observations)``).
+
+Writes ``<out>.md`` (one table per sweep: rates with 95 % Wilson intervals, means with
+95 % Student-t intervals, from :func:`uasep_env.metrics.aggregate`), ``<out>.json`` (every
+aggregate of every cell) and ``<out>.png`` (every metric against the number of UAVs and of
+obstacles, with the intervals), and prints the targets: at 8 and 32 UAVs, each
+non-APF policy's collision rate no worse than the APF's (Wilson intervals overlapping or
+lower). An existing output is refused unless ``--force``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib
+import math
+import os
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from uasep_env import make_config
+from uasep_env.config import EnvConfig
+from uasep_env.evaluation import evaluate
+from uasep_env.jsonio import write_json
+from uasep_env.observation import ObservationLayout
+from uasep_env.policies import POLICIES, is_policy_checkpoint
+from uasep_env.policies.learned import load_policy
+from uasep_env.tables import render_table
+
+#: Seeds of the size/obstacle-count bank: outside every range the project trains, validates,
+#: selects or reports on (training [0, 1e6), trade-off bank 100,000+, validation 4,000,000+,
+#: held-out 5,000,000-5,000,499).
+SCALING_SEEDS = range(6_000_000, 6_001_000)
+UAV_COUNTS = (3, 8, 16, 32)
+OBSTACLE_COUNTS = (1, 2, 4)
+APFS = ("apf", "motion-state-apf", "traditional-apf")
+#: (dotted aggregate key, label, unit): safety first, then deviation.
+METRICS: tuple[tuple[str, str, str], ...] = (
+    ("episode.collision", "episodes with a collision", "rate"),
+    ("episode.loss_of_separation", "episodes with loss of separation", "rate"),
+    ("episode.terminated", "early ends (collision or lost UAV)", "rate"),
+    ("episode.min_uav_separation", "min UAV-UAV separation", "m"),
+    ("episode.min_obstacle_distance", "min UAV-obstacle distance", "m"),
+    ("episode.min_region_distance", "min distance to reachable region", "m"),
+    ("episode.uav_los_events", "loss-of-separation events UAV-UAV", "count"),
+    ("episode.obstacle_los_events", "loss-of-separation events UAV-obstacle", "count"),
+    ("episode.max_conflict_duration", "max conflict duration", "s"),
+    ("episode.max_deviation", "max deviation", "m"),
+    ("episode.max_rms_deviation", "RMS deviation, worst UAV", "m"),
+)
+#: UAV counts the size target is checked at.
+TARGET_UAVS = (8, 32)
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicyEntry:
+    """One policy of the comparison.
+
+    Attributes:
+        label: Its name in the tables.
+        kind: ``"builtin"``, ``"checkpoint"`` or ``"factory"``.
+        spec: The name, path or ``module:callable``.
+        layout: For a checkpoint, its ``(k_uavs, k_obstacles)``; trained sizes in ``trained``.
+        trained: For a checkpoint, ``(n_uavs, n_obstacles)`` it was trained with.
+    """
+
+    label: str
+    kind: str
+    spec: str
+    layout: tuple[int, int] | None = None
+    trained: tuple[int, int] | None = None
+
+
+def checkpoint_layout(path: str | Path) -> tuple[EnvConfig, tuple[int, int]]:
+    """The training config of a checkpoint and its effective ``(k_uavs, k_obstacles)``."""
+    trained = load_policy(path).meta.env_config
+    layout = ObservationLayout.from_config(trained)
+    return trained, (layout.k_uavs, layout.k_obstacles)
+
+
+def cell_config(
+    n_uavs: int,
+    n_obstacles: int,
+    formation: str = "auto",
+    entry: PolicyEntry | None = None,
+    episode_duration: float | None = None,
+) -> EnvConfig:
+    """The environment of one cell, as ``entry`` observes it.
+
+    Args:
+        n_uavs: Formation size.
+        n_obstacles: Obstacles (all aimed at the formation).
+        formation: A pattern name, or ``"auto"``: the paper's at 3 UAVs, ``grid`` above.
+        entry: A checkpoint's entry fixes the observation to its training layout (the same
+            scales and K); anything else observes the default layout.
+        episode_duration: Seconds per episode (None: the config's default).
+
+    Returns:
+        The validated config.
+    """
+    pattern = formation if formation != "auto" else ("paper" if n_uavs == 3 else "grid")
+    extra: dict[str, Any] = {}
+    if episode_duration is not None:
+        extra["episode_duration"] = episode_duration
+    if entry is not None and entry.kind == "checkpoint":
+        trained, (k_u, k_o) = checkpoint_layout(entry.spec)
+        extra["observation"] = {
+            **dataclasses.asdict(trained.observation),
+            "k_uavs": k_u,
+            "k_obstacles": k_o,
+        }
+    return make_config(
+        scenario="random", n_uavs=n_uavs, n_obstacles=n_obstacles, formation=pattern, **extra
+    )
+
+
+def load_factory(spec: str) -> Callable[[EnvConfig], Any]:
+    """The callable named by ``module:callable`` (``ValueError`` naming ``spec`` otherwise)."""
+    module, _, name = spec.partition(":")
+    try:
+        obj: Any = importlib.import_module(module)
+        for part in name.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError, ValueError) as err:
+        raise ValueError(f"--policy {spec!r}: cannot import {name!r} from {module!r} ({err})")
+    if not callable(obj):
+        raise ValueError(f"--policy {spec!r}: {name} is not callable")
+    return obj
+
+
+def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
+    """Entries for ``--policy`` values; an unknown one is a ``ValueError`` naming it."""
+    entries: list[PolicyEntry] = []
+    taken: set[str] = set()
+    for spec in (s.strip() for raw in specs for s in raw.split(",")):
+        if not spec:
+            continue
+        if spec in POLICIES:
+            entry = PolicyEntry(spec, "builtin", spec)
+        elif Path(spec).is_file():
+            if not is_policy_checkpoint(spec):
+                raise ValueError(f"--policy {spec!r}: not a policy checkpoint (.zip)")
+            trained, layout = checkpoint_layout(spec)
+            entry = PolicyEntry(
+                Path(spec).stem, "checkpoint", spec, layout, (trained.n_uavs, trained.n_obstacles)
+            )
+        elif ":" in spec:
+            load_factory(spec)
+            entry = PolicyEntry(spec.rpartition(":")[2], "factory", spec)
+        else:
+            raise ValueError(
+                f"--policy {spec!r}: not a built-in policy {sorted(POLICIES)}, a checkpoint "
+                "file or module:callable"
+            )
+        if entry.label in taken:
+            entry = dataclasses.replace(entry, label=f"{entry.label}-{len(taken) + 1}")
+        taken.add(entry.label)
+        entries.append(entry)
+    if not entries:
+        raise ValueError("--policy: give at least one policy")
+    return entries
+
+
+def cells(
+    uavs: Sequence[int],
+    obstacles: Sequence[int],
+    base_uavs: int,
+    base_obstacles: int,
+    full_grid: bool = False,
+) -> list[tuple[int, int]]:
+    """The ``(n_uavs, n_obstacles)`` cells: the two sweeps (or every combination), sorted."""
+    if full_grid:
+        out = {(n, m) for n in uavs for m in obstacles}
+    else:
+        out = {(n, base_obstacles) for n in uavs} | {(base_uavs, m) for m in obstacles}
+    return sorted(out)
+
+
+def run(
+    entries: Sequence[PolicyEntry],
+    grid: Sequence[tuple[int, int]],
+    episodes: int,
+    formation: str = "auto",
+    workers: int = 1,
+    episode_duration: float | None = None,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Evaluate every entry in every cell on the same seeds; the JSON-ready result."""
+    seeds = list(SCALING_SEEDS)[:episodes]
+    rows: list[dict[str, Any]] = []
+    for n, m in grid:
+        t0 = time.perf_counter()
+        shared = [e for e in entries if e.kind != "checkpoint"]
+        groups: list[tuple[EnvConfig, list[PolicyEntry]]] = []
+        if shared:
+            groups.append((cell_config(n, m, formation, None, episode_duration), shared))
+        for e in entries:
+            if e.kind == "checkpoint":
+                groups.append((cell_config(n, m, formation, e, episode_duration), [e]))
+        for cfg, group in groups:
+            specs: dict[str, Any] = {}
+            for e in group:
+                specs[e.label] = load_factory(e.spec)(cfg) if e.kind == "factory" else e.spec
+            result = evaluate(specs, cfg, seeds, workers=workers)
+            for e in group:
+                agg = result.results[e.label].aggregate
+                rows.append(
+                    {
+                        "n_uavs": n,
+                        "n_obstacles": m,
+                        "policy": e.label,
+                        "zero_shot": e.trained is not None and e.trained != (n, m),
+                        "formation": cfg.formation if isinstance(cfg.formation, str) else "slots",
+                        "metrics": {k: agg[k] for k, _, _ in METRICS if k in agg},
+                    }
+                )
+        log(f"{n:>2} UAVs, {m} obstacle(s): {len(seeds)} episodes x {len(entries)} policies "
+            f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    return {
+        "seeds": {"first": seeds[0], "count": len(seeds), "bank": "SCALING_SEEDS"},
+        "policies": [dataclasses.asdict(e) for e in entries],
+        "cells": [list(c) for c in grid],
+        "rows": rows,
+    }
+
+
+def _fmt(stats: dict[str, Any] | None, unit: str) -> str:
+    if stats is None:
+        return "-"
+    mean, lo, hi = stats.get("mean"), stats.get("ci_low"), stats.get("ci_high")
+    if mean is None or not math.isfinite(mean):
+        return "-"
+    if unit == "rate":
+        return f"{mean:.1%} [{lo:.1%}, {hi:.1%}]"
+    digits = 2 if unit == "count" else 1
+    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
+        return f"{mean:.{digits}f}"
+    return f"{mean:.{digits}f} ± {0.5 * (hi - lo):.{digits}f}"
+
+
+def sweeps(result: dict[str, Any]) -> dict[str, list[dict[str, Any]]]:
+    """The rows of each sweep: by number of UAVs (fewest obstacles) and by obstacles."""
+    grid = [tuple(c) for c in result["cells"]]
+    base_m = min(m for _, m in grid)
+    base_n = min(n for n, _ in grid)
+    return {
+        "n_uavs": [r for r in result["rows"] if r["n_obstacles"] == base_m],
+        "n_obstacles": [r for r in result["rows"] if r["n_uavs"] == base_n],
+    }
+
+
+def targets(result: dict[str, Any]) -> list[tuple[str, str, bool | None]]:
+    """At 8 and 32 UAVs: each non-APF policy's collision rate no worse than the APF's."""
+    by = {(r["n_uavs"], r["n_obstacles"], r["policy"]): r for r in result["rows"]}
+    out: list[tuple[str, str, bool | None]] = []
+    others = [p["label"] for p in result["policies"] if p["label"] not in APFS]
+    for n in TARGET_UAVS:
+        ms = sorted({r["n_obstacles"] for r in result["rows"] if r["n_uavs"] == n})
+        for m in ms[:1]:
+            apf = by.get((n, m, "apf"))
+            for label in others:
+                mine = by.get((n, m, label))
+                what = f"{label}: collisions at {n} UAVs no worse than the APF's"
+                if apf is None or mine is None:
+                    out.append((what, "not evaluated (needs apf and the policy)", None))
+                    continue
+                a, b = apf["metrics"]["episode.collision"], mine["metrics"]["episode.collision"]
+                met = b["ci_low"] <= a["ci_high"]
+                out.append((what, f"{_fmt(b, 'rate')} vs APF {_fmt(a, 'rate')}", met))
+    return out
+
+
+def markdown(result: dict[str, Any], command: str, elapsed_s: float) -> str:
+    """The results file: one table per sweep, the targets, and how it was made."""
+    seeds = result["seeds"]
+    lines = [
+        "# Safety and deviation against formation size and obstacle count",
+        "",
+        f"Made by `{command}` in {elapsed_s / 60:.1f} min on this project's 2-core machine. "
+        f"{seeds['count']} `random` encounters per cell (seeds {seeds['first']:,}-"
+        f"{seeds['first'] + seeds['count'] - 1:,}, `SCALING_SEEDS`), the same for every "
+        "policy; rates with 95 % Wilson intervals, means ± the 95 % Student-t half-width.",
+        "",
+    ]
+    for p in result["policies"]:
+        if p["kind"] == "checkpoint":
+            lines.append(
+                f"* `{p['label']}`: trained with {p['trained'][0]} UAVs and {p['trained'][1]} "
+                f"obstacle(s), observes the {p['layout'][0]} nearest UAVs and "
+                f"{p['layout'][1]} nearest obstacle(s); other cells are zero-shot."
+            )
+    headers = ["UAVs", "obstacles", "policy", *(label for _, label, _ in METRICS)]
+    for key, title in (("n_uavs", "By formation size"), ("n_obstacles", "By obstacle count")):
+        rows = [
+            [str(r["n_uavs"]), str(r["n_obstacles"]), r["policy"]]
+            + [_fmt(r["metrics"].get(k), unit) for k, _, unit in METRICS]
+            for r in sweeps(result)[key]
+        ]
+        align = ["right", "right", "left"] + ["right"] * len(METRICS)
+        lines += ["", f"## {title}", "", render_table(headers, rows, align=align, markdown=True)]
+    body = [[t, m, "n/a" if ok is None else ("met" if ok else "not met")]
+            for t, m, ok in targets(result)]  # fmt: skip
+    if body:
+        lines += ["", "## Targets", "", render_table(["target", "measured", "met"], body,
+                                                     markdown=True)]  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def figure(result: dict[str, Any], path: Path) -> Path:
+    """Every metric against the number of UAVs and of obstacles, with the intervals."""
+    from matplotlib.figure import Figure  # lazily: only the figure needs matplotlib
+
+    sw = sweeps(result)
+    labels = [p["label"] for p in result["policies"]]
+    n_rows = math.ceil(len(METRICS) / 2)
+    fig = Figure(figsize=(16, 2.6 * n_rows), layout="constrained")
+    axes = fig.subplots(n_rows, 4, squeeze=False)
+    for i, (key, title, unit) in enumerate(METRICS):
+        for j, axis in enumerate(("n_uavs", "n_obstacles")):
+            ax = axes[i // 2, 2 * (i % 2) + j]
+            for label in labels:
+                rows = sorted((r for r in sw[axis] if r["policy"] == label), key=lambda r: r[axis])
+                xs = [r[axis] for r in rows]
+                st = [r["metrics"].get(key, {}) for r in rows]
+                ys = [s.get("mean", math.nan) for s in st]
+                lo = [y - s.get("ci_low", y) if s.get("ci_low") is not None else 0 for y, s in
+                      zip(ys, st, strict=True)]  # fmt: skip
+                hi = [s.get("ci_high", y) - y if s.get("ci_high") is not None else 0 for y, s in
+                      zip(ys, st, strict=True)]  # fmt: skip
+                ax.errorbar(xs, ys, yerr=[lo, hi], marker="o", capsize=3, label=label)
+            ax.set_title(f"{title}" + ("" if unit in ("rate", "count") else f" ({unit})"),
+                         fontsize=8)  # fmt: skip
+            ax.set_xlabel("UAVs" if axis == "n_uavs" else "obstacles", fontsize=8)
+            if axis == "n_uavs":
+                ax.set_xscale("log", base=2)
+            ax.set_xticks(sorted({r[axis] for r in sw[axis]}))
+            ax.set_xticklabels([str(x) for x in sorted({r[axis] for r in sw[axis]})])
+            ax.tick_params(labelsize=7)
+    for k in range(len(METRICS), 2 * n_rows):
+        for j in range(2):
+            axes[k // 2, 2 * (k % 2) + j].axis("off")
+    axes[0, 0].legend(fontsize=7)
+    fig.savefig(path, dpi=80, facecolor="white")
+    return path
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _counts(text: str, flag: str) -> tuple[int, ...]:
+    try:
+        vals = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"{flag}: comma-separated integers, got {text!r}") from err
+    if not vals:
+        raise argparse.ArgumentTypeError(f"{flag}: comma-separated integers, got {text!r}")
+    return vals
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Run the sweeps, write the table, JSON and figure, print the targets."""
+    import shlex
+    import sys
+
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--policy", action="append", default=None, help="name, checkpoint, mod:fn")
+    p.add_argument("--episodes", type=int, default=50)
+    p.add_argument("--uavs", type=lambda t: _counts(t, "--uavs"), default=UAV_COUNTS)
+    p.add_argument("--obstacles", type=lambda t: _counts(t, "--obstacles"),
+                   default=OBSTACLE_COUNTS)  # fmt: skip
+    p.add_argument("--base-uavs", type=int, default=3)
+    p.add_argument("--base-obstacles", type=int, default=1)
+    p.add_argument("--full-grid", action="store_true")
+    p.add_argument("--formation", default="auto")
+    p.add_argument("--episode-duration", type=float, default=None, help="s (default: 200)")
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--out", type=Path, default=Path("runs/scaling/scaling"))
+    p.add_argument("--no-figure", action="store_true")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    args = p.parse_args(argv)
+    if not 1 <= args.episodes <= len(SCALING_SEEDS):
+        p.error(f"argument --episodes: must be in [1, {len(SCALING_SEEDS)}], got {args.episodes}")
+    if args.workers < 1:
+        p.error(f"argument --workers: must be >= 1, got {args.workers}")
+    try:
+        entries = parse_policies(args.policy or list(APFS))
+        grid = cells(args.uavs, args.obstacles, args.base_uavs, args.base_obstacles,
+                     args.full_grid)  # fmt: skip
+        for n, m in grid:  # validate every cell before the first episode
+            cell_config(n, m, args.formation, None, args.episode_duration)
+    except ValueError as err:
+        p.error(str(err))
+    outs = [args.out.with_suffix(s) for s in (".md", ".json", ".png")]
+    if not args.force and (clash := [str(o) for o in outs if o.exists()]):
+        p.error(f"{', '.join(clash)} exist: pass --force to overwrite")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    result = run(entries, grid, args.episodes, args.formation, args.workers,
+                 args.episode_duration)  # fmt: skip
+    elapsed = time.perf_counter() - t0
+    command = "python baselines/scaling.py " + shlex.join(sys.argv[1:] if argv is None else argv)
+    result["command"], result["elapsed_s"] = command, elapsed
+    tmp = write_json(result, outs[1].with_name(outs[1].name + ".tmp"))
+    os.replace(tmp, outs[1])
+    text = markdown(result, command, elapsed)
+    _write_atomic(outs[0], text)
+    if not args.no_figure:
+        tmp_png = figure(result, outs[2].with_name(outs[2].stem + ".tmp.png"))
+        os.replace(tmp_png, outs[2])
+    print(text)
+    print(f"wrote {outs[0]}, {outs[1]}" + ("" if args.no_figure else f", {outs[2]}"))
+    return result
+
+
+if __name__ == "__main__":
+    main()
