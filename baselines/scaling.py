@@ -1,4 +1,4 @@
-"""Safety and deviation against the number of UAVs and of obstacles, on a held-out bank.
+r"""Safety and deviation against the number of UAVs and of obstacles, on a held-out bank.
 
     python baselines/scaling.py --policy apf,motion-state-apf,traditional-apf \\
         --episodes 50 --out baselines/results/scaling
@@ -13,6 +13,9 @@ trade-off bank), in two sweeps: formations of ``--uavs`` (3, 8, 16, 32) UAVs wit
 ``--base-uavs`` (3) UAVs (``--full-grid``: every combination). The formation is the
 paper's at 3 UAVs and a square ``grid`` (spacing 20 m) above (``--formation`` to choose
 one pattern for every size). Each obstacle is aimed at a UAV of the formation.
+``--held-out-episodes N`` adds the first N encounters of the held-out bank
+(:data:`~uasep_env.scenarios.HELD_OUT_SEEDS`, 3 UAVs and 1 obstacle, 200 s): with it, one
+command gives every table a new method is reported with (``docs/protocol.md``).
 
 Policies (``--policy``, comma-separated or repeated):
 
@@ -51,6 +54,7 @@ from uasep_env.jsonio import write_json
 from uasep_env.observation import ObservationLayout
 from uasep_env.policies import POLICIES, is_policy_checkpoint
 from uasep_env.policies.learned import load_policy
+from uasep_env.scenarios import HELD_OUT_SEEDS
 from uasep_env.tables import render_table
 
 #: Seeds of the size/obstacle-count bank: outside every range the project trains, validates,
@@ -148,7 +152,9 @@ def load_factory(spec: str) -> Callable[[EnvConfig], Any]:
         for part in name.split("."):
             obj = getattr(obj, part)
     except (ImportError, AttributeError, ValueError) as err:
-        raise ValueError(f"--policy {spec!r}: cannot import {name!r} from {module!r} ({err})")
+        raise ValueError(
+            f"--policy {spec!r}: cannot import {name!r} from {module!r} ({err})"
+        ) from err
     if not callable(obj):
         raise ValueError(f"--policy {spec!r}: {name} is not callable")
     return obj
@@ -202,6 +208,46 @@ def cells(
     return sorted(out)
 
 
+def evaluate_cell(
+    entries: Sequence[PolicyEntry],
+    n: int,
+    m: int,
+    seeds: Sequence[int],
+    formation: str = "auto",
+    workers: int = 1,
+    episode_duration: float | None = None,
+) -> list[dict[str, Any]]:
+    """Every entry on ``seeds`` with ``n`` UAVs and ``m`` obstacles: one row per entry.
+
+    Built-in policies and factories share one evaluation (the default layout); each
+    checkpoint gets its own, in its training layout. Every one plays the same encounters.
+    """
+    shared = [e for e in entries if e.kind != "checkpoint"]
+    groups: list[tuple[EnvConfig, list[PolicyEntry]]] = []
+    if shared:
+        groups.append((cell_config(n, m, formation, None, episode_duration), shared))
+    for e in entries:
+        if e.kind == "checkpoint":
+            groups.append((cell_config(n, m, formation, e, episode_duration), [e]))
+    rows: dict[str, dict[str, Any]] = {}
+    for cfg, group in groups:
+        specs: dict[str, Any] = {}
+        for e in group:
+            specs[e.label] = load_factory(e.spec)(cfg) if e.kind == "factory" else e.spec
+        result = evaluate(specs, cfg, seeds, workers=workers)
+        for e in group:
+            agg = result.results[e.label].aggregate
+            rows[e.label] = {
+                "n_uavs": n,
+                "n_obstacles": m,
+                "policy": e.label,
+                "zero_shot": e.trained is not None and e.trained != (n, m),
+                "formation": cfg.formation if isinstance(cfg.formation, str) else "slots",
+                "metrics": {k: agg[k] for k, _, _ in METRICS if k in agg},
+            }
+    return [rows[e.label] for e in entries]
+
+
 def run(
     entries: Sequence[PolicyEntry],
     grid: Sequence[tuple[int, int]],
@@ -209,44 +255,35 @@ def run(
     formation: str = "auto",
     workers: int = 1,
     episode_duration: float | None = None,
+    held_out_episodes: int = 0,
     log: Callable[[str], None] = print,
 ) -> dict[str, Any]:
-    """Evaluate every entry in every cell on the same seeds; the JSON-ready result."""
+    """Evaluate every entry in every cell on the same seeds; the JSON-ready result.
+
+    With ``held_out_episodes``, also the first of the held-out bank
+    (:data:`~uasep_env.scenarios.HELD_OUT_SEEDS`: 3 UAVs, 1 obstacle, 200 s episodes).
+    """
     seeds = list(SCALING_SEEDS)[:episodes]
     rows: list[dict[str, Any]] = []
     for n, m in grid:
         t0 = time.perf_counter()
-        shared = [e for e in entries if e.kind != "checkpoint"]
-        groups: list[tuple[EnvConfig, list[PolicyEntry]]] = []
-        if shared:
-            groups.append((cell_config(n, m, formation, None, episode_duration), shared))
-        for e in entries:
-            if e.kind == "checkpoint":
-                groups.append((cell_config(n, m, formation, e, episode_duration), [e]))
-        for cfg, group in groups:
-            specs: dict[str, Any] = {}
-            for e in group:
-                specs[e.label] = load_factory(e.spec)(cfg) if e.kind == "factory" else e.spec
-            result = evaluate(specs, cfg, seeds, workers=workers)
-            for e in group:
-                agg = result.results[e.label].aggregate
-                rows.append(
-                    {
-                        "n_uavs": n,
-                        "n_obstacles": m,
-                        "policy": e.label,
-                        "zero_shot": e.trained is not None and e.trained != (n, m),
-                        "formation": cfg.formation if isinstance(cfg.formation, str) else "slots",
-                        "metrics": {k: agg[k] for k, _, _ in METRICS if k in agg},
-                    }
-                )
-        log(f"{n:>2} UAVs, {m} obstacle(s): {len(seeds)} episodes x {len(entries)} policies "
-            f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
+        rows += evaluate_cell(entries, n, m, seeds, formation, workers, episode_duration)
+        log(
+            f"{n:>2} UAVs, {m} obstacle(s): {len(seeds)} episodes x {len(entries)} policies "
+            f"in {time.perf_counter() - t0:.1f} s"
+        )
+    held: list[dict[str, Any]] = []
+    if held_out_episodes:
+        t0 = time.perf_counter()
+        bank = list(HELD_OUT_SEEDS)[:held_out_episodes]
+        held = evaluate_cell(entries, 3, 1, bank, "auto", workers)
+        log(f"held-out bank: {len(bank)} episodes in {time.perf_counter() - t0:.1f} s")
     return {
         "seeds": {"first": seeds[0], "count": len(seeds), "bank": "SCALING_SEEDS"},
         "policies": [dataclasses.asdict(e) for e in entries],
         "cells": [list(c) for c in grid],
         "rows": rows,
+        "held_out": held,
     }
 
 
@@ -324,11 +361,33 @@ def markdown(result: dict[str, Any], command: str, elapsed_s: float) -> str:
         ]
         align = ["right", "right", "left"] + ["right"] * len(METRICS)
         lines += ["", f"## {title}", "", render_table(headers, rows, align=align, markdown=True)]
-    body = [[t, m, "n/a" if ok is None else ("met" if ok else "not met")]
-            for t, m, ok in targets(result)]  # fmt: skip
+    if result.get("held_out"):
+        rows = [
+            [str(r["n_uavs"]), str(r["n_obstacles"]), r["policy"]]
+            + [_fmt(r["metrics"].get(k), unit) for k, _, unit in METRICS]
+            for r in result["held_out"]
+        ]
+        n_held = result["held_out"][0]["metrics"]["episode.collision"]["n"]
+        lines += [
+            "",
+            "## Held-out bank",
+            "",
+            f"The first {n_held} encounters of the held-out bank (`HELD_OUT_SEEDS`, from "
+            "5,000,000; 3 UAVs, 1 obstacle).",
+            "",
+            render_table(headers, rows, align=align, markdown=True),
+        ]
+    body = [
+        [t, m, "n/a" if ok is None else ("met" if ok else "not met")]
+        for t, m, ok in targets(result)
+    ]
     if body:
-        lines += ["", "## Targets", "", render_table(["target", "measured", "met"], body,
-                                                     markdown=True)]  # fmt: skip
+        lines += [
+            "",
+            "## Targets",
+            "",
+            render_table(["target", "measured", "met"], body, markdown=True),
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -349,13 +408,18 @@ def figure(result: dict[str, Any], path: Path) -> Path:
                 xs = [r[axis] for r in rows]
                 st = [r["metrics"].get(key, {}) for r in rows]
                 ys = [s.get("mean", math.nan) for s in st]
-                lo = [y - s.get("ci_low", y) if s.get("ci_low") is not None else 0 for y, s in
-                      zip(ys, st, strict=True)]  # fmt: skip
-                hi = [s.get("ci_high", y) - y if s.get("ci_high") is not None else 0 for y, s in
-                      zip(ys, st, strict=True)]  # fmt: skip
+                lo = [
+                    y - s.get("ci_low", y) if s.get("ci_low") is not None else 0
+                    for y, s in zip(ys, st, strict=True)
+                ]
+                hi = [
+                    s.get("ci_high", y) - y if s.get("ci_high") is not None else 0
+                    for y, s in zip(ys, st, strict=True)
+                ]
                 ax.errorbar(xs, ys, yerr=[lo, hi], marker="o", capsize=3, label=label)
-            ax.set_title(f"{title}" + ("" if unit in ("rate", "count") else f" ({unit})"),
-                         fontsize=8)  # fmt: skip
+            ax.set_title(
+                f"{title}" + ("" if unit in ("rate", "count") else f" ({unit})"), fontsize=8
+            )
             ax.set_xlabel("UAVs" if axis == "n_uavs" else "obstacles", fontsize=8)
             if axis == "n_uavs":
                 ax.set_xscale("log", base=2)
@@ -395,13 +459,18 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--policy", action="append", default=None, help="name, checkpoint, mod:fn")
     p.add_argument("--episodes", type=int, default=50)
     p.add_argument("--uavs", type=lambda t: _counts(t, "--uavs"), default=UAV_COUNTS)
-    p.add_argument("--obstacles", type=lambda t: _counts(t, "--obstacles"),
-                   default=OBSTACLE_COUNTS)  # fmt: skip
+    p.add_argument("--obstacles", type=lambda t: _counts(t, "--obstacles"), default=OBSTACLE_COUNTS)
     p.add_argument("--base-uavs", type=int, default=3)
     p.add_argument("--base-obstacles", type=int, default=1)
     p.add_argument("--full-grid", action="store_true")
     p.add_argument("--formation", default="auto")
     p.add_argument("--episode-duration", type=float, default=None, help="s (default: 200)")
+    p.add_argument(
+        "--held-out-episodes",
+        type=int,
+        default=0,
+        help="also the first N held-out encounters (3 UAVs, 1 obstacle; at most 500)",
+    )
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--out", type=Path, default=Path("runs/scaling/scaling"))
     p.add_argument("--no-figure", action="store_true")
@@ -409,12 +478,16 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     args = p.parse_args(argv)
     if not 1 <= args.episodes <= len(SCALING_SEEDS):
         p.error(f"argument --episodes: must be in [1, {len(SCALING_SEEDS)}], got {args.episodes}")
+    if not 0 <= args.held_out_episodes <= len(HELD_OUT_SEEDS):
+        p.error(
+            f"argument --held-out-episodes: must be in [0, {len(HELD_OUT_SEEDS)}], "
+            f"got {args.held_out_episodes}"
+        )
     if args.workers < 1:
         p.error(f"argument --workers: must be >= 1, got {args.workers}")
     try:
         entries = parse_policies(args.policy or list(APFS))
-        grid = cells(args.uavs, args.obstacles, args.base_uavs, args.base_obstacles,
-                     args.full_grid)  # fmt: skip
+        grid = cells(args.uavs, args.obstacles, args.base_uavs, args.base_obstacles, args.full_grid)
         for n, m in grid:  # validate every cell before the first episode
             cell_config(n, m, args.formation, None, args.episode_duration)
     except ValueError as err:
@@ -424,8 +497,15 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         p.error(f"{', '.join(clash)} exist: pass --force to overwrite")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    result = run(entries, grid, args.episodes, args.formation, args.workers,
-                 args.episode_duration)  # fmt: skip
+    result = run(
+        entries,
+        grid,
+        args.episodes,
+        args.formation,
+        args.workers,
+        args.episode_duration,
+        args.held_out_episodes,
+    )
     elapsed = time.perf_counter() - t0
     command = "python baselines/scaling.py " + shlex.join(sys.argv[1:] if argv is None else argv)
     result["command"], result["elapsed_s"] = command, elapsed

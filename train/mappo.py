@@ -46,7 +46,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import ppo_shared  # noqa: E402
+import ppo_shared
 
 
 @dataclass
@@ -90,8 +90,9 @@ def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
     check_training_seeds(args.seed, args.n_envs)
     torch.manual_seed(args.seed)
     base = UAVSharedVecEnv(n_envs=args.n_envs, config=config, seed=args.seed)
-    venv = VecNormalize(VecMonitor(base), norm_obs=args.norm_obs, norm_reward=False,
-                        gamma=args.gamma)  # fmt: skip
+    venv = VecNormalize(
+        VecMonitor(base), norm_obs=args.norm_obs, norm_reward=False, gamma=args.gamma
+    )
     env = SkrlView(venv, base)
     act = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[args.activation]
 
@@ -104,8 +105,7 @@ def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
 
     class Actor(GaussianMixin, Model):
         def __init__(self, obs_space: Any, act_space: Any) -> None:
-            Model.__init__(self, observation_space=obs_space, action_space=act_space,
-                           device="cpu")  # fmt: skip
+            Model.__init__(self, observation_space=obs_space, action_space=act_space, device="cpu")
             GaussianMixin.__init__(self, clip_actions=True, role="policy")
             self.net = mlp(self.num_observations, self.num_actions)
             self.log_std = torch.nn.Parameter(torch.full((self.num_actions,), args.log_std_init))
@@ -156,8 +156,9 @@ def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
             uid: {"size": 1, "device": "cpu"} for uid in env.possible_agents
         },
         # No TensorBoard files or skrl checkpoints: this script keeps its own.
-        "experiment": ExperimentCfg(directory=args.out_dir, write_interval=0,
-                                    checkpoint_interval=0),  # fmt: skip
+        "experiment": ExperimentCfg(
+            directory=args.out_dir, write_interval=0, checkpoint_interval=0
+        ),
     }
     agent = MAPPO(
         possible_agents=env.possible_agents,
@@ -222,14 +223,24 @@ class SkrlView:
         obs, rew, dones, infos = self.venv.step(stacked.reshape(-1, 3))
         self.infos = infos
         done = dones.reshape(self.num_envs, self.n)[:, :1]
-        trunc = np.array([infos[e * self.n].get("TimeLimit.truncated", False)
-                          for e in range(self.num_envs)])[:, None] & done  # fmt: skip
+        trunc = (
+            np.array(
+                [infos[e * self.n].get("TimeLimit.truncated", False) for e in range(self.num_envs)]
+            )[:, None]
+            & done
+        )
         term, trunc = torch.from_numpy(done & ~trunc), torch.from_numpy(trunc)
         r = rew.reshape(self.num_envs, self.n)
-        rewards = {a: torch.from_numpy(r[:, i : i + 1].copy())
-                   for i, a in enumerate(self.possible_agents)}  # fmt: skip
-        return (self._split(obs), rewards, {a: term for a in self.possible_agents},
-                {a: trunc for a in self.possible_agents}, {})  # fmt: skip
+        rewards = {
+            a: torch.from_numpy(r[:, i : i + 1].copy()) for i, a in enumerate(self.possible_agents)
+        }
+        return (
+            self._split(obs),
+            rewards,
+            {a: term for a in self.possible_agents},
+            {a: trunc for a in self.possible_agents},
+            {},
+        )
 
 
 def export_policy(agent: Any, venv: Any, config: Any, args: Args, path: Path, info: dict) -> Path:
@@ -257,12 +268,15 @@ def export_policy(agent: Any, venv: Any, config: Any, args: Args, path: Path, in
 
 
 def _modules(agent: Any) -> dict:
-    return {uid: {k: v.state_dict() for k, v in mods.items() if v is not None}
-            for uid, mods in agent.checkpoint_modules.items()}  # fmt: skip
+    return {
+        uid: {k: v.state_dict() for k, v in mods.items() if v is not None}
+        for uid, mods in agent.checkpoint_modules.items()
+    }
 
 
-def save_checkpoint(agent: Any, venv: Any, config: Any, args: Args, directory: Path,
-                    info: dict) -> None:  # fmt: skip
+def save_checkpoint(
+    agent: Any, venv: Any, config: Any, args: Args, directory: Path, info: dict
+) -> None:
     """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``."""
     import torch
 
@@ -272,8 +286,9 @@ def save_checkpoint(agent: Any, venv: Any, config: Any, args: Args, directory: P
     torch.save(_modules(agent), directory / "state.pt")
     o = venv.obs_rms
     np.savez(directory / "normalization.npz", obs_mean=o.mean, obs_var=o.var, obs_count=o.count)
-    (directory / "state.json").write_text(dumps({**info, "args": dataclasses.asdict(args)},
-                                                indent=2))  # fmt: skip
+    (directory / "state.json").write_text(
+        dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+    )
     export_policy(agent, venv, config, args, directory / "policy.zip", info)
 
 
@@ -316,20 +331,35 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
     if args.progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=args.total_timesteps, initial=steps, unit="step", unit_scale=True,
-                   desc="mappo", dynamic_ncols=True)  # fmt: skip
+        bar = tqdm(
+            total=args.total_timesteps,
+            initial=steps,
+            unit="step",
+            unit_scale=True,
+            desc="mappo",
+            dynamic_ncols=True,
+        )
 
     def summary() -> dict:
         if not window:
             return {}
         w = np.array(window, dtype=float)
-        names = ("return_mean", "collision_rate", "loss_of_separation_rate",
-                 "max_deviation_mean", "episode_length_mean")  # fmt: skip
+        names = (
+            "return_mean",
+            "collision_rate",
+            "loss_of_separation_rate",
+            "max_deviation_mean",
+            "episode_length_mean",
+        )
         return {k: float(np.mean(w[:, i])) for i, k in enumerate(names)}
 
     def facts() -> dict:
-        return {"agent_steps": steps, "wall_s": time.perf_counter() - t0, "episodes": episodes,
-                **summary()}  # fmt: skip
+        return {
+            "agent_steps": steps,
+            "wall_s": time.perf_counter() - t0,
+            "episodes": episodes,
+            **summary(),
+        }
 
     def checkpoint() -> None:
         d = out / "checkpoints" / f"step_{steps}"
@@ -350,30 +380,54 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
                 next_obs, rewards, term, trunc, infos = env.step(actions)
                 next_states = env.state()
                 agent.record_transition(
-                    observations=obs, states=states, actions=actions, rewards=rewards,
-                    next_observations=next_obs, next_states=next_states, terminated=term,
-                    truncated=trunc, infos=infos, timestep=t, timesteps=horizon,
-                )  # fmt: skip
+                    observations=obs,
+                    states=states,
+                    actions=actions,
+                    rewards=rewards,
+                    next_observations=next_obs,
+                    next_states=next_states,
+                    terminated=term,
+                    truncated=trunc,
+                    infos=infos,
+                    timestep=t,
+                    timesteps=horizon,
+                )
             agent.post_interaction(timestep=t, timesteps=horizon)
             obs, states, t, steps = next_obs, next_states, t + 1, steps + per_step
             for k, info in enumerate(env.infos):
                 if k % env.n == 0 and "episode_safety" in info:
                     s, ep = info["episode_safety"], info.get("episode", {"r": np.nan, "l": np.nan})
-                    window.append((ep["r"], s["collision"], s["loss_of_separation"],
-                                   s["max_deviation"], ep["l"]))  # fmt: skip
+                    window.append(
+                        (
+                            ep["r"],
+                            s["collision"],
+                            s["loss_of_separation"],
+                            s["max_deviation"],
+                            ep["l"],
+                        )
+                    )
                     episodes += 1
             if steps >= next_ckpt:
                 checkpoint()
                 next_ckpt += args.checkpoint_every
         s = summary()
-        writer.writerow({"agent_steps": steps, "wall_s": round(time.perf_counter() - t0, 2),
-                         "episodes": episodes, **s})  # fmt: skip
+        writer.writerow(
+            {
+                "agent_steps": steps,
+                "wall_s": round(time.perf_counter() - t0, 2),
+                "episodes": episodes,
+                **s,
+            }
+        )
         csv_file.flush()
         if bar is not None:
             bar.update(steps - bar.n)
             if s:
-                bar.set_postfix(ret=f"{s['return_mean']:.0f}", coll=f"{s['collision_rate']:.1%}",
-                                dev=f"{s['max_deviation_mean']:.1f}m")  # fmt: skip
+                bar.set_postfix(
+                    ret=f"{s['return_mean']:.0f}",
+                    coll=f"{s['collision_rate']:.1%}",
+                    dev=f"{s['max_deviation_mean']:.1f}m",
+                )
     checkpoint()
     csv_file.close()
     if bar is not None:

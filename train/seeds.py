@@ -56,8 +56,7 @@ METRICS = (
     ("episode.max_deviation", "max deviation (m)", "mean"),
     ("episode.min_obstacle_distance", "min UAV-obstacle distance (m)", "mean"),
 )
-CURVE_COLUMNS = ("return_mean", "collision_rate", "loss_of_separation_rate",
-                 "max_deviation_mean")  # fmt: skip
+CURVE_COLUMNS = ("return_mean", "collision_rate", "loss_of_separation_rate", "max_deviation_mean")
 
 
 def _python() -> list[str]:
@@ -81,8 +80,18 @@ def train_command(recipe: str, out: Path, k: int, extra: list[str]) -> list[str]
     run = seed_dir(out, k)
     if (run / "policy.zip").exists() and (run / "validation.json").exists():
         return None
-    cmd = [*_python(), str(HERE / RECIPES[recipe]), "--out-dir", str(run),
-           "--seed", str(SEED_STRIDE * k), "--torch-threads", "1", "--no-progress", *extra]  # fmt: skip
+    cmd = [
+        *_python(),
+        str(HERE / RECIPES[recipe]),
+        "--out-dir",
+        str(run),
+        "--seed",
+        str(SEED_STRIDE * k),
+        "--torch-threads",
+        "1",
+        "--no-progress",
+        *extra,
+    ]
     latest = run / "checkpoints" / "latest"
     if latest.exists():
         cmd += ["--resume", str(latest)]
@@ -102,8 +111,9 @@ def train_all(recipe: str, out: Path, seeds: int, parallel: int, extra: list[str
             seed_dir(out, k).mkdir(parents=True, exist_ok=True)
             log = (seed_dir(out, k) / "train.log").open("a")
             print(f"seed {k}: {' '.join(cmd[1:])}", flush=True)
-            running.append((k, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                                                env=_env()), log))  # fmt: skip
+            running.append(
+                (k, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=_env()), log)
+            )
         time.sleep(1.0)
         for item in list(running):
             k, proc, log = item
@@ -128,8 +138,15 @@ def select_all(out: Path, seeds: int, episodes: int, workers: int) -> list[Path]
         target = run / "selected.zip"
         if not target.exists():
             select_checkpoint.main(
-                [str(run), "--episodes", str(episodes), "--workers", str(workers),
-                 "--copy-to", str(target)]  # fmt: skip
+                [
+                    str(run),
+                    "--episodes",
+                    str(episodes),
+                    "--workers",
+                    str(workers),
+                    "--copy-to",
+                    str(target),
+                ]
             )
         chosen.append(target)
     return chosen
@@ -175,31 +192,52 @@ def across_seeds(result: Any, seeds: int) -> dict[str, dict[str, Any]]:
         mat = np.array([[p.get(f, math.nan) for f in families] for p in per])
         keep = np.isfinite(mat).all(axis=0)
         point, lo, hi = stratified_bootstrap_iqm(mat[:, keep])
-        out[key] = {"iqm": point, "ci_low": lo, "ci_high": hi, "families": families,
-                    "scores": mat.tolist()}  # fmt: skip
+        out[key] = {
+            "iqm": point,
+            "ci_low": lo,
+            "ci_high": hi,
+            "families": families,
+            "scores": mat.tolist(),
+        }
     return out
 
 
-def targets(recipe: str, result: Any, agg: dict[str, dict[str, Any]]) -> list[tuple[str, str, bool]]:
+def targets(
+    recipe: str, result: Any, agg: dict[str, dict[str, Any]]
+) -> list[tuple[str, str, bool]]:
     """The issue's targets for ``recipe``, from the measured aggregate across seeds."""
     apf = result.results["apf"].aggregate
     out = []
     if recipe == "residual_apf":
         for key in ("episode.collision", "episode.loss_of_separation"):
             a, s = apf[key], agg[key]
-            out.append((f"{key.removeprefix('episode.')}: as safe as the APF (intervals overlap "
-                        "or lower)", f"IQM {s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] "
-                        f"vs APF {a['rate']:.1%} [{a['ci_low']:.1%}, {a['ci_high']:.1%}]",
-                        s["ci_low"] <= a["ci_high"]))  # fmt: skip
+            out.append(
+                (
+                    f"{key.removeprefix('episode.')}: as safe as the APF (intervals overlap "
+                    "or lower)",
+                    f"IQM {s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] "
+                    f"vs APF {a['rate']:.1%} [{a['ci_low']:.1%}, {a['ci_high']:.1%}]",
+                    s["ci_low"] <= a["ci_high"],
+                )
+            )
         a, s = apf["episode.max_deviation"]["mean"], agg["episode.max_deviation"]["iqm"]
         cut = 1.0 - s / a
-        out.append(("mean max deviation at least 25 % below the APF's",
-                    f"IQM {s:.1f} m vs APF {a:.1f} m ({cut:+.1%} less)", cut >= 0.25))  # fmt: skip
+        out.append(
+            (
+                "mean max deviation at least 25 % below the APF's",
+                f"IQM {s:.1f} m vs APF {a:.1f} m ({cut:+.1%} less)",
+                cut >= 0.25,
+            )
+        )
     else:
         s = agg["episode.collision"]
-        out.append(("at most 5 % collisions (IQM across seeds)",
-                    f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}]",
-                    s["iqm"] <= 0.05))  # fmt: skip
+        out.append(
+            (
+                "at most 5 % collisions (IQM across seeds)",
+                f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}]",
+                s["iqm"] <= 0.05,
+            )
+        )
     return out
 
 
@@ -242,35 +280,43 @@ def report(recipe: str, out: Path, seeds: int, result: Any, command: str) -> tup
     rows.append(iqm_row)
     tg = targets(recipe, result, agg)
     n = len(result.seeds)
-    text = "\n".join([
-        f"# {recipe}: {seeds} training seeds",
-        "",
-        f"Made by `{command}`. Each seed's checkpoint chosen on validation encounters only; "
-        f"{n} held-out encounters (seeds {result.seeds[0]:,}-{result.seeds[-1]:,}). Per "
-        "seed: rates with 95 % Wilson intervals, means with 95 % Student-t intervals. Across "
-        "seeds: interquartile mean (IQM) of the per-family scores, 95 % stratified bootstrap "
-        "interval (seeds resampled within each scenario family).",
-        "",
-        "## Held-out bank",
-        "",
-        render_table(headers, rows, align=["left"] + ["right"] * (len(headers) - 1),
-                     markdown=True),
-        "",
-        "## Targets",
-        "",
-        render_table(["target", "measured", "met"],
-                     [[t, m, "met" if ok else "not met"] for t, m, ok in tg], markdown=True),
-        "",
-        "Learning curves of every seed: `curves.png`.",
-        "",
-    ])  # fmt: skip
+    text = "\n".join(
+        [
+            f"# {recipe}: {seeds} training seeds",
+            "",
+            f"Made by `{command}`. Each seed's checkpoint chosen on validation encounters only; "
+            f"{n} held-out encounters (seeds {result.seeds[0]:,}-{result.seeds[-1]:,}). Per "
+            "seed: rates with 95 % Wilson intervals, means with 95 % Student-t intervals. Across "
+            "seeds: interquartile mean (IQM) of the per-family scores, 95 % stratified bootstrap "
+            "interval (seeds resampled within each scenario family).",
+            "",
+            "## Held-out bank",
+            "",
+            render_table(
+                headers, rows, align=["left"] + ["right"] * (len(headers) - 1), markdown=True
+            ),
+            "",
+            "## Targets",
+            "",
+            render_table(
+                ["target", "measured", "met"],
+                [[t, m, "met" if ok else "not met"] for t, m, ok in tg],
+                markdown=True,
+            ),
+            "",
+            "Learning curves of every seed: `curves.png`.",
+            "",
+        ]
+    )
     data = {
         "recipe": recipe,
         "command": command,
         "seeds": seeds,
         "held_out_seeds": {"first": result.seeds[0], "count": n},
-        "per_seed": {lab: {k: result.results[lab].aggregate[k] for k, _, _ in METRICS}
-                     for lab in result.policies},  # fmt: skip
+        "per_seed": {
+            lab: {k: result.results[lab].aggregate[k] for k, _, _ in METRICS}
+            for lab in result.policies
+        },
         "across_seeds": agg,
         "targets": [{"target": t, "measured": m, "met": ok} for t, m, ok in tg],
         "training": {f"seed_{k}": _training_facts(seed_dir(out, k)) for k in range(seeds)},
@@ -292,8 +338,12 @@ def plot_curves(out: Path, seeds: int, title: str) -> Path:
 
     fig = Figure(figsize=(12, 7), layout="constrained")
     axes = fig.subplots(2, 2).ravel()
-    names = ("return (mean per agent)", "collision rate", "loss-of-separation rate",
-             "max deviation (m)")  # fmt: skip
+    names = (
+        "return (mean per agent)",
+        "collision rate",
+        "loss-of-separation rate",
+        "max deviation (m)",
+    )
     for k in range(seeds):
         path = seed_dir(out, k) / "progress.csv"
         if not path.exists():
@@ -367,9 +417,19 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         sys.path.insert(0, str(ROOT / "baselines"))
         import scaling
 
-        scaling.main(["--policy", ",".join(["apf", *map(str, chosen)]),
-                      "--episodes", str(args.scaling_episodes), "--out", str(out / "scaling"),
-                      "--workers", str(args.workers), "--force"])  # fmt: skip
+        scaling.main(
+            [
+                "--policy",
+                ",".join(["apf", *map(str, chosen)]),
+                "--episodes",
+                str(args.scaling_episodes),
+                "--out",
+                str(out / "scaling"),
+                "--workers",
+                str(args.workers),
+                "--force",
+            ]
+        )
     print(text)
     return data
 
