@@ -51,6 +51,7 @@ def test_a_3_uav_checkpoint_flies_8_uavs_and_more_obstacles():
     # The shipped checkpoint (K = 2 UAVs, 1 obstacle) zero-shot on 8 UAVs and 2 obstacles.
     entry = scaling.parse_policies([str(SHIPPED)])[0]
     assert entry.trained == (3, 1) and entry.layout == (2, 1)
+    assert scaling.parse_policies([f"mine={SHIPPED}"])[0].label == "mine"
     cfg = scaling.cell_config(8, 2, entry=entry, episode_duration=20.0)
     policy = load_policy(SHIPPED, cfg)
     (ep,) = run_episodes(policy, cfg, [scaling.SCALING_SEEDS[0]])
@@ -105,6 +106,9 @@ def test_scaling_script_writes_tables_figure_and_targets(tmp_path, capsys):
     assert out.with_suffix(".png").stat().st_size > 10_000
     with pytest.raises(SystemExit):  # no silent overwrite
         scaling.main(argv)
+    out.with_suffix(".md").unlink()
+    scaling.main(["--render", str(out.with_suffix(".json")), "--no-figure"])
+    assert out.with_suffix(".md").read_text() == text
     capsys.readouterr()
 
 
@@ -115,6 +119,7 @@ def test_scaling_script_writes_tables_figure_and_targets(tmp_path, capsys):
         (["--policy", "os:nope"], "cannot import"),
         (["--uavs", "3,40"], "n_uavs"),
         (["--episodes", "0"], "--episodes"),
+        (["--policy", "=apf"], "empty label"),
     ],
 )
 def test_scaling_bad_input_is_named(tmp_path, capsys, argv, message):

@@ -234,7 +234,8 @@ def targets(
         out.append(
             (
                 "at most 5 % collisions (IQM across seeds)",
-                f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}]",
+                f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] (early ends, "
+                f"collision or lost UAV: {agg['episode.terminated']['iqm']:.1%})",
                 s["iqm"] <= 0.05,
             )
         )
@@ -420,7 +421,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         scaling.main(
             [
                 "--policy",
-                ",".join(["apf", *map(str, chosen)]),
+                ",".join(["apf", *(f"seed_{k}={c}" for k, c in enumerate(chosen))]),
                 "--episodes",
                 str(args.scaling_episodes),
                 "--out",
