@@ -1,0 +1,187 @@
+"""The real-traffic file: a ``.npz`` of plain arrays, written byte-for-byte reproducibly.
+
+Members (all ``.npy``, no object arrays, so nothing is unpickled):
+
+* ``format_version`` -- ``int64`` scalar, :data:`FORMAT_VERSION`;
+* ``time_ms`` -- ``int64 (N,)``, each sample's time after its track's first sample (ms);
+* ``pos_cm`` -- ``int32 (N, 3)``, positions NED about the track's origin (cm);
+* ``vel_cms`` -- ``int32 (N, 3)``, reported ground velocity NED in the origin's frame (cm/s);
+* ``track_start`` -- ``int64 (T + 1,)``, the samples of track ``k`` are
+  ``track_start[k]:track_start[k + 1]``;
+* ``meta`` -- ``uint8``, UTF-8 JSON: the provenance of every track, the build's settings and
+  what it dropped.
+
+Integers (cm, ms) make the file independent of the last bits of the platform's maths; the
+zip entries carry a fixed date, so rebuilding gives the same bytes. Reading is bounded: the
+file, each member and the JSON have size limits, checked before anything large is allocated.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz", "write_npz"]
+
+#: Version of the layout above; a reader refuses any other.
+FORMAT_VERSION = 1
+#: Limits on what a reader accepts (bytes): the file, one member once inflated, the JSON
+#: (the shipped file is 0.42 MB, its largest member 0.27 MB inflated).
+MAX_FILE_BYTES = 32 * 2**20
+MAX_MEMBER_BYTES = 32 * 2**20
+MAX_META_BYTES = 16 * 2**20
+_MEMBERS = {
+    "format_version": (np.int64, 0),
+    "time_ms": (np.int64, 1),
+    "pos_cm": (np.int32, 2),
+    "vel_cms": (np.int32, 2),
+    "track_start": (np.int64, 1),
+    "meta": (np.uint8, 1),
+}
+_FIXED_DATE = (1980, 1, 1, 0, 0, 0)
+
+
+class RealTrafficFileError(ValueError):
+    """A real-traffic file is corrupt, too large or of another format version."""
+
+
+def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta: Any) -> None:
+    """Write ``arrays`` and the JSON ``meta`` to ``path`` atomically and reproducibly.
+
+    Args:
+        path: Destination ``.npz``.
+        arrays: ``time_ms``, ``pos_cm``, ``vel_cms``, ``track_start`` (cast to the file's dtypes).
+        meta: JSON-able metadata (written with sorted keys, no whitespace variation).
+    """
+    text = json.dumps(meta, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    members = dict(arrays)
+    members["format_version"] = np.int64(FORMAT_VERSION)
+    members["meta"] = np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        for name in sorted(_MEMBERS):
+            dtype, ndim = _MEMBERS[name]
+            arr = np.array(members[name], dtype=dtype, order="C")
+            if arr.ndim != ndim:
+                raise ValueError(f"{name} must have {ndim} dimensions, got shape {arr.shape}")
+            npy = io.BytesIO()
+            np.lib.format.write_array(npy, arr, version=(1, 0), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=_FIXED_DATE)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, npy.getvalue(), compresslevel=9)
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(buf.getvalue())
+        os.chmod(tmp, 0o644)  # package data: readable by all, like a normal write
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _read_member(zf: zipfile.ZipFile, name: str, path: Path, limit: int) -> np.ndarray:
+    try:
+        info = zf.getinfo(f"{name}.npy")
+    except KeyError:
+        raise RealTrafficFileError(f"{path}: member {name!r} is missing") from None
+    if info.file_size > limit:
+        raise RealTrafficFileError(
+            f"{path}: member {name!r} inflates to {info.file_size} bytes (limit {limit})"
+        )
+    with zf.open(info) as fh:
+        raw = fh.read(limit + 1)  # the header's size may lie: never read past the limit
+    if len(raw) > limit:
+        raise RealTrafficFileError(f"{path}: member {name!r} is larger than {limit} bytes")
+    try:
+        arr = np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise RealTrafficFileError(f"{path}: member {name!r} is not a plain array: {exc}") from exc
+    dtype, ndim = _MEMBERS[name]
+    if arr.dtype != np.dtype(dtype) or arr.ndim != ndim:
+        raise RealTrafficFileError(
+            f"{path}: member {name!r} has dtype {arr.dtype} and {arr.ndim} dimensions, "
+            f"expected {np.dtype(dtype)} and {ndim}"
+        )
+    return arr
+
+
+def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Read and check a real-traffic file; no pickle, bounded memory.
+
+    Args:
+        path: The ``.npz`` file.
+
+    Returns:
+        ``(arrays, meta)``: the numeric members and the parsed JSON metadata.
+
+    Raises:
+        FileNotFoundError: No such file (the path is named).
+        RealTrafficFileError: Not a zip, a missing or malformed member, a size over the
+            limits, inconsistent arrays, or another format version (named with the path).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"real-traffic file not found: {path}")
+    size = path.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise RealTrafficFileError(f"{path}: {size} bytes, over the {MAX_FILE_BYTES} limit")
+    try:
+        zf = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise RealTrafficFileError(f"{path}: not a real-traffic .npz file ({exc})") from exc
+    with zf:
+        try:
+            version = _read_member(zf, "format_version", path, 1024)
+            if int(version) != FORMAT_VERSION:
+                raise RealTrafficFileError(
+                    f"{path}: format_version {int(version)}, this reader needs {FORMAT_VERSION}"
+                )
+            arrays = {
+                name: _read_member(zf, name, path, MAX_MEMBER_BYTES)
+                for name in ("time_ms", "pos_cm", "vel_cms", "track_start")
+            }
+            raw_meta = _read_member(zf, "meta", path, MAX_META_BYTES)
+        except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError) as exc:
+            raise RealTrafficFileError(f"{path}: corrupt zip member ({exc})") from exc
+    try:
+        meta = json.loads(raw_meta.tobytes().decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RealTrafficFileError(f"{path}: metadata is not UTF-8 JSON ({exc})") from exc
+    _check_consistent(arrays, meta, path)
+    return arrays, meta
+
+
+def _check_consistent(arrays: dict[str, np.ndarray], meta: Any, path: Path) -> None:
+    n = len(arrays["time_ms"])
+    start = arrays["track_start"]
+    if arrays["pos_cm"].shape != (n, 3) or arrays["vel_cms"].shape != (n, 3):
+        raise RealTrafficFileError(
+            f"{path}: pos_cm {arrays['pos_cm'].shape} and vel_cms {arrays['vel_cms'].shape} "
+            f"must be ({n}, 3)"
+        )
+    if len(start) < 1 or start[0] != 0 or start[-1] != n or np.any(np.diff(start) < 2):
+        raise RealTrafficFileError(
+            f"{path}: track_start must rise from 0 to {n} by at least 2 samples per track"
+        )
+    if not isinstance(meta, dict) or not isinstance(meta.get("tracks"), list):
+        raise RealTrafficFileError(f"{path}: metadata has no 'tracks' list")
+    if len(meta["tracks"]) != len(start) - 1:
+        raise RealTrafficFileError(
+            f"{path}: {len(meta['tracks'])} track records for {len(start) - 1} tracks"
+        )
+    t = arrays["time_ms"]
+    firsts = start[:-1]
+    rising = np.diff(t) > 0
+    rising[start[1:-1] - 1] = True  # a new track may start anywhere
+    if np.any(t[firsts] != 0) or not np.all(rising):
+        raise RealTrafficFileError(f"{path}: time_ms must start at 0 and rise within each track")
