@@ -343,10 +343,12 @@ def targets(result: dict[str, Any]) -> list[tuple[str, str, bool | None]]:
 def markdown(result: dict[str, Any], command: str, elapsed_s: float) -> str:
     """The results file: one table per sweep, the targets, and how it was made."""
     seeds = result["seeds"]
+    cpu = f" ({result['cpu_s'] / 60:.1f} min of CPU here)" if result.get("cpu_s") else ""
     lines = [
         "# Safety and deviation against formation size and obstacle count",
         "",
-        f"Made by `{command}` in {elapsed_s / 60:.1f} min on this project's 2-core machine. "
+        f"Made by `{command}` in {elapsed_s / 60:.1f} min of wall time{cpu} on this "
+        "project's 2-core machine (shared with other work: wall times vary with its load). "
         f"{seeds['count']} `random` encounters per cell (seeds {seeds['first']:,}-"
         f"{seeds['first'] + seeds['count'] - 1:,}, `SCALING_SEEDS`), the same for every "
         "policy; rates with 95 % Wilson intervals, means ± the 95 % Student-t half-width.",
@@ -511,7 +513,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if not args.force and (clash := [str(o) for o in outs if o.exists()]):
         p.error(f"{', '.join(clash)} exist: pass --force to overwrite")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     result = run(
         entries,
         grid,
@@ -524,6 +526,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     elapsed = time.perf_counter() - t0
     command = "python baselines/scaling.py " + shlex.join(sys.argv[1:] if argv is None else argv)
     result["command"], result["elapsed_s"] = command, elapsed
+    if args.workers == 1:  # the CPU time of the episodes (all played in this process)
+        result["cpu_s"] = time.process_time() - c0
     tmp = write_json(result, outs[1].with_name(outs[1].name + ".tmp"))
     os.replace(tmp, outs[1])
     _write_views(result, args.out, not args.no_figure)
