@@ -8,8 +8,10 @@ A single-file script in the CleanRL style: every option is a field of :class:`Ar
 
 Each UAV of each of ``n_envs`` batched environments is one SB3 sub-environment
 (:class:`uasep_env.envs.sb3.UAVSharedVecEnv`), wrapped in SB3's ``VecNormalize``
-(observation and return normalisation). The defaults are the ones the sweep in
-``train/README.md`` chose. A run writes to ``out_dir``:
+(observation and return normalisation). Each UAV observes a fixed number of neighbours
+(``--k-uavs`` 2, ``--k-obstacles`` 1): the observation's width does not depend on the
+formation size or the obstacle count, so the policy flies any of them (``docs/protocol.md``).
+The defaults are the ones the sweep in ``train/README.md`` chose. A run writes to ``out_dir``:
 
 * ``progress.csv``: one row per PPO iteration (agent-steps, wall time, and over the last
   200 finished episodes: mean return per agent, collision rate, loss-of-separation rate,
