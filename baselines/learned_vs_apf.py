@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
+from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.policies import load_policy
 from uasep_env.scenarios import HELD_OUT_PAPER_SEEDS, HELD_OUT_SEEDS
@@ -133,7 +134,7 @@ def main(argv: list[str] | None = None) -> str:
         ]
     text = "\n\n".join(sections) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "learned_vs_apf.md").write_text(text)
+    atomic_write(args.out / "learned_vs_apf.md", text)
     write_json({"meta": meta, **results}, args.out / "learned_vs_apf.json.gz")
     print(text)
     return text

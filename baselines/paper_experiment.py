@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
+from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.plotting import plot_paper_figures
 from uasep_env.tables import render_table
@@ -134,7 +135,7 @@ def main() -> None:
             table(bank),
         ]
     )
-    (args.out / "summary.md").write_text(text + "\n")
+    atomic_write(args.out / "summary.md", text + "\n")
     print(text)
 
 

@@ -16,13 +16,13 @@ The knobs (``scale`` multiplies the gains that set the margin in the reference g
 ``default_gains``, is the knee of its front on the bank, see :func:`knee`):
 
 * ``apf`` -- the proposed APF with the enclosing prediction (the default):
-  ``obs_safe_min`` and ``obs_time`` (``r_safe = r_min + K v cos delta``, eq. 24);
+  ``obstacle_safe_min`` and ``obstacle_time`` (``r_safe = r_min + K v cos delta``, eq. 24);
 * ``apf-published`` -- the same gains with the paper's prediction as published
   (:data:`uasep_env.config.AS_PUBLISHED`: terminal set, eqs. 17-18 ellipsoid);
-* ``motion-state-apf`` -- ``obs_safe_min`` and ``obs_time`` (its sphere's safe distance);
+* ``motion-state-apf`` -- ``obstacle_safe_min`` and ``obstacle_time`` (its sphere's safe distance);
 * ``traditional-apf`` -- ``traditional_range`` (Khatib's influence distance ``rho_0``);
-* ``ppo-residual`` -- the shipped residual policy on the APF whose ``obs_safe_min`` and
-  ``obs_time`` are scaled (its correction was trained on the default base);
+* ``ppo-residual`` -- the shipped residual policy on the APF whose ``obstacle_safe_min`` and
+  ``obstacle_time`` are scaled (its correction was trained on the default base);
 * ``ppo-shared`` -- the shipped pure policy has no gain; what sets its margin is the region it
   observes, so the prediction horizon is swept (trained at 10 s; other horizons are outside
   its training distribution).
@@ -30,15 +30,18 @@ The knobs (``scale`` multiplies the gains that set the margin in the reference g
 Writes ``docs/figures/tradeoff.csv`` (one row per method, setting and scenario: every
 statistic with its interval), ``docs/figures/tradeoff_{paper,bank}.png`` and
 ``docs/figures/tradeoff.md`` (the tables the README quotes, from :func:`report`). Resumable: rows
-already in the CSV for the same episodes are kept, and only missing settings run (delete
-the CSV, or pass ``--fresh``, to start over). The motion-state and traditional APFs do not
+already in the CSV are kept, and only missing settings run (delete the CSV, or pass
+``--fresh``, to start over). The CSV is rewritten atomically after every evaluation call, so a
+kill or a full disk never loses finished rows (a torn last row, from a file cut short some
+other way, is dropped and that setting runs again); a CSV holding rows of other episode counts
+is refused rather than mixed into the tables. The motion-state and traditional APFs do not
 read the prediction, so their rows hold for both fits.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env import make_config
+from uasep_env.atomic import atomic_output, atomic_write
 from uasep_env.config import AS_PUBLISHED, EnvConfig
 from uasep_env.config.checks import check_positive_int
 from uasep_env.evaluation import PolicyResult, evaluate
@@ -59,6 +63,11 @@ from uasep_env.policies import (
     load_policy,
 )
 from uasep_env.tables import render_table
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # run as a script or imported
+from sweep_rows import check_counts as _check_counts
+from sweep_rows import read_rows as _read
+from sweep_rows import write_rows as _write
 
 ROOT = Path(__file__).resolve().parent
 FIGURES = ROOT.parent / "docs" / "figures"
@@ -216,26 +225,6 @@ def _datasets(paper_n: int, bank_n: int) -> dict[str, tuple[str, range]]:
     }
 
 
-def _read(path: Path) -> list[dict[str, Any]]:
-    if not path.exists():
-        return []
-    with path.open() as f:
-        return [
-            {k: (v if k in ("method", "knob", "dataset") else float(v)) for k, v in r.items()}
-            for r in csv.DictReader(f)
-        ]
-
-
-def _write(path: Path, rows: list[dict[str, Any]]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    cols = list(rows[0])
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols, lineterminator="\n")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-
-
 def run(
     methods: Sequence[Method],
     paper_n: int,
@@ -247,6 +236,7 @@ def run(
     """Evaluate every missing (method, setting, dataset) and return all rows of the CSV."""
     rows = [] if fresh else _read(csv_path)
     sets = _datasets(paper_n, bank_n)
+    _check_counts(csv_path, rows, sets)
     done = {(r["method"], r["value"], r["dataset"], r["n"]) for r in rows}
     for m in methods:
         for ds, (scenario, seeds) in sets.items():
@@ -371,7 +361,8 @@ def plot(rows: list[dict[str, Any]], dataset: str, path: Path, title: str) -> No
         f"{title}: each controller's safety margin swept (filled = its Pareto front, "
         "star = default setting, bars = 95 % intervals)"
     )
-    fig.savefig(path, dpi=90)
+    with atomic_output(path) as fh:
+        fig.savefig(fh, format="png", dpi=90)
     plt.close(fig)
 
 
@@ -525,7 +516,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         f"Random encounter bank ({args.bank_episodes} encounters)",
     )
     text = report(rows)
-    (args.out / "tradeoff.md").write_text(text)
+    atomic_write(args.out / "tradeoff.md", text)
     print(text)
 
 

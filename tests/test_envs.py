@@ -346,10 +346,10 @@ def test_observation_decodes_to_si_quantities():
     region = w.region_distances(w.est_pos)[0, 2, 0]
     np.testing.assert_allclose(o["obstacle_region_dist"][0, 0], region, rtol=1e-5)
     np.testing.assert_allclose(
-        o["obstacle_rel_pos"][0], w.obs_est_pos[0, 0] - w.est_pos[0, 2], rtol=1e-5
+        o["obstacle_rel_pos"][0], w.obstacle_est_pos[0, 0] - w.est_pos[0, 2], rtol=1e-5
     )
     np.testing.assert_allclose(
-        o["obstacle_rel_vel"][0], w.obs_est_vel[0, 0] - w.est_vel[0, 2], atol=1e-5
+        o["obstacle_rel_vel"][0], w.obstacle_est_vel[0, 0] - w.est_vel[0, 2], atol=1e-5
     )
     # The nearest neighbour's relative position is right and sorted first.
     d = np.linalg.norm(w.est_pos[0] - w.est_pos[0, 2], axis=-1)

@@ -136,8 +136,7 @@ def _case_observations():
 def _case_rewards():
     core = _world_case()
     w, cfg = core.world, core.config
-    x = rewards._Inputs(w.uav_pos, w.plan_pos, w.accel_cmd, w.prev_accel_cmd, w.min_uav_dist,
-                        w.min_obs_dist, w.region_distances())  # fmt: skip
+    x = rewards._gather_inputs(w)
     weights, constants = rewards._vectors(cfg.reward, cfg.uav, cfg.max_steps)
     return x, constants, weights
 
@@ -283,6 +282,72 @@ def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
         assert absent > 0  # the short range did hide some neighbours
 
 
+def _assemble_both(x, layout):
+    """The numpy assembly and the kernel's, into NaN-filled arrays: ``(want, got)``."""
+    e, n = x.pos.shape[:2]
+    want = np.full((e, n, layout.world_dim), np.nan, dtype=np.float32)
+    got = want.copy()
+    observation._assemble.reference(x, layout, want)
+    _kernel("assemble_observations")(x, layout, got)
+    return want, got
+
+
+def _columns_of(layout, key):
+    """The vector columns of feature ``key`` in ``layout`` (every neighbour slot)."""
+    f = next(f for f in observation.FEATURES if f.key == key)
+    s = layout.slices[key]
+    if f.block == "self":
+        return list(range(s.start, s.stop))
+    start = layout.self_dim + (layout.k_uavs * layout.width("uav") if f.block == "obstacle" else 0)
+    k = layout.k_uavs if f.block == "uav" else layout.k_obstacles
+    w = layout.width(f.block)
+    return [start + slot * w + c for slot in range(k) for c in range(s.start, s.stop)]
+
+
+@pytest.mark.parametrize("key", [f.key for f in observation.FEATURES])
+def test_every_feature_of_the_table_is_bit_identical_with_and_without_it(key):
+    """Each feature, on (optional ones enabled) and off: kernel and numpy agree, and the rest
+    of the vector is the same numbers at the shifted columns (the layout is data)."""
+    import dataclasses
+
+    core = _world_case()
+    default = core.layout
+    on = dataclasses.replace(default, features=(*default.features, key))
+    off = dataclasses.replace(default, features=tuple(k for k in on.features if k != key))
+    assert key in on.features and key not in off.features
+    assert off.dim < on.dim
+    x = observation._gather_inputs(core.world, on)
+    want_on, got_on = _assemble_both(x, on)
+    want_off, got_off = _assemble_both(x, off)
+    for want, got in ((want_on, got_on), (want_off, got_off)):
+        assert not np.isnan(want).any()  # every entry written
+        np.testing.assert_array_equal(got, want)
+    cols = _columns_of(on, key)
+    assert len(cols) == on.dim - off.dim
+    assert np.any(want_on[..., cols] != 0.0)  # computed, not left at zero
+    rest = np.delete(want_on, cols, axis=-1)
+    np.testing.assert_array_equal(rest, want_off)
+    if on.features != default.features:  # optional: its vector decodes with it
+        assert key in on.decode(want_on)
+
+
+def test_optional_features_are_named_in_the_config():
+    from uasep_env import make_config
+    from uasep_env.observation_layout import OPTIONAL_FEATURES, ObservationLayout
+
+    with pytest.raises(ValueError, match=r"observation\.optional_features"):
+        ObservationLayout.from_config(make_config(observation={"optional_features": ["nope"]}))
+    with pytest.raises(ValueError, match=r"observation\.optional_features"):
+        make_config(observation={"optional_features": "uav_dist"})
+    with pytest.raises(ValueError, match="unknown observation feature"):
+        ObservationLayout(1, 1, 1.0, 1.0, 1.0, 1.0, 1.0, features=("nope",))
+    for key in OPTIONAL_FEATURES:
+        cfg = make_config(observation={"optional_features": [key]})
+        assert key in ObservationLayout.from_config(cfg).features
+    default = ObservationLayout.from_config(make_config())
+    assert not set(OPTIONAL_FEATURES) & set(default.features)
+
+
 def test_norm_adds_in_einsum_order():
     """The kernels' distance is numpy's ``sqrt(einsum)`` to the bit (its summation order)."""
     from uasep_env._kernels import common
@@ -355,6 +420,36 @@ def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shar
         for name in rewards.REWARD_TERMS:
             np.testing.assert_array_equal(fast[1][name], slow[1][name], err_msg=name)
     assert (fast[1]["collision"] < 0).any() and (fast[1]["separation_region"] < 0).any()
+
+
+def test_reward_terms_agree_between_table_numpy_kernel_and_weights():
+    """A term cannot be half-added: the table, the numpy terms, the kernel's writes, the
+    weights and the module's documentation name the same terms."""
+    import dataclasses
+    import inspect
+    import re
+
+    from uasep_env._kernels import rewards as kernel
+    from uasep_env.config import RewardWeights
+
+    names = rewards.REWARD_TERMS
+    assert names == tuple(t.name for t in rewards.TERMS) == rewards._TERM_INDEX._fields
+    assert tuple(rewards._TERM_INDEX) == tuple(range(len(names)))
+    x, constants, weights = _case_rewards()
+    assert tuple(rewards._term_values(x, constants)) == names
+    written = re.findall(r"terms\[ix\.(\w+), e, i\]", inspect.getsource(kernel._reward_agent))
+    assert sorted(written) == sorted(names)  # each row once, by name
+    assert not re.search(r"terms\[\d", inspect.getsource(kernel))  # no literal rows
+    weight_names = {f.name for f in dataclasses.fields(RewardWeights)} - {"shared"}
+    assert weight_names == set(names)
+    for name in names:
+        assert f"``{name}``" in rewards.__doc__
+    # At run time too: every row of a NaN-filled terms array is written.
+    e, n = x.min_uav_dist.shape
+    own, terms = np.full((e, n), np.nan), np.full((len(names), e, n), np.nan)
+    x = type(x)(*(np.ascontiguousarray(a) for a in x))
+    kernel._rewards_serial(x, constants, rewards._TERM_INDEX, weights, own, terms)
+    assert not np.isnan(terms).any() and not np.isnan(own).any()
 
 
 def test_plan_kernel_matches_numpy_along_and_past_the_plan(monkeypatch):

@@ -94,8 +94,9 @@ def test_residual_checkpoint_in_a_direct_env_equals_the_residual_env(tmp_path):
 @pytest.mark.parametrize(
     ("env", "message"),
     [
-        ({"n_uavs": 4}, "n_uavs: trained with 3, this env has 4"),
-        ({"n_obstacles": 2}, "observation width: the network reads"),
+        ({"n_uavs": 4}, r"k_uavs: the network reads the 2 nearest UAVs, this env gives 3 "
+         r"\(set observation.k_uavs=2"),
+        ({"n_obstacles": 2}, "k_obstacles: the network reads the 1 nearest obstacles"),
         ({"action": {"mode": "residual_apf"}}, "action.mode: trained with 'direct'"),
     ],
 )
@@ -167,13 +168,16 @@ def test_tampered_checkpoints_are_rejected(tmp_path):
 
     with pytest.raises(CheckpointError, match="unknown checkpoint format"):
         load_policy(write("a.zip", {**desc, "format": "other/9"}, raw))
-    with pytest.raises(CheckpointError, match="layer 0 has shapes"):
+    with pytest.raises(CheckpointError, match="layout is 58 wide, obs_dim says 59"):
         load_policy(write("b.zip", {**desc, "obs_dim": desc["obs_dim"] + 1}, raw))
+    with pytest.raises(CheckpointError, match=r"layer0.weight.npy: shape \(16, 58\), expected"):
+        v1 = {k: v for k, v in desc.items() if k != "layout"}
+        load_policy(write("b1.zip", {**v1, "format": "uasep-policy/1", "obs_dim": 59}, raw))
     with pytest.raises(CheckpointError, match="invalid checkpoint description"):
         load_policy(write("c.zip", {**desc, "config": {"n_uavs": 99}}, raw))
     buf = io.BytesIO()
     np.savez(buf, obj=np.array([{"a": 1}], dtype=object))
-    with pytest.raises(CheckpointError, match=r"unreadable weights|missing weights"):
+    with pytest.raises(CheckpointError, match=r"unexpected member\(s\) 'obj.npy'"):
         load_policy(write("d.zip", desc, buf.getvalue()))
 
 
@@ -260,7 +264,7 @@ def test_base_gains_only_for_a_residual_policy_flying_its_own_base():
     from uasep_env.policies import APFGains
 
     cfg = make_config(scenario="random")
-    wide = APFGains().scaled(("obs_safe_min",), 2.0)
+    wide = APFGains().scaled(("obstacle_safe_min",), 2.0)
     residual = load_policy(CHECKPOINTS / "ppo_residual_apf.zip", cfg, base_gains=wide)
     assert residual._residual.apf.gains == wide
     with pytest.raises(ValueError, match=r"base_gains=APFGains\(.*a direct policy in a direct"):

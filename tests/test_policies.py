@@ -120,8 +120,8 @@ def test_speed_bound_eq4():
 
 
 def test_gains_validated():
-    with pytest.raises(ValueError, match="k_obs=-1"):
-        APFGains(k_obs=-1.0)
+    with pytest.raises(ValueError, match="k_obstacle=-1"):
+        APFGains(k_obstacle=-1.0)
     with pytest.raises(ValueError, match="unknown policy 'nope'"):
         make_policy("nope", make_config())
 

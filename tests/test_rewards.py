@@ -8,7 +8,7 @@ import pytest
 from uasep_env import make_config
 from uasep_env.config import RewardWeights
 from uasep_env.envs.core import EnvCore
-from uasep_env.rewards import REWARD_TERMS, compute_rewards
+from uasep_env.rewards import REWARD_TERMS, compute_rewards, term_bounds
 
 
 @pytest.fixture
@@ -103,16 +103,10 @@ def test_team_mean_is_numpy_mean_bit_for_bit(n):
 
 
 def _weights_max_penalty(w: RewardWeights) -> float:
-    from uasep_env.rewards import REGION_TERM_CAP
+    """The most a step alive can lose: every per-step penalty at its bound (the term table)."""
+    from uasep_env.rewards import TERMS
 
-    return (
-        w.separation_inner
-        + w.separation_obstacle
-        + REGION_TERM_CAP * w.separation_region
-        + w.deviation
-        + w.control
-        + 4.0 * w.smoothness
-    )
+    return sum(-t.low * getattr(w, t.name) for t in TERMS if t.high <= 0 and not t.per_episode)
 
 
 def test_default_step_reward_is_in_zero_one():
@@ -126,8 +120,12 @@ def test_default_step_reward_is_in_zero_one():
     core.reset(seed=3)
     rng = np.random.default_rng(0)
     alive = np.ones(16, dtype=bool)
+    bounds = term_bounds(core.config.max_steps)
     for _ in range(300):
         res = core.step(rng.uniform(-1, 1, size=(16, 3, 3)), active=alive)
+        for name, (low, high) in bounds.items():  # every term within its table bounds
+            t = res.terms[name][alive]
+            assert (t >= low).all() and (t <= high).all(), name
         no_collision = res.terms["collision"] == 0.0
         r = res.rewards[alive][no_collision[alive]]
         assert (r >= 0.0).all() and (r <= 1.0).all()

@@ -48,8 +48,8 @@ def test_margin_scale_one_is_the_default_gains():
 
     assert tradeoff._scaled(tradeoff.APF.margin_gains, 1.0) == APFGains()
     scaled = tradeoff._scaled(tradeoff.APF.margin_gains, 2.0)
-    assert scaled.obs_safe_min == 2 * APFGains().obs_safe_min
-    assert scaled.k_obs == APFGains().k_obs
+    assert scaled.obstacle_safe_min == 2 * APFGains().obstacle_safe_min
+    assert scaled.k_obstacle == APFGains().k_obstacle
     for m in tradeoff.METHODS:
         assert len(m.values) >= 8, m.name
 
@@ -111,4 +111,3 @@ def test_each_controllers_default_is_the_knee_of_its_shipped_front():
             assert tradeoff.knee(bank)["value"] == m.default, m.name
             controller = m.policy(cfg, m.default)
             assert controller.gains == type(controller)(cfg).gains, m.name
-

@@ -6,7 +6,7 @@ import pytest
 from uasep_env import World, make_config
 from uasep_env.config import SCENARIOS
 
-STATE = ("uav_pos", "uav_vel", "est_pos", "est_vel", "obs_est_pos", "pred_center", "time")
+STATE = ("uav_pos", "uav_vel", "est_pos", "est_vel", "obstacle_est_pos", "pred_center", "time")
 
 
 def _actions(rng, e, n, scale=2.0):
@@ -115,7 +115,7 @@ def test_zero_noise_estimates_are_exact():
     w.reset(seed=0)
     _run(w, 50)
     np.testing.assert_allclose(w.est_pos, w.uav_pos, atol=1e-9)
-    np.testing.assert_allclose(w.obs_est_pos, w.obstacles.pos, atol=1e-9)
+    np.testing.assert_allclose(w.obstacle_est_pos, w.obstacles.pos, atol=1e-9)
 
 
 def test_noise_makes_estimates_differ_and_kalman_helps():

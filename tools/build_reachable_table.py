@@ -14,10 +14,12 @@ certificate. A rebuild with the defaults matches the shipped table to 1.5e-7.
 from __future__ import annotations
 
 import argparse
+import io
 from pathlib import Path
 
 import numpy as np
 
+from uasep_env.atomic import atomic_write
 from uasep_env.reachable.fit import _load_table
 from uasep_env.reachable.optimal import optimal_shape
 from uasep_env.reachable.sets import FloatArray, _h_unit
@@ -47,7 +49,9 @@ def main() -> None:
     args = parser.parse_args()
     u, logr, _ = _load_table()
     tables = {key: build_table(swept, u, logr) for key, swept in (("s", True), ("t", False))}
-    np.savez(args.out, al=u, lr=logr, **tables)
+    buf = io.BytesIO()
+    np.savez(buf, al=u, lr=logr, **tables)
+    atomic_write(args.out, buf.getvalue())
     print(f"wrote {args.out}")
 
 

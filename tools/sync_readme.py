@@ -25,6 +25,7 @@ import re
 import sys
 from pathlib import Path
 
+from uasep_env.atomic import atomic_write
 from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -121,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         return 0
     if new != old:
-        README.write_text(new)
+        atomic_write(README, new)
         print(f"rewrote the result tables of {README}")
     return 0
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ppo_shared import Args, main
+from ppo_shared import Args, cli
 
 #: The residual recipe's defaults (where they differ from the pure policy's).
 RESIDUAL_DEFAULTS = Args(
@@ -28,4 +28,4 @@ RESIDUAL_DEFAULTS = Args(
 )
 
 if __name__ == "__main__":
-    main(defaults=RESIDUAL_DEFAULTS)
+    cli(defaults=RESIDUAL_DEFAULTS)

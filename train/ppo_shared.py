@@ -23,6 +23,15 @@ The defaults are the ones the sweep in ``train/README.md`` chose. A run writes t
   action mode, normalisation and weights; loads without unpickling, runs in numpy);
 * ``validation.json``: the policy and the APF on ``eval_episodes`` validation encounters.
 
+A fresh run refuses a non-empty ``out_dir`` unless ``--overwrite`` (which deletes only the
+files above) or ``--resume`` is given; every file is written atomically, and ``--resume``
+rewinds ``progress.csv`` and the checkpoints to the one it resumes from (:mod:`rundir`).
+A resumed run restores the weights, the optimiser, the normalisation statistics, the
+counters (agent-steps, episodes, the 200-episode window, wall time) and torch's random
+state; it is not bit-exact with an uninterrupted run: the episodes and the rollout in
+progress at the checkpoint are dropped, and the environments restart their episodes from
+their seeds (see ``docs/robustness.md``).
+
 Seeds: training environments are seeded ``seed + e`` inside
 :data:`uasep_env.scenarios.TRAINING_SEEDS`; validation uses
 :data:`~uasep_env.scenarios.VALIDATION_SEEDS`; neither meets the held-out bank
@@ -34,9 +43,12 @@ from __future__ import annotations
 
 import argparse
 import collections
-import csv
 import dataclasses
+import io
 import json
+import os
+import shutil
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -82,7 +94,8 @@ class Args:
     checkpoint_every: int = 2_000_000  # agent-steps
     eval_episodes: int = 50
     out_dir: str = "runs/ppo_shared"
-    resume: str = ""  # a checkpoint directory to continue from
+    resume: str = ""  # a checkpoint directory to continue from (its progress, exactly)
+    overwrite: bool = False  # replace a previous run's files in out_dir (else: refused)
     tensorboard: bool = False
     torch_threads: int = 1
     progress: bool = True
@@ -210,35 +223,67 @@ def export_policy(model: Any, venv: Any, config: Any, args: Args, path: Path, in
 def save_checkpoint(
     model: Any, venv: Any, config: Any, args: Args, directory: Path, info: dict
 ) -> None:
-    """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``."""
+    """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
+
+    The folder is written under a temporary name and renamed into place when complete
+    (:func:`rundir.publish_dir`), so ``directory`` is either the old checkpoint or the new
+    one; ``state.json`` is written last (a folder without it is incomplete).
+    """
+    from rundir import publish_dir
+
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        _write_checkpoint(model, venv, config, args, tmp, info)
+        publish_dir(tmp, directory)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)  # the previous checkpoint stays as it was
+        raise
+
+
+def _write_checkpoint(
+    model: Any, venv: Any, config: Any, args: Args, tmp: Path, info: dict
+) -> None:
     import torch
 
+    from uasep_env.atomic import atomic_write
     from uasep_env.jsonio import dumps
 
-    directory.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
     torch.save(
-        {"policy": model.policy.state_dict(), "optimizer": model.policy.optimizer.state_dict()},
-        directory / "state.pt",
+        {
+            "policy": model.policy.state_dict(),
+            "optimizer": model.policy.optimizer.state_dict(),
+            "torch_rng": torch.get_rng_state(),
+        },
+        buf,
     )
+    atomic_write(tmp / "state.pt", buf.getvalue())
     o, r = venv.obs_rms, venv.ret_rms
+    buf = io.BytesIO()
     np.savez(
-        directory / "normalization.npz",
+        buf,
         obs_mean=o.mean, obs_var=o.var, obs_count=o.count,
         ret_mean=r.mean, ret_var=r.var, ret_count=r.count,
     )  # fmt: skip
-    (directory / "state.json").write_text(
-        dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
-    )
-    export_policy(model, venv, config, args, directory / "policy.zip", info)
+    atomic_write(tmp / "normalization.npz", buf.getvalue())
+    export_policy(model, venv, config, args, tmp / "policy.zip", info)
+    state = dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+    atomic_write(tmp / "state.json", state)
 
 
 def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
     """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling)."""
     import torch
+    from rundir import check_checkpoint
 
+    directory = check_checkpoint(directory)
     state = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
     model.policy.load_state_dict(state["policy"])
     model.policy.optimizer.load_state_dict(state["optimizer"])
+    if "torch_rng" in state:
+        torch.set_rng_state(state["torch_rng"])
     with np.load(directory / "normalization.npz", allow_pickle=False) as z:
         venv.obs_rms.mean, venv.obs_rms.var = z["obs_mean"], z["obs_var"]
         venv.obs_rms.count = float(z["obs_count"])
@@ -261,9 +306,20 @@ CSV_FIELDS = (
 )
 
 
-def make_callback(args: Args, config: Any, venv: Any, wall_offset: float, total: int) -> Any:
-    """The SB3 callback: progress bar, learning curve rows, checkpoints, wall budget."""
+def make_callback(
+    args: Args, config: Any, venv: Any, wall_offset: float, total: int, resumed: dict | None = None
+) -> Any:
+    """The SB3 callback: progress bar, learning curve rows, checkpoints, wall budget.
+
+    ``resumed``: the ``state.json`` of the checkpoint a run resumes from (its episode count
+    and 200-episode window continue).
+    """
+    from rundir import ProgressLog
     from stable_baselines3.common.callbacks import BaseCallback
+
+    from uasep_env.atomic import atomic_symlink
+
+    resumed = resumed or {}
 
     out = Path(args.out_dir)
     n_uavs = config.n_uavs
@@ -281,16 +337,14 @@ def make_callback(args: Args, config: Any, venv: Any, wall_offset: float, total:
             self.iterations = self.num_timesteps // (args.n_envs * n_uavs * args.n_steps)
             for q in self._actor_params():
                 q.requires_grad_(self.iterations >= args.critic_warmup)
-            self.window: collections.deque = collections.deque(maxlen=200)
-            self.episodes = 0
+            self.window: collections.deque = collections.deque(
+                (tuple(e) for e in resumed.get("window", ())), maxlen=200
+            )
+            self.episodes = int(resumed.get("episodes", 0))
             self.next_ckpt = (
                 self.num_timesteps // args.checkpoint_every + 1
             ) * args.checkpoint_every
-            new = not (out / "progress.csv").exists()
-            self.csv_file = (out / "progress.csv").open("a", newline="")
-            self.csv = csv.DictWriter(self.csv_file, fieldnames=CSV_FIELDS)
-            if new:
-                self.csv.writeheader()
+            self.csv = ProgressLog(out / "progress.csv", CSV_FIELDS)
             self.bar = None
             if args.progress:
                 from tqdm import tqdm
@@ -325,7 +379,8 @@ def make_callback(args: Args, config: Any, venv: Any, wall_offset: float, total:
                     self.episodes += 1
             if self.bar is not None:
                 self.bar.update(self.num_timesteps - self.bar.n)
-            if self.num_timesteps >= self.next_ckpt:
+            # The last one is saved at the end (after the final update), not twice.
+            if self.next_ckpt <= self.num_timesteps < total:
                 self.checkpoint()
                 self.next_ckpt += args.checkpoint_every
             return self.wall() < args.max_minutes * 60.0
@@ -338,8 +393,7 @@ def make_callback(args: Args, config: Any, venv: Any, wall_offset: float, total:
             s = self.summary()
             row = {"agent_steps": self.num_timesteps, "wall_s": round(self.wall(), 2),
                    "episodes": self.episodes, **s}  # fmt: skip
-            self.csv.writerow(row)
-            self.csv_file.flush()
+            self.csv.write(row)
             if self.bar is not None and s:
                 self.bar.set_postfix(
                     ret=f"{s['return_mean']:.0f}",
@@ -358,82 +412,52 @@ def make_callback(args: Args, config: Any, venv: Any, wall_offset: float, total:
         def checkpoint(self) -> None:
             info = self.info()
             d = out / "checkpoints" / f"step_{self.num_timesteps}"
-            save_checkpoint(self.model, venv, config, args, d, info)
-            latest = out / "checkpoints" / "latest"
-            if latest.is_symlink() or latest.exists():
-                latest.unlink()
-            latest.symlink_to(d.name)
+            window = [[float(x) for x in e] for e in self.window]
+            save_checkpoint(self.model, venv, config, args, d, {**info, "window": window})
+            atomic_symlink(d.name, out / "checkpoints" / "latest")  # once d is complete
 
         def _on_training_end(self) -> None:
             self.checkpoint()
-            self.csv_file.close()
+            self.csv.close()
             if self.bar is not None:
                 self.bar.close()
 
     return Progress()
 
 
-def plot_curves(csv_path: Path, png_path: Path, title: str = "") -> Path:
-    """Learning curves (return, collision and loss-of-separation rates, deviation) as PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    with csv_path.open() as f:
-        # Rows whose window holds fewer than 20 episodes (the run's first) are left out.
-        rows = [r for r in csv.DictReader(f) if r.get("return_mean") and int(r["episodes"]) >= 20]
-    data = {k: np.array([float(r[k]) for r in rows]) for k in CSV_FIELDS}
-    fig, axes = plt.subplots(2, 4, figsize=(16, 6.5), sharey="col")
-    panels = (
-        ("return_mean", "mean return per agent"),
-        ("collision_rate", "collision rate"),
-        ("loss_of_separation_rate", "loss-of-separation rate"),
-        ("max_deviation_mean", "mean max deviation (m)"),
-    )
-    for row, (x_key, x_label, scale) in enumerate(
-        (("agent_steps", "agent-steps (millions)", 1e-6), ("wall_s", "wall time (min)", 1 / 60))
-    ):
-        for col, (key, label) in enumerate(panels):
-            ax = axes[row, col]
-            ax.plot(data[x_key] * scale, data[key], lw=1.2)
-            ax.set_xlabel(x_label)
-            ax.set_title(label, fontsize=10)
-            ax.grid(alpha=0.3)
-    fig.suptitle(title or csv_path.parent.name)
-    fig.tight_layout()
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png_path, dpi=90)
-    plt.close(fig)
-    return png_path
-
-
 def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     """Train (or resume), export the policy, validate against the APF; returns the summary."""
     args = parse_args(argv, defaults)
     import torch  # lazy: the training extra
+    from rundir import check_checkpoint, plot_curves, prepare_out_dir, rewind
 
     torch.set_num_threads(args.torch_threads)
     config = make_env_config(args)
     out = Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    resume = check_checkpoint(Path(args.resume)) if args.resume else None
+    prepare_out_dir(out, args.resume, args.overwrite)
     venv, model = build(args, config)
-    wall_offset = 0.0
-    if args.resume:
-        info = load_checkpoint(model, venv, Path(args.resume))
-        wall_offset = float(info["wall_s"])
-        print(f"resumed from {args.resume} at {model.num_timesteps:,} agent-steps")
+    resumed: dict = {}
+    if resume is not None:
+        resumed = load_checkpoint(model, venv, resume)
+        rewind(out, CSV_FIELDS, model.num_timesteps)
+        print(f"resumed from {resume} at {model.num_timesteps:,} agent-steps")
     remaining = max(0, args.total_timesteps - model.num_timesteps)
-    callback = make_callback(args, config, venv, wall_offset, args.total_timesteps)
-    model.learn(
-        total_timesteps=remaining,
-        callback=callback,
-        reset_num_timesteps=not args.resume,
-        tb_log_name=args.action_mode,
-    )
-    info = callback.info()
+    if remaining or resume is None:
+        callback = make_callback(
+            args, config, venv, float(resumed.get("wall_s", 0.0)), args.total_timesteps, resumed
+        )
+        model.learn(
+            total_timesteps=remaining,
+            callback=callback,
+            reset_num_timesteps=resume is None,
+            tb_log_name=args.action_mode,
+        )
+        info = callback.info()
+    else:  # resumed at the end: only the final outputs are (re)written
+        info = {k: v for k, v in resumed.items() if k not in ("window", "args")}
     policy_path = export_policy(model, venv, config, args, out / "policy.zip", info)
-    plot_curves(out / "progress.csv", out / "curves.png", f"PPO ({args.action_mode})")
+    plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS, f"PPO ({args.action_mode})")
 
     return write_validation(out, config, policy_path, info, args.eval_episodes)
 
@@ -442,6 +466,7 @@ def write_validation(
     out: Path, config: Any, policy_path: Path, info: dict, episodes: int
 ) -> dict:
     """The policy and the APF on ``episodes`` validation encounters: ``validation.json``."""
+    from uasep_env.atomic import atomic_write
     from uasep_env.evaluation import evaluate
     from uasep_env.jsonio import dumps
     from uasep_env.policies import load_policy
@@ -462,10 +487,18 @@ def write_validation(
                 if f"episode.{k}" in agg
             }
     text = dumps(summary, indent=2, default=str)
-    (out / "validation.json").write_text(text)
+    atomic_write(out / "validation.json", text + "\n")
     print(text)
     return summary
 
 
+def cli(defaults: Args | None = None) -> None:
+    """Run :func:`main`; a file that cannot be written (a full disk) is one line, status 1."""
+    try:
+        main(defaults=defaults)
+    except OSError as err:
+        sys.exit(f"{Path(sys.argv[0]).name}: error: {err}")
+
+
 if __name__ == "__main__":
-    main()
+    cli()

@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import argparse
 import csv
-import shutil
 from pathlib import Path
 
 from uasep_env import make_config
+from uasep_env.atomic import atomic_output, atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate
 from uasep_env.policies import load_policy
 from uasep_env.scenarios import VALIDATION_SEEDS
@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> Path:
         rows, key=lambda r: tuple(r[k] for k in KEYS[:3])
     )[:1]
     best = min(pool, key=lambda r: r["max_deviation"])
-    with (args.run / "selection.csv").open("w", newline="") as fh:
+    with atomic_output(args.run / "selection.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -74,8 +74,7 @@ def main(argv: list[str] | None = None) -> Path:
               f"{', '.join(f'{k} {r[k]:.3f}' for k in KEYS)}, safe={r['safe']}")  # fmt: skip
     chosen = Path(best["policy"])
     if args.copy_to is not None:
-        args.copy_to.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(chosen, args.copy_to)
+        atomic_write(args.copy_to, chosen.read_bytes())
         print(f"copied {chosen} -> {args.copy_to}")
     return chosen
 

@@ -22,6 +22,8 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from uasep_env.atomic import atomic_output, atomic_write
+
 HERE = Path(__file__).resolve().parent
 
 
@@ -52,8 +54,11 @@ def _run(setting: dict[str, str], args: argparse.Namespace) -> dict:
         ]  # fmt: skip
         for k, v in setting.items():
             cmd += ["--" + k.replace("_", "-"), v]
+        # A killed run continues from its last checkpoint; otherwise its files are replaced.
+        latest = out / "checkpoints" / "latest"
+        cmd += ["--resume", str(latest)] if latest.exists() else ["--overwrite"]
         out.mkdir(parents=True, exist_ok=True)
-        with (out / "log.txt").open("w") as log:
+        with (out / "log.txt").open("a") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
     summary = json.loads((out / "validation.json").read_text())
     val = summary["validation"]["learned"]
@@ -86,14 +91,14 @@ def main(argv: list[str] | None = None) -> list[dict]:
     with ThreadPoolExecutor(max_workers=args.parallel) as pool:
         rows = list(pool.map(lambda s: _run(s, args), settings))
     out = Path(args.out)
-    with (out / "sweep.csv").open("w", newline="") as f:
+    with atomic_output(out / "sweep.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     head = list(rows[0])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(str(r[k]) for k in head) + " |" for r in rows]
-    (out / "sweep.md").write_text("\n".join(lines) + "\n")
+    atomic_write(out / "sweep.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     return rows
 

@@ -77,5 +77,5 @@ def nearest_separations(
         ``(uav, obstacle)``, each ``(E, N)`` (m), ``inf`` where there is none.
     """
     d_uav = uav_distances(uav_pos, self_distance=np.inf).min(axis=-1)
-    d_obs = obstacle_distances(uav_pos, obstacle_pos, active).min(axis=-1, initial=np.inf)
-    return d_uav, d_obs
+    d_obstacle = obstacle_distances(uav_pos, obstacle_pos, active).min(axis=-1, initial=np.inf)
+    return d_uav, d_obstacle

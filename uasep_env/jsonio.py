@@ -17,13 +17,16 @@ import dataclasses
 import gzip
 import json
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["OMIT", "PLAIN", "dumps", "to_plain", "write_json"]
+from uasep_env.atomic import atomic_write
+
+__all__ = ["OMIT", "PLAIN", "dumps", "json_depth", "to_plain", "write_json"]
 
 #: Field-metadata key: a function applied to the field's value before conversion.
 PLAIN = "uasep_plain"
@@ -83,7 +86,8 @@ def write_json(value: Any, path: str | Path) -> Path:
     """Write :func:`dumps` (indented, newline-terminated) to ``path``, creating its folders.
 
     A path ending in ``.gz`` is gzip-compressed with a zero time stamp, so the same value
-    gives the same bytes (per-episode results of large banks shrink about tenfold).
+    gives the same bytes (per-episode results of large banks shrink about tenfold). The file
+    is written atomically (:func:`uasep_env.atomic.atomic_write`).
 
     Args:
         value: Anything :func:`to_plain` takes.
@@ -93,11 +97,26 @@ def write_json(value: Any, path: str | Path) -> Path:
         The path written.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     data = (dumps(value, indent=2) + "\n").encode("utf-8")
     if path.suffix == ".gz":
-        with path.open("wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz:
-            gz.write(data)
-    else:
-        path.write_bytes(data)
-    return path
+        data = gzip.compress(data, mtime=0)
+    return atomic_write(path, data)
+
+
+def json_depth(text: str) -> int:
+    """Deepest ``[``/``{`` nesting of JSON text, found without parsing it (strings skipped).
+
+    Lets a reader refuse deeply nested input before :func:`json.loads` recurses into it.
+
+    Args:
+        text: JSON text (need not be valid).
+
+    Returns:
+        The largest number of open brackets at any point.
+    """
+    # The unrolled form keeps the regex engine from stacking one frame per character.
+    bare = re.sub(r'"[^"\\]*(?:\\.[^"\\]*)*"', '""', text)
+    codes = np.frombuffer(bare.encode("utf-8"), np.uint8)
+    opens = (codes == ord("[")) | (codes == ord("{"))
+    closes = (codes == ord("]")) | (codes == ord("}"))
+    return int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))

@@ -9,9 +9,9 @@ Term                       Value per agent (unweighted)
 =========================  ===========================================================
 ``separation_inner``       ``-max(0, 1 - d_uav / d_sep)^2``: closest UAV over the step
                            (``d_sep`` = ``uav.separation_distance``); 0 when separated
-``separation_obstacle``    ``-max(0, 1 - d_obs / d_obs_sep)^2``: closest obstacle centre
-                           over the step (``d_obs_sep`` = ``uav.obstacle_separation``)
-``separation_region``      ``-min(2, max(0, 1 - d_region / d_obs_sep))``: signed distance
+``separation_obstacle``    ``-max(0, 1 - d_obstacle / d_osep)^2``: closest obstacle
+                           centre over the step (``d_osep`` = ``uav.obstacle_separation``)
+``separation_region``      ``-min(2, max(0, 1 - d_region / d_osep))``: signed distance
                            to the nearest predicted reachable ellipsoid; grows as the UAV
                            moves towards and into the region
 ``deviation``              ``-d / (d + 20 m)``, ``d = |p - p_planned|``: in ``(-1, 0]``,
@@ -57,6 +57,7 @@ never collide).
 from __future__ import annotations
 
 import functools
+from collections import namedtuple
 from typing import NamedTuple
 
 import numpy as np
@@ -69,26 +70,63 @@ __all__ = [
     "DEVIATION_SCALE_M",
     "REGION_TERM_CAP",
     "REWARD_TERMS",
+    "TERMS",
+    "RewardTerm",
     "collisions",
     "compute_rewards",
     "team_mean",
+    "term_bounds",
 ]
 
-#: Names of the reward terms, in reporting order.
-REWARD_TERMS = (
-    "separation_inner",
-    "separation_obstacle",
-    "separation_region",
-    "deviation",
-    "control",
-    "smoothness",
-    "collision",
-    "progress",
-)
 #: Deviation (m) at which the deviation term is -1/2 (it tends to -1 far off the plan).
 DEVIATION_SCALE_M = 20.0
 #: Cap of the region term's intrusion depth (units of ``uav.obstacle_separation``).
 REGION_TERM_CAP = 2.0
+
+
+class RewardTerm(NamedTuple):
+    """One row of the term table.
+
+    Attributes:
+        name: The term's name (a field of :class:`~uasep_env.config.RewardWeights` too).
+        low: Least value of the unweighted term in one step.
+        high: Greatest value of the unweighted term in one step.
+        per_episode: Whether ``low`` and ``high`` are in units of ``max_steps`` (the
+            collision term costs the whole episode's budget).
+    """
+
+    name: str
+    low: float
+    high: float
+    per_episode: bool = False
+
+
+#: The reward terms, in reporting order, with their per-step bounds: the one list the
+#: numpy terms (:func:`_term_values`), the compiled kernel's term indices
+#: (:data:`_TERM_INDEX`), the weights and the tests read.
+TERMS: tuple[RewardTerm, ...] = (
+    RewardTerm("separation_inner", -1.0, 0.0),
+    RewardTerm("separation_obstacle", -1.0, 0.0),
+    RewardTerm("separation_region", -REGION_TERM_CAP, 0.0),
+    RewardTerm("deviation", -1.0, 0.0),
+    RewardTerm("control", -1.0, 0.0),  # each axis of the command is within max_accel
+    RewardTerm("smoothness", -4.0, 0.0),  # a full reversal on every axis
+    RewardTerm("collision", -1.0, 0.0, per_episode=True),
+    RewardTerm("progress", 1.0, 1.0),
+)
+#: Names of the reward terms, in reporting order.
+REWARD_TERMS: tuple[str, ...] = tuple(t.name for t in TERMS)
+#: Each term's row in the kernel's ``(T, E, N)`` terms array, by name (the kernel writes
+#: ``terms[index.<name>, e, i]``, never a literal row).
+_TERM_INDEX = namedtuple("TermIndex", REWARD_TERMS)(*range(len(REWARD_TERMS)))
+
+
+def term_bounds(max_steps: int) -> dict[str, tuple[float, float]]:
+    """Each term's ``(low, high)`` per step for an episode of ``max_steps`` steps."""
+    return {
+        t.name: (t.low * max_steps, t.high * max_steps) if t.per_episode else (t.low, t.high)
+        for t in TERMS
+    }
 
 
 def team_mean(x: np.ndarray) -> np.ndarray:
@@ -109,22 +147,27 @@ def team_mean(x: np.ndarray) -> np.ndarray:
 
 def collisions(world: World) -> np.ndarray:
     """``(E, N)`` whether each UAV collided during the last step (true state)."""
-    return _collided(world.min_uav_dist, world.min_obs_dist, world.config.uav.collision_distance)
+    return _collided(
+        world.min_uav_dist, world.min_obstacle_dist, world.config.uav.collision_distance
+    )
 
 
-def _collided(d_uav: np.ndarray, d_obs: np.ndarray, d_col: float) -> np.ndarray:
-    return (d_uav < d_col) | (d_obs < d_col)
+def _collided(d_uav: np.ndarray, d_obstacle: np.ndarray, d_col: float) -> np.ndarray:
+    return (d_uav < d_col) | (d_obstacle < d_col)
 
 
 class _Inputs(NamedTuple):
-    """The world's arrays the reward terms are computed from (``E`` envs, ``N`` UAVs)."""
+    """The world's arrays the reward terms are computed from (``E`` envs, ``N`` UAVs).
+
+    Built in one place, :func:`_gather_inputs`, by keyword.
+    """
 
     uav_pos: np.ndarray  # (E, N, 3) true positions (m)
     plan_pos: np.ndarray  # (E, N, 3) planned positions (m)
     cmd: np.ndarray  # (E, N, 3) commanded accelerations (m/s^2)
     prev_cmd: np.ndarray  # (E, N, 3) the previous command (m/s^2)
     min_uav_dist: np.ndarray  # (E, N) closest UAV over the step (m)
-    min_obs_dist: np.ndarray  # (E, N) closest obstacle centre over the step (m)
+    min_obstacle_dist: np.ndarray  # (E, N) closest obstacle centre over the step (m)
     region: np.ndarray  # (E, N, M) signed distance to each reachable ellipsoid (m), inf if off
 
 
@@ -136,7 +179,7 @@ class _Constants(NamedTuple):
     obstacle_separation: float  # m
     collision_distance: float  # m
     deviation_scale: float  # m, DEVIATION_SCALE_M
-    region_cap: float  # REGION_TERM_CAP
+    region_cap: float  # the region term's bound, REGION_TERM_CAP
     max_steps: float  # the collision term's magnitude
 
 
@@ -156,15 +199,7 @@ def compute_rewards(
     Returns:
         ``(rewards, terms)``: ``(E, N)`` rewards and a dict of ``(E, N)`` unweighted terms.
     """
-    x = _Inputs(
-        world.uav_pos,
-        world.plan_pos,
-        world.accel_cmd,
-        world.prev_accel_cmd,
-        world.min_uav_dist,
-        world.min_obs_dist,
-        world.region_distances() if region is None else region,
-    )
+    x = _gather_inputs(world, region)
     w, c = _vectors(weights, world.config.uav, world.config.max_steps)
     own, stacked = _weighted_terms(x, c, w)
     terms = dict(zip(REWARD_TERMS, stacked, strict=True))
@@ -173,24 +208,37 @@ def compute_rewards(
     return own, terms
 
 
+def _gather_inputs(world: World, region: np.ndarray | None = None) -> _Inputs:
+    """The world's arrays the terms read (``region``: precomputed true region distances)."""
+    return _Inputs(
+        uav_pos=world.uav_pos,
+        plan_pos=world.plan_pos,
+        cmd=world.accel_cmd,
+        prev_cmd=world.prev_accel_cmd,
+        min_uav_dist=world.min_uav_dist,
+        min_obstacle_dist=world.min_obstacle_dist,
+        region=world.region_distances() if region is None else region,
+    )
+
+
 @functools.lru_cache(maxsize=64)
 def _vectors(weights: RewardWeights, u: UAVConfig, max_steps: int) -> tuple[np.ndarray, _Constants]:
     """The weights in term order (read-only) and the constants (configs are frozen)."""
     w = np.array([getattr(weights, name) for name in REWARD_TERMS])
     w.flags.writeable = False
     c = _Constants(
-        u.max_accel,
-        u.separation_distance,
-        u.obstacle_separation,
-        u.collision_distance,
-        DEVIATION_SCALE_M,
-        REGION_TERM_CAP,
-        float(max_steps),
+        max_accel=u.max_accel,
+        separation_distance=u.separation_distance,
+        obstacle_separation=u.obstacle_separation,
+        collision_distance=u.collision_distance,
+        deviation_scale=DEVIATION_SCALE_M,
+        region_cap=-TERMS[REWARD_TERMS.index("separation_region")].low,
+        max_steps=float(max_steps),
     )
     return w, c
 
 
-@compiled_twin("reward_terms")
+@compiled_twin("reward_terms", index=_TERM_INDEX)
 def _weighted_terms(x: _Inputs, c: _Constants, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The unweighted terms and their weighted sum, before any team sharing.
 
@@ -203,16 +251,25 @@ def _weighted_terms(x: _Inputs, c: _Constants, w: np.ndarray) -> tuple[np.ndarra
         ``(own, terms)``: ``(E, N)`` weighted sums and ``(T, E, N)`` unweighted terms in
         :data:`REWARD_TERMS` order.
     """
+    terms = _term_values(x, c)
+    stacked = np.stack([terms[name] for name in REWARD_TERMS])
+    own = np.zeros_like(x.min_uav_dist)
+    for k in range(len(REWARD_TERMS)):
+        own += w[k] * stacked[k]
+    return own, stacked
+
+
+def _term_values(x: _Inputs, c: _Constants) -> dict[str, np.ndarray]:
+    """Every term of :data:`TERMS`, by name, ``(E, N)`` each (the numpy reference)."""
     d_region = x.region.min(axis=-1, initial=np.inf)
     dev = np.linalg.norm(x.uav_pos - x.plan_pos, axis=-1)
     cmd = x.cmd / c.max_accel
     dcmd = (x.cmd - x.prev_cmd) / c.max_accel
-    collided = _collided(x.min_uav_dist, x.min_obs_dist, c.collision_distance)
-    terms = {
+    collided = _collided(x.min_uav_dist, x.min_obstacle_dist, c.collision_distance)
+    d_obstacle = x.min_obstacle_dist
+    return {
         "separation_inner": -(np.maximum(0.0, 1.0 - x.min_uav_dist / c.separation_distance) ** 2),
-        "separation_obstacle": -(
-            np.maximum(0.0, 1.0 - x.min_obs_dist / c.obstacle_separation) ** 2
-        ),
+        "separation_obstacle": -(np.maximum(0.0, 1.0 - d_obstacle / c.obstacle_separation) ** 2),
         "separation_region": -np.minimum(
             c.region_cap, np.maximum(0.0, 1.0 - d_region / c.obstacle_separation)
         ),
@@ -223,8 +280,3 @@ def _weighted_terms(x: _Inputs, c: _Constants, w: np.ndarray) -> tuple[np.ndarra
         * np.broadcast_to(collided.any(axis=-1, keepdims=True), x.min_uav_dist.shape),
         "progress": np.ones_like(x.min_uav_dist),
     }
-    stacked = np.stack([terms[name] for name in REWARD_TERMS])
-    own = np.zeros_like(x.min_uav_dist)
-    for k in range(len(REWARD_TERMS)):
-        own += w[k] * stacked[k]
-    return own, stacked

@@ -29,10 +29,12 @@ bit.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import ClassVar
 
 import numpy as np
 
 from uasep_env import reachable
+from uasep_env._deprecation import RENAMED_WORLD_ATTRIBUTES, RenamedAttributes
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_positive_int, check_seed, is_int
 from uasep_env.dynamics import measure, step_double_integrator
@@ -46,7 +48,7 @@ from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, place_obstacles, samp
 __all__ = ["World"]
 
 
-class World:
+class World(RenamedAttributes):
     """``n_envs`` batched worlds of UAVs and obstacles.
 
     Args:
@@ -69,8 +71,8 @@ class World:
         est_pos: ``(E, N, 3)`` estimated UAV positions (m).
         est_vel: ``(E, N, 3)`` estimated UAV velocities (m/s).
         obstacles: The obstacles' true state (:class:`ObstacleState`).
-        obs_est_pos: ``(E, M, 3)`` estimated obstacle positions (m).
-        obs_est_vel: ``(E, M, 3)`` estimated obstacle ground velocities (m/s).
+        obstacle_est_pos: ``(E, M, 3)`` estimated obstacle positions (m).
+        obstacle_est_vel: ``(E, M, 3)`` estimated obstacle ground velocities (m/s).
         pred_center: ``(E, M, 3)`` centres of the predicted reachable ellipsoids (m).
         pred_axes: ``(E, M, 3)`` their semi-axes (longitudinal, lateral, vertical) (m).
         pred_heading: ``(E, M)`` their headings (rad).
@@ -84,7 +86,7 @@ class World:
         plan_pos: ``(E, N, 3)`` each UAV's planned position now (m).
         plan_vel: ``(E, N, 3)`` each UAV's planned velocity now (m/s).
         min_uav_dist: ``(E, N)`` smallest distance to another UAV over the last env step (m).
-        min_obs_dist: ``(E, N)`` smallest distance to an active obstacle over it (m).
+        min_obstacle_dist: ``(E, N)`` smallest distance to an active obstacle over it (m).
         families: Scenario family of each environment's episode.
     """
 
@@ -121,8 +123,8 @@ class World:
         self.est_pos = np.zeros((e, n, 3))
         self.est_vel = np.zeros((e, n, 3))
         self.obstacles = ObstacleState(e, m)
-        self.obs_est_pos = np.zeros((e, m, 3))
-        self.obs_est_vel = np.zeros((e, m, 3))
+        self.obstacle_est_pos = np.zeros((e, m, 3))
+        self.obstacle_est_vel = np.zeros((e, m, 3))
         self.pred_offset = np.zeros((e, m))
         self.pred_center = np.zeros((e, m, 3))
         self.pred_axes = np.ones((e, m, 3))
@@ -134,11 +136,11 @@ class World:
         self._plan_offsets = segment_offsets(self.plan.direction, self.slots)
         self._refresh_plan()
         self.min_uav_dist = np.full((e, n), np.inf)
-        self.min_obs_dist = np.full((e, n), np.inf)
+        self.min_obstacle_dist = np.full((e, n), np.inf)
         self.families: list[str] = [""] * e
         # Obstacle tracks: zero known input; process noise covers a full-rate turn's
         # lateral acceleration v * w_max (at least 0.1 m/s^2).
-        self._obs_kf = KalmanModel(
+        self._obstacle_kf = KalmanModel(
             cfg.dt,
             max(cfg.obstacle.speed * cfg.obstacle.max_turn_rate, 0.1),
             nz.obstacle_position_std,
@@ -216,7 +218,7 @@ class World:
             # Inflations keep the true obstacle inside despite wind drift and the track error.
             pred = cfg.prediction
             wind_speed = np.linalg.norm(ob.wind[mask], axis=-1)[:, None]
-            track_err = 3.0 * self._obs_kf.steady_state_position_std()
+            track_err = 3.0 * self._obstacle_kf.steady_state_position_std()
             offset, axes = reachable.ellipsoid(
                 ob.speed[mask],
                 ob.max_turn_rate[mask],
@@ -270,7 +272,7 @@ class World:
         self.prev_accel_cmd[...] = self.accel_cmd
         np.minimum(np.maximum(cmd, -cfg.uav.max_accel), cfg.uav.max_accel, out=self.accel_cmd)
         self.min_uav_dist.fill(np.inf)
-        self.min_obs_dist.fill(np.inf)
+        self.min_obstacle_dist.fill(np.inf)
         for _ in range(cfg.decision_interval):
             self._physics_step(active)
         self.steps += 1
@@ -318,6 +320,7 @@ class World:
         """``(E, N, 3)`` each UAV's planned velocity now (m/s), read-only."""
         return self._plan_arrays()[3]
 
+    _RENAMED: ClassVar[dict[str, str]] = RENAMED_WORLD_ATTRIBUTES  # read with a warning
     _STATE = (
         "time",
         "steps",
@@ -329,14 +332,14 @@ class World:
         "prev_accel_cmd",
         "est_pos",
         "est_vel",
-        "obs_est_pos",
-        "obs_est_vel",
+        "obstacle_est_pos",
+        "obstacle_est_vel",
         "pred_center",
         "pred_heading",
         "pred_cos",
         "pred_sin",
         "min_uav_dist",
-        "min_obs_dist",
+        "min_obstacle_dist",
     )
     _OBSTACLE_STATE = ("pos", "heading", "turn_rate", "climb_rate")
 
@@ -395,20 +398,22 @@ class World:
         z_meas = z[:, n * 3 : n * 9].reshape(-1, n, 6)
         mp, mv = measure(self.uav_pos[r], self.uav_vel[r], z_meas[..., :3], z_meas[..., 3:])
         if m:
-            obs_vel = obstacle_velocity(self.obstacles, None if mask is None else mask)
+            obstacle_vel = obstacle_velocity(self.obstacles, None if mask is None else mask)
             z_obs = z[:, n * 9 :].reshape(-1, m, 6)
-            omp, omv = measure(self.obstacles.pos[r], obs_vel, z_obs[..., :3], z_obs[..., 3:])
+            omp, omv = measure(self.obstacles.pos[r], obstacle_vel, z_obs[..., :3], z_obs[..., 3:])
         if initialise or not cfg.prediction.kalman:
             self.est_pos[r], self.est_vel[r] = mp, mv
             if m:
-                self.obs_est_pos[r], self.obs_est_vel[r] = omp, omv
+                self.obstacle_est_pos[r], self.obstacle_est_vel[r] = omp, omv
             if initialise:
                 self._kf_count[r] = 0
             return
         self._kf_count += 1
         self._uav_kf.update(self.est_pos, self.est_vel, known_accel, mp, mv, self._kf_count)
         if m:
-            self._obs_kf.update(self.obs_est_pos, self.obs_est_vel, None, omp, omv, self._kf_count)
+            self._obstacle_kf.update(
+                self.obstacle_est_pos, self.obstacle_est_vel, None, omp, omv, self._kf_count
+            )
 
     # ------------------------------------------------------------------ prediction
     def _predict_regions(self, mask: np.ndarray | None = None) -> None:
@@ -419,8 +424,8 @@ class World:
         if not self.n_obstacles:
             return
         r = slice(None) if mask is None else mask
-        est_pos, offset = self.obs_est_pos[r], self.pred_offset[r]
-        air = self.obs_est_vel[r] - self.obstacles.wind[r, None, :]  # heading: airspeed's
+        est_pos, offset = self.obstacle_est_pos[r], self.pred_offset[r]
+        air = self.obstacle_est_vel[r] - self.obstacles.wind[r, None, :]  # heading: airspeed's
         heading = np.arctan2(air[..., 1], air[..., 0])
         cos_h, sin_h = np.cos(heading), np.sin(heading)
         self.pred_heading[r] = heading
@@ -433,13 +438,13 @@ class World:
 
     # ------------------------------------------------------------------ safety
     def _update_safety(self, reset_mask: np.ndarray | None = None) -> None:
-        d_uav, d_obs = self.separations()
+        d_uav, d_obstacle = self.separations()
         if reset_mask is not None:
             self.min_uav_dist[reset_mask] = d_uav[reset_mask]
-            self.min_obs_dist[reset_mask] = d_obs[reset_mask]
+            self.min_obstacle_dist[reset_mask] = d_obstacle[reset_mask]
         else:
             np.minimum(self.min_uav_dist, d_uav, out=self.min_uav_dist)
-            np.minimum(self.min_obs_dist, d_obs, out=self.min_obs_dist)
+            np.minimum(self.min_obstacle_dist, d_obstacle, out=self.min_obstacle_dist)
 
     # ------------------------------------------------------------------ queries
     def separations(self) -> tuple[np.ndarray, np.ndarray]:

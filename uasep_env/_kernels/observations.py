@@ -50,11 +50,12 @@ def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_env(e, x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+def _observe_env(e, x, scales, cols, out):  # noqa: ANN001, ANN202
     """Environment ``e`` of :func:`uasep_env.observation._assemble`, every agent.
 
     ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays, ``cols`` the
-    :data:`uasep_env.observation.COLUMNS` named tuple of column offsets.
+    layout's :class:`uasep_env.observation_layout.Columns`: where each feature goes (-1 when
+    the layout lacks it), the neighbour counts and the block widths.
     """
     pos, vel = x.pos, x.vel
     # The estimated formation (eqs. 5-7): centre, mean velocity and frame, once per env.
@@ -64,50 +65,66 @@ def _observe_env(e, x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, 
     ct, st, cp, sp = _frame(mv0, mv1, mv2, d[e, 0], d[e, 1], d[e, 2], scales[5])
     frame = (c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp)
     for i in range(pos.shape[1]):
-        _observe_agent(e, i, frame, x, scales, cols, k_u, k_o, self_dim, out)
+        _observe_agent(e, i, frame, x, scales, cols, out)
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_agent(e, i, frame, x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
-    """UAV ``i`` of environment ``e``; ``frame`` is the formation's, from :func:`_observe_env`."""
+def _put3(out, e, i, col, v0, v1, v2, clip):  # noqa: ANN001, ANN202
+    """A 3-vector feature at ``col``, unless the layout lacks it (``col < 0``)."""
+    if col >= 0:
+        _put(out, e, i, col, v0, clip)
+        _put(out, e, i, col + 1, v1, clip)
+        _put(out, e, i, col + 2, v2, clip)
+
+
+@numba.njit(inline="always", **_JIT)
+def _put1(out, e, i, col, v, clip):  # noqa: ANN001, ANN202
+    """A scalar feature at ``col``, unless the layout lacks it (``col < 0``)."""
+    if col >= 0:
+        _put(out, e, i, col, v, clip)
+
+
+@numba.njit(inline="always", **_JIT)
+def _observe_agent(e, i, frame, x, scales, cols, out):  # noqa: ANN001, ANN202
+    """UAV ``i`` of environment ``e``; ``frame`` is the formation's, from :func:`_observe_env`.
+
+    Every feature is written at its column of ``cols`` relative to its block, and skipped
+    when that is -1.
+    """
     pos, vel = x.pos, x.vel
     n = pos.shape[1]
     m = x.region.shape[2]
     ps, vs, acs, sensing, clip = scales[0], scales[1], scales[2], scales[3], np.float32(scales[4])
     c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp = frame
+    p0, p1, p2 = pos[e, i, 0], pos[e, i, 1], pos[e, i, 2]
     # This UAV's slot (eq. 7).
-    p0, p1, p2 = x.pattern[e, i, 0], x.pattern[e, i, 1], x.pattern[e, i, 2]
+    q0, q1, q2 = x.pattern[e, i, 0], x.pattern[e, i, 1], x.pattern[e, i, 2]
     # Rows of the rotation as formation.rotate multiplies them (the zero included).
-    slot0 = c0 + ((-st * p0 + (cp * ct) * p1) + (-ct * sp) * p2)
-    slot1 = c1 + ((ct * p0 + (cp * st) * p1) + (-st * sp) * p2)
-    slot2 = c2 + ((0.0 * p0 + (-sp) * p1) + (-cp) * p2)
+    slot0 = c0 + ((-st * q0 + (cp * ct) * q1) + (-ct * sp) * q2)
+    slot1 = c1 + ((ct * q0 + (cp * st) * q1) + (-st * sp) * q2)
+    slot2 = c2 + ((0.0 * q0 + (-sp) * q1) + (-cp) * q2)
     wp_dist = _norm3(x.final_wp[e, 0] - c0, x.final_wp[e, 1] - c1, x.final_wp[e, 2] - c2)
-    slot = cols.slot_offset
-    _put(out, e, i, slot, (slot0 - pos[e, i, 0]) / ps, clip)
-    _put(out, e, i, slot + 1, (slot1 - pos[e, i, 1]) / ps, clip)
-    _put(out, e, i, slot + 2, (slot2 - pos[e, i, 2]) / ps, clip)
-    fv = cols.formation_velocity
-    _put(out, e, i, fv, mv0 / vs, clip)
-    _put(out, e, i, fv + 1, mv1 / vs, clip)
-    _put(out, e, i, fv + 2, mv2 / vs, clip)
-    goal = cols.goal_offset
-    _put(out, e, i, goal, (x.plan_center[e, 0] - c0) / ps, clip)
-    _put(out, e, i, goal + 1, (x.plan_center[e, 1] - c1) / ps, clip)
-    _put(out, e, i, goal + 2, (x.plan_center[e, 2] - c2) / ps, clip)
-    for a in range(3):
-        p = pos[e, i, a]
-        _put(out, e, i, cols.plan_offset + a, (x.plan_pos[e, i, a] - p) / ps, clip)
-        _put(out, e, i, cols.velocity + a, vel[e, i, a] / vs, clip)
-        _put(out, e, i, cols.plan_velocity + a, x.plan_vel[e, i, a] / vs, clip)
-        _put(out, e, i, cols.waypoint_dir + a, x.wp_dir[e, a], clip)
-        _put(out, e, i, cols.last_accel + a, x.accel_cmd[e, i, a] / acs, clip)
-    _put(out, e, i, cols.waypoint_dist, wp_dist / ps, clip)
-    _put(out, e, i, cols.progress, x.progress[e], clip)
-    col = self_dim
+    _put3(
+        out, e, i, cols.slot_offset, (slot0 - p0) / ps, (slot1 - p1) / ps, (slot2 - p2) / ps, clip
+    )
+    pp, pv, ac, wd = x.plan_pos, x.plan_vel, x.accel_cmd, x.wp_dir
+    v = ((pp[e, i, 0] - p0) / ps, (pp[e, i, 1] - p1) / ps, (pp[e, i, 2] - p2) / ps)
+    _put3(out, e, i, cols.plan_offset, v[0], v[1], v[2], clip)
+    _put3(out, e, i, cols.velocity, vel[e, i, 0] / vs, vel[e, i, 1] / vs, vel[e, i, 2] / vs, clip)
+    _put3(out, e, i, cols.plan_velocity, pv[e, i, 0] / vs, pv[e, i, 1] / vs, pv[e, i, 2] / vs, clip)
+    _put3(out, e, i, cols.formation_velocity, mv0 / vs, mv1 / vs, mv2 / vs, clip)
+    pc = x.plan_center
+    v = ((pc[e, 0] - c0) / ps, (pc[e, 1] - c1) / ps, (pc[e, 2] - c2) / ps)
+    _put3(out, e, i, cols.goal_offset, v[0], v[1], v[2], clip)
+    _put3(out, e, i, cols.waypoint_dir, wd[e, 0], wd[e, 1], wd[e, 2], clip)
+    _put1(out, e, i, cols.waypoint_dist, wp_dist / ps, clip)
+    _put3(out, e, i, cols.last_accel, ac[e, i, 0] / acs, ac[e, i, 1] / acs, ac[e, i, 2] / acs, clip)
+    _put1(out, e, i, cols.progress, x.progress[e], clip)
+    col = cols.self_dim
 
     # Nearest UAVs: the k smallest (distance, index) pairs in order, i.e. a stable argsort.
     prev_d, prev_j = -np.inf, -1
-    for s in range(k_u):
+    for s in range(cols.k_uavs):
         best_d, best_j = np.inf, n
         for j in range(n):
             if j == i:
@@ -121,80 +138,109 @@ def _observe_agent(e, i, frame, x, scales, cols, k_u, k_o, self_dim, out):  # no
         prev_d, prev_j = best_d, best_j
         c = col + s * cols.uav_width
         if best_d <= sensing:
-            for a in range(3):
-                rel_p = (pos[e, best_j, a] - pos[e, i, a]) / ps
-                _put(out, e, i, c + cols.uav_rel_pos + a, rel_p, clip)
-                rel_v = (vel[e, best_j, a] - vel[e, i, a]) / vs
-                _put(out, e, i, c + cols.uav_rel_vel + a, rel_v, clip)
-            _put(out, e, i, c + cols.uav_dist, best_d / ps, clip)
-            _put(out, e, i, c + cols.uav_mask, 1.0, clip)
+            j = best_j
+            _uav_features(out, e, i, c, cols, x, j, best_d, ps, vs, clip)
         else:
             for a in range(cols.uav_width):
                 out[e, i, c + a] = 0.0
-    col += k_u * cols.uav_width
+    col += cols.k_uavs * cols.uav_width
 
     # Nearest obstacles by distance to their reachable region (stable, like the UAVs).
+    k_o, w = cols.k_obstacles, cols.obstacle_width
     kk = min(k_o, m)
     prev_d, prev_j = -np.inf, -1
     for s in range(kk):
         best_d, best_j = np.inf, m
         for j in range(m):
             key = np.inf
-            if x.active[e, j] and _gap(pos, e, i, x.obs_pos, j) <= sensing:
+            if x.active[e, j] and _gap(pos, e, i, x.obstacle_pos, j) <= sensing:
                 key = x.region[e, i, j]
             after = key > prev_d or (key == prev_d and j > prev_j)
             if after and (key < best_d or (key == best_d and j < best_j)):
                 best_d, best_j = key, j
         prev_d, prev_j = best_d, best_j
-        c = col + s * cols.obstacle_width
+        c = col + s * w
         if math.isfinite(best_d):
-            j = best_j
-            for a in range(3):
-                v = (x.pred_center[e, j, a] - pos[e, i, a]) / ps
-                _put(out, e, i, c + cols.obstacle_center + a, v, clip)
-                _put(out, e, i, c + cols.obstacle_axes + a, x.pred_axes[e, j, a] / ps, clip)
-                v = (x.obs_pos[e, j, a] - pos[e, i, a]) / ps
-                _put(out, e, i, c + cols.obstacle_rel_pos + a, v, clip)
-                v = (x.obs_vel[e, j, a] - vel[e, i, a]) / vs
-                _put(out, e, i, c + cols.obstacle_rel_vel + a, v, clip)
-            _put(out, e, i, c + cols.obstacle_heading_cs, x.cos_h[e, j], clip)
-            _put(out, e, i, c + cols.obstacle_heading_cs + 1, x.sin_h[e, j], clip)
-            _put(out, e, i, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
-            _put(out, e, i, c + cols.obstacle_mask, 1.0, clip)
+            _obstacle_features(out, e, i, c, cols, x, best_j, ps, vs, clip)
         else:
-            for a in range(cols.obstacle_width):
+            for a in range(w):
                 out[e, i, c + a] = 0.0
-    for a in range(col + kk * cols.obstacle_width, col + k_o * cols.obstacle_width):
+    for a in range(col + kk * w, col + k_o * w):
         out[e, i, a] = 0.0
 
 
+@numba.njit(inline="always", **_JIT)
+def _uav_features(out, e, i, c, cols, x, j, dist, ps, vs, clip):  # noqa: ANN001, ANN202
+    """UAV ``j`` as UAV ``i`` observes it, into the block at column ``c`` (it is present)."""
+    pos, vel = x.pos, x.vel
+    r = ((pos[e, j, 0] - pos[e, i, 0]) / ps, (pos[e, j, 1] - pos[e, i, 1]) / ps,
+         (pos[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
+    if cols.uav_rel_pos >= 0:
+        _put3(out, e, i, c + cols.uav_rel_pos, r[0], r[1], r[2], clip)
+    r = ((vel[e, j, 0] - vel[e, i, 0]) / vs, (vel[e, j, 1] - vel[e, i, 1]) / vs,
+         (vel[e, j, 2] - vel[e, i, 2]) / vs)  # fmt: skip
+    if cols.uav_rel_vel >= 0:
+        _put3(out, e, i, c + cols.uav_rel_vel, r[0], r[1], r[2], clip)
+    if cols.uav_dist >= 0:
+        _put(out, e, i, c + cols.uav_dist, dist / ps, clip)
+    if cols.uav_mask >= 0:
+        _put(out, e, i, c + cols.uav_mask, 1.0, clip)
+
+
+@numba.njit(inline="always", **_JIT)
+def _obstacle_features(out, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001, ANN202
+    """Obstacle ``j`` as UAV ``i`` observes it, into the block at column ``c`` (present)."""
+    pos, vel = x.pos, x.vel
+    if cols.obstacle_center >= 0:
+        pc = x.pred_center
+        r = ((pc[e, j, 0] - pos[e, i, 0]) / ps, (pc[e, j, 1] - pos[e, i, 1]) / ps,
+             (pc[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
+        _put3(out, e, i, c + cols.obstacle_center, r[0], r[1], r[2], clip)
+    if cols.obstacle_axes >= 0:
+        ax = x.pred_axes
+        r = (ax[e, j, 0] / ps, ax[e, j, 1] / ps, ax[e, j, 2] / ps)
+        _put3(out, e, i, c + cols.obstacle_axes, r[0], r[1], r[2], clip)
+    if cols.obstacle_heading_cs >= 0:
+        _put(out, e, i, c + cols.obstacle_heading_cs, x.cos_h[e, j], clip)
+        _put(out, e, i, c + cols.obstacle_heading_cs + 1, x.sin_h[e, j], clip)
+    if cols.obstacle_rel_pos >= 0:
+        op = x.obstacle_pos
+        r = ((op[e, j, 0] - pos[e, i, 0]) / ps, (op[e, j, 1] - pos[e, i, 1]) / ps,
+             (op[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
+        _put3(out, e, i, c + cols.obstacle_rel_pos, r[0], r[1], r[2], clip)
+    if cols.obstacle_rel_vel >= 0:
+        ov = x.obstacle_vel
+        r = ((ov[e, j, 0] - vel[e, i, 0]) / vs, (ov[e, j, 1] - vel[e, i, 1]) / vs,
+             (ov[e, j, 2] - vel[e, i, 2]) / vs)  # fmt: skip
+        _put3(out, e, i, c + cols.obstacle_rel_vel, r[0], r[1], r[2], clip)
+    if cols.obstacle_region_dist >= 0:
+        _put(out, e, i, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
+    if cols.obstacle_mask >= 0:
+        _put(out, e, i, c + cols.obstacle_mask, 1.0, clip)
+
+
 @numba.njit(**_JIT)
-def _observe_serial(x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+def _observe_serial(x, scales, cols, out):  # noqa: ANN001, ANN202
     for e in range(out.shape[0]):
-        _observe_env(e, x, scales, cols, k_u, k_o, self_dim, out)
+        _observe_env(e, x, scales, cols, out)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _observe_parallel(x, scales, cols, k_u, k_o, self_dim, out):  # noqa: ANN001, ANN202
+def _observe_parallel(x, scales, cols, out):  # noqa: ANN001, ANN202
     for e in numba.prange(out.shape[0]):
-        _observe_env(e, x, scales, cols, k_u, k_o, self_dim, out)
+        _observe_env(e, x, scales, cols, out)
 
 
 def assemble_observations(
-    inputs: tuple,
-    layout: object,
-    out: np.ndarray,
-    *,
-    columns: tuple,
-    min_frame_speed: float,
+    inputs: tuple, layout: object, out: np.ndarray, *, min_frame_speed: float
 ) -> None:
     """Compiled :func:`uasep_env.observation._assemble`: fills ``out`` in place.
 
     Args:
         inputs: The :class:`uasep_env.observation._Inputs` of one call.
-        layout: Its :class:`uasep_env.observation.ObservationLayout`.
+        layout: Its :class:`uasep_env.observation_layout.ObservationLayout`; its
+            ``columns`` say where each feature goes (data, not compiled in).
         out: ``(E, N, dim)`` float32, C-contiguous.
-        columns: :data:`uasep_env.observation.COLUMNS`, where each feature is written.
         min_frame_speed: :data:`uasep_env.formation.MIN_FRAME_SPEED`.
     """
     scales = np.array(
@@ -210,4 +256,4 @@ def assemble_observations(
     # Contiguous arrays only: one compiled signature, whatever views the caller passes.
     x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
     fn = _observe_parallel if _parallel(out.shape[0] * out.shape[1]) else _observe_serial
-    fn(x, scales, columns, layout.k_uavs, layout.k_obstacles, layout.self_dim, out)
+    fn(x, scales, layout.columns, out)

@@ -9,46 +9,46 @@ from uasep_env._kernels.common import _JIT, _norm3, _parallel, _sq3
 
 
 @numba.njit(inline="always", **_JIT)
-def _reward_agent(k, x, c, weights, own, terms):  # noqa: ANN001, ANN202
+def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.rewards._weighted_terms`.
 
     ``x`` is the :class:`uasep_env.rewards._Inputs` named tuple, ``c`` the
-    :class:`uasep_env.rewards._Constants` one. Terms in
-    :data:`uasep_env.rewards.REWARD_TERMS` order.
+    :class:`uasep_env.rewards._Constants` one; ``ix`` gives each term's row of ``terms``
+    by name (:data:`uasep_env.rewards._TERM_INDEX`, from the term table).
     """
     n = x.uav_pos.shape[1]
     e = k // n
     i = k % n
-    max_acc, d_sep, d_obs_sep = c.max_accel, c.separation_distance, c.obstacle_separation
+    max_acc, d_sep, d_osep = c.max_accel, c.separation_distance, c.obstacle_separation
     d_col, dev_scale = c.collision_distance, c.deviation_scale
     region_cap, max_steps = c.region_cap, c.max_steps
-    d_uav, d_obs = x.min_uav_dist[e, i], x.min_obs_dist[e, i]
+    d_uav, d_obstacle = x.min_uav_dist[e, i], x.min_obstacle_dist[e, i]
     d_region = np.inf
     for j in range(x.region.shape[2]):
         d_region = min(d_region, x.region[e, i, j])
     t = max(0.0, 1.0 - d_uav / d_sep)
-    terms[0, e, i] = -(t * t)
-    t = max(0.0, 1.0 - d_obs / d_obs_sep)
-    terms[1, e, i] = -(t * t)
-    terms[2, e, i] = -min(region_cap, max(0.0, 1.0 - d_region / d_obs_sep))
+    terms[ix.separation_inner, e, i] = -(t * t)
+    t = max(0.0, 1.0 - d_obstacle / d_osep)
+    terms[ix.separation_obstacle, e, i] = -(t * t)
+    terms[ix.separation_region, e, i] = -min(region_cap, max(0.0, 1.0 - d_region / d_osep))
     dev = _norm3(
         x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0],
         x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
         x.uav_pos[e, i, 2] - x.plan_pos[e, i, 2],
     )
-    terms[3, e, i] = -(dev / (dev + dev_scale))
+    terms[ix.deviation, e, i] = -(dev / (dev + dev_scale))
     a0, a1, a2 = x.cmd[e, i, 0], x.cmd[e, i, 1], x.cmd[e, i, 2]
     u0, u1, u2 = a0 / max_acc, a1 / max_acc, a2 / max_acc
-    terms[4, e, i] = -_sq3(u0, u1, u2) / 3.0
+    terms[ix.control, e, i] = -_sq3(u0, u1, u2) / 3.0
     u0 = (a0 - x.prev_cmd[e, i, 0]) / max_acc
     u1 = (a1 - x.prev_cmd[e, i, 1]) / max_acc
     u2 = (a2 - x.prev_cmd[e, i, 2]) / max_acc
-    terms[5, e, i] = -_sq3(u0, u1, u2) / 3.0
+    terms[ix.smoothness, e, i] = -_sq3(u0, u1, u2) / 3.0
     hit = False  # any UAV of the environment (the collision ends everyone's episode)
     for j in range(n):
-        hit = hit or x.min_uav_dist[e, j] < d_col or x.min_obs_dist[e, j] < d_col
-    terms[6, e, i] = -max_steps if hit else -0.0
-    terms[7, e, i] = 1.0
+        hit = hit or x.min_uav_dist[e, j] < d_col or x.min_obstacle_dist[e, j] < d_col
+    terms[ix.collision, e, i] = -max_steps if hit else -0.0
+    terms[ix.progress, e, i] = 1.0
     total = 0.0
     for t_idx in range(terms.shape[0]):
         total += weights[t_idx] * terms[t_idx, e, i]
@@ -56,19 +56,19 @@ def _reward_agent(k, x, c, weights, own, terms):  # noqa: ANN001, ANN202
 
 
 @numba.njit(**_JIT)
-def _rewards_serial(x, c, weights, own, terms):  # noqa: ANN001, ANN202
+def _rewards_serial(x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     for k in range(own.size):
-        _reward_agent(k, x, c, weights, own, terms)
+        _reward_agent(k, x, c, ix, weights, own, terms)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _rewards_parallel(x, c, weights, own, terms):  # noqa: ANN001, ANN202
+def _rewards_parallel(x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     for k in numba.prange(own.size):
-        _reward_agent(k, x, c, weights, own, terms)
+        _reward_agent(k, x, c, ix, weights, own, terms)
 
 
 def reward_terms(
-    inputs: tuple, constants: tuple, weights: np.ndarray
+    inputs: tuple, constants: tuple, weights: np.ndarray, *, index: tuple
 ) -> tuple[np.ndarray, np.ndarray]:
     """Compiled reward terms and their weighted sum (before any team sharing).
 
@@ -76,6 +76,7 @@ def reward_terms(
         inputs: The :class:`uasep_env.rewards._Inputs` of one call.
         constants: The :class:`uasep_env.rewards._Constants` of one call.
         weights: One weight per term, in :data:`uasep_env.rewards.REWARD_TERMS` order.
+        index: :data:`uasep_env.rewards._TERM_INDEX`, each term's row by name.
 
     Returns:
         ``(own, terms)``: ``(E, N)`` weighted sums and ``(T, E, N)`` unweighted terms.
@@ -83,7 +84,7 @@ def reward_terms(
     x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
     e, n = x.min_uav_dist.shape
     own = np.empty((e, n))
-    terms = np.empty((len(weights), e, n))
+    terms = np.empty((len(index), e, n))
     fn = _rewards_parallel if _parallel(own.size) else _rewards_serial
-    fn(x, constants, weights, own, terms)
+    fn(x, constants, index, weights, own, terms)
     return own, terms

@@ -9,8 +9,8 @@ from uasep_env._kernels.common import _JIT, _gap, _parallel
 
 
 @numba.njit(inline="always", **_JIT)
-def _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001, ANN202
-    n, m = uav_pos.shape[1], obs_pos.shape[1]
+def _separation_row(k, uav_pos, obstacle_pos, active, d_uav, d_obstacle):  # noqa: ANN001, ANN202
+    n, m = uav_pos.shape[1], obstacle_pos.shape[1]
     e = k // n
     i = k % n
     best = np.inf
@@ -21,30 +21,30 @@ def _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001,
     best = np.inf
     for j in range(m):
         if active[e, j]:
-            best = min(best, _gap(uav_pos, e, i, obs_pos, j))
-    d_obs[e, i] = best
+            best = min(best, _gap(uav_pos, e, i, obstacle_pos, j))
+    d_obstacle[e, i] = best
 
 
 @numba.njit(**_JIT)
-def _separations_serial(uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001, ANN202
+def _separations_serial(uav_pos, obstacle_pos, active, d_uav, d_obstacle):  # noqa: ANN001, ANN202
     for k in range(d_uav.size):
-        _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs)
+        _separation_row(k, uav_pos, obstacle_pos, active, d_uav, d_obstacle)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _separations_parallel(uav_pos, obs_pos, active, d_uav, d_obs):  # noqa: ANN001, ANN202
+def _separations_parallel(uav_pos, obstacle_pos, active, d_uav, d_obstacle):  # noqa: ANN001, ANN202
     for k in numba.prange(d_uav.size):
-        _separation_row(k, uav_pos, obs_pos, active, d_uav, d_obs)
+        _separation_row(k, uav_pos, obstacle_pos, active, d_uav, d_obstacle)
 
 
 def separations(
-    uav_pos: np.ndarray, obs_pos: np.ndarray, active: np.ndarray
+    uav_pos: np.ndarray, obstacle_pos: np.ndarray, active: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Compiled :meth:`uasep_env.world.World.separations`: nearest UAV and obstacle distances.
 
     Args:
         uav_pos: ``(E, N, 3)`` positions (m).
-        obs_pos: ``(E, M, 3)`` obstacle positions (m).
+        obstacle_pos: ``(E, M, 3)`` obstacle positions (m).
         active: ``(E, M)`` bool, which obstacles count.
 
     Returns:
@@ -53,8 +53,8 @@ def separations(
     """
     e, n, _ = uav_pos.shape
     d_uav = np.empty((e, n))
-    d_obs = np.empty((e, n))
+    d_obstacle = np.empty((e, n))
     fn = _separations_parallel if _parallel(d_uav.size) else _separations_serial
     c = np.ascontiguousarray
-    fn(c(uav_pos), c(obs_pos), c(active), d_uav, d_obs)
-    return d_uav, d_obs
+    fn(c(uav_pos), c(obstacle_pos), c(active), d_uav, d_obstacle)
+    return d_uav, d_obstacle

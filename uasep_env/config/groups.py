@@ -229,6 +229,9 @@ class ObservationConfig:
             1,012 m).
         sensing_range: Obstacles and UAVs farther than this are not observed (m); at most
             ``clip * position_scale``, the farthest distance an observation can express.
+        optional_features: Optional features to add to the vector (keys of
+            :data:`uasep_env.observation_layout.OPTIONAL_FEATURES`; checked when the layout
+            is built). None by default.
     """
 
     k_uavs: int | None = None
@@ -236,8 +239,17 @@ class ObservationConfig:
     position_scale: float = 100.0  # m
     clip: float = 12.0
     sensing_range: float = 1000.0  # m
+    optional_features: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        feats = self.optional_features
+        check(
+            isinstance(feats, (tuple, list)) and all(isinstance(f, str) for f in feats),
+            "observation.optional_features",
+            feats,
+            "must be a list of feature names",
+        )
+        object.__setattr__(self, "optional_features", tuple(feats))
         if self.k_uavs is not None:
             check_int_in("observation.k_uavs", self.k_uavs, 1, 31)
         if self.k_obstacles is not None:

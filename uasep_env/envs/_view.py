@@ -6,6 +6,7 @@ from typing import Any
 
 import gymnasium
 import numpy as np
+from gymnasium.error import ClosedEnvironmentError
 
 __all__ = ["ViewMixin"]
 
@@ -16,6 +17,7 @@ class ViewMixin:
     render_mode: str | None
     core: Any
     _renderer: Any = None
+    _closed: bool = False
 
     @property
     def world(self) -> Any:
@@ -40,5 +42,20 @@ class ViewMixin:
             self._renderer = None
 
     def close(self) -> None:
-        """Close the renderer, if any."""
+        """Close the renderer, if any; later ``reset``/``step`` calls raise (Gymnasium's rule).
+
+        Closing twice is harmless.
+        """
         self.close_renderer()
+        self._closed = True
+
+    def check_open(self, method: str) -> None:
+        """Raise ``ClosedEnvironmentError`` if :meth:`close` was called.
+
+        Raises:
+            gymnasium.error.ClosedEnvironmentError: The environment is closed.
+        """
+        if self._closed or getattr(self, "closed", False):  # the vector API's own flag
+            raise ClosedEnvironmentError(
+                f"{type(self).__name__}.{method}() called after close(); create a new environment"
+            )

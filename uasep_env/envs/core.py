@@ -326,10 +326,10 @@ class EnvCore:
         d_region = region.min(axis=-1, initial=np.inf)
         safety = {
             "min_uav_distance": w.min_uav_dist.copy(),
-            "min_obstacle_distance": w.min_obs_dist.copy(),
+            "min_obstacle_distance": w.min_obstacle_dist.copy(),
             "min_region_distance": d_region,
             "loss_of_separation_uav": w.min_uav_dist < u.separation_distance,
-            "loss_of_separation_obstacle": w.min_obs_dist < u.obstacle_separation,
+            "loss_of_separation_obstacle": w.min_obstacle_dist < u.obstacle_separation,
             "in_reachable_region": d_region < 0.0,
             "collision": collided,
             "lost": lost,

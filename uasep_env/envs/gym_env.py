@@ -69,6 +69,7 @@ class FormationEnv(ViewMixin, gymnasium.Env):
             TypeError: ``seed`` is not None or an int, or ``options`` is not a dict.
             ValueError: A negative seed, or any option (none is supported).
         """
+        self.check_open("reset")
         check_seed(seed)
         check_options(options, ())
         super().reset(seed=None if seed is None else int(seed))
@@ -85,6 +86,7 @@ class FormationEnv(ViewMixin, gymnasium.Env):
             RuntimeError: The episode has ended (or none was started): call ``reset``.
             ValueError: A bad action (named); see the class docstring.
         """
+        self.check_open("step")
         if self._done:
             raise RuntimeError("step() called on a finished episode; call reset() first")
         n = self.config.n_uavs

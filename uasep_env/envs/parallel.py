@@ -16,11 +16,12 @@ from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import (
     EnvCore,
     StepResult,
+    _short,
     action_array,
     check_options,
     prepare_actions,
 )
-from uasep_env.observation import state_dim
+from uasep_env.observation import ObservationLayout, state_dim
 
 __all__ = ["UAVSeparationParallelEnv", "env", "parallel_env"]
 
@@ -80,7 +81,11 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
     Unknown keys raise ``TypeError``. ``max_cycles`` (PettingZoo's convention) sets the
     episode length in steps (``episode_duration = max_cycles * step_duration``).
     ``reset(options={"config": {...}})`` changes the config for the next episodes, except
-    the keys that change the spaces.
+    what would change the spaces (``n_uavs``, ``n_obstacles``, ``observation``, or an
+    ``action.mode`` that changes the observation width): spaces are fixed for an
+    environment's life, as Gymnasium and PettingZoo code assumes, so such a change is a
+    ``ValueError`` naming the widths (create a new environment instead). After
+    :meth:`close`, ``reset`` and ``step`` raise ``gymnasium.error.ClosedEnvironmentError``.
 
     ## Reset options
     ``"config"`` is the one documented option. Other keys are ignored with a
@@ -166,6 +171,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
                 unknown config key.
             ValueError: A negative seed or an invalid config value.
         """
+        self.check_open("reset")
         check_seed(seed)
         if options is not None:
             check_options(options, None)  # a dict; keys other than "config" are ignored
@@ -198,6 +204,16 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
                 "create a new environment instead"
             )
         config = make_config(self.config, **changes)
+        # Spaces are fixed for an environment's life (what Gymnasium/PettingZoo code, wrappers
+        # and vectorisers assume): a change that would alter them is refused.
+        new_dim, new_state = ObservationLayout.from_config(config).dim, state_dim(config)
+        if new_dim != self._obs_space.shape[0] or new_state != self.state_space.shape[0]:
+            raise ValueError(
+                f"options['config'] {_short(changes)} changes the observation width from "
+                f"{self._obs_space.shape[0]} to {new_dim} (state {self.state_space.shape[0]} "
+                f"to {new_state}); spaces are fixed for an environment's life: create a new "
+                "environment instead"
+            )
         seed_state = self.core.world._noise.rngs  # keep each environment's random stream going
         self.config = config
         self.render_mode = config.render_mode
@@ -219,6 +235,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
             ValueError: Missing or unknown agents, or a bad action (named).
             RuntimeError: Stepping a finished episode without reset.
         """
+        self.check_open("step")
         if not self.agents:
             raise RuntimeError("step() called on a finished episode; call reset() first")
         if not isinstance(actions, dict):
@@ -302,8 +319,23 @@ def env(
 ) -> Any:
     """The AEC (turn-based) view of :func:`parallel_env` (PettingZoo's ``parallel_to_aec``).
 
-    Agents act in turn; the joint action is stepped once every agent has acted.
+    Agents act in turn; the joint action is stepped once every agent has acted. After
+    ``close()`` every ``reset``/``step`` raises ``gymnasium.error.ClosedEnvironmentError``
+    (not only the step that completes a joint action).
     """
     from pettingzoo.utils.conversions import parallel_to_aec
+    from pettingzoo.utils.wrappers import BaseWrapper
 
-    return parallel_to_aec(parallel_env(config, max_cycles=max_cycles, **kwargs))
+    class ClosedCheck(BaseWrapper):
+        """Refuses every call after close (the AEC view buffers actions between steps)."""
+
+        def reset(self, seed: int | None = None, options: dict | None = None) -> None:
+            par.check_open("reset")
+            super().reset(seed=seed, options=options)
+
+        def step(self, action: Any) -> None:
+            par.check_open("step")
+            super().step(action)
+
+    par = parallel_env(config, max_cycles=max_cycles, **kwargs)
+    return ClosedCheck(parallel_to_aec(par))

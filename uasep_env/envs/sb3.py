@@ -68,6 +68,7 @@ class UAVSharedVecEnv(VecEnv):
         self._max_dev = np.zeros(n_envs)
         self._clipped = np.zeros(self.num_envs, dtype=np.int64)
         self._started = False
+        self._closed = False
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         """Seed the next reset (environment ``e`` gets ``seed + e``).
@@ -82,6 +83,7 @@ class UAVSharedVecEnv(VecEnv):
 
     def reset(self) -> np.ndarray:
         """Reset every environment; observations ``(n_envs * n_uavs, obs_dim)``."""
+        self._check_open("reset")
         obs = self.core.reset(seed=self._seed)
         self._seed = None
         self._collided[:] = self._lost_sep[:] = False
@@ -97,6 +99,7 @@ class UAVSharedVecEnv(VecEnv):
                 (:class:`~uasep_env.envs.core.ActionTypeError` for values that are not
                 real numbers).
         """
+        self._check_open("step_async")
         acts, outside = prepare_actions(
             actions, (self.num_envs, 3), "actions", self.config.action.strict
         )
@@ -111,6 +114,7 @@ class UAVSharedVecEnv(VecEnv):
         Raises:
             RuntimeError: Before the first reset, or without ``step_async``.
         """
+        self._check_open("step_wait")
         if not self._started:
             raise RuntimeError("step_wait() called before reset()")
         if self._actions is None:
@@ -156,7 +160,16 @@ class UAVSharedVecEnv(VecEnv):
         np.maximum(self._max_dev, np.where(settled, dev, 0.0), out=self._max_dev)
 
     def close(self) -> None:
-        """Nothing to release."""
+        """Mark the env closed: later ``reset``/``step`` calls raise (Gymnasium's rule)."""
+        self._closed = True
+
+    def _check_open(self, method: str) -> None:
+        if self._closed:
+            from gymnasium.error import ClosedEnvironmentError
+
+            raise ClosedEnvironmentError(
+                f"UAVSharedVecEnv.{method}() called after close(); create a new environment"
+            )
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         """Rendering is done by the Gymnasium/PettingZoo views."""

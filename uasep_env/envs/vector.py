@@ -136,6 +136,7 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
             ValueError: A negative seed, the wrong number of seeds, an unknown option or a
                 bad mask.
         """
+        self.check_open("reset")
         check_seed(seed, self.num_envs)
         mask = None
         if check_options(options, ("reset_mask",)):
@@ -167,6 +168,7 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
                 whose episode ended has not been reset.
             ValueError: A bad action (named with its index in ``actions``).
         """
+        self.check_open("step")
         if not self._started:
             raise RuntimeError("step() called before reset()")
         if self.autoreset_mode == AutoresetMode.DISABLED and self._needs_reset.any():

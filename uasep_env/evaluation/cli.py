@@ -23,10 +23,14 @@ __all__ = ["build_parser", "main"]
 
 
 def _split_policy_args(values: Iterable[str]) -> list[str]:
-    """Split repeatable, comma-separated ``--policy`` values; keep order, drop duplicates."""
+    """Split repeatable, comma-separated ``--policy`` values; keep order, drop duplicates.
+
+    A value that is the path of an existing file is taken whole, commas and all.
+    """
     names: list[str] = []
     for value in values:
-        for part in value.split(","):
+        whole = value.strip()
+        for part in [whole] if whole and Path(whole).is_file() else value.split(","):
             part = part.strip()
             if part and part not in names:
                 names.append(part)
@@ -59,6 +63,22 @@ class _OneLineParser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         """Print ``prog: error: message`` and a pointer to ``--help``; exit with status 2."""
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _one_line(err: BaseException, limit: int = 400) -> str:
+    """An exception as one non-empty line, cut to about ``limit`` characters."""
+    text = " ".join(str(err).split()) or type(err).__name__
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text):,} chars)"
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name the same file (resolved, or the same inode when both exist)."""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
 
 
 def _output_problem(path: Path, directory: bool) -> str | None:
@@ -121,7 +141,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         metavar="NAME",
         help="policy to evaluate; repeatable or comma-separated, all on the same seeds "
-        "(default: apf)",
+        "(default: apf); a value naming an existing file is one path, commas included",
     )
     p.add_argument(
         "--scenario",
@@ -248,7 +268,7 @@ def _run(argv: Sequence[str] | None) -> int:
         try:
             check_policy_name(name)
         except ValueError as err:
-            parser.error(f"argument --policy: {err}")
+            parser.error(f"argument --policy: {_one_line(err)}")
     if args.deviation_threshold <= 0:
         parser.error(
             f"argument --deviation-threshold: must be > 0, got {args.deviation_threshold:g}"
@@ -261,15 +281,22 @@ def _run(argv: Sequence[str] | None) -> int:
         problem = None if path is None else _output_problem(path, directory)
         if problem is not None:
             parser.error(f"argument {flag}: cannot write {str(path)!r}: {problem}")
+    # An output must not overwrite an input, nor another output.
+    if args.json is not None and args.csv is not None and _same_file(args.json, args.csv):
+        parser.error(f"arguments --json and --csv: both write {str(args.json)!r}")
+    for flag, path in (("--json", args.json), ("--csv", args.csv)):
+        for name in names if path is not None else ():
+            if name not in POLICIES and _same_file(path, Path(name)):
+                parser.error(f"argument {flag}: {str(path)!r} is the policy being evaluated")
     try:
         cfg = build_config(args.scenario, args.config)
-    except (TypeError, ValueError) as err:
-        parser.error(f"argument --config: {err}")
+    except (TypeError, ValueError, RecursionError) as err:
+        parser.error(f"argument --config: {_one_line(err)}")
     for name in names:  # fail early on models that do not load
         try:
             make_policy(name, cfg, args.allow_pickle)
         except Exception as err:
-            parser.error(f"argument --policy: cannot load {name!r}: {err}")
+            parser.error(f"argument --policy: cannot load {name!r}: {_one_line(err)}")
 
     seeds = list(range(args.seed, args.seed + args.episodes))
     bar = _progress_bar(len(names) * len(seeds), args.quiet)
@@ -344,5 +371,5 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(code, file=sys.stderr)
         return 1
     except OSError as err:
-        print(f"uasep-eval: error: {err}", file=sys.stderr)
+        print(f"uasep-eval: error: {_one_line(err)}", file=sys.stderr)
         return 1

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from uasep_env.atomic import atomic_output
 from uasep_env.evaluation.results import EvaluationResult
 from uasep_env.jsonio import dumps, write_json
 from uasep_env.metrics import flatten_metrics
@@ -47,7 +48,7 @@ def write_csv(result: EvaluationResult, path: str | Path) -> Path:
 
     Args:
         result: An :func:`evaluate` result.
-        path: Output file.
+        path: Output file (written atomically: an error leaves the old file intact).
 
     Returns:
         The path written.
@@ -71,8 +72,7 @@ def write_csv(result: EvaluationResult, path: str | Path) -> Path:
             )
     header = ["policy", "seed", "family", "steps", "terminated", "episode_return", *keys]
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_output(path, "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=header, restval="")
         writer.writeheader()
         for row in rows:

@@ -7,12 +7,25 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.jsonio import json_depth
 
 __all__ = ["build_config", "parse_config_overrides"]
 
 
+#: Deepest nesting a ``--config`` value may have (the config's deepest field is 2 levels).
+MAX_VALUE_DEPTH = 8
+
+
+def _short(text: str, limit: int = 80) -> str:
+    """``repr`` of ``text``, cut to about ``limit`` characters (errors echo bad values)."""
+    return repr(text) if len(text) <= limit else repr(text[:limit]) + f"... ({len(text):,} chars)"
+
+
 def _parse_value(text: str) -> Any:
     """JSON when it parses (numbers, true/false/null, lists, dicts), else the string."""
+    depth = json_depth(text)
+    if depth > MAX_VALUE_DEPTH:
+        raise ValueError(f"value {_short(text)} nests {depth} levels, limit {MAX_VALUE_DEPTH}")
     try:
         return json.loads(text)
     except ValueError:
@@ -41,20 +54,27 @@ def parse_config_overrides(items: Iterable[str]) -> dict[str, Any]:
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or not key:
-            raise ValueError(f"config override {item!r}: expected KEY=VALUE (e.g. dt=0.1)")
+            raise ValueError(f"config override {_short(item)}: expected KEY=VALUE (e.g. dt=0.1)")
         parts = key.split(".")
         if any(not p for p in parts):
-            raise ValueError(f"config override {item!r}: malformed key {key!r}")
+            raise ValueError(f"config override {_short(item)}: malformed key {_short(key)}")
         node = out
         for depth, part in enumerate(parts[:-1]):
             child = node.setdefault(part, {})
             if not isinstance(child, dict):
                 where = ".".join(parts[: depth + 1])
-                raise ValueError(f"config override {item!r}: {where!r} was already set to a value")
+                raise ValueError(
+                    f"config override {_short(item)}: {where!r} was already set to a value"
+                )
             node = child
         if isinstance(node.get(parts[-1]), dict):
-            raise ValueError(f"config override {item!r}: {key!r} is a section with fields set")
-        node[parts[-1]] = _parse_value(raw.strip())
+            raise ValueError(
+                f"config override {_short(item)}: {key!r} is a section with fields set"
+            )
+        try:
+            node[parts[-1]] = _parse_value(raw.strip())
+        except ValueError as err:
+            raise ValueError(f"config override {key!r}: {err}") from None
     return out
 
 

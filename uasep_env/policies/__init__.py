@@ -6,6 +6,7 @@ SB3 models.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from uasep_env.policies.learned import (
     CheckpointError,
     LearnedPolicy,
     SB3Policy,
+    checkpoint_config,
     is_policy_checkpoint,
     load_policy,
     load_sb3_policy,
@@ -34,6 +36,7 @@ __all__ = [
     "TraditionalAPF",
     "ZeroPolicy",
     "check_policy_name",
+    "checkpoint_config",
     "is_policy_checkpoint",
     "load_policy",
     "load_sb3_policy",
@@ -50,7 +53,15 @@ POLICIES: dict[str, Callable[[EnvConfig], Policy]] = {
 }
 
 
+def _looks_like_path(name: str) -> bool:
+    return name.endswith(".zip") or "/" in name or os.sep in name
+
+
 def _unknown_policy(name: str) -> ValueError:
+    if _looks_like_path(name) and not Path(name).exists():
+        return ValueError(
+            f"no such file {name!r} (a policy is one of {sorted(POLICIES)} or a path)"
+        )
     return ValueError(f"unknown policy {name!r}: use one of {sorted(POLICIES)} or a model path")
 
 
@@ -64,7 +75,8 @@ def check_policy_name(name: str) -> str:
         ``name``.
 
     Raises:
-        ValueError: For an unknown name that is not an existing path.
+        ValueError: For an unknown name that is not an existing path (a path-like name,
+            ending in ``.zip`` or holding a ``/``, is reported as a missing file).
     """
     if name in POLICIES or Path(name).exists():
         return name

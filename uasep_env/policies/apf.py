@@ -48,14 +48,16 @@ shared margin.
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from uasep_env import reachable
+from uasep_env._deprecation import RenamedAttributes, warn_renamed
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import check_positive
 from uasep_env.observation import ObservationLayout
@@ -65,12 +67,36 @@ __all__ = ["APF", "APFGains", "MotionStateAPF", "TraditionalAPF"]
 # Fractions of the horizon at which the straight-line prediction is checked.
 _PREDICTION_SAMPLES = np.linspace(0.0, 1.0, 11)
 # Gains that divide or bound a distance must be > 0; the others may be 0 (term off).
-_POSITIVE_GAINS = frozenset({"goal_saturation", "obs_safe_min", "horizon", "inner_safe_min"})
+_POSITIVE_GAINS = frozenset({"goal_saturation", "obstacle_safe_min", "horizon", "inner_safe_min"})
 _GAIN_MAX = 1e6  # any larger gain is a typo, whatever its unit
 
 
+#: Gains renamed after 0.1.0 (``obs`` also means observation): the old names still work as
+#: keywords, in :meth:`APFGains.scaled` and as attributes, with a DeprecationWarning.
+RENAMED_GAINS = {
+    "k_obs": "k_obstacle",
+    "obs_safe_min": "obstacle_safe_min",
+    "obs_time": "obstacle_time",
+}
+
+
+def _new_gain_names(names: dict[str, Any] | Sequence[str], stacklevel: int) -> Any:
+    """``names`` (keywords or a sequence of names) with old gain names renamed, warning."""
+    items = names.items() if isinstance(names, dict) else ((n, None) for n in names)
+    out = {}
+    for name, value in items:
+        new = RENAMED_GAINS.get(name)
+        if new is not None:
+            warn_renamed(f"APFGains.{name}", f"APFGains.{new}", stacklevel)
+            if new in out or (isinstance(names, dict) and new in names):
+                raise TypeError(f"APFGains got both {name!r} and its new name {new!r}")
+            name = new
+        out[name] = value
+    return out if isinstance(names, dict) else tuple(out)
+
+
 @dataclass(frozen=True)
-class APFGains:
+class APFGains(RenamedAttributes):
     """Gains of the APF controllers (units in brackets; accelerations in m/s^2).
 
     Attributes:
@@ -79,9 +105,9 @@ class APFGains:
         k_slot: ``K_p`` [1/s^2], pull towards the formation slot (eq. 19).
         k_vel: ``K_v`` [1/s], velocity matching with the planned velocity (eq. 20).
         k_damp: ``K`` of eq. 21 [1/s], damping of the velocity relative to the formation.
-        k_obs: ``K_obs`` [m^2/s^2], obstacle repulsion (eq. 23).
-        obs_safe_min: ``r_safe^min`` [m], safe distance from the reachable region (eq. 24).
-        obs_time: ``K`` of eq. 24 [s], growth of the safe distance with approach speed.
+        k_obstacle: ``K_obs`` [m^2/s^2], obstacle repulsion (eq. 23).
+        obstacle_safe_min: ``r_safe^min`` [m], safe distance from the reachable region (eq. 24).
+        obstacle_time: ``K`` of eq. 24 [s], growth of the safe distance with approach speed.
         horizon: ``K_s`` [s], look-ahead of the entry prediction.
         alpha: Weight of the line-of-sight part of the inner repulsion [m^2/s^2].
         beta: Weight of the relative-velocity part of the inner repulsion [m/s].
@@ -99,9 +125,9 @@ class APFGains:
     k_slot: float = 0.08
     k_vel: float = 0.6
     k_damp: float = 0.3
-    k_obs: float = 40.0
-    obs_safe_min: float = 6.0
-    obs_time: float = 2.0
+    k_obstacle: float = 40.0
+    obstacle_safe_min: float = 6.0
+    obstacle_time: float = 2.0
     horizon: float = 10.0
     alpha: float = 30.0
     beta: float = 3.0
@@ -122,9 +148,23 @@ class APFGains:
                 hi=_GAIN_MAX,
             )
 
+    _RENAMED: ClassVar[dict[str, str]] = RENAMED_GAINS
+
     def scaled(self, names: Sequence[str], factor: float) -> APFGains:
         """These gains with the named ones multiplied by ``factor`` (the trade-off sweeps)."""
+        names = _new_gain_names(names, stacklevel=4)
         return replace(self, **{n: getattr(self, n) * factor for n in names})
+
+
+_dataclass_init = APFGains.__init__
+
+
+@functools.wraps(_dataclass_init)
+def _init_accepting_old_names(self: APFGains, *args: Any, **kwargs: Any) -> None:
+    _dataclass_init(self, *args, **_new_gain_names(kwargs, stacklevel=4))
+
+
+APFGains.__init__ = _init_accepting_old_names  # type: ignore[method-assign]
 
 
 def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
@@ -147,7 +187,7 @@ class _APFBase(ABC):
 
     name = "apf-base"
     #: The gains that set the method's safety margin (what its trade-off curve sweeps).
-    margin_gains: ClassVar[tuple[str, ...]] = ("obs_safe_min", "obs_time")
+    margin_gains: ClassVar[tuple[str, ...]] = ("obstacle_safe_min", "obstacle_time")
     #: The gains used when none are given; each method's come from its trade-off curve.
     default_gains: ClassVar[APFGains] = APFGains()
 
@@ -223,8 +263,8 @@ class APF(_APFBase):
 
     Default gains: :class:`APFGains` as they are. They are the knee of the APF's trade-off
     curve (``baselines/tradeoff.py``, ``docs/figures/tradeoff.md``): over margin scales
-    0.25-3 of ``obs_safe_min`` and ``obs_time`` on the 200-encounter bank, every setting is
-    collision-free and the mean max deviation grows from 33 to 45 m while the min
+    0.25-3 of ``obstacle_safe_min`` and ``obstacle_time`` on the 200-encounter bank, every
+    setting is collision-free and the mean max deviation grows from 33 to 45 m while the min
     UAV-obstacle distance grows from 30 to 39 m; the knee (scale 1: 6 m and 2 s, 37 m and
     33 m) is where more distance starts to cost more deviation per metre.
 
@@ -251,7 +291,7 @@ class APF(_APFBase):
         v_hat, speed = _unit(o["velocity"])
         cos_delta = np.einsum("...ki,...i->...k", -normal, v_hat)
         approach = np.where(cos_delta > 0.0, speed[..., None] * cos_delta, 0.0)
-        r_safe = g.obs_safe_min + g.obs_time * approach
+        r_safe = g.obstacle_safe_min + g.obstacle_time * approach
         dd = np.maximum(d, 0.5)  # inside the region: the strongest push, outwards
         near = mask & (d < r_safe)
         # Straight-line prediction: does the UAV come within r_min of the region? Only asked
@@ -264,9 +304,9 @@ class APF(_APFBase):
             d_future = reachable.distance_to_ellipsoid(
                 future, center[idx][:, None, :], axes[idx][:, None, :], heading[idx][:, None]
             )
-            will_enter[idx] = d_future.min(axis=-1) < g.obs_safe_min
+            will_enter[idx] = d_future.min(axis=-1) < g.obstacle_safe_min
         active = near & will_enter
-        mag = np.where(active, g.k_obs * (1.0 / dd - 1.0 / r_safe), 0.0)
+        mag = np.where(active, g.k_obstacle * (1.0 / dd - 1.0 / r_safe), 0.0)
         f = mag[..., None] * normal
         return _cap_norm(f, g.max_repulsion).sum(axis=-2)
 
@@ -277,8 +317,8 @@ class MotionStateAPF(_APFBase):
     The obstacle is a sphere of its safety radius around its current (estimated) position;
     the safe distance grows with the relative approach speed; always active inside it.
 
-    Default gains: ``obs_safe_min`` 9 m and ``obs_time`` 3 s (1.5 times the APF's), the knee
-    of its trade-off curve (``baselines/tradeoff.py``, bank): below it collisions rise
+    Default gains: ``obstacle_safe_min`` 9 m and ``obstacle_time`` 3 s (1.5 times the APF's),
+    the knee of its trade-off curve (``baselines/tradeoff.py``, bank): below it collisions rise
     (12 % at the APF's 6 m / 2 s, 26 % at a quarter of them), above it each metre of
     distance costs more deviation (collisions 11 %, max deviation 12 m, min distance 13 m
     at the knee; 8.5 %, 16 m and 14 m at twice the margin).
@@ -296,10 +336,10 @@ class MotionStateAPF(_APFBase):
         d = dist - radius
         relv = o["obstacle_rel_vel"]  # v_obs - v_i
         closing = np.maximum(0.0, np.einsum("...ki,...ki->...k", relv, away))
-        r_safe = g.obs_safe_min + g.obs_time * closing
+        r_safe = g.obstacle_safe_min + g.obstacle_time * closing
         dd = np.maximum(d, 0.5)
         active = o["obstacle_mask"] & (d < r_safe)
-        mag = np.where(active, g.k_obs * (1.0 / dd - 1.0 / r_safe), 0.0)
+        mag = np.where(active, g.k_obstacle * (1.0 / dd - 1.0 / r_safe), 0.0)
         return _cap_norm(mag[..., None] * away, g.max_repulsion).sum(axis=-2)
 
 

@@ -1,12 +1,18 @@
-"""Learned policies: the project's checkpoint format, and stable-baselines3 models.
+"""Learned policies: the project's checkpoints, and stable-baselines3 models.
 
 A **policy checkpoint** (``.zip``) is what training ships (``baselines/checkpoints/``): a zip
 holding ``uasep_policy.json`` (format, the environment config it was trained in, its action
-mode, observation width, network shape and training facts) and ``weights.npz`` (the actor's
-layers and the observation normalisation statistics, plain float arrays). Loading reads JSON
-and ``numpy.load(..., allow_pickle=False)``: nothing from the file is unpickled and no code
-from it runs. The actor runs in numpy, so evaluating a checkpoint needs neither torch nor
-stable-baselines3.
+mode, observation layout, network shape and training facts) and ``weights.npz`` (the actor's
+layers and the observation normalisation statistics, plain float arrays). The file format
+and its reader with hard limits live in :mod:`uasep_env.policies.checkpoint` and
+:mod:`~uasep_env.policies.checkpoint_reader` (their names are importable from here too):
+nothing from the file is unpickled and no code from it runs. The actor runs in numpy, so
+evaluating a checkpoint needs neither torch nor stable-baselines3.
+
+A checkpoint fits any environment that gives its network the observation layout it reads
+(the K nearest UAVs and obstacles, the same features in the same order): a policy trained on
+3 UAVs flies 8 or 32 when ``observation.k_uavs`` / ``k_obstacles`` are fixed to its own
+(:func:`checkpoint_config` builds such a config).
 
 A stable-baselines3 ``.zip`` is different: SB3's loader unpickles (runs) objects stored in
 the file. :func:`load_sb3_policy` therefore refuses it unless the caller opts in with
@@ -18,97 +24,51 @@ Importing this module does not import stable-baselines3 or torch.
 from __future__ import annotations
 
 import functools
-import io
-import json
 import zipfile
-from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from uasep_env.actions import ResidualAPF
-from uasep_env.config import EnvConfig, make_config
-from uasep_env.jsonio import dumps
+from uasep_env.config import EnvConfig
 from uasep_env.observation import ObservationLayout
+from uasep_env.policies.checkpoint import (
+    ALGORITHMS,
+    CHECKPOINT_FORMAT,
+    META,
+    CheckpointError,
+    PolicyCheckpoint,
+    StoredLayout,
+    save_policy,
+)
+from uasep_env.policies.checkpoint_reader import LIMITS, CheckpointLimits, read_checkpoint
 
 if TYPE_CHECKING:
     from uasep_env.policies.apf import APFGains
 
 __all__ = [
     "CHECKPOINT_FORMAT",
+    "LIMITS",
     "CheckpointError",
+    "CheckpointLimits",
     "LearnedPolicy",
     "PolicyCheckpoint",
     "SB3Policy",
+    "StoredLayout",
+    "checkpoint_config",
     "is_policy_checkpoint",
     "load_policy",
     "load_sb3_policy",
     "save_policy",
 ]
 
-#: Format tag written into every checkpoint's JSON.
-CHECKPOINT_FORMAT = "uasep-policy/1"
-_META = "uasep_policy.json"
-_WEIGHTS = "weights.npz"
 _ACTIVATIONS = {
     "tanh": np.tanh,
     "relu": lambda x: np.maximum(x, 0.0),
 }
-_ALGORITHMS = ("PPO", "SAC", "TD3", "A2C", "DDPG")
-
-
-class CheckpointError(ValueError):
-    """A file that is not a usable policy checkpoint, or one that does not fit the env."""
-
-
-@dataclass(frozen=True)
-class PolicyCheckpoint:
-    """What a policy checkpoint holds besides its weights.
-
-    Attributes:
-        config: The environment config it was trained in (``EnvConfig.to_dict()``).
-        obs_dim: Width of the observation the network reads.
-        activation: Hidden-layer activation (``"tanh"`` or ``"relu"``).
-        hidden: Widths of the hidden layers.
-        obs_norm: Whether observations are normalised by the stored mean and variance.
-        clip_obs: Bound of the normalised observations.
-        obs_epsilon: Added to the variance before its square root.
-        algorithm: The algorithm that trained it (for the record).
-        info: Training facts (agent-steps, wall time, seed, ...), JSON values.
-        format: :data:`CHECKPOINT_FORMAT`.
-    """
-
-    config: dict[str, Any]
-    obs_dim: int
-    activation: str
-    hidden: tuple[int, ...]
-    obs_norm: bool
-    clip_obs: float = 10.0
-    obs_epsilon: float = 1e-8
-    algorithm: str = "PPO"
-    info: dict[str, Any] = field(default_factory=dict)
-    format: str = CHECKPOINT_FORMAT
-
-    @property
-    def env_config(self) -> EnvConfig:
-        """The training config, validated."""
-        return make_config(_tuples(self.config))
-
-    @property
-    def action_mode(self) -> str:
-        """``"direct"`` or ``"residual_apf"``."""
-        return self.env_config.action.mode
-
-
-def _tuples(value: Any) -> Any:
-    """JSON lists back to the tuples the config uses (``formation``, ``wind``)."""
-    if isinstance(value, Mapping):
-        return {k: _tuples(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return tuple(_tuples(v) for v in value)
-    return value
 
 
 class LearnedPolicy:
@@ -134,8 +94,9 @@ class LearnedPolicy:
             it was trained on). Anywhere else it is an error (nothing would use it).
 
     Raises:
-        CheckpointError: When the environment does not fit the checkpoint (number of UAVs,
-            observation width, action mode), naming the mismatch.
+        CheckpointError: When the environment does not fit the checkpoint (observation
+            layout: K nearest UAVs/obstacles, features and widths; action mode), naming the
+            first difference.
     """
 
     def __init__(
@@ -156,8 +117,9 @@ class LearnedPolicy:
         self.name = name
         self.mode = trained.action.mode
         _check_fits(meta, trained, config)
+        # The base APF flies this env (its size), with the trained action settings.
         self._residual = (
-            ResidualAPF(trained, base_gains)
+            ResidualAPF(config.replace(action=asdict(trained.action)), base_gains)
             if self.mode == "residual_apf" and config.action.mode == "direct"
             else None
         )
@@ -200,133 +162,80 @@ class LearnedPolicy:
 
 
 def _check_fits(meta: PolicyCheckpoint, trained: EnvConfig, config: EnvConfig) -> None:
+    """The env must give the network the layout it reads (any number of UAVs/obstacles)."""
     problems = []
     if trained.action.mode == "direct" and config.action.mode != "direct":
         problems.append(f"action.mode: trained with 'direct', this env uses {config.action.mode!r}")
-    env_layout = ObservationLayout.from_config(config.replace(action=asdict(trained.action)))
-    if env_layout.dim != meta.obs_dim:
-        # Only the layout matters (a fixed-K policy flies any n_uavs); name n_uavs if it moved.
-        if config.n_uavs != trained.n_uavs:
-            problems.append(f"n_uavs: trained with {trained.n_uavs}, this env has {config.n_uavs}")
-        problems.append(
-            f"observation width: the network reads {meta.obs_dim}, this env gives "
-            f"{env_layout.dim} (k_uavs/k_obstacles/n_obstacles differ)"
-        )
+    env_layout = StoredLayout.from_config(config.replace(action=asdict(trained.action)))
+    difference = meta.observation_layout.difference(env_layout)
+    if difference is not None:
+        problems.append(difference)
     if problems:
         raise CheckpointError("checkpoint does not fit this environment: " + "; ".join(problems))
 
 
 def is_policy_checkpoint(path: str | Path) -> bool:
-    """Whether ``path`` is a zip in this project's checkpoint format."""
+    """Whether ``path`` is a zip in this project's checkpoint format (by its member names)."""
     try:
         with zipfile.ZipFile(path) as z:
-            return _META in z.namelist()
-    except (OSError, zipfile.BadZipFile):
+            return META in z.namelist()
+    except (OSError, zipfile.BadZipFile, ValueError, EOFError):
         return False
-
-
-def save_policy(
-    path: str | Path,
-    meta: PolicyCheckpoint,
-    weights: Sequence[tuple[np.ndarray, np.ndarray]],
-    obs_mean: np.ndarray | None = None,
-    obs_var: np.ndarray | None = None,
-) -> Path:
-    """Write a policy checkpoint (JSON description + ``.npz`` arrays in one zip).
-
-    Returns:
-        The path written.
-    """
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    arrays: dict[str, np.ndarray] = {}
-    for k, (w, b) in enumerate(weights):
-        arrays[f"layer{k}.weight"] = np.asarray(w, np.float32)
-        arrays[f"layer{k}.bias"] = np.asarray(b, np.float32)
-    if meta.obs_norm:
-        arrays["obs_mean"] = np.asarray(obs_mean, np.float64)
-        arrays["obs_var"] = np.asarray(obs_var, np.float64)
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    desc = {**asdict(meta), "hidden": list(meta.hidden), "n_layers": len(weights)}
-    tmp = p.with_name(p.name + ".tmp")
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr(_META, dumps(desc, indent=2, sort_keys=True))
-        z.writestr(_WEIGHTS, buf.getvalue())
-    tmp.replace(p)
-    return p
-
-
-def _read_checkpoint(
-    p: Path,
-) -> tuple[PolicyCheckpoint, list[tuple[np.ndarray, np.ndarray]], Any, Any]:
-    """Parse a checkpoint file; every failure is a one-line :class:`CheckpointError`."""
-    try:
-        with zipfile.ZipFile(p) as z:
-            desc = json.loads(z.read(_META).decode("utf-8"))
-            raw = z.read(_WEIGHTS)
-    except (zipfile.BadZipFile, KeyError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise CheckpointError(f"{p} is not a uasep policy checkpoint ({err})") from err
-    if not isinstance(desc, dict) or desc.get("format") != CHECKPOINT_FORMAT:
-        got = desc.get("format") if isinstance(desc, dict) else type(desc).__name__
-        raise CheckpointError(
-            f"{p}: unknown checkpoint format {got!r}, expected {CHECKPOINT_FORMAT}"
-        )
-    n_layers = desc.pop("n_layers", None)
-    try:
-        meta = PolicyCheckpoint(**{**desc, "hidden": tuple(desc.get("hidden", ()))})
-        meta.env_config  # noqa: B018 (validates the stored config)
-    except (TypeError, ValueError) as err:
-        raise CheckpointError(f"{p}: invalid checkpoint description ({err})") from err
-    if meta.activation not in _ACTIVATIONS:
-        raise CheckpointError(f"{p}: unknown activation {meta.activation!r}")
-    try:
-        with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (ValueError, OSError, zipfile.BadZipFile) as err:
-        raise CheckpointError(f"{p}: unreadable weights ({err})") from err
-    try:
-        weights = [
-            (arrays[f"layer{k}.weight"], arrays[f"layer{k}.bias"]) for k in range(int(n_layers))
-        ]
-        mean = arrays["obs_mean"] if meta.obs_norm else None
-        var = arrays["obs_var"] if meta.obs_norm else None
-    except (KeyError, TypeError) as err:
-        raise CheckpointError(f"{p}: missing weights ({err})") from err
-    _check_shapes(p, meta, weights, mean, var)
-    return meta, weights, mean, var
-
-
-def _check_shapes(
-    p: Path,
-    meta: PolicyCheckpoint,
-    weights: list[tuple[np.ndarray, np.ndarray]],
-    mean: np.ndarray | None,
-    var: np.ndarray | None,
-) -> None:
-    width = meta.obs_dim
-    sizes = [*meta.hidden, 3]
-    if len(weights) != len(sizes):
-        raise CheckpointError(f"{p}: {len(weights)} layers stored, the description says {sizes}")
-    for k, ((w, b), out) in enumerate(zip(weights, sizes, strict=True)):
-        if w.shape != (out, width) or b.shape != (out,):
-            raise CheckpointError(
-                f"{p}: layer {k} has shapes {w.shape}/{b.shape}, expected ({out}, {width})/({out},)"
-            )
-        if w.dtype.kind != "f" or not (np.isfinite(w).all() and np.isfinite(b).all()):
-            raise CheckpointError(f"{p}: layer {k} holds non-finite or non-float values")
-        width = out
-    if meta.obs_norm:
-        for name, a in (("obs_mean", mean), ("obs_var", var)):
-            if a is None or a.shape != (meta.obs_dim,) or not np.isfinite(a).all():
-                raise CheckpointError(f"{p}: {name} must be {meta.obs_dim} finite values")
-        if (var < 0).any():
-            raise CheckpointError(f"{p}: obs_var has negative entries")
 
 
 @functools.lru_cache(maxsize=16)
 def _cached_read(path: str, mtime_ns: int, size: int) -> tuple:
-    return _read_checkpoint(Path(path))
+    return read_checkpoint(Path(path))
+
+
+def _read(path: str | Path) -> tuple:
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"no policy checkpoint at {p}")
+    st = p.stat()
+    return _cached_read(str(p.resolve()), st.st_mtime_ns, st.st_size)
+
+
+def checkpoint_config(
+    path: str | Path,
+    n_uavs: int | None = None,
+    n_obstacles: int | None = None,
+    **overrides: Any,
+) -> EnvConfig:
+    """The env config a checkpoint's policy can act in, at another formation size.
+
+    The training config (``direct`` action mode, the mode policies are evaluated in) with
+    ``n_uavs`` / ``n_obstacles`` replaced and the observation's K nearest UAVs and obstacles
+    fixed to the checkpoint's, so the observation has the layout the network reads.
+
+    Args:
+        path: The checkpoint.
+        n_uavs: Formation size (default: the training one).
+        n_obstacles: Number of obstacles (default: the training one).
+        **overrides: More config fields (e.g. ``scenario="random"``).
+
+    Returns:
+        The validated config (``load_policy(path, config)`` accepts it).
+
+    Raises:
+        CheckpointError: If no such config gives the checkpoint's layout (e.g. ``n_uavs``
+            not above its ``k_uavs``), naming the difference.
+    """
+    meta = _read(path)[0]
+    trained = meta.env_config
+    layout = meta.observation_layout
+    values: dict[str, Any] = {
+        "n_uavs": trained.n_uavs if n_uavs is None else n_uavs,
+        "n_obstacles": trained.n_obstacles if n_obstacles is None else n_obstacles,
+        **overrides,
+    }
+    observation = {**dict(overrides.get("observation") or {})}
+    observation.update(k_uavs=layout.k_uavs, k_obstacles=layout.k_obstacles)
+    values["observation"] = observation
+    values.setdefault("action", {"mode": "direct"})
+    config = trained.replace(**values)
+    _check_fits(meta, trained, config)
+    return config
 
 
 def load_policy(
@@ -353,10 +262,7 @@ def load_policy(
             ``config`` (the mismatch is named).
     """
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"no policy checkpoint at {p}")
-    st = p.stat()
-    meta, weights, mean, var = _cached_read(str(p.resolve()), st.st_mtime_ns, st.st_size)
+    meta, weights, mean, var = _read(p)
     return LearnedPolicy(
         meta, weights, mean, var, config=config, name=name or p.stem, base_gains=base_gains
     )
@@ -440,8 +346,8 @@ def load_sb3_policy(
             "(uasep-eval --allow-pickle) only for a file you trust"
         )
     name = algorithm or "PPO"
-    if name not in _ALGORITHMS:
-        raise CheckpointError(f"unknown SB3 algorithm {name!r}; choose from {_ALGORITHMS}")
+    if name not in ALGORITHMS:
+        raise CheckpointError(f"unknown SB3 algorithm {name!r}; choose from {ALGORITHMS}")
     model = _load_sb3(str(p.resolve()), p.stat().st_mtime_ns, name)
     return SB3Policy(model, config)
 

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from uasep_env.atomic import atomic_output
 from uasep_env.geometry import obstacle_distances
 from uasep_env.metrics import trajectory_deviation
 from uasep_env.viz.style import COLLISION_COLOUR, OBSTACLE_COLOUR, SEPARATION_COLOUR
@@ -50,7 +51,8 @@ def _new_figure(figsize: tuple[float, float], constrained: bool = True) -> Figur
 
 
 def _save(fig: Figure, path: Path, dpi: int) -> Path:
-    fig.savefig(path, dpi=dpi, facecolor="white")
+    with atomic_output(path) as fh:
+        fig.savefig(fh, format=path.suffix[1:] or "png", dpi=dpi, facecolor="white")
     return path
 
 

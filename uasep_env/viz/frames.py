@@ -323,15 +323,15 @@ class Renderer:
         # Title.
         t = float(world.time[env])
         d_uav = float(np.min(world.min_uav_dist[env], initial=np.inf))
-        d_obs = float(np.min(world.min_obs_dist[env], initial=np.inf))
+        d_obstacle = float(np.min(world.min_obstacle_dist[env], initial=np.inf))
         family = world.families[env] if env < len(world.families) else ""
         scen = f"{family} scenario  ·  " if family else ""
         art["title"].set_text(f"{scen}env {env}  ·  t = {t:6.1f} s")
         sep_uav = world.config.uav.separation_distance
         sep_obs = world.config.uav.obstacle_separation
-        lost = d_uav < sep_uav or d_obs < sep_obs
+        lost = d_uav < sep_uav or d_obstacle < sep_obs
         art["status"].set_text(
-            f"min UAV–UAV {_fmt_dist(d_uav)}    min UAV–obstacle {_fmt_dist(d_obs)}"
+            f"min UAV–UAV {_fmt_dist(d_uav)}    min UAV–obstacle {_fmt_dist(d_obstacle)}"
             + ("    LOSS OF SEPARATION" if lost else "")
         )
         art["status"].set_color(OBSTACLE_COLOUR if lost else "0.15")
@@ -374,9 +374,12 @@ class Renderer:
         """
         if self.fig is None or not self._art:
             raise RuntimeError("nothing rendered yet: call render(world) first")
+        from uasep_env.atomic import atomic_output  # all or nothing, like every output
+
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.fig.savefig(path, dpi=self.dpi, facecolor="white")
+        with atomic_output(path) as fh:
+            fig_format = path.suffix[1:] or "png"
+            self.fig.savefig(fh, format=fig_format, dpi=self.dpi, facecolor="white")
         return path
 
     def close(self) -> None:

@@ -1,0 +1,124 @@
+"""Observations, rewards and feature names pinned to values recorded before a refactor.
+
+The digests were recorded on ``main`` at 4bef8b7, before the observation layout became data
+and the reward terms a table (issue 19). A refactor of the observation or reward code must
+leave them unchanged, with and without numba. A change that is meant to move the numbers
+(new dynamics, a new default feature) updates them here, with a CHANGELOG entry and the env
+version bump.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from uasep_env import _numba, make_config
+from uasep_env.envs.core import EnvCore
+from uasep_env.observation import ObservationLayout
+from uasep_env.policies import APF
+
+CONFIGS = {
+    "paper": {"scenario": "paper"},
+    "random": {"n_uavs": 4, "n_obstacles": 3, "scenario": "random", "reward": {"shared": 0.3}},
+    "short_range": {
+        "n_uavs": 5,
+        "n_obstacles": 2,
+        "scenario": "random",
+        "observation": {"k_uavs": 2, "k_obstacles": 4, "sensing_range": 60.0},
+    },
+    "no_obstacles": {"n_uavs": 4, "n_obstacles": 0},
+    "residual": {
+        "n_uavs": 3,
+        "n_obstacles": 2,
+        "scenario": "random",
+        "action": {"mode": "residual_apf"},
+    },
+}
+#: The reward terms when the digests were recorded (a new term, weighted 0 by default, adds
+#: an entry to ``terms`` without moving these).
+RECORDED_TERMS = (
+    "collision",
+    "control",
+    "deviation",
+    "progress",
+    "separation_inner",
+    "separation_obstacle",
+    "separation_region",
+    "smoothness",
+)
+#: name: (digest of 40 steps of observations, rewards and terms; last obs[0, 0, 0];
+#: last reward[0, 0]; observation width; digest of the feature names).
+PINNED = {
+    "paper": ("11d015cec0fb0280", 0.00385141558945179, 0.9350802311468418, 58, "4ad1804379e3ca79"),
+    "random": (
+        "c54a2cb3f9d14577",
+        -0.014026936143636703,
+        0.9757481990098025,
+        98,
+        "f77f57f8b8f6a080",
+    ),
+    "short_range": (
+        "1cd0c42bfd6c554d",
+        -0.013831560499966145,
+        0.9787620078065938,
+        106,
+        "61c1e65f43d2b817",
+    ),
+    "no_obstacles": (
+        "950a21c53068ff3e",
+        0.0049272882752120495,
+        0.9357570556866531,
+        66,
+        "b7d89c0929ca9f01",
+    ),
+    "residual": (
+        "8127524d7ee71f23",
+        -0.02903461456298828,
+        0.9683772334816598,
+        77,
+        "ead82f5a5479d5ee",
+    ),
+}
+
+
+def _rollout(name: str) -> tuple[str, float, float, int]:
+    cfg = make_config(**CONFIGS[name])
+    core = EnvCore(cfg, n_envs=5)
+    obs = core.reset(seed=7)
+    apf = APF(cfg)
+    h = hashlib.sha256(obs.tobytes())
+    rng = np.random.default_rng(1)
+    for _ in range(40):
+        if cfg.action.mode == "direct":
+            act = apf(obs)
+        else:
+            act = rng.uniform(-1, 1, size=(*obs.shape[:2], 3))
+        res = core.step(act)
+        obs = res.obs
+        h.update(res.obs.tobytes())
+        h.update(res.rewards.tobytes())
+        for k in RECORDED_TERMS:
+            h.update(res.terms[k].tobytes())
+    return h.hexdigest()[:16], float(obs[0, 0, 0]), float(res.rewards[0, 0]), obs.shape[-1]
+
+
+@pytest.mark.parametrize("numba", [True, False], ids=["numba", "numpy"])
+@pytest.mark.parametrize("name", sorted(CONFIGS))
+def test_observations_and_rewards_match_the_recorded_numbers(monkeypatch, name, numba):
+    if numba and not _numba.available():
+        pytest.skip("numba not installed or UASEP_NUMBA=0")
+    if not numba:
+        monkeypatch.setitem(_numba._state, "numba", None)
+    digest, first_obs, first_reward, width = _rollout(name)
+    want = PINNED[name]
+    assert (first_obs, first_reward, width) == want[1:4]
+    assert digest == want[0]
+
+
+@pytest.mark.parametrize("name", sorted(CONFIGS))
+def test_feature_names_match_the_recorded_layout(name):
+    names = ObservationLayout.from_config(make_config(**CONFIGS[name])).feature_names()
+    assert len(names) == PINNED[name][3]
+    assert hashlib.sha256("\n".join(names).encode()).hexdigest()[:16] == PINNED[name][4]
