@@ -51,7 +51,6 @@ from uasep_env import make_config
 from uasep_env.config import EnvConfig
 from uasep_env.evaluation import evaluate
 from uasep_env.jsonio import write_json
-from uasep_env.observation import ObservationLayout
 from uasep_env.policies import POLICIES, is_policy_checkpoint
 from uasep_env.policies.learned import load_policy
 from uasep_env.scenarios import HELD_OUT_SEEDS
@@ -89,9 +88,9 @@ class PolicyEntry:
 
 def checkpoint_layout(path: str | Path) -> tuple[EnvConfig, tuple[int, int]]:
     """The training config of a checkpoint and its effective ``(k_uavs, k_obstacles)``."""
-    trained = load_policy(path).meta.env_config
-    layout = ObservationLayout.from_config(trained)
-    return trained, (layout.k_uavs, layout.k_obstacles)
+    meta = load_policy(path).meta
+    layout = meta.observation_layout  # stored (format 2) or implied by its training config
+    return meta.env_config, (layout.k_uavs, layout.k_obstacles)
 
 
 def cell_config(

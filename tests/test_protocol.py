@@ -68,9 +68,9 @@ def test_fixed_k_recipe_config_and_mismatched_layout_is_named(tmp_path):
     for n, m in ((3, 1), (16, 4)):
         load_policy(path, cfg.replace(n_uavs=n, n_obstacles=m, action={"mode": "direct"}))
     # Another layout is refused, naming what differs.
-    with pytest.raises(CheckpointError, match="observation width"):
+    with pytest.raises(CheckpointError, match="k_obstacles: the network reads the 1 nearest"):
         load_policy(path, cfg.replace(observation={"k_obstacles": 2}, action={"mode": "direct"}))
-    with pytest.raises(CheckpointError, match="n_uavs: trained with 3, this env has 8"):
+    with pytest.raises(CheckpointError, match="k_uavs: the network reads the 2 nearest UAVs"):
         load_policy(path, make_config(scenario="random", n_uavs=8))
 
 

@@ -23,7 +23,10 @@ conventions of ``train/ppo_shared.py`` (every flag of it applies where it means 
 * Budget and outputs as ``ppo_shared.py``: ``--max-minutes`` (55) or ``--total-timesteps``
   agent-steps; ``progress.csv`` and ``curves.png``; ``checkpoints/step_N/`` (``state.pt``
   loaded weights-only, ``normalization.npz``, ``state.json``, ``policy.zip``) and
-  ``checkpoints/latest`` for ``--resume``; ``validation.json``.
+  ``checkpoints/latest`` for ``--resume``; ``validation.json``. The run folder follows
+  ``train/rundir.py``: a used ``--out-dir`` is refused unless ``--resume`` or
+  ``--overwrite``, files are written atomically, and ``--resume`` rewinds ``progress.csv``
+  to the checkpoint and continues its episode window.
 
 Options of ``ppo_shared.py`` MAPPO does not have (``--critic-warmup``, ``--norm-reward``,
 ``--tensorboard``) are refused. ``--batch-size`` sets skrl's mini-batches per agent
@@ -33,9 +36,11 @@ Options of ``ppo_shared.py`` MAPPO does not have (``--critic-warmup``, ``--norm-
 from __future__ import annotations
 
 import collections
-import csv
 import dataclasses
+import io
 import json
+import os
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -277,30 +282,50 @@ def _modules(agent: Any) -> dict:
 def save_checkpoint(
     agent: Any, venv: Any, config: Any, args: Args, directory: Path, info: dict
 ) -> None:
-    """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``."""
-    import torch
+    """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
 
+    As ``ppo_shared.save_checkpoint``: written under a temporary name and renamed into place
+    when complete (:func:`rundir.publish_dir`), ``state.json`` last.
+    """
+    import torch
+    from rundir import publish_dir
+
+    from uasep_env.atomic import atomic_write
     from uasep_env.jsonio import dumps
 
-    directory.mkdir(parents=True, exist_ok=True)
-    torch.save(_modules(agent), directory / "state.pt")
-    o = venv.obs_rms
-    np.savez(directory / "normalization.npz", obs_mean=o.mean, obs_var=o.var, obs_count=o.count)
-    (directory / "state.json").write_text(
-        dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
-    )
-    export_policy(agent, venv, config, args, directory / "policy.zip", info)
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        buf = io.BytesIO()
+        torch.save({"agent": _modules(agent), "torch_rng": torch.get_rng_state()}, buf)
+        atomic_write(tmp / "state.pt", buf.getvalue())
+        o = venv.obs_rms
+        buf = io.BytesIO()
+        np.savez(buf, obs_mean=o.mean, obs_var=o.var, obs_count=o.count)
+        atomic_write(tmp / "normalization.npz", buf.getvalue())
+        export_policy(agent, venv, config, args, tmp / "policy.zip", info)
+        atomic_write(
+            tmp / "state.json", dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+        )
+        publish_dir(tmp, directory)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)  # the previous checkpoint stays as it was
+        raise
 
 
 def load_checkpoint(agent: Any, venv: Any, directory: Path) -> dict:
     """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling)."""
     import torch
+    from rundir import check_checkpoint
 
+    directory = check_checkpoint(directory)
     state = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
     for uid, mods in agent.checkpoint_modules.items():
         for k, v in mods.items():
             if v is not None:
-                v.load_state_dict(state[uid][k])
+                v.load_state_dict(state["agent"][uid][k])
+    torch.set_rng_state(state["torch_rng"])
     with np.load(directory / "normalization.npz", allow_pickle=False) as z:
         venv.obs_rms.mean, venv.obs_rms.var = z["obs_mean"], z["obs_var"]
         venv.obs_rms.count = float(z["obs_count"])
@@ -310,22 +335,24 @@ def load_checkpoint(agent: Any, venv: Any, directory: Path) -> dict:
 def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
     """The training loop (skrl's trainer loop, with the recipes' bookkeeping)."""
     import torch
+    from rundir import ProgressLog, check_checkpoint, rewind
+
+    from uasep_env.atomic import atomic_symlink
 
     venv, env, agent = build(args, config)
-    steps, wall_offset = 0, 0.0
+    resumed: dict = {}
     if args.resume:
-        info = load_checkpoint(agent, venv, Path(args.resume))
-        steps, wall_offset = int(info["agent_steps"]), float(info["wall_s"])
-        print(f"resumed from {args.resume} at {steps:,} agent-steps")
+        resumed = load_checkpoint(agent, venv, check_checkpoint(Path(args.resume)))
+        rewind(out, ppo_shared.CSV_FIELDS, int(resumed["agent_steps"]))
+        print(f"resumed from {args.resume} at {int(resumed['agent_steps']):,} agent-steps")
+    steps, wall_offset = int(resumed.get("agent_steps", 0)), float(resumed.get("wall_s", 0.0))
     per_step = args.n_envs * env.n
     t0 = time.perf_counter() - wall_offset
-    window: collections.deque = collections.deque(maxlen=200)
-    episodes = 0
-    new = not (out / "progress.csv").exists()
-    csv_file = (out / "progress.csv").open("a", newline="")
-    writer = csv.DictWriter(csv_file, fieldnames=ppo_shared.CSV_FIELDS)
-    if new:
-        writer.writeheader()
+    window: collections.deque = collections.deque(
+        (tuple(e) for e in resumed.get("window", ())), maxlen=200
+    )
+    episodes = int(resumed.get("episodes", 0))
+    log = ProgressLog(out / "progress.csv", ppo_shared.CSV_FIELDS)
     next_ckpt = (steps // args.checkpoint_every + 1) * args.checkpoint_every
     bar = None
     if args.progress:
@@ -363,11 +390,9 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
 
     def checkpoint() -> None:
         d = out / "checkpoints" / f"step_{steps}"
-        save_checkpoint(agent, venv, config, args, d, facts())
-        latest = out / "checkpoints" / "latest"
-        if latest.is_symlink() or latest.exists():
-            latest.unlink()
-        latest.symlink_to(d.name)
+        window_rows = [[float(x) for x in e] for e in window]
+        save_checkpoint(agent, venv, config, args, d, {**facts(), "window": window_rows})
+        atomic_symlink(d.name, out / "checkpoints" / "latest")
 
     obs, _ = env.reset()
     states = env.state()
@@ -411,7 +436,7 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
                 checkpoint()
                 next_ckpt += args.checkpoint_every
         s = summary()
-        writer.writerow(
+        log.write(
             {
                 "agent_steps": steps,
                 "wall_s": round(time.perf_counter() - t0, 2),
@@ -419,7 +444,6 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
                 **s,
             }
         )
-        csv_file.flush()
         if bar is not None:
             bar.update(steps - bar.n)
             if s:
@@ -429,7 +453,7 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
                     dev=f"{s['max_deviation_mean']:.1f}m",
                 )
     checkpoint()
-    csv_file.close()
+    log.close()
     if bar is not None:
         bar.close()
     return agent, venv, facts()
@@ -442,14 +466,21 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     import torch  # lazy: the training extra
 
     torch.set_num_threads(args.torch_threads)
+    from rundir import check_checkpoint, plot_curves, prepare_out_dir
+
     config = ppo_shared.make_env_config(args)
     out = Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    if args.resume:
+        check_checkpoint(Path(args.resume))
+    prepare_out_dir(out, args.resume, args.overwrite)
     agent, venv, info = train(args, config, out)
     policy_path = export_policy(agent, venv, config, args, out / "policy.zip", info)
-    ppo_shared.plot_curves(out / "progress.csv", out / "curves.png", "MAPPO (skrl)")
+    plot_curves(out / "progress.csv", out / "curves.png", ppo_shared.CSV_FIELDS, "MAPPO (skrl)")
     return ppo_shared.write_validation(out, config, policy_path, info, args.eval_episodes)
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except OSError as err:  # a file that cannot be written (a full disk): one line, status 1
+        sys.exit(f"{Path(sys.argv[0]).name}: error: {err}")
