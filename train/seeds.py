@@ -108,8 +108,8 @@ def train_all(recipe: str, out: Path, seeds: int, parallel: int, extra: list[str
     while pending or running:
         while pending and len(running) < parallel:
             k, cmd = pending.pop(0)
-            seed_dir(out, k).mkdir(parents=True, exist_ok=True)
-            log = (seed_dir(out, k) / "train.log").open("a")
+            # The log lies beside the run folder: a recipe refuses a used --out-dir.
+            log = (out / f"seed_{k}.log").open("a")
             print(f"seed {k}: {' '.join(cmd[1:])}", flush=True)
             running.append(
                 (k, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=_env()), log)
@@ -124,7 +124,7 @@ def train_all(recipe: str, out: Path, seeds: int, parallel: int, extra: list[str
                 if proc.returncode != 0:
                     failed.append(k)
     if failed:
-        raise SystemExit(f"training failed for seeds {failed}: see seed_<k>/train.log")
+        raise SystemExit(f"training failed for seeds {failed}: see {out}/seed_<k>.log")
 
 
 def select_all(out: Path, seeds: int, episodes: int, workers: int) -> list[Path]:
