@@ -1,13 +1,22 @@
 # Two entry points, each installing what it needs into .venv on a fresh machine:
 #   make eval   -- the APF evaluated on the paper's scenario, metrics printed
 #   make test   -- ruff + the whole test suite (with the ecosystem's clients: the clients extra)
+# and CI's further jobs (.ci/run):
+#   make test-floors  -- the env/vector/convention tests on the declared dependency floors
+#                        (.ci/floors.txt), without numba or any extra, in a venv of their own
+#   make test-package -- build wheel + sdist, twine check, install the wheel in a clean venv
+#                        outside the repo and run uasep-eval on a shipped policy by name
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 # A local CPU build; a plain "torch" requirement would pull a multi-GB CUDA build.
 TORCH  := torch==2.13.0
 
-.PHONY: eval test lint bench clean
+# Outside the repository: what a pip user has (no repo on the path).
+FLOORS_VENV ?= $(CURDIR)/.venv-floors
+PKG_DIR     ?= /tmp/uasep-env-package-check
+
+.PHONY: eval test lint bench clean ci test-floors test-package
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -38,9 +47,48 @@ lint: $(VENV)/.all
 test: lint
 	UASEP_REQUIRE_CLIENTS=1 $(BIN)/python -m pytest -n 2 --dist loadgroup -q
 
+# Every CI job, in order (.ci/run).
+ci: test test-floors test-package
+
+# The floors, exactly, and the package's requirements resolved against them (pip fails if a
+# declared range excludes a floor; --dry-run: no build/ left in the tree); the tests run on
+# this checkout. No numba (its kernels hide the numpy paths), no matplotlib, no torch.
+$(FLOORS_VENV)/.floors: .ci/floors.txt pyproject.toml
+	rm -rf $(FLOORS_VENV)
+	$(PYTHON) -m venv $(FLOORS_VENV)
+	$(FLOORS_VENV)/bin/python -m pip install --quiet -r .ci/floors.txt "pytest>=8"
+	$(FLOORS_VENV)/bin/python -m pip install --quiet --dry-run -c .ci/floors.txt .
+	touch $@
+
+FLOORS_TESTS := tests/test_envs.py tests/test_vector.py tests/test_conventions.py \
+	tests/test_config.py tests/test_packaging.py
+
+test-floors: $(FLOORS_VENV)/.floors
+	@! $(FLOORS_VENV)/bin/python -c "import numba" 2>/dev/null || (echo "numba in the floors venv" && false)
+	$(FLOORS_VENV)/bin/python -m pip list --format=freeze | grep -iE "^(numpy|gymnasium|pettingzoo|scipy|tabulate)=="
+	cd $(CURDIR) && $(FLOORS_VENV)/bin/python -m pytest -q -p no:cacheprovider $(FLOORS_TESTS)
+
+# sdist, then the wheel built from it (so the sdist is complete); the clean venv takes the
+# wheel's dependencies from pip's cache after the first run.
+test-package: $(VENV)/.all
+	rm -rf $(PKG_DIR) && mkdir -p $(PKG_DIR)
+	$(BIN)/python -m build --outdir $(PKG_DIR)/dist . > $(PKG_DIR)/build.log
+	$(BIN)/twine check --strict $(PKG_DIR)/dist/*
+	$(BIN)/python tools/check_dist.py $(PKG_DIR)/dist
+	$(PYTHON) -m venv $(PKG_DIR)/venv
+	$(PKG_DIR)/venv/bin/python -m pip install --quiet $(PKG_DIR)/dist/*.whl
+	cd $(PKG_DIR) && venv/bin/uasep-eval --policy ppo_residual_apf,apf \
+		--config episode_duration=20 --json run.json
+	cd $(PKG_DIR) && ! venv/bin/python -c "import matplotlib" 2>/dev/null
+	cd $(PKG_DIR) && mkdir sdist && tar xzf dist/*.tar.gz -C sdist --strip-components 1
+	cd $(PKG_DIR)/sdist && $(abspath $(BIN))/python -m pytest -q -p no:cacheprovider \
+		--collect-only tests > collect.log || (tail -30 collect.log && false)
+	cd $(PKG_DIR)/sdist && UASEP_NUMBA=0 $(abspath $(BIN))/python -m pytest -q \
+		-p no:cacheprovider tests/test_packaging.py -k "shipped or metadata or links or floors"
+
 bench: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[bench]"
 	$(BIN)/python benchmarks/bench_peers.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) $(FLOORS_VENV) .pytest_cache .ruff_cache .hypothesis

@@ -207,3 +207,123 @@ def test_skrl_pettingzoo_wrapper():
             ends += 1
             obs, _ = env.reset()  # skrl's trainers reset finished episodes the same way
     assert ends >= 2
+
+
+# --- A CleanRL-style PPO loop on the native vector env (issue 23) ------------------------------
+
+
+def test_cleanrl_style_ppo_on_make_vec():
+    """CleanRL's ppo_continuous_action loop, on gymnasium.make_vec and its vector wrappers."""
+    torch = _need("torch")
+    import gymnasium
+    from gymnasium.wrappers import vector as vw
+    from torch import nn
+
+    n_envs, n_steps, gamma, lam, clip = 2, 64, 0.99, 0.95, 0.2
+    envs = gymnasium.make_vec("uasep/Formation-v1", num_envs=n_envs, **SHORT)
+    envs = vw.RecordEpisodeStatistics(envs)
+    envs = vw.ClipAction(envs)
+    envs = vw.NormalizeObservation(envs)
+    envs = vw.NormalizeReward(envs, gamma=gamma)
+    obs_dim = envs.single_observation_space.shape[0]
+    act_dim = envs.single_action_space.shape[0]
+    torch.manual_seed(0)
+    critic = nn.Sequential(nn.Linear(obs_dim, 64), nn.Tanh(), nn.Linear(64, 1))
+    actor = nn.Sequential(nn.Linear(obs_dim, 64), nn.Tanh(), nn.Linear(64, act_dim))
+    log_std = nn.Parameter(torch.zeros(1, act_dim))
+    params = [*critic.parameters(), *actor.parameters(), log_std]
+    optimizer = torch.optim.Adam(params, lr=3e-4, eps=1e-5)
+    before = [p.detach().clone() for p in params]
+
+    def dist(x):
+        return torch.distributions.Normal(actor(x), log_std.expand(len(x), -1).exp())
+
+    obs_np, _ = envs.reset(seed=0)
+    next_obs, next_done = torch.as_tensor(obs_np), torch.zeros(n_envs)
+    episodes = 0
+    for _ in range(2):  # iterations
+        buf = {k: [] for k in ("obs", "act", "logp", "rew", "done", "val")}
+        for _ in range(n_steps):
+            with torch.no_grad():
+                d = dist(next_obs)
+                action = d.sample()
+                buf["logp"].append(d.log_prob(action).sum(-1))
+                buf["val"].append(critic(next_obs).squeeze(-1))
+            buf["obs"].append(next_obs)
+            buf["act"].append(action)
+            buf["done"].append(next_done)
+            obs_np, reward, term, trunc, infos = envs.step(action.numpy())
+            buf["rew"].append(torch.as_tensor(reward, dtype=torch.float32))
+            next_obs = torch.as_tensor(obs_np)
+            next_done = torch.as_tensor(np.logical_or(term, trunc), dtype=torch.float32)
+            if "episode" in infos:
+                episodes += int(infos["_episode"].sum())
+        b = {k: torch.stack(v) for k, v in buf.items()}
+        with torch.no_grad():
+            next_value = critic(next_obs).squeeze(-1)
+        adv = torch.zeros_like(b["rew"])
+        last = torch.zeros(n_envs)
+        for t in reversed(range(n_steps)):
+            nonterminal = 1.0 - (next_done if t == n_steps - 1 else b["done"][t + 1])
+            value_next = next_value if t == n_steps - 1 else b["val"][t + 1]
+            delta = b["rew"][t] + gamma * value_next * nonterminal - b["val"][t]
+            adv[t] = last = delta + gamma * lam * nonterminal * last
+        ret = adv + b["val"]
+        flat = {k: v.reshape(n_steps * n_envs, *v.shape[2:]) for k, v in b.items()}
+        adv, ret = adv.reshape(-1), ret.reshape(-1)
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        ratio = (dist(flat["obs"]).log_prob(flat["act"]).sum(-1) - flat["logp"]).exp()
+        pg_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - clip, 1 + clip)).mean()
+        v_loss = 0.5 * ((critic(flat["obs"]).squeeze(-1) - ret) ** 2).mean()
+        loss = pg_loss + 0.5 * v_loss
+        optimizer.zero_grad()
+        loss.backward()
+        nn.utils.clip_grad_norm_(params, 0.5)
+        optimizer.step()
+        assert torch.isfinite(loss)
+    envs.close()
+    assert episodes >= 4  # 50-step episodes, 128 steps in each of 2 envs: RecordEpisodeStatistics
+    assert all(not torch.equal(a, p.detach()) for a, p in zip(before, params, strict=True))
+
+
+# --- SB3 off-policy on the shared adapter, SubprocVecEnv with spawn (issue 23) ------------------
+
+
+def test_sb3_sac_on_the_shared_adapter():
+    sb3 = _need("stable_baselines3")
+    from stable_baselines3.common.evaluation import evaluate_policy
+
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+
+    venv = UAVSharedVecEnv(n_envs=2, seed=0, **SHORT)  # 6 UAVs, one shared SAC policy
+    model = sb3.SAC(
+        "MlpPolicy", venv, learning_starts=30, batch_size=32, buffer_size=1000, seed=0, device="cpu"
+    )
+    model.learn(total_timesteps=330)  # 55 steps of 6 UAVs: crosses the episode end (50)
+    assert model.num_timesteps >= 330 and model.replay_buffer.size() > 0
+    mean, _ = evaluate_policy(model, venv, n_eval_episodes=6)
+    assert np.isfinite(mean)
+
+
+def test_sb3_subproc_vec_env_spawn():
+    """make_vec_env with SubprocVecEnv(start_method="spawn"): the workers import the package
+    (registering the ids) from the id's "module:" prefix."""
+    sb3 = _need("stable_baselines3")
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    venv = make_vec_env(
+        "uasep_env:uasep/PaperEncounter-v1",
+        n_envs=2,
+        seed=0,
+        env_kwargs=SHORT,
+        vec_env_cls=SubprocVecEnv,
+        vec_env_kwargs={"start_method": "spawn"},
+    )
+    try:
+        model = sb3.PPO("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=1, device="cpu")
+        model.learn(128)
+        assert model.num_timesteps >= 128
+        assert len(model.ep_info_buffer) >= 2  # episodes of 50 steps finished in the workers
+    finally:
+        venv.close()

@@ -134,3 +134,19 @@ def test_as_published_runs_the_papers_prediction():
     assert ref[1] == ref[2]
     with pytest.raises(ValueError, match=r"prediction\.fit"):
         make_config(prediction={"fit": "tight"})
+
+
+def test_any_sequence_is_a_formation_or_vector():
+    """Issue 23 item 8: OmegaConf's ListConfig (Hydra, BenchMARL YAML) is a sequence too."""
+    omegaconf = pytest.importorskip("omegaconf")
+    yaml = omegaconf.OmegaConf.create(
+        {"formation": [[-20, 0, 0], [20, 0, 0], [0, 0, 0]], "obstacle": {"wind": [1, 0, 0]}}
+    )
+    cfg = make_config(formation=yaml.formation, obstacle={"wind": yaml.obstacle.wind})
+    assert cfg.formation == ((-20.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert cfg.obstacle.wind == (1.0, 0.0, 0.0)
+    assert make_config(yaml) == cfg  # a whole DictConfig
+    with pytest.raises(ValueError, match=r"formation.*shape \(3, 3\)"):
+        make_config(formation=omegaconf.OmegaConf.create([[0, 0, 0]]))
+    with pytest.raises(ValueError, match="formation"):
+        make_config(formation=b"abc")  # bytes are not a sequence of slots

@@ -370,3 +370,19 @@ def test_console_script_help():
 def test_evaluate_rejects_a_bad_ray_address(bad):
     with pytest.raises(ValueError, match=r"ray: must be 'local' or a Ray address, got"):
         evaluate(["apf"], _short_config(), [0], ray=bad)
+
+
+def test_scenario_brings_its_defaults_large_formation_flies_eight(tmp_path):
+    """Issue 23 item 8: --scenario large_formation flew 3 UAVs; its gym id flies 8."""
+    import gymnasium
+
+    gym_cfg = gymnasium.make("uasep/LargeFormation-v1").unwrapped.config
+    cfg = build_config("large_formation")
+    assert (cfg.n_uavs, cfg.formation, cfg.n_obstacles) == (8, "wedge", 2)
+    assert (gym_cfg.n_uavs, gym_cfg.formation, gym_cfg.n_obstacles) == (8, "wedge", 2)
+    assert build_config("large_formation", ["n_uavs=6"]).n_uavs == 6  # overrides win
+    assert build_config("paper").n_uavs == 3
+    out = tmp_path / "lf.json"
+    args = ["--scenario", "large_formation", "--config", "episode_duration=2", "--json", str(out)]
+    assert main([*args, "--quiet"]) == 0
+    assert json.loads(out.read_text())["config"]["n_uavs"] == 8

@@ -275,3 +275,25 @@ def test_base_gains_only_for_a_residual_policy_flying_its_own_base():
             cfg.replace(action={"mode": "residual_apf"}),
             base_gains=wide,
         )
+
+
+def test_uasep_eval_loads_an_sb3_sac_model_with_algorithm(tmp_path, capsys):
+    """Issue 23 item 6: --allow-pickle loaded every SB3 file as PPO; --algorithm picks it."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+
+    venv = UAVSharedVecEnv(n_envs=1, seed=0, episode_duration=4.0)
+    model = sb3.SAC(
+        "MlpPolicy", venv, learning_starts=8, batch_size=8, buffer_size=64, seed=0, device="cpu"
+    )
+    model.learn(total_timesteps=16)
+    path = tmp_path / "sac.zip"
+    model.save(path)
+    args = ["--policy", str(path), "--allow-pickle", "--config", "episode_duration=4", "--quiet"]
+    assert eval_main(args) == 2  # loaded as PPO: refused, with the way out named
+    assert "--algorithm" in capsys.readouterr().err
+    out = tmp_path / "r.json"
+    assert eval_main([*args, "--algorithm", "SAC", "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["policies"] == ["sac"]  # labelled by the file stem
+    assert eval_main([*args, "--algorithm", "SACC"]) == 2
+    assert "--algorithm" in capsys.readouterr().err

@@ -370,7 +370,41 @@ def test_vector_env_render():
     )
     env.reset(seed=0)
     env.step(np.zeros(env.action_space.shape, dtype=np.float32))
-    _check_frame(env.render())
+    frames = env.render()
+    # Issue 23 item 7: Gymnasium's vector convention, one frame per sub-env (was env 0's).
+    assert isinstance(frames, tuple) and len(frames) == 2
+    for frame in frames:
+        _check_frame(frame)
+    assert not np.array_equal(frames[0], frames[1])
+    # Sub-env i is the single env seeded seed + i: the same frame, pixel for pixel, below
+    # the title (which names the env index).
+    single = gymnasium.make("uasep/PaperEncounter-v1", render_mode="rgb_array")
+    single.reset(seed=1)
+    single.step(np.zeros(single.action_space.shape, dtype=np.float32))
+    np.testing.assert_array_equal(frames[1][40:], single.render()[40:])
+    single.close()
+    env.close()
+
+
+def test_vector_env_human_rendering_wrapper(monkeypatch):
+    """gymnasium.wrappers.vector.HumanRendering tiles the sub-envs' frames in a window."""
+    pytest.importorskip("pygame")
+    pytest.importorskip("cv2")
+    from gymnasium.wrappers.vector import HumanRendering
+
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")  # no display needed
+    env = HumanRendering(
+        gymnasium.make_vec(
+            "uasep/PaperEncounter-v1",
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            render_mode="rgb_array",
+            episode_duration=2.0,
+        )
+    )
+    env.reset(seed=0)
+    env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    assert env.window is not None and env.screen_size is not None
     env.close()
 
 

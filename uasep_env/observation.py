@@ -122,6 +122,18 @@ def _gather_inputs(
     )
 
 
+def _view(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``a`` reshaped to ``shape`` as a view (writes go to ``a``).
+
+    ``np.reshape(..., copy=False)`` says the same but needs numpy >= 2.1; a plain reshape
+    may silently copy, so the view is checked.
+    """
+    view = a.reshape(shape)
+    if view.size and not np.may_share_memory(view, a):  # pragma: no cover - never copies
+        raise RuntimeError(f"cannot reshape {a.shape} to {shape} without a copy")
+    return view
+
+
 def _write(block: np.ndarray, cols: dict[str, slice], values: dict[str, object]) -> None:
     """``block[..., cols[key]] = value`` for each computed feature the layout has."""
     for key, value in values.items():
@@ -174,7 +186,7 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
         d_sel = dist.reshape(-1)[pair]
         present = (d_sel <= layout.sensing_range)[..., None]
         w = layout.width("uav")
-        block = np.reshape(out[..., col : col + k_u * w], (e, n, k_u, w), copy=False)
+        block = _view(out[..., col : col + k_u * w], (e, n, k_u, w))
         relv = vel.reshape(-1, 3)[other] - vel[:, :, None, :]
         uavs = {
             "uav_rel_pos": np.where(present, rel.reshape(-1, 3)[pair] / ps, 0.0),
@@ -187,7 +199,7 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
 
     k_o = layout.k_obstacles
     w = layout.width("obstacle")
-    block = np.reshape(out[..., col : col + k_o * w], (e, n, k_o, w), copy=False)
+    block = _view(out[..., col : col + k_o * w], (e, n, k_o, w))
     kk = min(k_o, m)
     block[:, :, kk:] = 0.0
     if kk:

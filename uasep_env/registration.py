@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import gymnasium
 
+from uasep_env.scenarios import SCENARIO_DEFAULTS
+
 __all__ = ["ENV_IDS", "register_envs"]
 
 #: id -> default config overrides.
@@ -12,9 +14,7 @@ ENV_IDS: dict[str, dict] = {
     "uasep/PaperEncounter-v1": {"scenario": "paper"},
     "uasep/LargeFormation-v1": {
         "scenario": "large_formation",
-        "n_uavs": 8,
-        "formation": "wedge",
-        "n_obstacles": 2,
+        **SCENARIO_DEFAULTS["large_formation"],
     },
 }
 

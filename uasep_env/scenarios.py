@@ -53,6 +53,7 @@ __all__ = [
     "HELD_OUT_SEEDS",
     "N_WAYPOINTS",
     "RANDOM_FAMILIES",
+    "SCENARIO_DEFAULTS",
     "TRAINING_SEEDS",
     "VALIDATION_SEEDS",
     "ScenarioSpec",
@@ -65,6 +66,11 @@ __all__ = [
 N_WAYPOINTS = 4
 #: Families drawn by the ``random`` scenario.
 RANDOM_FAMILIES = ("crossing", "head_on", "overtaking", "climbing", "multi_obstacle")
+#: Config a family is meant to be flown with, applied where a scenario is chosen by name
+#: (the gym id ``uasep/LargeFormation-v1``, ``uasep-eval --scenario``), before overrides.
+SCENARIO_DEFAULTS: dict[str, dict] = {
+    "large_formation": {"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
+}
 
 # Seed ranges of learned baselines: training, validation and the held-out bank never meet.
 #: Seeds training environments may be created with (environment ``e`` of a batch seeded

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -34,6 +35,17 @@ def check(cond: bool, name: str, value: object, what: str) -> None:
     """
     if not cond:
         raise ValueError(f"invalid config value {name}={value!r}: {what}")
+
+
+def is_sequence(value: object) -> bool:
+    """A sequence of values: any :class:`~collections.abc.Sequence` but text, or an array.
+
+    Any sequence, not just ``tuple``/``list``: configs arrive as OmegaConf ``ListConfig``
+    (Hydra, BenchMARL's YAML) and other sequence types.
+    """
+    if isinstance(value, np.ndarray):
+        return True
+    return isinstance(value, Sequence) and not isinstance(value, (str, bytes, bytearray))
 
 
 def is_int(value: object) -> bool:
@@ -120,7 +132,7 @@ def check_vector(name: str, value: object, length: int, bound: float) -> tuple[f
         ValueError: Naming ``name`` and the value.
     """
     check(
-        isinstance(value, (tuple, list, np.ndarray)) and len(value) == length,
+        is_sequence(value) and len(value) == length,
         name,
         value,
         f"must be a sequence of {length} numbers",

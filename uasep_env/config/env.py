@@ -16,8 +16,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any, TypeVar
 
-import numpy as np
-
 from uasep_env.config.checks import (
     MAX_DIST,
     MAX_SPEED,
@@ -27,6 +25,7 @@ from uasep_env.config.checks import (
     check_one_of,
     check_positive,
     check_vector,
+    is_sequence,
 )
 from uasep_env.config.groups import (
     ActionConfig,
@@ -122,8 +121,7 @@ class EnvConfig:
             )
         else:
             check(
-                isinstance(self.formation, (tuple, list, np.ndarray))
-                and len(self.formation) == self.n_uavs,
+                is_sequence(self.formation) and len(self.formation) == self.n_uavs,
                 "formation",
                 self.formation,
                 f"explicit pattern must have shape ({self.n_uavs}, 3): one (x, y, z) per UAV",

@@ -8,6 +8,8 @@ import gymnasium
 import numpy as np
 from gymnasium.error import ClosedEnvironmentError
 
+from uasep_env.viz.requirements import require_matplotlib
+
 __all__ = ["ViewMixin"]
 
 
@@ -25,11 +27,16 @@ class ViewMixin:
         return self.core.world
 
     def render(self) -> np.ndarray | None:
-        """Render environment 0 with matplotlib: an RGB array or a window."""
+        """Render environment 0 with matplotlib: an RGB array or a window.
+
+        Raises:
+            ModuleNotFoundError: Without matplotlib, naming the ``viz`` extra.
+        """
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without a render_mode; returning None")
             return None
         if self._renderer is None:
+            require_matplotlib(f"render() (render_mode={self.render_mode!r})")
             from uasep_env.viz.frames import Renderer
 
             self._renderer = Renderer(mode=self.render_mode)

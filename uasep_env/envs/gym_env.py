@@ -12,6 +12,7 @@ from uasep_env.config.checks import check_seed
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS
+from uasep_env.viz.requirements import available_render_modes, checked_render_mode
 
 __all__ = ["FormationEnv"]
 
@@ -47,11 +48,15 @@ class FormationEnv(ViewMixin, gymnasium.Env):
     Any :class:`~uasep_env.config.EnvConfig` field as a keyword, validated.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}  # noqa: RUF012
+    # The render modes this installation can draw (none without matplotlib, the viz extra).
+    metadata = {  # noqa: RUF012
+        "render_modes": available_render_modes(("human", "rgb_array")),
+        "render_fps": 10,
+    }
 
     def __init__(self, config: EnvConfig | dict | None = None, **kwargs: Any) -> None:
         self.config = make_config(config, **kwargs)
-        self.render_mode = self.config.render_mode
+        self.render_mode = checked_render_mode(self.config.render_mode)
         self.core = EnvCore(self.config, n_envs=1)
         n, d = self.config.n_uavs, self.core.obs_dim
         clip = self.config.observation.clip

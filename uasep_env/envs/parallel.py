@@ -22,6 +22,7 @@ from uasep_env.envs.core import (
     prepare_actions,
 )
 from uasep_env.observation import ObservationLayout, state_dim
+from uasep_env.viz.requirements import available_render_modes, checked_render_mode
 
 __all__ = ["UAVSeparationParallelEnv", "env", "parallel_env"]
 
@@ -96,7 +97,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
 
     metadata = {  # noqa: RUF012 - PettingZoo reads it as a class attribute
         "name": "uasep_formation_v1",
-        "render_modes": ["human", "rgb_array"],
+        "render_modes": available_render_modes(("human", "rgb_array")),  # none without viz
         "is_parallelizable": True,
         "render_fps": 10,
     }
@@ -109,7 +110,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
         **kwargs: Any,
     ) -> None:
         self.config = _with_max_cycles(make_config(config, **kwargs), max_cycles, kwargs)
-        self.render_mode = self.config.render_mode
+        self.render_mode = checked_render_mode(self.config.render_mode)
         self.core = EnvCore(self.config, n_envs=1)
         self.possible_agents = [f"uav_{i}" for i in range(self.config.n_uavs)]
         self.agents: list[str] = []
@@ -216,7 +217,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
             )
         seed_state = self.core.world._noise.rngs  # keep each environment's random stream going
         self.config = config
-        self.render_mode = config.render_mode
+        self.render_mode = checked_render_mode(config.render_mode)
         self.core = EnvCore(config, n_envs=1)
         self.core.world._noise.rngs = seed_state
 

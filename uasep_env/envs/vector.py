@@ -21,6 +21,11 @@ from uasep_env.config.checks import check_positive_int, check_seed
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS, team_mean
+from uasep_env.viz.requirements import (
+    available_render_modes,
+    checked_render_mode,
+    require_matplotlib,
+)
 
 __all__ = ["FormationVectorEnv"]
 
@@ -94,7 +99,7 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         max_episode_steps: int | None = None,
         **kwargs: Any,
     ) -> None:
-        self._renderer: Any = None  # first: close() runs even if __init__ raises
+        self._renderers: list[Any] | None = None  # first: close() runs if __init__ raises
         check_positive_int("num_envs", num_envs)
         self.config = _limit_steps(make_config(config, **kwargs), max_episode_steps)
         try:
@@ -105,11 +110,11 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
                 f"{[m.value for m in AutoresetMode]}"
             ) from err
         self.metadata = {
-            "render_modes": ["rgb_array"],
+            "render_modes": available_render_modes(("rgb_array",)),  # none without viz
             "render_fps": 10,
             "autoreset_mode": self.autoreset_mode,
         }
-        self.render_mode = self.config.render_mode
+        self.render_mode = checked_render_mode(self.config.render_mode)
         self.num_envs = int(num_envs)
         self.core = EnvCore(self.config, n_envs=self.num_envs)
         n, d = self.config.n_uavs, self.core.obs_dim
@@ -235,13 +240,31 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         values.update(res.safety)
         return values
 
-    def render(self) -> np.ndarray | None:
-        """An RGB frame of environment 0 (``render_mode="rgb_array"``; else ``None``)."""
-        return super().render() if self.render_mode == "rgb_array" else None
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """One RGB frame per environment (``render_mode="rgb_array"``; else ``None``).
+
+        Gymnasium's vector convention (``SyncVectorEnv.render``), which its vector wrappers
+        (``HumanRendering``, ``RecordVideo``) read. Each environment has its own renderer,
+        so each keeps its own trails.
+
+        Raises:
+            ModuleNotFoundError: Without matplotlib, naming the ``viz`` extra.
+        """
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderers is None:
+            require_matplotlib("render() (render_mode='rgb_array')")
+            from uasep_env.viz.frames import Renderer
+
+            self._renderers = [Renderer(mode="rgb_array") for _ in range(self.num_envs)]
+        world = self.core.world
+        return tuple(r.render(world, env=i) for i, r in enumerate(self._renderers))
 
     # The vector API's close (it calls close_extras and marks the env closed), not the view's.
     close = VectorEnv.close
 
     def close_extras(self, **kwargs: Any) -> None:
-        """Close the renderer."""
-        self.close_renderer()
+        """Close the renderers."""
+        for renderer in self._renderers or ():
+            renderer.close()
+        self._renderers = None

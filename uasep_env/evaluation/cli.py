@@ -16,8 +16,10 @@ from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.report import format_summary
 from uasep_env.evaluation.runner import DEFAULT_HOLD_TIME_S, evaluate
-from uasep_env.policies import POLICIES, check_policy_name, make_policy
+from uasep_env.policies import POLICIES, check_policy_name, make_policy, shipped_policies
+from uasep_env.policies.checkpoint import ALGORITHMS as SB3_ALGORITHMS
 from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
+from uasep_env.viz.requirements import VIZ_HINT, matplotlib_available
 
 __all__ = ["build_parser", "main"]
 
@@ -132,7 +134,8 @@ def build_parser() -> argparse.ArgumentParser:
             "  uasep-eval --policy apf --scenario random --episodes 100 --workers 4 "
             "--json out.json\n"
             "  uasep-eval --config noise=false --config obstacle.speed=6 --csv out.csv\n"
-            f"policies: {', '.join(POLICIES)} or the path of a policy checkpoint (.zip)"
+            f"policies: {', '.join([*POLICIES, *shipped_policies()])} or the path of a "
+            "policy checkpoint (.zip)"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -148,7 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
         default="paper",
         choices=SCENARIOS,
         metavar="NAME",
-        help=f"scenario family: {', '.join(SCENARIOS)} (default: paper)",
+        help=f"scenario family: {', '.join(SCENARIOS)} (default: paper); a family's own "
+        "defaults come with it (large_formation: 8 UAVs in a wedge, as its gym id), --config "
+        "overrides them",
     )
     p.add_argument(
         "--episodes",
@@ -242,6 +247,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="let a stable-baselines3 model file be unpickled, which runs code from it; "
         "only for files you trust (policy checkpoints never need it)",
     )
+    p.add_argument(
+        "--algorithm",
+        choices=SB3_ALGORITHMS,
+        default=None,
+        metavar="NAME",
+        help="the stable-baselines3 algorithm that saved a model file given with "
+        f"--allow-pickle: {', '.join(SB3_ALGORITHMS)} (default: PPO)",
+    )
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return p
 
@@ -281,6 +294,8 @@ def _run(argv: Sequence[str] | None) -> int:
         problem = None if path is None else _output_problem(path, directory)
         if problem is not None:
             parser.error(f"argument {flag}: cannot write {str(path)!r}: {problem}")
+    if args.plot is not None and not matplotlib_available():  # before hours of evaluation
+        parser.error(f"argument --plot: the figures need matplotlib: {VIZ_HINT}")
     # An output must not overwrite an input, nor another output.
     if args.json is not None and args.csv is not None and _same_file(args.json, args.csv):
         parser.error(f"arguments --json and --csv: both write {str(args.json)!r}")
@@ -294,7 +309,7 @@ def _run(argv: Sequence[str] | None) -> int:
         parser.error(f"argument --config: {_one_line(err)}")
     for name in names:  # fail early on models that do not load
         try:
-            make_policy(name, cfg, args.allow_pickle)
+            make_policy(name, cfg, args.allow_pickle, args.algorithm)
         except Exception as err:
             parser.error(f"argument --policy: cannot load {name!r}: {_one_line(err)}")
 
@@ -314,6 +329,7 @@ def _run(argv: Sequence[str] | None) -> int:
             progress=bar.update if bar is not None else None,
             allow_pickle=args.allow_pickle,
             ray=args.ray,
+            algorithm=args.algorithm,
         )
     finally:
         if bar is not None:

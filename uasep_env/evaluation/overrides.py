@@ -8,6 +8,7 @@ from typing import Any
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.jsonio import json_depth
+from uasep_env.scenarios import SCENARIO_DEFAULTS
 
 __all__ = ["build_config", "parse_config_overrides"]
 
@@ -87,7 +88,8 @@ def build_config(
 
     Args:
         scenario: Scenario family (one of :data:`uasep_env.config.SCENARIOS`), or None to
-            keep the base's.
+            keep the base's. Its defaults (:data:`uasep_env.scenarios.SCENARIO_DEFAULTS`,
+            e.g. 8 UAVs for ``large_formation``, as its gym id) come with it.
         overrides: ``KEY=VALUE`` strings (see :func:`parse_config_overrides`) or a nested dict.
         base: Base config or dict (defaults when None).
 
@@ -100,6 +102,7 @@ def build_config(
     """
     values: dict[str, Any] = {}
     if scenario is not None:
+        values.update(SCENARIO_DEFAULTS.get(scenario, {}))
         values["scenario"] = scenario
     if isinstance(overrides, Mapping):
         values.update(overrides)

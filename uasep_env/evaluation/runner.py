@@ -118,6 +118,7 @@ def _run_chunk(
     hold_time: float,
     keep: int,
     allow_pickle: bool = False,
+    algorithm: str | None = None,
 ) -> tuple[list[EpisodeResult], list[Episode]]:
     """Play one chunk of seeds with one policy and compute its metrics (pool task).
 
@@ -130,11 +131,14 @@ def _run_chunk(
         hold_time: Hold time of the conflict timeline (s).
         keep: Number of leading episodes of the chunk to return whole (for plots).
         allow_pickle: Let SB3 model files be unpickled (see :func:`make_policy`).
+        algorithm: The SB3 algorithm of such files (default PPO).
 
     Returns:
         Per-episode results, and the first ``keep`` :class:`Episode` objects.
     """
-    policy = make_policy(spec, config, allow_pickle) if isinstance(spec, str) else spec
+    policy = spec
+    if isinstance(spec, str):
+        policy = make_policy(spec, config, allow_pickle, algorithm)
     if isinstance(spec, str) and isinstance(policy, RandomPolicy):
         policy = RandomPolicy(config, seed=seeds[0])  # independent draws per chunk
     episodes = run_episodes(
@@ -191,12 +195,14 @@ def evaluate(
     progress: Callable[[int], None] | None = None,
     allow_pickle: bool = False,
     ray: str | None = None,
+    algorithm: str | None = None,
 ) -> EvaluationResult:
     """Evaluate policies on the same seeds and aggregate the paper's metrics.
 
     Args:
         policies: A policy name (``"apf"``, ``"motion-state-apf"``, ``"traditional-apf"``,
-            ``"zero"``, ``"random"``) or the path of a saved SB3 model, a sequence of those,
+            ``"zero"``, ``"random"``, or a shipped policy such as ``"ppo_shared"``) or the
+            path of a checkpoint or saved SB3 model, a sequence of those,
             or a mapping ``label -> name / path / Policy object``. Names are rebuilt fresh for
             every chunk (reproducible for any ``workers``); a policy object is reused as is
             (with ``workers > 1`` it is pickled to the workers).
@@ -218,6 +224,8 @@ def evaluate(
             starts a local Ray (or uses the one this process already joined), anything else
             is the address of a cluster (``"auto"``, ``"ray://head:10001"``). Every node
             needs this package installed. The results are the same as with ``workers=1``.
+        algorithm: The stable-baselines3 algorithm of model files (``"SAC"``, ...;
+            default PPO).
 
     Returns:
         The typed result (:class:`EvaluationResult`: per policy the episodes and their
@@ -260,6 +268,7 @@ def evaluate(
                 hold_time,
                 keep_episodes if ci == 0 else 0,
                 allow_pickle,
+                algorithm,
             ),
         )
         for label, spec in specs.items()

@@ -22,6 +22,7 @@ from uasep_env.policies.learned import (
     load_policy,
     load_sb3_policy,
 )
+from uasep_env.policies.shipped import shipped_policies, shipped_policy_path
 
 __all__ = [
     "APF",
@@ -41,6 +42,8 @@ __all__ = [
     "load_policy",
     "load_sb3_policy",
     "make_policy",
+    "shipped_policies",
+    "shipped_policy_path",
 ]
 
 #: The policy registry: built-in policies by name, each a factory taking the config.
@@ -58,15 +61,17 @@ def _looks_like_path(name: str) -> bool:
 
 
 def _unknown_policy(name: str) -> ValueError:
+    names = sorted(POLICIES) + sorted(shipped_policies())
     if _looks_like_path(name) and not Path(name).exists():
-        return ValueError(
-            f"no such file {name!r} (a policy is one of {sorted(POLICIES)} or a path)"
-        )
-    return ValueError(f"unknown policy {name!r}: use one of {sorted(POLICIES)} or a model path")
+        return ValueError(f"no such file {name!r} (a policy is one of {names} or a path)")
+    return ValueError(f"unknown policy {name!r}: use one of {names} or a model path")
 
 
 def check_policy_name(name: str) -> str:
-    """Return ``name`` if it names a built-in policy (:data:`POLICIES`) or an existing path.
+    """Return ``name`` if it names a policy or an existing path.
+
+    A name is a built-in policy (:data:`POLICIES`) or a shipped one
+    (:func:`~uasep_env.policies.shipped.shipped_policies`).
 
     Args:
         name: A policy name or the path of a saved model.
@@ -78,16 +83,25 @@ def check_policy_name(name: str) -> str:
         ValueError: For an unknown name that is not an existing path (a path-like name,
             ending in ``.zip`` or holding a ``/``, is reported as a missing file).
     """
-    if name in POLICIES or Path(name).exists():
+    if name in POLICIES or Path(name).exists() or shipped_policy_path(name) is not None:
         return name
     raise _unknown_policy(name)
 
 
-def make_policy(name: str, config: EnvConfig, allow_pickle: bool = False) -> Policy:
-    """A policy by name (:data:`POLICIES`) or from the path of a saved model.
+def make_policy(
+    name: str, config: EnvConfig, allow_pickle: bool = False, algorithm: str | None = None
+) -> Policy:
+    """A policy by name (built-in or shipped) or from the path of a saved model.
 
     A path is loaded as a policy checkpoint (:func:`load_policy`, no unpickling); any other
     file as a stable-baselines3 model, only with ``allow_pickle`` (it runs code from the file).
+    An existing file takes precedence over a shipped policy of the same name.
+
+    Args:
+        name: Built-in policy (:data:`POLICIES`), shipped policy, or path.
+        config: The environment config the policy acts in.
+        allow_pickle: Let a stable-baselines3 model file be unpickled.
+        algorithm: The SB3 algorithm of such a file (``"PPO"``, ``"SAC"``, ...; default PPO).
 
     Raises:
         ValueError: For an unknown name that is not an existing file
@@ -95,8 +109,12 @@ def make_policy(name: str, config: EnvConfig, allow_pickle: bool = False) -> Pol
     """
     if name in POLICIES:
         return POLICIES[name](config)
-    if Path(check_policy_name(name)).is_file():
+    check_policy_name(name)
+    if Path(name).is_file():
         if is_policy_checkpoint(name):
             return load_policy(name, config)
-        return load_sb3_policy(name, config, allow_pickle=allow_pickle)
+        return load_sb3_policy(name, config, algorithm=algorithm, allow_pickle=allow_pickle)
+    shipped = shipped_policy_path(name)
+    if shipped is not None and not Path(name).exists():
+        return load_policy(shipped, config, name=name)
     raise _unknown_policy(name)  # an existing folder

@@ -247,7 +247,8 @@ def load_policy(
     """Load a policy checkpoint (read once per process while the file is unchanged).
 
     Args:
-        path: The checkpoint (``.zip``).
+        path: The checkpoint (``.zip``), or the name of a shipped policy (``"ppo_shared"``,
+            :func:`~uasep_env.policies.shipped.shipped_policies`) when no such file exists.
         config: The environment config it will act in (default: its own, ``direct`` mode).
         name: Label in reports (default: the file's stem).
         base_gains: The gains of the APF a residual policy corrects (see
@@ -262,6 +263,12 @@ def load_policy(
             ``config`` (the mismatch is named).
     """
     p = Path(path)
+    if not p.exists() and isinstance(path, str):
+        from uasep_env.policies.shipped import shipped_policy_path
+
+        p = shipped_policy_path(path) or p
+    if not p.is_file():
+        raise FileNotFoundError(f"no policy checkpoint at {p} (and no shipped policy {path!r})")
     meta, weights, mean, var = _read(p)
     return LearnedPolicy(
         meta, weights, mean, var, config=config, name=name or p.stem, base_gains=base_gains
@@ -359,4 +366,7 @@ def _load_sb3(path: str, mtime_ns: int, algorithm: str) -> Any:
     try:
         return getattr(sb3, algorithm).load(path, device="cpu")
     except Exception as err:  # SB3 raises many types for a bad file
-        raise CheckpointError(f"could not load {path} as {algorithm}: {err}") from err
+        raise CheckpointError(
+            f"could not load {path} as {algorithm} (saved by another algorithm? choose it with "
+            f"algorithm= / uasep-eval --algorithm, one of {ALGORITHMS}): {err}"
+        ) from err

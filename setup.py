@@ -1,0 +1,60 @@
+"""Build steps pyproject.toml cannot declare (everything else is in pyproject.toml).
+
+* The shipped policies: ``baselines/checkpoints/*.zip`` (the source, where training writes
+  them) are copied into the wheel as ``uasep_env/checkpoints/*.zip`` when the wheel is built,
+  so the installed package resolves them by name and the copy cannot drift from the repo.
+  A source checkout (and an editable install) reads them from ``baselines/checkpoints/``.
+* The long description: the README with its relative links and images made absolute, so
+  that they work on the package index's page (on GitHub and in the docs they stay relative).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from setuptools import setup
+from setuptools.command.build_py import build_py
+
+HERE = Path(__file__).resolve().parent
+CHECKPOINTS = Path("baselines") / "checkpoints"
+REPO = "https://github.com/uasep/uasep-env"
+BLOB = f"{REPO}/blob/main/"
+RAW = "https://raw.githubusercontent.com/uasep/uasep-env/main/"
+# ![alt](target) or [text](target) whose target is not a URL, an anchor or an e-mail.
+_LINK = re.compile(r"(!?)\[((?:[^\[\]]|\[[^\]]*\])*)\]\((?!https?://|#|mailto:)([^)\s]+)\)")
+
+
+def absolute_links(markdown: str) -> str:
+    """Relative Markdown links -> the repository's pages, images -> their raw files."""
+
+    def repl(m: re.Match) -> str:
+        bang, text, target = m.groups()
+        target = target.removeprefix("./")
+        return f"{bang}[{text}]({(RAW if bang else BLOB) + target})"
+
+    return _LINK.sub(repl, markdown)
+
+
+class BuildPyWithCheckpoints(build_py):
+    """``build_py`` that also puts the shipped policy checkpoints into the package."""
+
+    def run(self) -> None:
+        """Build the package, then copy ``baselines/checkpoints/*.zip`` into it."""
+        super().run()
+        source = HERE / CHECKPOINTS
+        zips = sorted(source.glob("*.zip"))
+        if not zips:
+            raise FileNotFoundError(f"no shipped policies in {source} (the wheel needs them)")
+        target = Path(self.build_lib) / "uasep_env" / "checkpoints"
+        self.mkpath(str(target))
+        for src in zips:
+            self.copy_file(str(src), str(target / src.name))
+
+
+if __name__ == "__main__":
+    setup(
+        cmdclass={"build_py": BuildPyWithCheckpoints},
+        long_description=absolute_links((HERE / "README.md").read_text(encoding="utf-8")),
+        long_description_content_type="text/markdown",
+    )
