@@ -21,7 +21,8 @@ Policies (``--policy``, comma-separated or repeated; ``LABEL=SPEC`` names one):
 
 * a built-in name (``apf``, ``motion-state-apf``, ``traditional-apf``, ``zero``, ...),
   observing the environment's default layout;
-* a policy checkpoint (``.zip`` in the project's format): it reads the observation layout
+* a policy checkpoint (``.zip`` in the project's format, or a shipped one by name:
+  ``ppo_residual_apf``, ``ppo_shared``): it reads the observation layout
   it was trained with (its K nearest UAVs and obstacles, :func:`checkpoint_layout`), so a
   checkpoint trained on 3 UAVs flies every size zero-shot;
 * ``module:callable``: a factory called with each cell's :class:`~uasep_env.EnvConfig`
@@ -51,7 +52,7 @@ from uasep_env import make_config
 from uasep_env.config import EnvConfig
 from uasep_env.evaluation import evaluate
 from uasep_env.jsonio import write_json
-from uasep_env.policies import POLICIES, is_policy_checkpoint
+from uasep_env.policies import POLICIES, is_policy_checkpoint, shipped_policy_path
 from uasep_env.policies.learned import load_policy
 from uasep_env.scenarios import HELD_OUT_SEEDS
 
@@ -159,6 +160,11 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
                 raise ValueError(f"--policy {item!r}: empty label before '='")
         if spec in POLICIES:
             entry = PolicyEntry(spec, "builtin", spec)
+        elif not Path(spec).exists() and (shipped := shipped_policy_path(spec)) is not None:
+            trained, layout = checkpoint_layout(shipped)  # a shipped checkpoint, by name
+            entry = PolicyEntry(
+                spec, "checkpoint", str(shipped), layout, (trained.n_uavs, trained.n_obstacles)
+            )
         elif Path(spec).is_file():
             if not is_policy_checkpoint(spec):
                 raise ValueError(f"--policy {spec!r}: not a policy checkpoint (.zip)")

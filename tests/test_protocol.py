@@ -52,6 +52,8 @@ def test_a_3_uav_checkpoint_flies_8_uavs_and_more_obstacles():
     entry = scaling.parse_policies([str(SHIPPED)])[0]
     assert entry.trained == (3, 1) and entry.layout == (2, 1)
     assert scaling.parse_policies([f"mine={SHIPPED}"])[0].label == "mine"
+    by_name = scaling.parse_policies(["ppo_residual_apf"])[0]
+    assert by_name.kind == "checkpoint" and by_name.layout == (2, 1)
     cfg = scaling.cell_config(8, 2, entry=entry, episode_duration=20.0)
     policy = load_policy(SHIPPED, cfg)
     (ep,) = run_episodes(policy, cfg, [scaling.SCALING_SEEDS[0]])
