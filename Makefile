@@ -16,7 +16,7 @@ TORCH  := torch==2.13.0
 FLOORS_VENV ?= $(CURDIR)/.venv-floors
 PKG_DIR     ?= /tmp/uasep-env-package-check
 
-.PHONY: eval test lint bench clean ci test-floors test-package
+.PHONY: eval test lint bench clean ci test-floors test-package docs
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -48,7 +48,7 @@ test: lint
 	UASEP_REQUIRE_CLIENTS=1 $(BIN)/python -m pytest -n 2 --dist loadgroup -q
 
 # Every CI job, in order (.ci/run).
-ci: test test-floors test-package
+ci: test test-floors test-package docs
 
 # The floors, exactly, and the package's requirements resolved against them (pip fails if a
 # declared range excludes a floor; --dry-run: no build/ left in the tree); the tests run on
@@ -85,6 +85,11 @@ test-package: $(VENV)/.all
 		--collect-only tests > collect.log || (tail -30 collect.log && false)
 	cd $(PKG_DIR)/sdist && UASEP_NUMBA=0 $(abspath $(BIN))/python -m pytest -q \
 		-p no:cacheprovider tests/test_packaging.py -k "shipped or metadata or links or floors"
+
+# The documentation site (Sphinx), warnings as errors; the pages' examples run in make test.
+docs: $(VENV)/.all
+	$(BIN)/python -m pip install --quiet -e ".[docs]" "$(TORCH)"
+	$(BIN)/python -m sphinx -b html -W --keep-going -q docs docs/_build/html
 
 bench: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[bench]"

@@ -1,4 +1,7 @@
-"""The README's result tables are the results files' (``tools/sync_readme.py``)."""
+"""The result tables of the README and the docs pages are the results files'.
+
+(``tools/sync_readme.py`` writes them.)
+"""
 
 from __future__ import annotations
 
@@ -12,9 +15,33 @@ SYNC = runpy.run_path(str(ROOT / "tools" / "sync_readme.py"))
 
 def test_readme_tables_match_the_results_files():
     readme = (ROOT / "README.md").read_text()
-    assert readme.count("<!-- results ") == 11  # every marked table is checked below
-    assert readme.count("<!-- scenarios -->") == 1  # the families' table, from the registry
+    assert readme.count("<!-- results ") == 2  # every marked table is checked below
     assert SYNC["render_readme"](readme) == readme, "run: python tools/sync_readme.py"
+
+
+def test_docs_pages_tables_match_the_results_files():
+    pages = SYNC["pages"]()
+    assert ROOT / "README.md" in pages and ROOT / "docs" / "results.md" in pages
+    marked = {p.name: p.read_text().count("<!-- results ") for p in pages}
+    # The results page holds the paper experiment's and the trade-off tables.
+    assert marked["results.md"] == 9 and marked["training.md"] == 3, marked
+    # The families' table, written from the scenario registry.
+    assert (ROOT / "docs" / "environment.md").read_text().count("<!-- scenarios -->") == 1
+    for page in pages:
+        text = page.read_text()
+        assert SYNC["render_readme"](text) == text, f"{page.name}: run python tools/sync_readme.py"
+
+
+def test_sync_check_names_a_stale_page(tmp_path, monkeypatch, capsys):
+    page = tmp_path / "page.md"
+    marker = '<!-- results summary.md "Paper scenario" pretty -->'
+    page.write_text(f"{marker}\n| old |\n<!-- /results -->\n")
+    monkeypatch.setitem(SYNC["main"].__globals__, "pages", lambda: [page])
+    monkeypatch.setitem(SYNC["main"].__globals__, "ROOT", tmp_path)
+    assert SYNC["main"](["--check"]) == 1
+    assert "page.md" in capsys.readouterr().err
+    assert SYNC["main"]([]) == 0 and "| old |" not in page.read_text()
+    assert SYNC["main"](["--check"]) == 0
 
 
 def test_sync_rewrites_a_stale_table_and_names_a_missing_section(tmp_path):

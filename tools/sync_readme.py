@@ -1,9 +1,12 @@
-"""Write the README's result tables from the results files (``baselines/results/*.md``).
+"""Write the result tables of the README and the docs pages from the results files.
+
+The results files are ``baselines/results/*.md``; the pages are ``README.md`` and every
+``docs/*.md`` (:data:`PAGES`).
 
 A source with a ``/`` is a path from the repository's root (the trade-off tables:
 ``docs/figures/tradeoff.md``).
 
-Each table in the README stands between two markers naming its source: a results file and
+Each table in a page stands between two markers naming its source: a results file and
 the heading of its section there (the first table after that heading is taken)::
 
     <!-- results summary.md "Paper scenario" pretty -->
@@ -16,10 +19,10 @@ The table of scenario families stands between ``<!-- scenarios -->`` and
 
 ``pretty`` writes the controllers as the README names them (``APF (proposed)``, ...) and
 units with superscripts (``m/s²``). The tables are re-laid out by
-:func:`uasep_env.tables.render_table`, so the README says exactly what the results say.
+:func:`uasep_env.tables.render_table`, so the pages say exactly what the results say.
 
-    python tools/sync_readme.py          # rewrite README.md
-    python tools/sync_readme.py --check  # exit 1 if README.md is out of date
+    python tools/sync_readme.py          # rewrite README.md and docs/*.md
+    python tools/sync_readme.py --check  # exit 1 if one of them is out of date
 """
 
 from __future__ import annotations
@@ -37,6 +40,12 @@ from uasep_env.tables import render_table
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 RESULTS = ROOT / "baselines" / "results"
+
+
+def pages() -> list[Path]:
+    """The pages whose marked tables are generated: the README and the docs pages."""
+    return [README, *sorted((ROOT / "docs").glob("*.md"))]
+
 
 #: The README's names of the controllers (``pretty`` tables).
 README_LABELS = {
@@ -113,10 +122,10 @@ def _prettify(cell: str) -> str:
 
 
 def render_readme(readme: str, results: Path = RESULTS) -> str:
-    """The README with every marked table rewritten from its source.
+    """A page (the README or a docs page) with every marked table rewritten from its source.
 
     Args:
-        readme: The README's text.
+        readme: The page's text.
         results: Folder of the results files.
 
     Returns:
@@ -139,21 +148,25 @@ def render_readme(readme: str, results: Path = RESULTS) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Rewrite README.md (or, with ``--check``, say whether it is up to date)."""
+    """Rewrite the pages' tables (or, with ``--check``, say whether they are up to date)."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--check", action="store_true", help="exit 1 if README.md is out of date")
+    p.add_argument("--check", action="store_true", help="exit 1 if a page is out of date")
     args = p.parse_args(argv)
-    old = README.read_text()
-    new = render_readme(old)
-    if args.check:
-        if new != old:
-            print("README.md's result tables differ from baselines/results: run "
-                  "python tools/sync_readme.py", file=sys.stderr)  # fmt: skip
-            return 1
-        return 0
-    if new != old:
-        atomic_write(README, new)
-        print(f"rewrote the result tables of {README}")
+    stale = []
+    for page in pages():
+        old = page.read_text()
+        new = render_readme(old)
+        if new == old:
+            continue
+        stale.append(page)
+        if not args.check:
+            atomic_write(page, new)
+            print(f"rewrote the result tables of {page.relative_to(ROOT)}")
+    if args.check and stale:
+        names = ", ".join(str(page.relative_to(ROOT)) for page in stale)
+        print(f"result tables differ from the results files in {names}: run "
+              "python tools/sync_readme.py", file=sys.stderr)  # fmt: skip
+        return 1
     return 0
 
 

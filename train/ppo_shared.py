@@ -8,8 +8,10 @@ A single-file script in the CleanRL style: every option is a field of :class:`Ar
 
 Each UAV of each of ``n_envs`` batched environments is one SB3 sub-environment
 (:class:`uasep_env.envs.sb3.UAVSharedVecEnv`), wrapped in SB3's ``VecNormalize``
-(observation and return normalisation). The defaults are the ones the sweep in
-``train/README.md`` chose. A run writes to ``out_dir``:
+(observation and return normalisation). Each UAV observes a fixed number of neighbours
+(``--k-uavs`` 2, ``--k-obstacles`` 1): the observation's width does not depend on the
+formation size or the obstacle count, so the policy flies any of them (``docs/protocol.md``).
+The defaults are the ones the sweep in ``train/README.md`` chose. A run writes to ``out_dir``:
 
 * ``progress.csv``: one row per PPO iteration (agent-steps, wall time, and over the last
   200 finished episodes: mean return per agent, collision rate, loss-of-separation rate,
@@ -64,6 +66,10 @@ class Args:
     scenario: str = "random"
     n_uavs: int = 3
     n_obstacles: int = 1
+    # Fixed K (observation.k_uavs / k_obstacles): the observation's width does not depend on
+    # n_uavs or n_obstacles, so the policy flies any formation size / obstacle count.
+    k_uavs: int = 2  # nearest other UAVs observed (all of them at 3 UAVs)
+    k_obstacles: int = 1  # nearest obstacles observed (by distance to its predicted region)
     episode_duration: float = 200.0  # s
     config: str = ""  # more env overrides, space-separated KEY=VALUE ("reward.collision=0.5")
     total_timesteps: int = 150_000_000  # agent-steps (the wall budget usually ends a run first)
@@ -98,10 +104,11 @@ class Args:
 def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:
     """Build :class:`Args` from the command line (one ``--kebab-case`` flag per field)."""
     base = defaults or Args()
+    cls = type(base)  # a recipe may extend Args (train/mappo.py)
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawTextHelpFormatter
     )
-    for f in dataclasses.fields(Args):
+    for f in dataclasses.fields(cls):
         flag = "--" + f.name.replace("_", "-")
         default = getattr(base, f.name)
         if f.type in ("bool", bool):
@@ -109,7 +116,7 @@ def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> A
         else:
             cast = {"int": int, "float": float, "str": str}[str(f.type)]
             parser.add_argument(flag, type=cast, default=default)
-    args = Args(**vars(parser.parse_args(argv)))
+    args = cls(**vars(parser.parse_args(argv)))
     if args.action_mode not in ("direct", "residual_apf"):
         parser.error(
             f"argument --action-mode: must be direct or residual_apf, got {args.action_mode!r}"
@@ -133,6 +140,7 @@ def make_env_config(args: Args) -> Any:
         n_obstacles=args.n_obstacles,
         episode_duration=args.episode_duration,
         action={"mode": args.action_mode, "residual_scale": args.residual_scale},
+        observation={"k_uavs": args.k_uavs, "k_obstacles": args.k_obstacles},
     )
     return base.replace(**parse_config_overrides(args.config.split()))
 
@@ -423,12 +431,6 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     import torch  # lazy: the training extra
     from rundir import check_checkpoint, plot_curves, prepare_out_dir, rewind
 
-    from uasep_env.atomic import atomic_write
-    from uasep_env.evaluation import evaluate
-    from uasep_env.jsonio import dumps
-    from uasep_env.policies import load_policy
-    from uasep_env.scenarios import VALIDATION_SEEDS
-
     torch.set_num_threads(args.torch_threads)
     config = make_env_config(args)
     out = Path(args.out_dir)
@@ -457,8 +459,21 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     policy_path = export_policy(model, venv, config, args, out / "policy.zip", info)
     plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS, f"PPO ({args.action_mode})")
 
+    return write_validation(out, config, policy_path, info, args.eval_episodes)
+
+
+def write_validation(
+    out: Path, config: Any, policy_path: Path, info: dict, episodes: int
+) -> dict:
+    """The policy and the APF on ``episodes`` validation encounters: ``validation.json``."""
+    from uasep_env.atomic import atomic_write
+    from uasep_env.evaluation import evaluate
+    from uasep_env.jsonio import dumps
+    from uasep_env.policies import load_policy
+    from uasep_env.scenarios import VALIDATION_SEEDS
+
     eval_cfg = config.replace(action={"mode": "direct"})
-    seeds = list(VALIDATION_SEEDS)[: args.eval_episodes]
+    seeds = list(VALIDATION_SEEDS)[:episodes]
     summary: dict = {"training": info, "policy": str(policy_path), "validation": {}}
     if seeds:
         policies = {"learned": load_policy(policy_path, eval_cfg), "apf": "apf"}

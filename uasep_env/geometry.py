@@ -32,6 +32,12 @@ def uav_distances(uav_pos: ArrayLike, *, self_distance: float = 0.0) -> FloatArr
 
     Returns:
         ``(..., N, N)`` distances (m).
+
+    Examples:
+        >>> uav_distances([[0, 0, 0], [3, 4, 0], [0, 0, 12]])
+        array([[ 0.,  5., 12.],
+               [ 5.,  0., 13.],
+               [12., 13.,  0.]])
     """
     p = np.asarray(uav_pos, dtype=np.float64)
     d = _norm(p[..., :, None, :] - p[..., None, :, :])

@@ -34,6 +34,12 @@ def render_table(
 
     Raises:
         ValueError: If a row's length differs from the header's.
+
+    Examples:
+        >>> print(render_table(["policy", "collisions"], [["apf", "0.0%"]], markdown=True))
+        | policy   | collisions   |
+        |----------|--------------|
+        | apf      | 0.0%         |
     """
     width = len(headers)
     for r in rows:

@@ -247,6 +247,15 @@ def make_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwargs: A
     Raises:
         TypeError: For unknown keys (named, e.g. ``noise.acel_std``).
         ValueError: For invalid or out-of-range values (the dotted field and the value).
+
+    Examples:
+        >>> cfg = make_config(scenario="crossing", noise={"position_std": 1.0})
+        >>> cfg.scenario, cfg.noise.position_std, cfg.n_uavs
+        ('crossing', 1.0, 3)
+        >>> make_config(uav={"max_speed": -1})
+        Traceback (most recent call last):
+        ...
+        ValueError: invalid config value uav.max_speed=-1: must be > 0
     """
     if config is None:
         base, values = EnvConfig(), {}

@@ -312,7 +312,28 @@ def _with_max_cycles(config: EnvConfig, max_cycles: Any, kwargs: dict) -> EnvCon
 def parallel_env(
     config: EnvConfig | dict | None = None, *, max_cycles: int | None = None, **kwargs: Any
 ) -> UAVSeparationParallelEnv:
-    """Create the PettingZoo parallel environment (see :class:`UAVSeparationParallelEnv`)."""
+    """Create the PettingZoo parallel environment (see :class:`UAVSeparationParallelEnv`).
+
+    Args:
+        config: A config or a (nested) dict of overrides (:func:`~uasep_env.config.make_config`).
+        max_cycles: Episode length in steps (PettingZoo's convention); None: the config's.
+        **kwargs: Config overrides, each a validated field of
+            :class:`~uasep_env.config.EnvConfig`.
+
+    Returns:
+        The environment (reset it with a seed before stepping).
+
+    Examples:
+        >>> import uasep_env
+        >>> env = uasep_env.parallel_env(scenario="paper", n_uavs=3, n_obstacles=1)
+        >>> observations, infos = env.reset(seed=0)
+        >>> env.agents
+        ['uav_0', 'uav_1', 'uav_2']
+        >>> observations["uav_0"].shape, observations["uav_0"].dtype
+        ((58,), dtype('float32'))
+        >>> env.action_space("uav_0")
+        Box(-1.0, 1.0, (3,), float32)
+    """
     return UAVSeparationParallelEnv(config, max_cycles=max_cycles, **kwargs)
 
 

@@ -1,7 +1,9 @@
 """Quantiles and confidence intervals of the aggregates (``scipy.stats``).
 
 Means get a two-sided Student-t interval, ``mean +/- t_{(1+c)/2, n-1} * s / sqrt(n)``; rates
-(fractions of episodes) a Wilson score interval.
+(fractions of episodes) a Wilson score interval. Across training seeds, the interquartile mean
+with a stratified percentile bootstrap interval (the statistics of ``rliable``, Agarwal et al.
+2021, through :func:`scipy.stats.bootstrap`).
 """
 
 from __future__ import annotations
@@ -12,7 +14,15 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import stats
 
-__all__ = ["check_probability", "normal_quantile", "t_interval", "t_quantile", "wilson_interval"]
+__all__ = [
+    "check_probability",
+    "iqm",
+    "normal_quantile",
+    "stratified_bootstrap_iqm",
+    "t_interval",
+    "t_quantile",
+    "wilson_interval",
+]
 
 
 def check_probability(name: str, p: float) -> float:
@@ -112,3 +122,65 @@ def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[f
         return math.nan, math.nan
     ci = stats.binomtest(int(successes), int(n)).proportion_ci(confidence, method="wilson")
     return float(ci.low), float(ci.high)
+
+
+def iqm(values: ArrayLike) -> float:
+    """Interquartile mean: the mean of the middle 50 % (``scipy.stats.trim_mean(x, 0.25)``).
+
+    NaNs are ignored; NaN when no finite value is left.
+    """
+    arr = np.asarray(values, dtype=np.float64).ravel()
+    arr = arr[np.isfinite(arr)]
+    return float(stats.trim_mean(arr, 0.25)) if arr.size else math.nan
+
+
+def stratified_bootstrap_iqm(
+    scores: ArrayLike,
+    confidence: float = 0.95,
+    n_resamples: int = 2000,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """IQM of ``(runs, tasks)`` scores and its stratified bootstrap interval.
+
+    As ``rliable``: the runs (training seeds) are resampled with replacement independently
+    within each task (a stratum: here a scenario family), the IQM is taken over the whole
+    resampled matrix, and the interval is the percentile interval of those IQMs. Each column
+    is one sample of :func:`scipy.stats.bootstrap` (independent resampling per sample).
+
+    Args:
+        scores: ``(n_runs, n_tasks)`` (or ``(n_runs,)``: one task) finite scores.
+        confidence: Confidence level in (0, 1).
+        n_resamples: Bootstrap resamples.
+        seed: Seed of the resampling generator.
+
+    Returns:
+        ``(iqm, low, high)``; the interval is ``(iqm, iqm)`` with a single run.
+
+    Raises:
+        ValueError: For an empty or non-finite score matrix.
+    """
+    confidence = check_probability("confidence", confidence)
+    arr = np.asarray(scores, dtype=np.float64)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2 or arr.size == 0 or not np.isfinite(arr).all():
+        raise ValueError(f"scores: need a finite (runs, tasks) matrix, got shape {arr.shape}")
+    point = iqm(arr)
+    if arr.shape[0] < 2 or np.ptp(arr, axis=0).max() == 0.0:
+        return point, point, point  # nothing to resample: every draw gives the same IQM
+
+    def statistic(*columns: np.ndarray, axis: int = -1) -> np.ndarray:
+        return stats.trim_mean(np.concatenate(columns, axis=axis), 0.25, axis=axis)
+
+    res = stats.bootstrap(
+        tuple(arr.T),
+        statistic,
+        n_resamples=n_resamples,
+        confidence_level=confidence,
+        method="percentile",
+        paired=False,
+        vectorized=True,
+        rng=np.random.default_rng(seed),
+    )
+    ci = res.confidence_interval
+    return point, float(ci.low), float(ci.high)

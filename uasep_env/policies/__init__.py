@@ -82,6 +82,14 @@ def check_policy_name(name: str) -> str:
     Raises:
         ValueError: For an unknown name that is not an existing path (a path-like name,
             ending in ``.zip`` or holding a ``/``, is reported as a missing file).
+
+    Examples:
+        >>> check_policy_name("apf")
+        'apf'
+        >>> check_policy_name("apff")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown policy 'apff': use one of ['apf', ...] or a model path
     """
     if name in POLICIES or Path(name).exists() or shipped_policy_path(name) is not None:
         return name

@@ -48,6 +48,8 @@ META = "uasep_policy.json"
 WEIGHTS = "weights.npz"
 ACTIVATIONS = ("tanh", "relu")
 ALGORITHMS = ("PPO", "SAC", "TD3", "A2C", "DDPG")
+#: What a checkpoint's ``algorithm`` may say: the SB3 algorithms, and MAPPO (train/mappo.py).
+CHECKPOINT_ALGORITHMS = (*ALGORITHMS, "MAPPO")
 
 
 class CheckpointError(ValueError):

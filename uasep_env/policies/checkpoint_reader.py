@@ -26,7 +26,7 @@ import numpy as np
 from uasep_env.jsonio import json_depth
 from uasep_env.policies.checkpoint import (
     ACTIVATIONS,
-    ALGORITHMS,
+    CHECKPOINT_ALGORITHMS,
     CHECKPOINT_FORMAT,
     META,
     READABLE_FORMATS,
@@ -227,8 +227,8 @@ def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyC
     if len(json.dumps(info)) > limits.info_bytes:
         raise _fail(p, f"info is larger than {limits.info_bytes:,} bytes")
     algorithm = desc.get("algorithm", "PPO")
-    if algorithm not in ALGORITHMS:
-        raise _fail(p, f"algorithm must be one of {ALGORITHMS}, got {_short(algorithm)}")
+    if algorithm not in CHECKPOINT_ALGORITHMS:
+        raise _fail(p, f"algorithm must be one of {CHECKPOINT_ALGORITHMS}, got {_short(algorithm)}")
     layout = _layout(p, desc["layout"], limits) if "layout" in desc else None
     meta = PolicyCheckpoint(
         config=desc["config"],

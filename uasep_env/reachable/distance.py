@@ -192,6 +192,13 @@ def distance_to_ellipsoid(
 
     Raises:
         ValueError: If a semi-axis is negative or not finite.
+
+    Examples:
+        An ellipsoid heading north (semi-axes 20 m along, 10 m across, 5 m vertical): a
+        point 30 m ahead is 10 m outside it, its centre 5 m inside (the smallest axis).
+
+        >>> distance_to_ellipsoid([[30.0, 0, 0], [0, 0, 0]], [0, 0, 0], [20.0, 10, 5], 0.0)
+        array([10., -5.])
     """
     _, dist, normal = _nearest(points, centers, _check_axes(semi_axes), headings)
     return (dist, normal) if return_normal else dist

@@ -1,0 +1,228 @@
+"""The benchmark protocol: fixed-K checkpoints at any size, the scaling script, seeds, MAPPO."""
+
+import itertools
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uasep_env import make_config
+from uasep_env.evaluation import evaluate
+from uasep_env.metrics.statistics import iqm, stratified_bootstrap_iqm
+from uasep_env.observation import ObservationLayout
+from uasep_env.policies import CheckpointError, load_policy
+from uasep_env.policies.learned import PolicyCheckpoint, save_policy
+from uasep_env.rollout import run_episodes
+from uasep_env.scenarios import HELD_OUT_SEEDS, TRAINING_SEEDS, VALIDATION_SEEDS
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "baselines"))
+sys.path.insert(0, str(ROOT / "train"))
+
+import scaling  # noqa: E402
+import seeds  # noqa: E402
+
+SHIPPED = ROOT / "baselines" / "checkpoints" / "ppo_residual_apf.zip"
+
+
+def _checkpoint(path, cfg, seed=0):
+    rng = np.random.default_rng(seed)
+    dim = ObservationLayout.from_config(cfg).dim
+    sizes = [dim, 8, 3]
+    weights = [
+        (rng.normal(0, 0.3, (o, i)).astype(np.float32), np.zeros(o, np.float32))
+        for i, o in itertools.pairwise(sizes)
+    ]
+    meta = PolicyCheckpoint(
+        config=cfg.to_dict(), obs_dim=dim, activation="tanh", hidden=(8,), obs_norm=False
+    )
+    return save_policy(path, meta, weights)
+
+
+def test_scaling_seeds_meet_no_other_range():
+    bank = set(scaling.SCALING_SEEDS)
+    for other in (TRAINING_SEEDS, VALIDATION_SEEDS, HELD_OUT_SEEDS):
+        assert bank.isdisjoint(other)
+
+
+def test_a_3_uav_checkpoint_flies_8_uavs_and_more_obstacles():
+    # The shipped checkpoint (K = 2 UAVs, 1 obstacle) zero-shot on 8 UAVs and 2 obstacles.
+    entry = scaling.parse_policies([str(SHIPPED)])[0]
+    assert entry.trained == (3, 1) and entry.layout == (2, 1)
+    assert scaling.parse_policies([f"mine={SHIPPED}"])[0].label == "mine"
+    by_name = scaling.parse_policies(["ppo_residual_apf"])[0]
+    assert by_name.kind == "checkpoint" and by_name.layout == (2, 1)
+    cfg = scaling.cell_config(8, 2, entry=entry, episode_duration=20.0)
+    policy = load_policy(SHIPPED, cfg)
+    (ep,) = run_episodes(policy, cfg, [scaling.SCALING_SEEDS[0]])
+    assert ep.record.uav_pos.shape[1] == 8 and ep.steps > 0
+    assert np.isfinite(ep.record.uav_pos).all()
+
+
+def test_fixed_k_recipe_config_and_mismatched_layout_is_named(tmp_path):
+    ppo_shared = pytest.importorskip("ppo_shared")
+    cfg = ppo_shared.make_env_config(ppo_shared.Args())
+    assert (cfg.observation.k_uavs, cfg.observation.k_obstacles) == (2, 1)
+    path = _checkpoint(tmp_path / "k.zip", cfg.replace(action={"mode": "direct"}))
+    # Any size, any obstacle count, with the layout it was trained on:
+    for n, m in ((3, 1), (16, 4)):
+        load_policy(path, cfg.replace(n_uavs=n, n_obstacles=m, action={"mode": "direct"}))
+    # Another layout is refused, naming what differs.
+    with pytest.raises(CheckpointError, match="k_obstacles: the network reads the 1 nearest"):
+        load_policy(path, cfg.replace(observation={"k_obstacles": 2}, action={"mode": "direct"}))
+    with pytest.raises(CheckpointError, match="k_uavs: the network reads the 2 nearest UAVs"):
+        load_policy(path, make_config(scenario="random", n_uavs=8))
+
+
+def test_scaling_script_writes_tables_figure_and_targets(tmp_path, capsys):
+    out = tmp_path / "sc"
+    argv = [
+        "--policy",
+        f"apf,{SHIPPED},uasep_env.policies:ZeroPolicy",
+        "--episodes",
+        "2",
+        "--uavs",
+        "3,8",
+        "--obstacles",
+        "1,2",
+        "--episode-duration",
+        "15",
+        "--held-out-episodes",
+        "2",
+        "--out",
+        str(out),
+    ]
+    result = scaling.main(argv)
+    assert {tuple(c) for c in result["cells"]} == {(3, 1), (8, 1), (3, 2)}
+    assert len(result["rows"]) == 3 * 3
+    zero_shot = {(r["n_uavs"], r["n_obstacles"]) for r in result["rows"] if r["zero_shot"]}
+    assert zero_shot == {(8, 1), (3, 2)}
+    text = out.with_suffix(".md").read_text()
+    assert "## By formation size" in text and "## By obstacle count" in text
+    assert "## Held-out bank" in text and len(result["held_out"]) == 3
+    assert "ppo_residual_apf: collisions at 8 UAVs no worse than the APF's" in text
+    data = json.loads(out.with_suffix(".json").read_text())
+    assert data["rows"][0]["metrics"]["episode.collision"]["kind"] == "rate"
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    with pytest.raises(SystemExit):  # no silent overwrite
+        scaling.main(argv)
+    out.with_suffix(".md").unlink()
+    scaling.main(["--render", str(out.with_suffix(".json")), "--no-figure"])
+    assert out.with_suffix(".md").read_text() == text
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--policy", "nope"], "--policy 'nope'"),
+        (["--policy", "os:nope"], "cannot import"),
+        (["--uavs", "3,40"], "n_uavs"),
+        (["--episodes", "0"], "--episodes"),
+        (["--policy", "=apf"], "empty label"),
+    ],
+)
+def test_scaling_bad_input_is_named(tmp_path, capsys, argv, message):
+    with pytest.raises(SystemExit):
+        scaling.main([*argv, "--out", str(tmp_path / "x")])
+    assert message in capsys.readouterr().err
+
+
+def test_iqm_and_stratified_bootstrap():
+    assert iqm(np.arange(1, 9)) == pytest.approx(4.5)
+    point, lo, hi = stratified_bootstrap_iqm([[0.0, 1.0], [0.1, 1.1]])
+    # Stratified: every resample keeps two scores of each column, so the IQM (the mean of
+    # the middle two) lies in [0.5, 0.6]; unstratified draws would reach 0.05 or 1.05.
+    assert point == pytest.approx(0.55)
+    assert 0.5 - 1e-9 <= lo <= point <= hi <= 0.6 + 1e-9 and hi - lo > 0.0
+    assert stratified_bootstrap_iqm([0.2]) == (0.2, 0.2, 0.2)
+    with pytest.raises(ValueError, match="scores"):
+        stratified_bootstrap_iqm([[np.nan, 1.0]])
+
+
+def test_seed_driver_resumes_and_reports(tmp_path):
+    out = tmp_path / "run"
+    assert "--resume" not in seeds.train_command("shared", out, 0, [])
+    latest = seeds.seed_dir(out, 1) / "checkpoints" / "latest"
+    latest.mkdir(parents=True)
+    cmd = seeds.train_command("shared", out, 1, ["--max-minutes", "1"])
+    assert cmd[-2:] == ["--resume", str(latest)] and cmd[cmd.index("--seed") + 1] == "1000"
+    stale = seeds.seed_dir(out, 2)
+    stale.mkdir()
+    (stale / "progress.csv").write_text("x")
+    seeds.train_command("shared", out, 2, [])
+    assert not stale.exists() and list(out.glob("seed_2.aborted-*"))
+    done = seeds.seed_dir(out, 3)
+    done.mkdir()
+    (done / "policy.zip").write_text("")
+    (done / "validation.json").write_text("{}")
+    assert seeds.train_command("shared", out, 3, []) is None
+
+    cfg = make_config(scenario="random", episode_duration=15.0)
+    paths = [_checkpoint(tmp_path / f"c{k}.zip", cfg, seed=k) for k in range(2)]
+    policies = {"apf": "apf", **{f"seed_{k}": str(p) for k, p in enumerate(paths)}}
+    result = evaluate(policies, cfg, list(HELD_OUT_SEEDS)[:6])
+    text, data = seeds.report("shared", out, 2, result, "python train/seeds.py ...")
+    assert "IQM across seeds" in text and "at most 5 % collisions" in text
+    agg = data["across_seeds"]["episode.max_deviation"]
+    assert agg["ci_low"] <= agg["iqm"] <= agg["ci_high"]
+    assert np.array(agg["scores"]).shape[0] == 2
+    (seeds.seed_dir(out, 0)).mkdir(parents=True, exist_ok=True)
+    (seeds.seed_dir(out, 0) / "progress.csv").write_text(
+        "agent_steps,wall_s,episodes,return_mean,collision_rate,loss_of_separation_rate,"
+        "max_deviation_mean,episode_length_mean\n100,1,3,5.0,0.1,0.2,30.0,50\n"
+        "200,2,6,6.0,0.0,0.1,25.0,50\n"
+    )
+    assert seeds.plot_curves(out, 2, "shared").stat().st_size > 10_000
+
+
+def test_mappo_recipe_trains_exports_and_flies(tmp_path):
+    pytest.importorskip("skrl")
+    torch = pytest.importorskip("torch")
+    import mappo
+
+    out = tmp_path / "mappo"
+    argv = [
+        "--out-dir",
+        str(out),
+        "--n-envs",
+        "2",
+        "--n-steps",
+        "16",
+        "--batch-size",
+        "16",
+        "--total-timesteps",
+        "300",
+        "--checkpoint-every",
+        "150",
+        "--eval-episodes",
+        "1",
+        "--episode-duration",
+        "4",
+        "--hidden",
+        "16,16",
+        "--no-progress",
+    ]
+    summary = mappo.main(argv)
+    assert summary["training"]["agent_steps"] >= 300
+    assert (out / "checkpoints" / "latest" / "state.pt").exists()
+    assert (out / "progress.csv").read_text().count("\n") >= 2
+    policy = load_policy(out / "policy.zip")
+    assert policy.meta.algorithm == "MAPPO"
+    # The numpy actor is the trained torch actor's mean.
+    args = mappo.ppo_shared.parse_args(argv, mappo.Args())
+    cfg = mappo.ppo_shared.make_env_config(args)
+    venv, _, agent = mappo.build(args, cfg)
+    mappo.load_checkpoint(agent, venv, out / "checkpoints" / "latest")
+    obs = np.random.default_rng(0).normal(size=(5, policy.meta.obs_dim)).astype(np.float32)
+    actor = agent.policies["uav_0"]
+    with torch.no_grad():
+        mean = actor.net(torch.from_numpy(venv.normalize_obs(obs).astype(np.float32))).numpy()
+    np.testing.assert_allclose(policy(obs), np.clip(mean, -1, 1), atol=1e-5)
+    # And it flies 8 UAVs (fixed K).
+    entry = scaling.parse_policies([str(out / "policy.zip")])[0]
+    cfg8 = scaling.cell_config(8, 1, entry=entry, episode_duration=4.0)
+    (ep,) = run_episodes(load_policy(out / "policy.zip", cfg8), cfg8, [scaling.SCALING_SEEDS[0]])
+    assert ep.steps > 0

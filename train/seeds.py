@@ -1,0 +1,439 @@
+"""Train a recipe over several training seeds, select on validation, report across seeds.
+
+    python train/seeds.py --recipe residual_apf --seeds 3 --parallel 2 --out-dir runs/seeds_residual
+    python train/seeds.py --recipe shared --seeds 3 --parallel 2 --out-dir runs/seeds_shared
+    python train/seeds.py --recipe mappo --seeds 3 --parallel 2 --out-dir runs/seeds_mappo
+    # the same command again resumes: finished seeds are kept, interrupted ones continue
+    # from their checkpoints/latest; flags after "--" go to the recipe unchanged:
+    python train/seeds.py --recipe shared --seeds 2 --out-dir /tmp/s -- --max-minutes 1
+
+Stages (each skipped when its output exists, so an interrupted run picks up where it was):
+
+1. **train**: seed ``k`` (0 .. ``--seeds``-1) runs ``train/<recipe>.py --seed 1000*k
+   --out-dir <out>/seed_<k>`` (its environments are seeded ``1000*k + e``, inside
+   :data:`~uasep_env.scenarios.TRAINING_SEEDS` and disjoint between runs), up to
+   ``--parallel`` side by side, each with one torch thread. A run with a
+   ``checkpoints/latest`` but no final ``policy.zip`` is resumed (``--resume``).
+2. **select**: ``train/select_checkpoint.py`` picks each seed's checkpoint on the first
+   ``--select-episodes`` validation encounters only
+   (:data:`~uasep_env.scenarios.VALIDATION_SEEDS`) and copies it to
+   ``<out>/seed_<k>/selected.zip``.
+3. **held-out**: every selected checkpoint and the APF play the first ``--episodes``
+   encounters of the held-out bank (:data:`~uasep_env.scenarios.HELD_OUT_SEEDS`).
+4. **report**: ``<out>/seeds.md`` and ``seeds.json``: every seed's figures (rates with Wilson
+   intervals, means with Student-t intervals), and across seeds the interquartile mean with
+   a 95 % stratified bootstrap interval (runs resampled within each scenario family, as
+   ``rliable`` does; :func:`uasep_env.metrics.statistics.stratified_bootstrap_iqm`), the
+   targets (met / not met, from these numbers) and ``curves.png``, the learning curves of all
+   seeds in one figure. ``--scaling-episodes N`` adds ``baselines/scaling.py`` over the
+   selected checkpoints (``<out>/scaling.*``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+RECIPES = {"shared": "ppo_shared.py", "residual_apf": "ppo_residual_apf.py", "mappo": "mappo.py"}
+#: Training seed of run ``k`` is ``SEED_STRIDE * k`` (its environments ``+ e``, e < stride).
+SEED_STRIDE = 1000
+#: (dotted aggregate key, label, kind) reported per seed and across seeds.
+METRICS = (
+    ("episode.collision", "collisions", "rate"),
+    ("episode.loss_of_separation", "loss of separation", "rate"),
+    ("episode.terminated", "early ends", "rate"),
+    ("episode.max_deviation", "max deviation (m)", "mean"),
+    ("episode.min_obstacle_distance", "min UAV-obstacle distance (m)", "mean"),
+)
+CURVE_COLUMNS = ("return_mean", "collision_rate", "loss_of_separation_rate", "max_deviation_mean")
+
+
+def _python() -> list[str]:
+    return [sys.executable]
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    env.setdefault("OMP_NUM_THREADS", "1")
+    return env
+
+
+def seed_dir(out: Path, k: int) -> Path:
+    """The run folder of seed ``k``."""
+    return out / f"seed_{k}"
+
+
+def train_command(recipe: str, out: Path, k: int, extra: list[str]) -> list[str] | None:
+    """The command that trains (or resumes) seed ``k``; None when it has finished."""
+    run = seed_dir(out, k)
+    if (run / "policy.zip").exists() and (run / "validation.json").exists():
+        return None
+    cmd = [
+        *_python(),
+        str(HERE / RECIPES[recipe]),
+        "--out-dir",
+        str(run),
+        "--seed",
+        str(SEED_STRIDE * k),
+        "--torch-threads",
+        "1",
+        "--no-progress",
+        *extra,
+    ]
+    latest = run / "checkpoints" / "latest"
+    if latest.exists():
+        cmd += ["--resume", str(latest)]
+    elif run.exists():  # an attempt that left nothing to resume from: keep it aside
+        run.rename(run.with_name(f"{run.name}.aborted-{time.strftime('%Y%m%d-%H%M%S')}"))
+    return cmd
+
+
+def train_all(recipe: str, out: Path, seeds: int, parallel: int, extra: list[str]) -> None:
+    """Stage 1: train every seed, ``parallel`` at a time; raise if one fails."""
+    pending = [(k, cmd) for k in range(seeds) if (cmd := train_command(recipe, out, k, extra))]
+    running: list[tuple[int, subprocess.Popen, Any]] = []
+    failed: list[int] = []
+    while pending or running:
+        while pending and len(running) < parallel:
+            k, cmd = pending.pop(0)
+            # The log lies beside the run folder: a recipe refuses a used --out-dir.
+            log = (out / f"seed_{k}.log").open("a")
+            print(f"seed {k}: {' '.join(cmd[1:])}", flush=True)
+            running.append(
+                (k, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=_env()), log)
+            )
+        time.sleep(1.0)
+        for item in list(running):
+            k, proc, log = item
+            if proc.poll() is not None:
+                log.close()
+                running.remove(item)
+                print(f"seed {k}: finished (exit {proc.returncode})", flush=True)
+                if proc.returncode != 0:
+                    failed.append(k)
+    if failed:
+        raise SystemExit(f"training failed for seeds {failed}: see {out}/seed_<k>.log")
+
+
+def select_all(out: Path, seeds: int, episodes: int, workers: int) -> list[Path]:
+    """Stage 2: each seed's checkpoint chosen on validation encounters only."""
+    sys.path.insert(0, str(HERE))
+    import select_checkpoint
+
+    chosen = []
+    for k in range(seeds):
+        run = seed_dir(out, k)
+        target = run / "selected.zip"
+        if not target.exists():
+            select_checkpoint.main(
+                [
+                    str(run),
+                    "--episodes",
+                    str(episodes),
+                    "--workers",
+                    str(workers),
+                    "--copy-to",
+                    str(target),
+                ]
+            )
+        chosen.append(target)
+    return chosen
+
+
+def held_out(chosen: list[Path], episodes: int, workers: int) -> Any:
+    """Stage 3: the selected checkpoints and the APF on the held-out bank."""
+    from uasep_env import make_config
+    from uasep_env.evaluation import evaluate
+    from uasep_env.scenarios import HELD_OUT_SEEDS
+
+    cfg = make_config(scenario="random")
+    policies: dict[str, Any] = {"apf": "apf"}
+    policies |= {f"seed_{k}": str(p) for k, p in enumerate(chosen)}
+    return evaluate(policies, cfg, list(HELD_OUT_SEEDS)[:episodes], workers=workers)
+
+
+def _episode_value(entry: Any, key: str) -> float:
+    e = entry.metrics.episode.to_dict()
+    name = key.removeprefix("episode.")
+    if name == "terminated":
+        return float(entry.terminated)
+    v = e.get(name)
+    return math.nan if v is None else float(v)
+
+
+def family_scores(result: Any, label: str, key: str) -> dict[str, float]:
+    """Mean of ``key`` per scenario family for one policy (a rate for booleans)."""
+    by: dict[str, list[float]] = {}
+    for entry in result.results[label].episodes:
+        by.setdefault(entry.family, []).append(_episode_value(entry, key))
+    return {f: float(np.nanmean(v)) for f, v in sorted(by.items())}
+
+
+def across_seeds(result: Any, seeds: int) -> dict[str, dict[str, Any]]:
+    """IQM and stratified bootstrap interval of each metric across the seeds."""
+    from uasep_env.metrics.statistics import stratified_bootstrap_iqm
+
+    out = {}
+    for key, _, _ in METRICS:
+        per = [family_scores(result, f"seed_{k}", key) for k in range(seeds)]
+        families = sorted(set().union(*per))
+        mat = np.array([[p.get(f, math.nan) for f in families] for p in per])
+        keep = np.isfinite(mat).all(axis=0)
+        point, lo, hi = stratified_bootstrap_iqm(mat[:, keep])
+        out[key] = {
+            "iqm": point,
+            "ci_low": lo,
+            "ci_high": hi,
+            "families": families,
+            "scores": mat.tolist(),
+        }
+    return out
+
+
+def targets(
+    recipe: str, result: Any, agg: dict[str, dict[str, Any]]
+) -> list[tuple[str, str, bool]]:
+    """The issue's targets for ``recipe``, from the measured aggregate across seeds."""
+    apf = result.results["apf"].aggregate
+    out = []
+    if recipe == "residual_apf":
+        for key in ("episode.collision", "episode.loss_of_separation"):
+            a, s = apf[key], agg[key]
+            out.append(
+                (
+                    f"{key.removeprefix('episode.')}: as safe as the APF (intervals overlap "
+                    "or lower)",
+                    f"IQM {s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] "
+                    f"vs APF {a['rate']:.1%} [{a['ci_low']:.1%}, {a['ci_high']:.1%}]",
+                    s["ci_low"] <= a["ci_high"],
+                )
+            )
+        a, s = apf["episode.max_deviation"]["mean"], agg["episode.max_deviation"]["iqm"]
+        cut = 1.0 - s / a
+        out.append(
+            (
+                "mean max deviation at least 25 % below the APF's",
+                f"IQM {s:.1f} m vs APF {a:.1f} m ({cut:+.1%} less)",
+                cut >= 0.25,
+            )
+        )
+    else:
+        s = agg["episode.collision"]
+        out.append(
+            (
+                "at most 5 % collisions (IQM across seeds)",
+                f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] (early ends, "
+                f"collision or lost UAV: {agg['episode.terminated']['iqm']:.1%})",
+                s["iqm"] <= 0.05,
+            )
+        )
+    return out
+
+
+def _fmt(stats: dict[str, Any], kind: str) -> str:
+    if kind == "rate":
+        return f"{stats['rate']:.1%} [{stats['ci_low']:.1%}, {stats['ci_high']:.1%}]"
+    return f"{stats['mean']:.1f} [{stats['ci_low']:.1f}, {stats['ci_high']:.1f}]"
+
+
+def _training_facts(run: Path) -> dict[str, Any]:
+    import json
+
+    try:
+        return json.loads((run / "validation.json").read_text())["training"]
+    except (OSError, ValueError, KeyError):
+        return {}
+
+
+def report(recipe: str, out: Path, seeds: int, result: Any, command: str) -> tuple[str, dict]:
+    """Stage 4: the markdown and JSON of every seed and of the aggregate."""
+    from uasep_env.tables import render_table
+
+    agg = across_seeds(result, seeds)
+    headers = ["policy", "agent-steps", "train (min)", *(label for _, label, _ in METRICS)]
+    rows = []
+    for label in result.policies:
+        a = result.results[label].aggregate
+        facts = _training_facts(seed_dir(out, int(label[5:]))) if label != "apf" else {}
+        steps = f"{facts['agent_steps']:,}" if "agent_steps" in facts else "-"
+        wall = f"{facts['wall_s'] / 60:.1f}" if "wall_s" in facts else "-"
+        rows.append([label, steps, wall, *(_fmt(a[k], kind) for k, _, kind in METRICS)])
+    iqm_row = ["IQM across seeds", "", ""]
+    for key, _, kind in METRICS:
+        s = agg[key]
+        iqm_row.append(
+            f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}]"
+            if kind == "rate"
+            else f"{s['iqm']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]"
+        )
+    rows.append(iqm_row)
+    tg = targets(recipe, result, agg)
+    n = len(result.seeds)
+    text = "\n".join(
+        [
+            f"# {recipe}: {seeds} training seeds",
+            "",
+            f"Made by `{command}`. Each seed's checkpoint chosen on validation encounters only; "
+            f"{n} held-out encounters (seeds {result.seeds[0]:,}-{result.seeds[-1]:,}). Per "
+            "seed: rates with 95 % Wilson intervals, means with 95 % Student-t intervals. Across "
+            "seeds: interquartile mean (IQM) of the per-family scores, 95 % stratified bootstrap "
+            "interval (seeds resampled within each scenario family).",
+            "",
+            "## Held-out bank",
+            "",
+            render_table(
+                headers, rows, align=["left"] + ["right"] * (len(headers) - 1), markdown=True
+            ),
+            "",
+            "## Targets",
+            "",
+            render_table(
+                ["target", "measured", "met"],
+                [[t, m, "met" if ok else "not met"] for t, m, ok in tg],
+                markdown=True,
+            ),
+            "",
+            "Learning curves of every seed: `curves.png`.",
+            "",
+        ]
+    )
+    data = {
+        "recipe": recipe,
+        "command": command,
+        "seeds": seeds,
+        "held_out_seeds": {"first": result.seeds[0], "count": n},
+        "per_seed": {
+            lab: {k: result.results[lab].aggregate[k] for k, _, _ in METRICS}
+            for lab in result.policies
+        },
+        "across_seeds": agg,
+        "targets": [{"target": t, "measured": m, "met": ok} for t, m, ok in tg],
+        "training": {f"seed_{k}": _training_facts(seed_dir(out, k)) for k in range(seeds)},
+    }
+    return text, data
+
+
+def read_curve(path: Path) -> dict[str, np.ndarray]:
+    """A run's ``progress.csv`` as float columns (empty cells NaN)."""
+    with path.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    cols = ("agent_steps", *CURVE_COLUMNS)
+    return {c: np.array([float(r.get(c) or "nan") for r in rows]) for c in cols}
+
+
+def plot_curves(out: Path, seeds: int, title: str) -> Path:
+    """Every seed's learning curves in one figure (``<out>/curves.png``)."""
+    from matplotlib.figure import Figure  # lazily: only the figure needs matplotlib
+
+    fig = Figure(figsize=(12, 7), layout="constrained")
+    axes = fig.subplots(2, 2).ravel()
+    names = (
+        "return (mean per agent)",
+        "collision rate",
+        "loss-of-separation rate",
+        "max deviation (m)",
+    )
+    for k in range(seeds):
+        path = seed_dir(out, k) / "progress.csv"
+        if not path.exists():
+            continue
+        c = read_curve(path)
+        for ax, col in zip(axes, CURVE_COLUMNS, strict=True):
+            ax.plot(c["agent_steps"], c[col], label=f"seed {k}", lw=1)
+    for ax, name in zip(axes, names, strict=True):
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("agent-steps", fontsize=8)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"{title}: {seeds} seeds (last 200 episodes of each)")
+    path = out / "curves.png"
+    tmp = out / "curves.tmp.png"
+    fig.savefig(tmp, dpi=80, facecolor="white")
+    os.replace(tmp, path)
+    return path
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Run the stages; return the report's JSON data."""
+    import shlex
+
+    from uasep_env.jsonio import write_json
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    extra: list[str] = []
+    if "--" in argv:
+        at = argv.index("--")
+        argv, extra = argv[:at], argv[at + 1 :]
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--recipe", choices=sorted(RECIPES), required=True)
+    p.add_argument("--seeds", type=int, default=3, help="number of training seeds")
+    p.add_argument("--parallel", type=int, default=1, help="seeds trained side by side")
+    p.add_argument("--out-dir", type=Path, required=True)
+    p.add_argument("--select-episodes", type=int, default=100)
+    p.add_argument("--episodes", type=int, default=500, help="held-out encounters")
+    p.add_argument("--scaling-episodes", type=int, default=0)
+    p.add_argument("--workers", type=int, default=2)
+    args = p.parse_args(argv)
+    for name in ("seeds", "parallel", "select_episodes", "episodes", "workers"):
+        if getattr(args, name) < 1:
+            p.error(f"argument --{name.replace('_', '-')}: must be >= 1")
+    if args.seeds > 100:
+        p.error("argument --seeds: at most 100 (seed k trains on 1000*k + e)")
+    for flag in ("--seed", "--out-dir", "--resume"):
+        if flag in extra:
+            p.error(f"{flag} is set per seed by this driver; do not pass it after --")
+    out = args.out_dir
+    out.mkdir(parents=True, exist_ok=True)
+    command = "python train/seeds.py " + shlex.join(argv + (["--", *extra] if extra else []))
+
+    t0 = time.perf_counter()
+    train_all(args.recipe, out, args.seeds, args.parallel, extra)
+    t_train = time.perf_counter() - t0
+    chosen = select_all(out, args.seeds, args.select_episodes, args.workers)
+    result = held_out(chosen, args.episodes, args.workers)
+    text, data = report(args.recipe, out, args.seeds, result, command)
+    data["driver_wall_s"] = {"train": t_train, "total": time.perf_counter() - t0}
+    _write_atomic(out / "seeds.md", text)
+    tmp = write_json(data, out / "seeds.json.tmp")
+    os.replace(tmp, out / "seeds.json")
+    plot_curves(out, args.seeds, args.recipe)
+    if args.scaling_episodes:
+        sys.path.insert(0, str(ROOT / "baselines"))
+        import scaling
+
+        scaling.main(
+            [
+                "--policy",
+                ",".join(["apf", *(f"seed_{k}={c}" for k, c in enumerate(chosen))]),
+                "--episodes",
+                str(args.scaling_episodes),
+                "--out",
+                str(out / "scaling"),
+                "--workers",
+                str(args.workers),
+                "--force",
+            ]
+        )
+    print(text)
+    return data
+
+
+if __name__ == "__main__":
+    main()
