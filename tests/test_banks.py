@@ -22,7 +22,8 @@ REGENERATE = (
     "`python tools/digest_banks.py` and regenerate EVERY results file with it: "
     "`python baselines/paper_experiment.py --workers 2`, "
     "`python baselines/learned_vs_apf.py --workers 2`, "
-    "`python baselines/tradeoff.py --workers 2 --fresh`, then `python tools/sync_readme.py`."
+    "`python baselines/tradeoff.py --workers 2 --fresh`, `python baselines/scaling.py` (the "
+    "command in baselines/results/scaling.md, with --force), then `python tools/sync_readme.py`."
 )
 
 

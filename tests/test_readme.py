@@ -26,7 +26,7 @@ def test_docs_pages_tables_match_the_results_files():
     # The results page holds the paper experiment's and the trade-off tables.
     assert marked["results.md"] == 9 and marked["training.md"] == 3, marked
     assert marked["real_traffic.md"] == 2, marked  # every controller on real traffic
-    # The families' table, from the registry (issue 19), on the environment page.
+    # The families' table, written from the scenario registry.
     assert (ROOT / "docs" / "environment.md").read_text().count("<!-- scenarios -->") == 1
     for page in pages:
         text = page.read_text()

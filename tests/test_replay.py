@@ -207,7 +207,7 @@ def test_the_real_traffic_bank_is_test_flights_and_pinned():
         assert tracks[int(spec.obstacle_track_index[0])].split == "test"
     banks = json.loads((ROOT / "tests" / "data" / "banks.json").read_text())["banks"]
     bank = banks["real_traffic_test"]
-    assert bank["config"] == REAL_TRAFFIC_BANK
+    assert {**bank["config"], "scenario": bank["scenario"]} == REAL_TRAFFIC_BANK
     assert bank["seeds"] == [REAL_TRAFFIC_TEST_SEEDS.start, REAL_TRAFFIC_TEST_SEEDS.stop]
     assert len(bank["entries"]) == len(REAL_TRAFFIC_TEST_SEEDS)
     assert "real_traffic" not in RANDOM_MIX.names  # the pinned random banks stay as they were

@@ -31,7 +31,8 @@ STALE = (
     "moved from the figures published in baselines/results/learned_vs_apf.json.gz. If the change "
     "is meant, bump the env ids' version and regenerate every results file "
     "(python baselines/learned_vs_apf.py --workers 2, baselines/paper_experiment.py, "
-    "baselines/tradeoff.py --fresh, tools/digest_banks.py, tools/sync_readme.py), and say in "
+    "baselines/tradeoff.py --fresh, baselines/scaling.py, tools/digest_banks.py, "
+    "tools/sync_readme.py), and say in "
     "CHANGELOG.md how the shipped policies' figures moved."
 )
 

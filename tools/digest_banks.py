@@ -2,9 +2,10 @@
 
 Every results file compares controllers on fixed banks of seeded scenarios: the held-out
 bank (``random``, seeds 5,000,000-5,000,499, and its 20 ``paper`` runs), the validation
-encounters ``train/select_checkpoint.py`` chooses checkpoints on, and the paper experiment's
-and trade-off's runs (``paper`` seeds 0-19, ``random`` seeds 100,000-100,199), and the
-real-traffic bank (``real_traffic`` on the test flights, seeds 6,000,000-6,000,299). The digest
+encounters ``train/select_checkpoint.py`` chooses checkpoints on, the paper experiment's
+and trade-off's runs (``paper`` seeds 0-19, ``random`` seeds 100,000-100,199), the size
+and obstacle-count cells of ``baselines/scaling.py`` (seeds 6,000,000-6,000,049) and the
+real-traffic banks (``real_traffic`` on the test flights, seeds 6,000,000-6,000,299). The digest
 records, per seed, the family drawn, a readable summary of the first obstacle (start
 altitude, speed, climb rate) and a hash of every array of the scenario (rounded to 1e-6, so
 that last-bit differences of a maths library do not count). ``tests/test_banks.py``
@@ -15,7 +16,8 @@ regenerates it and fails if any bank moved: then every results file is stale.
 
 After a change that moves a bank (and bumps the env ids' version), regenerate the digest
 AND every results file: ``baselines/paper_experiment.py``, ``baselines/learned_vs_apf.py``,
-``baselines/tradeoff.py --fresh``, then ``tools/sync_readme.py``.
+``baselines/tradeoff.py --fresh``, ``baselines/scaling.py`` (the command recorded in
+``baselines/results/scaling.md``, with ``--force``), then ``tools/sync_readme.py``.
 """
 
 from __future__ import annotations
@@ -46,8 +48,8 @@ from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK, REAL_TRAFFIC_SLO
 ROOT = Path(__file__).resolve().parents[1]
 DIGEST = ROOT / "tests" / "data" / "banks.json"
 
-#: Bank name -> (scenario, seeds, where it is used).
-BANKS: dict[str, tuple[str, range, str]] = {
+#: Bank name -> (scenario, seeds, where it is used[, further config]).
+BANKS: dict[str, tuple[Any, ...]] = {
     "held_out": ("random", HELD_OUT_SEEDS, "baselines/learned_vs_apf.py (held-out bank)"),
     "held_out_paper": ("paper", HELD_OUT_PAPER_SEEDS, "baselines/learned_vs_apf.py"),
     "validation": (
@@ -65,18 +67,24 @@ BANKS: dict[str, tuple[str, range, str]] = {
         "real_traffic",
         REAL_TRAFFIC_TEST_SEEDS,
         "baselines/real_traffic_eval.py (recorded tracks of the test flights)",
+        {k: v for k, v in REAL_TRAFFIC_BANK.items() if k != "scenario"},
     ),
     "real_traffic_test_slow": (
         "real_traffic",
         REAL_TRAFFIC_TEST_SEEDS,
         "baselines/real_traffic_eval.py (the same tracks slowed x0.2)",
+        {k: v for k, v in REAL_TRAFFIC_SLOW_BANK.items() if k != "scenario"},
     ),
 }
-#: Bank name -> its config overrides beside ``scenario`` (banks not named: none).
-CONFIGS: dict[str, dict[str, Any]] = {
-    "real_traffic_test": REAL_TRAFFIC_BANK,
-    "real_traffic_test_slow": REAL_TRAFFIC_SLOW_BANK,
-}
+# The size/obstacle-count cells of baselines/scaling.py (its SCALING_SEEDS, 50 per cell;
+# formation "auto": the paper's pattern at 3 UAVs, a grid above).
+for _n, _m in ((3, 1), (8, 1), (16, 1), (32, 1), (3, 2), (3, 4)):
+    BANKS[f"scaling_{_n}x{_m}"] = (
+        "random",
+        range(6_000_000, 6_000_050),
+        "baselines/scaling.py (results/scaling.*)",
+        {"n_uavs": _n, "n_obstacles": _m, "formation": "paper" if _n == 3 else "grid"},
+    )
 
 
 def spec_hash(spec: ScenarioSpec) -> str:
@@ -107,11 +115,11 @@ def entry(seed: int, spec: ScenarioSpec) -> list[Any]:
 def digest() -> dict[str, Any]:
     """The digest of every bank (only scenarios are sampled; no episode is flown)."""
     banks = {}
-    for name, (scenario, seeds, used_by) in BANKS.items():
-        cfg = make_config({**CONFIGS.get(name, {}), "scenario": scenario})
+    for name, (scenario, seeds, used_by, *extra) in BANKS.items():
+        cfg = make_config(scenario=scenario, **(extra[0] if extra else {}))
         banks[name] = {
             "scenario": scenario,
-            **({"config": CONFIGS[name]} if name in CONFIGS else {}),
+            **({"config": extra[0]} if extra else {}),
             "seeds": [seeds.start, seeds.stop],
             "used_by": used_by,
             "columns": ["seed", "family", "hash", "alt_m", "speed_mps", "climb_mps"],
