@@ -6,7 +6,7 @@ r"""Safety and deviation against the number of UAVs and of obstacles, on a held-
         --policy mypackage.policies:make_policy --episodes 100 --out runs/scaling
 
 Every policy plays the same ``random`` encounters (crossing, head-on, overtaking, climbing,
-multi-obstacle) drawn from :data:`SCALING_SEEDS` (6,000,000-6,000,999: disjoint from the
+multi-obstacle) drawn from :data:`SCALING_SEEDS` (7,000,000-7,000,999: disjoint from the
 training, validation and held-out seeds of :mod:`uasep_env.scenarios` and from the
 trade-off bank), in two sweeps: formations of ``--uavs`` (3, 8, 16, 32) UAVs with
 ``--base-obstacles`` (1) obstacle, and ``--obstacles`` (1, 2, 4) obstacles around
@@ -54,7 +54,7 @@ from uasep_env.evaluation import evaluate
 from uasep_env.jsonio import write_json
 from uasep_env.policies import POLICIES, is_policy_checkpoint, shipped_policy_path
 from uasep_env.policies.learned import load_policy
-from uasep_env.scenarios import HELD_OUT_SEEDS
+from uasep_env.scenarios import HELD_OUT_SEEDS, SCALING_SEEDS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -63,7 +63,6 @@ from scaling_report import APFS, METRICS, figure, markdown
 #: Seeds of the size/obstacle-count bank: outside every range the project trains, validates,
 #: selects or reports on (training [0, 1e6), trade-off bank 100,000+, validation 4,000,000+,
 #: held-out 5,000,000-5,000,499).
-SCALING_SEEDS = range(6_000_000, 6_001_000)
 UAV_COUNTS = (3, 8, 16, 32)
 OBSTACLE_COUNTS = (1, 2, 4)
 

@@ -6,6 +6,7 @@ helpers need them too; fixtures for what tests take as arguments.
 
 from __future__ import annotations
 
+import errno
 import os
 import subprocess
 import sys
@@ -20,6 +21,40 @@ from uasep_env.metrics import EpisodeRecord
 
 #: The repository root (the tests run scripts and read results files from it).
 ROOT = Path(__file__).resolve().parents[1]
+
+
+class _FullDisk:
+    """A file whose writes fail with ENOSPC after ``room`` bytes (a disk filling up)."""
+
+    def __init__(self, fh: Any, room: int) -> None:
+        self._fh, self._room = fh, room
+
+    def write(self, data: Any) -> int:
+        if len(data) > self._room:
+            self._fh.write(data[: self._room])
+            self._room = 0
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        self._room -= len(data)
+        return self._fh.write(data)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._fh, name)
+
+    def __enter__(self) -> _FullDisk:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._fh.close()
+
+
+def fill_disk(monkeypatch: pytest.MonkeyPatch, room: int = 0) -> None:
+    """From now on, every file ``uasep_env.atomic`` opens runs out of space after ``room`` bytes."""
+    from uasep_env import atomic
+
+    real = open
+    monkeypatch.setattr(
+        atomic, "_open", lambda path, mode="r", **kw: _FullDisk(real(path, mode, **kw), room)
+    )
 
 
 def run_in_repo(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:

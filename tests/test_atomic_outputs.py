@@ -7,8 +7,8 @@ import shutil
 from pathlib import Path
 
 import pytest
+from conftest import fill_disk
 
-from uasep_env import atomic
 from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write
 from uasep_env.evaluation import main
 from uasep_env.evaluation.overrides import parse_config_overrides
@@ -16,38 +16,9 @@ from uasep_env.evaluation.overrides import parse_config_overrides
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "baselines" / "checkpoints"
 
 
-class _FullDisk:
-    """A file whose writes fail with ENOSPC after ``room`` bytes (a disk filling up)."""
-
-    def __init__(self, fh, room):
-        self._fh, self._room = fh, room
-
-    def write(self, data):
-        if len(data) > self._room:
-            self._fh.write(data[: self._room])
-            self._room = 0
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-        self._room -= len(data)
-        return self._fh.write(data)
-
-    def __getattr__(self, name):
-        return getattr(self._fh, name)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self._fh.close()
-
-
 @pytest.fixture
 def full_disk(monkeypatch):
-    real = open
-
-    def fake_open(path, mode="r", **kw):
-        return _FullDisk(real(path, mode, **kw), room=100)
-
-    monkeypatch.setattr(atomic, "_open", fake_open)
+    fill_disk(monkeypatch, room=100)
 
 
 def _leftovers(folder):

@@ -15,7 +15,7 @@ from uasep_env.observation import ObservationLayout
 from uasep_env.policies import CheckpointError, load_policy
 from uasep_env.policies.learned import PolicyCheckpoint, save_policy
 from uasep_env.rollout import run_episodes
-from uasep_env.scenarios import HELD_OUT_SEEDS, TRAINING_SEEDS, VALIDATION_SEEDS
+from uasep_env.scenarios import HELD_OUT_SEEDS, SEED_RANGES
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "baselines"))
@@ -41,10 +41,12 @@ def _checkpoint(path, cfg, seed=0):
     return save_policy(path, meta, weights)
 
 
-def test_scaling_seeds_meet_no_other_range():
-    bank = set(scaling.SCALING_SEEDS)
-    for other in (TRAINING_SEEDS, VALIDATION_SEEDS, HELD_OUT_SEEDS):
-        assert bank.isdisjoint(other)
+def test_no_two_seed_ranges_meet():
+    ranges = list(SEED_RANGES.items())
+    assert scaling.SCALING_SEEDS is SEED_RANGES["scaling"]
+    for i, (name, bank) in enumerate(ranges):
+        for other_name, other in ranges[i + 1 :]:
+            assert set(bank).isdisjoint(other), (name, other_name)
 
 
 def test_a_3_uav_checkpoint_flies_8_uavs_and_more_obstacles():

@@ -15,7 +15,7 @@ SYNC = runpy.run_path(str(ROOT / "tools" / "sync_readme.py"))
 
 def test_readme_tables_match_the_results_files():
     readme = (ROOT / "README.md").read_text()
-    assert readme.count("<!-- results ") == 2  # every marked table is checked below
+    assert readme.count("<!-- results ") == 4  # every marked table is checked below
     assert SYNC["render_readme"](readme) == readme, "run: python tools/sync_readme.py"
 
 

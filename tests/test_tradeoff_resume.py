@@ -1,6 +1,5 @@
 """The trade-off sweep survives kills and full disks without losing or mixing rows."""
 
-import errno
 import os
 import signal
 import subprocess
@@ -10,14 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import fill_disk
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "baselines"))
 
 import sweep_rows  # noqa: E402
 import tradeoff  # noqa: E402
-
-from uasep_env import atomic  # noqa: E402
 
 # A cheap sweep: the APF on 10-19 s episodes, one evaluation call (and one CSV rewrite) per
 # setting, so that a kill can land between any two of them.
@@ -84,18 +82,7 @@ def test_a_full_disk_keeps_the_finished_rows(tmp_path, monkeypatch):
     path = tmp_path / "tradeoff.csv"
     sweep_rows.write_rows(path, _rows(20))
     before = path.read_bytes()
-    real = open
-
-    def full(p, mode="r", **kw):
-        fh = real(p, mode, **kw)
-
-        def write(_data):
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-
-        fh.write = write
-        return fh
-
-    monkeypatch.setattr(atomic, "_open", full)
+    fill_disk(monkeypatch)
     with pytest.raises(OSError, match="No space left on device; the previous file"):
         sweep_rows.write_rows(path, _rows(20, 4))
     monkeypatch.undo()

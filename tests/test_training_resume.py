@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import fill_disk
 
 pytest.importorskip("stable_baselines3")
 
@@ -153,14 +154,11 @@ def test_out_dir_is_refused_unless_resume_or_overwrite(tmp_path):
 
 
 def test_a_full_disk_while_checkpointing_keeps_the_previous_checkpoint(tmp_path, monkeypatch):
-    import errno
 
     import torch
 
     sys.path.insert(0, str(ROOT / "train"))
     import ppo_shared
-
-    from uasep_env import atomic
 
     torch.set_num_threads(1)
     args = ppo_shared.parse_args([*TINY, "--out-dir", str(tmp_path)])
@@ -169,18 +167,7 @@ def test_a_full_disk_while_checkpointing_keeps_the_previous_checkpoint(tmp_path,
     ck = tmp_path / "checkpoints" / "step_0"
     ppo_shared.save_checkpoint(model, venv, cfg, args, ck, {"agent_steps": 0, "wall_s": 0.0})
     before = {p.name: p.read_bytes() for p in ck.iterdir()}
-    real = open
-
-    def full(path, mode="r", **kw):
-        fh = real(path, mode, **kw)
-
-        def write(_data):
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-
-        fh.write = write
-        return fh
-
-    monkeypatch.setattr(atomic, "_open", full)
+    fill_disk(monkeypatch)
     with pytest.raises(OSError, match=r"cannot write .*state.pt: No space left on device"):
         ppo_shared.save_checkpoint(model, venv, cfg, args, ck, {"agent_steps": 9, "wall_s": 1.0})
     monkeypatch.undo()

@@ -4,7 +4,7 @@ Every results file compares controllers on fixed banks of seeded scenarios: the 
 bank (``random``, seeds 5,000,000-5,000,499, and its 20 ``paper`` runs), the validation
 encounters ``train/select_checkpoint.py`` chooses checkpoints on, the paper experiment's
 and trade-off's runs (``paper`` seeds 0-19, ``random`` seeds 100,000-100,199), the size
-and obstacle-count cells of ``baselines/scaling.py`` (seeds 6,000,000-6,000,049) and the
+and obstacle-count cells of ``baselines/scaling.py`` (seeds 7,000,000-7,000,049) and the
 real-traffic banks (``real_traffic`` on the test flights, seeds 6,000,000-6,000,299). The digest
 records, per seed, the family drawn, a readable summary of the first obstacle (start
 altitude, speed, climb rate) and a hash of every array of the scenario (rounded to 1e-6, so
@@ -39,6 +39,7 @@ from uasep_env.scenarios import (
     HELD_OUT_PAPER_SEEDS,
     HELD_OUT_SEEDS,
     REAL_TRAFFIC_TEST_SEEDS,
+    SCALING_SEEDS,
     VALIDATION_SEEDS,
     ScenarioSpec,
     sample_scenario,
@@ -81,7 +82,7 @@ BANKS: dict[str, tuple[Any, ...]] = {
 for _n, _m in ((3, 1), (8, 1), (16, 1), (32, 1), (3, 2), (3, 4)):
     BANKS[f"scaling_{_n}x{_m}"] = (
         "random",
-        range(6_000_000, 6_000_050),
+        SCALING_SEEDS[:50],
         "baselines/scaling.py (results/scaling.*)",
         {"n_uavs": _n, "n_obstacles": _m, "formation": "paper" if _n == 3 else "grid"},
     )

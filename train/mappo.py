@@ -252,24 +252,10 @@ def export_policy(agent: Any, venv: Any, config: Any, args: Args, path: Path, in
     """Write the shared actor and the observation normalisation as a policy checkpoint."""
     import torch
 
-    from uasep_env.policies.learned import PolicyCheckpoint, save_policy
-
     actor = agent.policies[agent.possible_agents[0]]
     linears = [m for m in actor.net if isinstance(m, torch.nn.Linear)]
-    weights = [(m.weight.detach().cpu().numpy(), m.bias.detach().cpu().numpy()) for m in linears]
-    meta = PolicyCheckpoint(
-        config=config.to_dict(),
-        obs_dim=int(venv.observation_space.shape[0]),
-        activation=args.activation,
-        hidden=tuple(_hidden(args)),
-        obs_norm=bool(venv.norm_obs),
-        clip_obs=float(venv.clip_obs),
-        obs_epsilon=float(venv.epsilon),
-        algorithm="MAPPO",
-        info={**info, "args": dataclasses.asdict(args), "implementation": "skrl MAPPO"},
-    )
-    rms = venv.obs_rms
-    return save_policy(path, meta, weights, rms.mean, rms.var)
+    info = {**info, "implementation": "skrl MAPPO"}
+    return ppo_shared.export_actor(linears, venv, config, args, path, "MAPPO", info)
 
 
 def _modules(agent: Any) -> dict:

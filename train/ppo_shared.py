@@ -200,10 +200,21 @@ def export_policy(model: Any, venv: Any, config: Any, args: Args, path: Path, in
     """Write the actor and the normalisation of ``model`` as a policy checkpoint."""
     import torch
 
-    from uasep_env.policies.learned import PolicyCheckpoint, save_policy
-
     linears = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
     linears.append(model.policy.action_net)
+    return export_actor(linears, venv, config, args, path, "PPO", info)
+
+
+def export_actor(
+    linears: list, venv: Any, config: Any, args: Args, path: Path, algorithm: str, info: dict
+) -> Path:
+    """Write an MLP actor and its observation normalisation as a policy checkpoint.
+
+    Every recipe exports through here: ``linears`` are the actor's ``torch.nn.Linear``
+    layers in order, the normalisation is ``venv``'s; the file is pickle-free.
+    """
+    from uasep_env.policies.learned import PolicyCheckpoint, save_policy
+
     weights = [(m.weight.detach().cpu().numpy(), m.bias.detach().cpu().numpy()) for m in linears]
     meta = PolicyCheckpoint(
         config=config.to_dict(),
@@ -213,7 +224,7 @@ def export_policy(model: Any, venv: Any, config: Any, args: Args, path: Path, in
         obs_norm=bool(venv.norm_obs),
         clip_obs=float(venv.clip_obs),
         obs_epsilon=float(venv.epsilon),
-        algorithm="PPO",
+        algorithm=algorithm,
         info={**info, "args": dataclasses.asdict(args)},
     )
     rms = venv.obs_rms
@@ -462,9 +473,7 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     return write_validation(out, config, policy_path, info, args.eval_episodes)
 
 
-def write_validation(
-    out: Path, config: Any, policy_path: Path, info: dict, episodes: int
-) -> dict:
+def write_validation(out: Path, config: Any, policy_path: Path, info: dict, episodes: int) -> dict:
     """The policy and the APF on ``episodes`` validation encounters: ``validation.json``."""
     from uasep_env.atomic import atomic_write
     from uasep_env.evaluation import evaluate

@@ -6,6 +6,8 @@ __all__ = [
     "HELD_OUT_PAPER_SEEDS",
     "HELD_OUT_SEEDS",
     "REAL_TRAFFIC_TEST_SEEDS",
+    "SCALING_SEEDS",
+    "SEED_RANGES",
     "TRAINING_SEEDS",
     "VALIDATION_SEEDS",
     "check_training_seeds",
@@ -25,6 +27,17 @@ HELD_OUT_PAPER_SEEDS = range(5_000_000, 5_000_020)
 #: only (``obstacle.replay_split="test"``; config:
 #: :data:`uasep_env.scenarios.real_traffic.REAL_TRAFFIC_BANK`).
 REAL_TRAFFIC_TEST_SEEDS = range(6_000_000, 6_000_300)
+#: The size / obstacle-count bank of ``baselines/scaling.py``: ``random`` encounters with
+#: 3-32 UAVs and 1-4 obstacles (its own range, so no seed means two banks).
+SCALING_SEEDS = range(7_000_000, 7_001_000)
+#: Every named range, for the test that they never meet.
+SEED_RANGES = {
+    "training": TRAINING_SEEDS,
+    "validation": VALIDATION_SEEDS,
+    "held_out": HELD_OUT_SEEDS,
+    "real_traffic_test": REAL_TRAFFIC_TEST_SEEDS,
+    "scaling": SCALING_SEEDS,
+}
 
 
 def check_training_seeds(seed: int, n_envs: int) -> None:
