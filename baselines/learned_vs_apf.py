@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> str:
     for name in LEARNED:
         path = CHECKPOINTS / f"{name}.zip"
         if path.exists():
-            policies[name] = str(path)
+            policies[name] = name  # the shipped name: results name no machine's folder
             meta[name] = load_policy(path).meta.info
     sections = []
     results = {}

@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> str:
     policies: dict[str, Any] = {name: name for name in APFS}
     for name in LEARNED:
         if (CHECKPOINTS / f"{name}.zip").exists():
-            policies[name] = str(CHECKPOINTS / f"{name}.zip")
+            policies[name] = name  # the shipped name: results name no machine's folder
     real_seeds = list(REAL_TRAFFIC_TEST_SEEDS)[: args.episodes]
     syn_seeds = list(HELD_OUT_SEEDS)[: args.synthetic_episodes]
     t0 = time.perf_counter()
