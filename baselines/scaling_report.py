@@ -69,6 +69,7 @@ def targets(result: dict[str, Any]) -> list[tuple[str, str, bool | None]]:
             for label in others:
                 mine = by.get((n, m, label))
                 what = f"{label}: collisions at {n} UAVs no worse than the APF's"
+                what += " (rate within its 95 % CI)"
                 if apf is None or mine is None:
                     out.append((what, "not evaluated (needs apf and the policy)", None))
                     continue
