@@ -6,6 +6,8 @@
 #                        (.ci/floors.txt), without numba or any extra, in a venv of their own
 #   make test-package -- build wheel + sdist, twine check, install the wheel in a clean venv
 #                        outside the repo and run uasep-eval on a shipped policy by name
+#   make test-benchmarl -- BenchMARL's MAPPO on a custom task, in a venv of its own
+#   make docs   -- the documentation site, warnings as errors
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -15,8 +17,9 @@ TORCH  := torch==2.13.0
 # Outside the repository: what a pip user has (no repo on the path).
 FLOORS_VENV ?= $(CURDIR)/.venv-floors
 PKG_DIR     ?= /tmp/uasep-env-package-check
+BENCHMARL_VENV ?= $(CURDIR)/.venv-benchmarl
 
-.PHONY: eval test lint bench clean ci test-floors test-package docs
+.PHONY: eval test lint bench clean ci test-floors test-package test-benchmarl docs
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -48,7 +51,7 @@ test: lint
 	UASEP_REQUIRE_CLIENTS=1 $(BIN)/python -m pytest -n 2 --dist loadgroup -q
 
 # Every CI job, in order (.ci/run).
-ci: test test-floors test-package docs
+ci: test test-floors test-package test-benchmarl docs
 
 # The floors, exactly, and the package's requirements resolved against them (pip fails if a
 # declared range excludes a floor; --dry-run: no build/ left in the tree); the tests run on
@@ -86,6 +89,19 @@ test-package: $(VENV)/.all
 	cd $(PKG_DIR)/sdist && UASEP_NUMBA=0 $(abspath $(BIN))/python -m pytest -q \
 		-p no:cacheprovider tests/test_packaging.py -k "shipped or metadata or links or floors"
 
+# BenchMARL's MAPPO on a custom task (tests/test_benchmarl.py): BenchMARL pins TorchRL 0.11,
+# the clients extra 0.14, so it gets a venv of its own.
+$(BENCHMARL_VENV)/.benchmarl: pyproject.toml
+	rm -rf $(BENCHMARL_VENV)
+	$(PYTHON) -m venv $(BENCHMARL_VENV)
+	$(BENCHMARL_VENV)/bin/python -m pip install --quiet $(TORCH)
+	$(BENCHMARL_VENV)/bin/python -m pip install --quiet -e ".[benchmarl]" "$(TORCH)"
+	touch $@
+
+test-benchmarl: $(BENCHMARL_VENV)/.benchmarl
+	UASEP_REQUIRE_BENCHMARL=1 UASEP_NUMBA=0 $(BENCHMARL_VENV)/bin/python -m pytest -q \
+		-p no:cacheprovider tests/test_benchmarl.py
+
 # The documentation site (Sphinx), warnings as errors; the pages' examples run in make test.
 docs: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[docs]" "$(TORCH)"
@@ -96,4 +112,4 @@ bench: $(VENV)/.all
 	$(BIN)/python benchmarks/bench_peers.py
 
 clean:
-	rm -rf $(VENV) $(FLOORS_VENV) .pytest_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) $(FLOORS_VENV) $(BENCHMARL_VENV) .pytest_cache .ruff_cache .hypothesis
