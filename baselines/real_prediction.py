@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env import reachable, real_traffic
+from uasep_env.atomic import atomic_write
 from uasep_env.config import EnvConfig
 from uasep_env.estimation import KalmanModel
 from uasep_env.jsonio import write_json
@@ -450,10 +451,7 @@ def main(argv: list[str] | None = None) -> int:
     res = run(args.seed, args.max_gap, args.min_windows)
     args.out_dir.mkdir(parents=True, exist_ok=True)
     write_json(res, args.out_dir / "real_prediction.json")
-    md = args.out_dir / "real_prediction.md"
-    tmp = md.with_name(f".{md.name}.tmp")
-    tmp.write_text(render_markdown(res), encoding="utf-8")
-    tmp.replace(md)
+    md = atomic_write(args.out_dir / "real_prediction.md", render_markdown(res))
     if not args.no_figure:
         plot(res, args.figure)
     print(md.read_text(encoding="utf-8").split("## Containment")[0])

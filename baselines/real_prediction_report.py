@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from uasep_env.atomic import atomic_output
+
 FITS = ("enclosing", "paper")
 
 
@@ -128,8 +130,6 @@ def plot(res: dict[str, Any], path: Path) -> None:
     axes[0].legend(fontsize=7)
     fig.suptitle("Reachable ellipsoids on recorded aircraft (swept region)")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=120)
+    with atomic_output(path) as fh:
+        fig.savefig(fh, format="png", dpi=120)
     plt.close(fig)
-    tmp.replace(path)

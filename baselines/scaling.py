@@ -41,7 +41,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
-import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -49,6 +48,7 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
+from uasep_env.atomic import atomic_write
 from uasep_env.config import EnvConfig
 from uasep_env.evaluation import evaluate
 from uasep_env.jsonio import write_json
@@ -284,12 +284,6 @@ def run(
     }
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def _counts(text: str, flag: str) -> tuple[int, ...]:
     try:
         vals = tuple(int(v) for v in text.split(",") if v.strip())
@@ -368,8 +362,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     result["command"], result["elapsed_s"] = command, elapsed
     if args.workers == 1:  # the CPU time of the episodes (all played in this process)
         result["cpu_s"] = time.process_time() - c0
-    tmp = write_json(result, outs[1].with_name(outs[1].name + ".tmp"))
-    os.replace(tmp, outs[1])
+    write_json(result, outs[1])
     _write_views(result, args.out, not args.no_figure)
     return result
 
@@ -377,10 +370,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 def _write_views(result: dict[str, Any], out: Path, with_figure: bool) -> None:
     """The markdown (and figure) of a result, written atomically next to its JSON."""
     text = markdown(result, result["command"], result["elapsed_s"])
-    _write_atomic(out.with_suffix(".md"), text)
+    atomic_write(out.with_suffix(".md"), text)
     if with_figure:
-        tmp_png = figure(result, out.with_name(out.name + ".tmp.png"))
-        os.replace(tmp_png, out.with_suffix(".png"))
+        figure(result, out.with_suffix(".png"))
     print(text)
     print(
         f"wrote {out.with_suffix('.md')}" + (f", {out.with_suffix('.png')}" if with_figure else "")

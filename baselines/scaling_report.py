@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from uasep_env.atomic import atomic_output
 from uasep_env.tables import render_table
 
 APFS = ("apf", "motion-state-apf", "traditional-apf")
@@ -178,5 +179,6 @@ def figure(result: dict[str, Any], path: Path) -> Path:
         for j in range(2):
             axes[k // 2, 2 * (k % 2) + j].axis("off")
     axes[0, 0].legend(fontsize=7)
-    fig.savefig(path, dpi=80, facecolor="white")
+    with atomic_output(path) as fh:
+        fig.savefig(fh, format="png", dpi=80, facecolor="white")
     return path

@@ -25,14 +25,13 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from uasep_env.atomic import atomic_write
 from uasep_env.config import make_config
 from uasep_env.registration import ENV_VERSION
 from uasep_env.scenarios import (
@@ -158,12 +157,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"a bank moved: {DIGEST} is stale (see this script's help)", file=sys.stderr)
             return 1
         return 0
-    DIGEST.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=DIGEST.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, DIGEST)  # atomic: a reader never sees half a digest
+    atomic_write(DIGEST, text)
     print(f"wrote {DIGEST}")
     return 0
 

@@ -43,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+from uasep_env.atomic import atomic_output, atomic_write
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RECIPES = {"shared": "ppo_shared.py", "residual_apf": "ppo_residual_apf.py", "mappo": "mappo.py"}
@@ -358,16 +360,9 @@ def plot_curves(out: Path, seeds: int, title: str) -> Path:
     axes[0].legend(fontsize=8)
     fig.suptitle(f"{title}: {seeds} seeds (last 200 episodes of each)")
     path = out / "curves.png"
-    tmp = out / "curves.tmp.png"
-    fig.savefig(tmp, dpi=80, facecolor="white")
-    os.replace(tmp, path)
+    with atomic_output(path) as fh:
+        fig.savefig(fh, format="png", dpi=80, facecolor="white")
     return path
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -410,9 +405,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     result = held_out(chosen, args.episodes, args.workers)
     text, data = report(args.recipe, out, args.seeds, result, command)
     data["driver_wall_s"] = {"train": t_train, "total": time.perf_counter() - t0}
-    _write_atomic(out / "seeds.md", text)
-    tmp = write_json(data, out / "seeds.json.tmp")
-    os.replace(tmp, out / "seeds.json")
+    atomic_write(out / "seeds.md", text)
+    write_json(data, out / "seeds.json")
     plot_curves(out, args.seeds, args.recipe)
     if args.scaling_episodes:
         sys.path.insert(0, str(ROOT / "baselines"))

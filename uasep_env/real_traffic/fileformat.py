@@ -21,12 +21,13 @@ from __future__ import annotations
 import io
 import json
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from uasep_env.atomic import atomic_write
 
 __all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz", "write_npz"]
 
@@ -77,16 +78,7 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o644 << 16
             zf.writestr(info, npy.getvalue(), compresslevel=9)
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(buf.getvalue())
-        os.chmod(tmp, 0o644)  # package data: readable by all, like a normal write
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, buf.getvalue())
 
 
 def _read_member(zf: zipfile.ZipFile, name: str, path: Path, limit: int) -> np.ndarray:
