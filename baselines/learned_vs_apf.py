@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
 
 from uasep_env import make_config
 from uasep_env.atomic import atomic_write
@@ -43,6 +42,15 @@ TABLE_ROWS = (
     *(r for r in ROWS if r[1] != "episode.collision"),
 )
 TRAINING_BUDGET_S = 3600.0
+
+
+def compared_policies() -> dict[str, str]:
+    """The three APFs and the shipped policies present: what every comparison plays.
+
+    Shipped policies go by name, so that results files name no machine's folder.
+    """
+    names = [*APFS, *(n for n in LEARNED if (CHECKPOINTS / f"{n}.zip").exists())]
+    return {name: name for name in names}
 
 
 def _overlap_or_better(learned: dict, apf: dict) -> bool:
@@ -100,13 +108,9 @@ def main(argv: list[str] | None = None) -> str:
     if not 1 <= args.episodes <= len(HELD_OUT_SEEDS):
         p.error(f"argument --episodes: must be in [1, {len(HELD_OUT_SEEDS)}]")
 
-    policies: dict[str, Any] = {name: name for name in APFS}
-    meta: dict[str, dict] = {}
-    for name in LEARNED:
-        path = CHECKPOINTS / f"{name}.zip"
-        if path.exists():
-            policies[name] = name  # the shipped name: results name no machine's folder
-            meta[name] = load_policy(path).meta.info
+    policies = compared_policies()
+    meta = {name: load_policy(CHECKPOINTS / f"{name}.zip").meta.info for name in LEARNED
+            if name in policies}  # fmt: skip
     sections = []
     results = {}
     for scenario, seeds in (

@@ -47,7 +47,7 @@ from uasep_env.tables import render_table
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))
 
-from learned_vs_apf import APFS, CHECKPOINTS, LEARNED, TABLE_ROWS  # noqa: E402
+from learned_vs_apf import TABLE_ROWS, compared_policies  # noqa: E402
 from paper_experiment import table  # noqa: E402
 
 #: The summary's columns: (heading, metric, statistic, format).
@@ -155,10 +155,7 @@ def main(argv: list[str] | None = None) -> str:
     if args.workers < 1:
         p.error(f"argument --workers: must be >= 1, got {args.workers}")
 
-    policies: dict[str, Any] = {name: name for name in APFS}
-    for name in LEARNED:
-        if (CHECKPOINTS / f"{name}.zip").exists():
-            policies[name] = name  # the shipped name: results name no machine's folder
+    policies = compared_policies()
     real_seeds = list(REAL_TRAFFIC_TEST_SEEDS)[: args.episodes]
     syn_seeds = list(HELD_OUT_SEEDS)[: args.synthetic_episodes]
     t0 = time.perf_counter()

@@ -60,9 +60,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from scaling_report import APFS, METRICS, figure, markdown
 
-#: Seeds of the size/obstacle-count bank: outside every range the project trains, validates,
-#: selects or reports on (training [0, 1e6), trade-off bank 100,000+, validation 4,000,000+,
-#: held-out 5,000,000-5,000,499).
+#: The cells' formation sizes and obstacle counts (seeds: ``SCALING_SEEDS``).
 UAV_COUNTS = (3, 8, 16, 32)
 OBSTACLE_COUNTS = (1, 2, 4)
 
