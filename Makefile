@@ -2,7 +2,7 @@
 #   make eval   -- the APF evaluated on the paper's scenario, metrics printed
 #   make test   -- ruff + the whole test suite (with the ecosystem's clients: the clients extra)
 # and CI's further jobs (.ci/run):
-#   make test-floors  -- the env/vector/convention tests on the declared dependency floors
+#   make test-floors  -- env, vector, convention, real-traffic and checkpoint tests on the floors
 #                        (.ci/floors.txt), without numba or any extra, in a venv of their own
 #   make test-package -- build wheel + sdist, twine check, install the wheel in a clean venv
 #                        outside the repo and run uasep-eval on a shipped policy by name
@@ -64,7 +64,9 @@ $(FLOORS_VENV)/.floors: .ci/floors.txt pyproject.toml
 	touch $@
 
 FLOORS_TESTS := tests/test_envs.py tests/test_vector.py tests/test_conventions.py \
-	tests/test_config.py tests/test_packaging.py
+	tests/test_config.py tests/test_packaging.py tests/test_replay.py tests/test_real_traffic.py \
+	tests/test_banks.py tests/test_shipped.py tests/test_pinned_numbers.py \
+	tests/test_checkpoint_layout.py tests/test_checkpoint_limits.py
 
 test-floors: $(FLOORS_VENV)/.floors
 	@! $(FLOORS_VENV)/bin/python -c "import numba" 2>/dev/null || (echo "numba in the floors venv" && false)
