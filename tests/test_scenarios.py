@@ -114,7 +114,11 @@ def test_every_family_starts_obstacles_in_the_airspace(
         },
         **extra,
     )
-    s = sample_scenario(np.random.default_rng(seed), cfg)
+    try:
+        s = sample_scenario(np.random.default_rng(seed), cfg)
+    except ValueError as err:  # a family may refuse an airspace it cannot fill (real tracks)
+        assert "airspace.ceiling_altitude" in str(err) or "airspace.ground" in str(err), err
+        return
     alt = -s.obstacle_pos[:, 2]
     assert np.all(alt >= ground + margin - 1e-9) and np.all(alt <= ceiling + 1e-9)
     band = s.obstacle_alt_band
