@@ -166,8 +166,10 @@ def test_seed_driver_resumes_and_reports(tmp_path):
     paths = [_checkpoint(tmp_path / f"c{k}.zip", cfg, seed=k) for k in range(2)]
     policies = {"apf": "apf", **{f"seed_{k}": str(p) for k, p in enumerate(paths)}}
     result = evaluate(policies, cfg, list(HELD_OUT_SEEDS)[:6])
-    text, data = seeds.report("shared", out, 2, result, "python train/seeds.py ...")
+    shipped = {"seed": 1, "validation": {}}
+    text, data = seeds.report("shared", out, 2, result, "python train/seeds.py ...", shipped)
     assert "IQM across seeds" in text and "at most 5 % collisions" in text
+    assert "Shipped: seed 1's checkpoint" in text and data["shipped"]["seed"] == 1
     agg = data["across_seeds"]["episode.max_deviation"]
     assert agg["ci_low"] <= agg["iqm"] <= agg["ci_high"]
     assert np.array(agg["scores"]).shape[0] == 2
@@ -228,3 +230,38 @@ def test_mappo_recipe_trains_exports_and_flies(tmp_path):
     cfg8 = scaling.cell_config(8, 1, entry=entry, episode_duration=4.0)
     (ep,) = run_episodes(load_policy(out / "policy.zip", cfg8), cfg8, [scaling.SCALING_SEEDS[0]])
     assert ep.steps > 0
+
+
+def _selection(run, rows, apf=(0.0, 0.0, 0.04, 35.0)):
+    run.mkdir(parents=True, exist_ok=True)
+    lines = ["policy,agent_steps,terminated,collision,loss_of_separation,max_deviation,safe"]
+    for i, r in enumerate(rows):
+        lines.append(f"{run}/checkpoints/step_{i}/policy.zip,{i}," + ",".join(map(str, r)) + ",")
+    lines.append("apf,," + ",".join(map(str, apf)) + ",")
+    (run / "selection.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_the_shipped_seed_is_chosen_on_validation_by_the_selection_rule(tmp_path):
+    import select_checkpoint
+
+    out = tmp_path / "run"
+    # seed 0: safe at 33 m; seed 1: safe at 31 m (ships), and an unsafe 20 m checkpoint;
+    # seed 2: never as safe as the APF.
+    _selection(seeds.seed_dir(out, 0), [(0, 0, 0.03, 33.0), (0, 0, 0.05, 25.0)])
+    _selection(seeds.seed_dir(out, 1), [(0, 0.01, 0.02, 20.0), (0, 0, 0.04, 31.0)])
+    _selection(seeds.seed_dir(out, 2), [(0.02, 0.02, 0.1, 15.0)])
+    shipped = seeds.ship(out, 3)
+    assert shipped["seed"] == 1
+    picks = shipped["validation"]["seeds"]
+    assert [p["max_deviation"] for p in picks] == [33.0, 31.0, 15.0]
+    assert picks[1]["policy"].endswith("step_1/policy.zip")
+    # None as safe as the APF: the lowest in early ends, collisions, losses, in that order.
+    rows, apf = select_checkpoint.read_selection(seeds.seed_dir(out, 2))
+    assert select_checkpoint.choose(rows, {**apf, "terminated": -1.0})["max_deviation"] == 15.0
+    # Seeds selected on other encounters do not compare: refused, naming the seed.
+    _selection(seeds.seed_dir(out, 2), [(0, 0, 0.0, 10.0)], apf=(0.0, 0.0, 0.05, 35.0))
+    with pytest.raises(ValueError, match="seed 2: its selection's APF figures"):
+        seeds.ship(out, 3)
+    (seeds.seed_dir(out, 2) / "selection.csv").write_text("policy,agent_steps\nx,1\n")
+    with pytest.raises(ValueError, match="no numeric"):
+        seeds.ship(out, 3)

@@ -17,7 +17,8 @@ Stages (each skipped when its output exists, so an interrupted run picks up wher
 2. **select**: ``train/select_checkpoint.py`` picks each seed's checkpoint on the first
    ``--select-episodes`` validation encounters only
    (:data:`~uasep_env.scenarios.VALIDATION_SEEDS`) and copies it to
-   ``<out>/seed_<k>/selected.zip``.
+   ``<out>/seed_<k>/selected.zip``. Then the same rule, on the same validation figures,
+   picks the seed whose checkpoint ships (``--ship-to`` copies it).
 3. **held-out**: every selected checkpoint and the APF play the first ``--episodes``
    encounters of the held-out bank (:data:`~uasep_env.scenarios.HELD_OUT_SEEDS`).
 4. **report**: ``<out>/seeds.md`` and ``seeds.json``: every seed's figures (rates with Wilson
@@ -154,6 +155,34 @@ def select_all(out: Path, seeds: int, episodes: int, workers: int) -> list[Path]
     return chosen
 
 
+def ship(out: Path, seeds: int) -> dict[str, Any]:
+    """Stage 2b: the seed whose selected checkpoint ships, chosen on validation only.
+
+    Every seed's selection played the same validation encounters, so their chosen rows
+    compare directly; the same rule as within a run (``select_checkpoint.choose``) picks
+    one across seeds.
+
+    Raises:
+        ValueError: The seeds' selections did not play the same validation encounters
+            (their APF figures differ).
+    """
+    sys.path.insert(0, str(HERE))
+    import select_checkpoint
+
+    picks, apf = [], None
+    for k in range(seeds):
+        rows, apf_k = select_checkpoint.read_selection(seed_dir(out, k))
+        if apf is not None and apf_k != apf:
+            raise ValueError(
+                f"seed {k}: its selection's APF figures {apf_k} differ from seed 0's {apf}: "
+                "the seeds were not selected on the same validation encounters"
+            )
+        apf = apf_k
+        picks.append({"seed": k, **select_checkpoint.choose(rows, apf_k)})
+    best = select_checkpoint.choose(picks, apf)
+    return {"seed": best["seed"], "validation": {"apf": apf, "seeds": picks}}
+
+
 def held_out(chosen: list[Path], episodes: int, workers: int) -> Any:
     """Stage 3: the selected checkpoints and the APF on the held-out bank."""
     from uasep_env import make_config
@@ -259,7 +288,9 @@ def _training_facts(run: Path) -> dict[str, Any]:
         return {}
 
 
-def report(recipe: str, out: Path, seeds: int, result: Any, command: str) -> tuple[str, dict]:
+def report(
+    recipe: str, out: Path, seeds: int, result: Any, command: str, shipped: dict[str, Any]
+) -> tuple[str, dict]:
     """Stage 4: the markdown and JSON of every seed and of the aggregate."""
     from uasep_env.tables import render_table
 
@@ -307,6 +338,11 @@ def report(recipe: str, out: Path, seeds: int, result: Any, command: str) -> tup
                 markdown=True,
             ),
             "",
+            f"Shipped: seed {shipped['seed']}'s checkpoint, chosen across seeds on the "
+            "validation encounters only, by the rule that chose each seed's checkpoint "
+            "(no less safe than the APF, then the lowest mean max deviation; "
+            "`train/select_checkpoint.py`).",
+            "",
             "Learning curves of every seed: `curves.png`.",
             "",
         ]
@@ -322,6 +358,7 @@ def report(recipe: str, out: Path, seeds: int, result: Any, command: str) -> tup
         },
         "across_seeds": agg,
         "targets": [{"target": t, "measured": m, "met": ok} for t, m, ok in tg],
+        "shipped": shipped,
         "training": {f"seed_{k}": _training_facts(seed_dir(out, k)) for k in range(seeds)},
     }
     return text, data
@@ -385,6 +422,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--episodes", type=int, default=500, help="held-out encounters")
     p.add_argument("--scaling-episodes", type=int, default=0)
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument(
+        "--ship-to",
+        type=Path,
+        default=None,
+        help="copy the checkpoint chosen across seeds (on validation only) to this file",
+    )
     args = p.parse_args(argv)
     for name in ("seeds", "parallel", "select_episodes", "episodes", "workers"):
         if getattr(args, name) < 1:
@@ -402,8 +445,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     train_all(args.recipe, out, args.seeds, args.parallel, extra)
     t_train = time.perf_counter() - t0
     chosen = select_all(out, args.seeds, args.select_episodes, args.workers)
+    shipped = ship(out, args.seeds)
+    print(f"shipped (chosen on validation): seed {shipped['seed']}", flush=True)
+    if args.ship_to is not None:
+        atomic_write(args.ship_to, chosen[shipped["seed"]].read_bytes())
+        print(f"copied {chosen[shipped['seed']]} -> {args.ship_to}", flush=True)
     result = held_out(chosen, args.episodes, args.workers)
-    text, data = report(args.recipe, out, args.seeds, result, command)
+    text, data = report(args.recipe, out, args.seeds, result, command, shipped)
     data["driver_wall_s"] = {"train": t_train, "total": time.perf_counter() - t0}
     atomic_write(out / "seeds.md", text)
     write_json(data, out / "seeds.json")

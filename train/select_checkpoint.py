@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import csv
 from pathlib import Path
+from typing import Any
 
 from uasep_env import make_config
 from uasep_env.atomic import atomic_output, atomic_write
@@ -29,6 +30,54 @@ KEYS = ("terminated", "collision", "loss_of_separation", "max_deviation")
 def _figures(result: EvaluationResult, label: str) -> dict[str, float]:
     agg = result.results[label].aggregate
     return {k: float(agg[f"episode.{k}"]["mean"]) for k in KEYS}
+
+
+def choose(rows: list[dict[str, Any]], apf: dict[str, float]) -> dict[str, Any]:
+    """The rule, safety first: among the rows no less safe than the APF, the least deviation.
+
+    Args:
+        rows: Candidates, each with the figures of :data:`KEYS` (rates and the mean max
+            deviation on the same validation encounters as ``apf``).
+        apf: The APF's figures on those encounters.
+
+    Returns:
+        The chosen row: of those whose early-end, collision and loss-of-separation rates are
+        all at most the APF's, the one with the lowest mean max deviation; if none is, the
+        one lowest in those rates, in that order (ties: the earlier row).
+    """
+    if not rows:
+        raise ValueError("no candidates to choose from")
+    pool = [r for r in rows if all(r[k] <= apf[k] for k in KEYS[:3])]
+    if not pool:
+        return min(rows, key=lambda r: tuple(r[k] for k in KEYS[:3]))
+    return min(pool, key=lambda r: r["max_deviation"])
+
+
+def read_selection(run: Path) -> tuple[list[dict[str, Any]], dict[str, float]]:
+    """A run's ``selection.csv``: its checkpoints' rows and the APF's figures.
+
+    Raises:
+        FileNotFoundError: The run has not been through selection.
+        ValueError: The table has no APF row or a figure is not a number (named).
+    """
+    with (run / "selection.csv").open(newline="") as fh:
+        table = list(csv.DictReader(fh))
+    rows, apf = [], None
+    for r in table:
+        try:
+            figs = {k: float(r[k]) for k in KEYS}
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{run / 'selection.csv'}: row {r.get('policy')!r} has no "
+                             f"numeric {', '.join(KEYS)}") from None  # fmt: skip
+        if r["policy"] == "apf":
+            apf = figs
+        else:
+            steps = r.get("agent_steps")
+            rows.append({"policy": r["policy"], "agent_steps": int(steps) if steps else None,
+                         **figs})  # fmt: skip
+    if apf is None:
+        raise ValueError(f"{run / 'selection.csv'}: no apf row")
+    return rows, apf
 
 
 def main(argv: list[str] | None = None) -> Path:
@@ -58,10 +107,7 @@ def main(argv: list[str] | None = None) -> Path:
         info = policies[str(q)].meta.info
         safe = all(f[k] <= apf[k] for k in KEYS[:3])
         rows.append({"policy": str(q), "agent_steps": info.get("agent_steps"), **f, "safe": safe})
-    pool = [r for r in rows if r["safe"]] or sorted(
-        rows, key=lambda r: tuple(r[k] for k in KEYS[:3])
-    )[:1]
-    best = min(pool, key=lambda r: r["max_deviation"])
+    best = choose(rows, apf)
     with atomic_output(args.run / "selection.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
