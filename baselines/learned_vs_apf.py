@@ -23,6 +23,7 @@ from pathlib import Path
 from uasep_env import make_config
 from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
+from uasep_env.metrics.statistics import no_worse_rate
 from uasep_env.policies import load_policy
 from uasep_env.scenarios import HELD_OUT_PAPER_SEEDS, HELD_OUT_SEEDS
 from uasep_env.tables import render_table
@@ -53,11 +54,6 @@ def compared_policies() -> dict[str, str]:
     return {name: name for name in names}
 
 
-def _overlap_or_better(learned: dict, apf: dict) -> bool:
-    """A rate no worse than the APF's: intervals overlap, or the learned one is lower."""
-    return learned["ci_low"] <= apf["ci_high"]
-
-
 def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, str, bool | None]]:
     """The issue's targets: (target, measured, met); ``None`` where the policy is missing."""
     res = {k: v.aggregate for k, v in bank.results.items()}
@@ -81,7 +77,7 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
                 (f"residual: {what} rate no worse than the APF's",
                  f"{r[key]['rate']:.1%} [{r[key]['ci_low']:.1%}, {r[key]['ci_high']:.1%}] vs "
                  f"{apf[key]['rate']:.1%} [{apf[key]['ci_low']:.1%}, {apf[key]['ci_high']:.1%}]",
-                 _overlap_or_better(r[key], apf[key]))
+                 no_worse_rate(r[key], apf[key]))
             )  # fmt: skip
         d, da = r["episode.max_deviation"]["mean"], apf["episode.max_deviation"]["mean"]
         out.append(

@@ -55,6 +55,7 @@ from uasep_env.config import AS_PUBLISHED, EnvConfig
 from uasep_env.config.checks import check_positive_int
 from uasep_env.evaluation import PolicyResult, evaluate
 from uasep_env.metrics import t_interval
+from uasep_env.metrics.statistics import no_worse_rate
 from uasep_env.policies import (
     APF,
     APFGains,
@@ -289,7 +290,7 @@ def knee_distances(rows: list[dict[str, Any]]) -> list[tuple[dict[str, Any], flo
     rows = sorted(rows, key=lambda r: r["value"])
     safest = min(r["collision"] for r in rows)
     safest_hi = min(r["collision_hi"] for r in rows if r["collision"] == safest)
-    ok = [r for r in rows if r["collision_lo"] <= safest_hi]
+    ok = [r for r in rows if no_worse_rate({"ci_low": r["collision_lo"]}, {"ci_high": safest_hi})]
     s = np.array([r["min_obstacle_distance"] for r in ok])
     c = np.array([r["max_deviation"] for r in ok])
     front = [r for r, k in zip(ok, pareto(s, c, True), strict=True) if k]

@@ -726,3 +726,18 @@ def test_bad_input_names_field(field, mutate):
     mutate(kw)
     with pytest.raises(ValueError, match=f"^{field}"):
         EpisodeRecord(**kw)
+
+
+def test_no_worse_rate_is_the_overlap_rule():
+    from uasep_env.metrics.statistics import no_worse_rate, wilson_interval
+
+    apf = dict(zip(("ci_low", "ci_high"), wilson_interval(0, 50), strict=True))  # [0, 7.1 %]
+    six = dict(zip(("ci_low", "ci_high"), wilson_interval(3, 50), strict=True))  # 2.1 % low
+    twenty_two = dict(zip(("ci_low", "ci_high"), wilson_interval(11, 50), strict=True))
+    assert no_worse_rate(six, apf) and no_worse_rate(apf, six)  # overlapping: no worse
+    assert not no_worse_rate(twenty_two, apf)  # 12.8 % > 7.1 %: worse
+    assert no_worse_rate(apf, twenty_two)  # lower: no worse
+    with pytest.raises(ValueError, match="ci_low and ci_high"):
+        no_worse_rate({"rate": 0.1}, apf)
+    with pytest.raises(ValueError, match="NaN"):
+        no_worse_rate({"ci_low": math.nan}, apf)

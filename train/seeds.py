@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.atomic import atomic_output, atomic_write
+from uasep_env.metrics.statistics import no_worse_rate
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -248,7 +249,7 @@ def targets(
                     "or lower)",
                     f"IQM {s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] "
                     f"vs APF {a['rate']:.1%} [{a['ci_low']:.1%}, {a['ci_high']:.1%}]",
-                    s["ci_low"] <= a["ci_high"],
+                    no_worse_rate(s, a),
                 )
             )
         a, s = apf["episode.max_deviation"]["mean"], agg["episode.max_deviation"]["iqm"]

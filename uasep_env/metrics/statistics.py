@@ -9,6 +9,7 @@ with a stratified percentile bootstrap interval (the statistics of ``rliable``, 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -17,6 +18,7 @@ from scipy import stats
 __all__ = [
     "check_probability",
     "iqm",
+    "no_worse_rate",
     "normal_quantile",
     "stratified_bootstrap_iqm",
     "t_interval",
@@ -122,6 +124,33 @@ def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[f
         return math.nan, math.nan
     ci = stats.binomtest(int(successes), int(n)).proportion_ci(confidence, method="wilson")
     return float(ci.low), float(ci.high)
+
+
+def no_worse_rate(policy: Mapping[str, float], reference: Mapping[str, float]) -> bool:
+    """The project's one rule for "a rate no worse than the reference's" (e.g. the APF's).
+
+    The two 95 % intervals overlap, or the policy's lies below: the policy's lower bound is
+    at most the reference's upper bound. Every comparison script (held-out, scaling, across
+    seeds) judges its "as safe as the APF" targets by this rule.
+
+    Args:
+        policy: The policy's interval (``ci_low``, ``ci_high``: a Wilson interval, or a
+            bootstrap interval across seeds).
+        reference: The reference's interval, the same keys.
+
+    Returns:
+        Whether the policy's rate is no worse than the reference's.
+
+    Raises:
+        ValueError: An interval without ``ci_low`` / ``ci_high`` or with a NaN bound.
+    """
+    try:
+        low, high = float(policy["ci_low"]), float(reference["ci_high"])
+    except (KeyError, TypeError, ValueError):
+        raise ValueError("no_worse_rate: both need numeric ci_low and ci_high") from None
+    if math.isnan(low) or math.isnan(high):
+        raise ValueError(f"no_worse_rate: an interval bound is NaN ({low}, {high})")
+    return low <= high
 
 
 def iqm(values: ArrayLike) -> float:
