@@ -10,6 +10,7 @@ from conftest import ROOT
 
 import uasep_env
 from uasep_env import make_config, real_traffic
+from uasep_env.replay import track_velocities
 from uasep_env.scenarios import RANDOM_MIX, REAL_TRAFFIC_TEST_SEEDS, sample_scenario
 from uasep_env.scenarios.real_traffic import (
     MEET_TOLERANCE_S,
@@ -181,7 +182,7 @@ def test_replayed_tracks_stay_in_the_sky():
     last = _spec(3, cfg).obstacle_track[0, -1]
     for _ in range(cfg.max_steps):
         w.step(np.zeros((1, 3, 3)))
-    v = w.replay.vel[0, 0, -1]
+    v = track_velocities(w.replay.pos[0, 0], cfg.dt)[-1]
     np.testing.assert_allclose(w.obstacles.pos[0, 0], last + np.array([v[0], v[1], 0.0]) * 10)
     assert w.obstacle_velocities()[0, 0, 2] == pytest.approx(0.0, abs=1e-12)
 
@@ -260,3 +261,18 @@ def test_the_gym_id():
     env.reset(seed=0)
     assert env.unwrapped.config.obstacle.model == "replay"
     env.step(env.action_space.sample())
+
+
+def test_replay_velocities_are_np_gradient_bit_for_bit():
+    # Taken from the positions when needed (not stored): the same floats as np.gradient.
+    from uasep_env.replay import ReplayTracks
+
+    rng = np.random.default_rng(3)
+    tracks = ReplayTracks(n_envs=2, n_obstacles=3, n_samples=7, dt=0.1)
+    tracks.pos[:] = rng.normal(0.0, 300.0, tracks.pos.shape)
+    want = track_velocities(tracks.pos, tracks.dt)
+    envs, slots = np.arange(2)[:, None], np.arange(3)[None, :]
+    for k in range(7):
+        got = tracks.velocity(envs, slots, np.full(2, k))
+        assert np.array_equal(got, want[:, :, k]), k
+    assert not hasattr(tracks, "vel")  # one (E, M, K, 3) array per batch, not two

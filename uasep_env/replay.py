@@ -57,15 +57,17 @@ class ReplayTracks:
 
     Attributes:
         pos: ``(E, M, K, 3)`` positions at physics step ``k`` after the reset (m, NED).
-        vel: ``(E, M, K, 3)`` their velocities (m/s).
         on: ``(E, M)`` which slots replay a track (the others fly the Dubins model).
+
+    The velocities are not stored: :meth:`velocity` takes them from the positions at the
+    step that needs them, with the arithmetic of :func:`track_velocities` (bit for bit), so
+    a batch holds one ``(E, M, K, 3)`` array, not two.
     """
 
     def __init__(self, n_envs: int, n_obstacles: int, n_samples: int, dt: float) -> None:
         self.dt = float(dt)
         self.n_samples = int(n_samples)
         self.pos = np.zeros((n_envs, n_obstacles, n_samples, 3))
-        self.vel = np.zeros((n_envs, n_obstacles, n_samples, 3))
         self.on = np.zeros((n_envs, n_obstacles), dtype=bool)
 
     def start(self, obs: ObstacleState, mask: np.ndarray, specs: Sequence[Any]) -> None:
@@ -95,7 +97,6 @@ class ReplayTracks:
                 )
             self.on[i] = spec.obstacle_replay
             self.pos[i] = track
-            self.vel[i] = track_velocities(track, self.dt)
         self._write(obs, mask, np.zeros(len(idx), dtype=np.int64))
 
     def step(self, obs: ObstacleState, time: np.ndarray) -> None:
@@ -108,6 +109,24 @@ class ReplayTracks:
         if self.on.any():
             self._write(obs, slice(None), np.rint(time / self.dt).astype(np.int64) + 1)
 
+    def velocity(self, envs: np.ndarray, slots: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """The tracks' velocities at sample ``k``, as :func:`track_velocities` gives them.
+
+        Args:
+            envs: ``(R, 1)`` environment indices.
+            slots: ``(1, M)`` obstacle slots.
+            k: ``(R,)`` sample indices in ``[0, K)``.
+
+        Returns:
+            ``(R, M, 3)`` velocities (m/s): central differences, one-sided at the ends.
+        """
+        last = self.n_samples - 1
+        lo, hi = np.maximum(k - 1, 0), np.minimum(k + 1, last)
+        diff = self.pos[envs, slots, hi[:, None]] - self.pos[envs, slots, lo[:, None]]
+        # np.gradient's own expressions (uniform spacing, edge_order 1), so the floats match.
+        inner = ((k > 0) & (k < last))[:, None, None]
+        return np.where(inner, diff / (2.0 * self.dt), diff / self.dt)
+
     def _write(self, obs: ObstacleState, rows: Any, step: np.ndarray) -> None:
         """Set the replayed slots of ``rows`` to their tracks at physics step ``step``."""
         on = self.on[rows]
@@ -119,7 +138,7 @@ class ReplayTracks:
         envs = np.arange(self.pos.shape[0])[rows][:, None]
         slots = np.arange(self.pos.shape[1])[None, :]
         pos = self.pos[envs, slots, k[:, None]]
-        vel = self.vel[envs, slots, k[:, None]]
+        vel = self.velocity(envs, slots, k)
         if (beyond > 0).any():  # past the record: level, at the last horizontal velocity
             vel = np.where(beyond > 0, vel * [1.0, 1.0, 0.0], vel)
             pos = pos + vel * beyond
