@@ -202,6 +202,31 @@ def test_size_limits_bound_memory(tmp_path, monkeypatch):
         rt.RealTrafficDataset(path)
 
 
+def test_zip_directory_is_checked_before_inflating(tmp_path):
+    # The checks the policy checkpoints have (uasep_env.boundedzip): a duplicate or an
+    # unexpected member, and a member that inflates far more than data does.
+    dup = tmp_path / "dup.npz"
+    _rewrite(rt.DEFAULT_PATH, dup, {})
+    with zipfile.ZipFile(dup, "a") as z, pytest.warns(UserWarning, match="Duplicate name"):
+        z.writestr("meta.npy", _npy(np.zeros(3, np.uint8)))
+    with pytest.raises(rt.RealTrafficFileError, match=r"dup\.npz: duplicate member"):
+        rt.RealTrafficDataset(dup)
+    extra = tmp_path / "extra.npz"
+    _rewrite(rt.DEFAULT_PATH, extra, {})
+    with zipfile.ZipFile(extra, "a") as z:
+        z.writestr("payload.npy", b"x")
+    with pytest.raises(rt.RealTrafficFileError, match=r"unexpected member.*payload"):
+        rt.RealTrafficDataset(extra)
+    bomb = tmp_path / "ratio.npz"
+    zeros = _npy(np.zeros(2_000_000, np.int64))  # 16 MB that deflate to ~16 KB
+    with zipfile.ZipFile(rt.DEFAULT_PATH) as zin, zipfile.ZipFile(bomb, "w") as zout:
+        for name in zin.namelist():
+            data = zeros if name == "time_ms.npy" else zin.read(name)
+            zout.writestr(name, data, compress_type=zipfile.ZIP_DEFLATED)
+    with pytest.raises(rt.RealTrafficFileError, match=r"time_ms\.npy: compression ratio"):
+        rt.RealTrafficDataset(bomb)
+
+
 # ------------------------------------------------------------------ build
 def test_geodesy_round_numbers():
     # At the equator 0.01 deg of latitude is M * 0.01 deg (M = a (1 - e^2), the meridian

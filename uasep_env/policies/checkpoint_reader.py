@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from uasep_env.boundedzip import check_members, read_member
 from uasep_env.jsonio import json_depth
 from uasep_env.policies.checkpoint import (
     ACTIVATIONS,
@@ -68,7 +69,6 @@ class CheckpointLimits:
 
 #: The limits :func:`read_checkpoint` applies.
 LIMITS = CheckpointLimits()
-_RATIO_FREE_BYTES = 64 * 1024  # small members may compress well (JSON does ~5:1)
 
 
 # What a hostile file can make the standard library and numpy raise on the way.
@@ -101,41 +101,10 @@ def _members(
     p: Path, z: zipfile.ZipFile, expected: Mapping[str, int], limits: CheckpointLimits
 ) -> dict[str, zipfile.ZipInfo]:
     """Check a zip's directory: exactly ``expected`` (name -> largest size), nothing read."""
-    infos = z.infolist()
-    names = [i.filename for i in infos]
-    dupes = sorted({n for n in names if names.count(n) > 1})
-    if dupes:
-        raise _fail(p, f"duplicate member(s) {', '.join(map(repr, dupes[:3]))}")
-    extra = [n for n in names if n not in expected]
-    if extra:
-        shown = ", ".join(repr(n[:60]) for n in extra[:3])
-        raise _fail(p, f"unexpected member(s) {shown}; the format holds {sorted(expected)}")
-    missing = [n for n in expected if n not in names]
-    if missing:
-        raise _fail(p, f"missing member(s) {', '.join(map(repr, missing))}")
-    out = {}
-    for info in infos:
-        if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
-            raise _fail(p, f"{info.filename}: compression method {info.compress_type} refused")
-        if info.flag_bits & 0x1:
-            raise _fail(p, f"{info.filename}: encrypted members are refused")
-        bound = expected[info.filename]
-        if info.file_size > bound:
-            raise _fail(p, f"{info.filename}: {info.file_size:,} bytes declared, limit {bound:,}")
-        ratio = info.file_size / max(info.compress_size, 1)
-        if info.file_size > _RATIO_FREE_BYTES and ratio > limits.ratio:
-            raise _fail(p, f"{info.filename}: compression ratio {ratio:,.0f}, limit {limits.ratio}")
-        out[info.filename] = info
-    return out
-
-
-def _read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo, limit: int) -> bytes:
-    """A member's bytes, never more than ``limit`` (however the data lies about its size)."""
-    with z.open(info) as fh:
-        data = fh.read(limit + 1)
-    if len(data) > limit:
-        raise ValueError(f"{info.filename}: more than {limit:,} bytes")
-    return data
+    try:
+        return check_members(z, expected, limits.ratio)
+    except ValueError as err:
+        raise _fail(p, str(err)) from None
 
 
 def _integer(p: Path, name: str, value: Any, low: int, high: int) -> int:
@@ -324,9 +293,9 @@ def read_checkpoint(
         with zipfile.ZipFile(p) as z:
             bounds = {META: limits.meta_bytes, WEIGHTS: limits.weights_bytes}
             infos = _members(p, z, bounds, limits)
-            text = _read_member(z, infos[META], limits.meta_bytes)
+            text = read_member(z, infos[META], limits.meta_bytes)
             meta, n_layers = _description(p, text, limits)
-            raw = _read_member(z, infos[WEIGHTS], limits.weights_bytes)
+            raw = read_member(z, infos[WEIGHTS], limits.weights_bytes)
         weights, mean, var = _weights(p, raw, meta, n_layers, limits)
     except CheckpointError:
         raise

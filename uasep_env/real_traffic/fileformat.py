@@ -13,7 +13,9 @@ Members (all ``.npy``, no object arrays, so nothing is unpickled):
 
 Integers (cm, ms) make the file independent of the last bits of the platform's maths; the
 zip entries carry a fixed date, so rebuilding gives the same bytes. Reading is bounded: the
-file, each member and the JSON have size limits, checked before anything large is allocated.
+file, each member and the JSON have size limits and the members a compression-ratio limit,
+checked on the zip's directory before anything is inflated (:mod:`uasep_env.boundedzip`,
+shared with the policy checkpoints).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.atomic import atomic_write
+from uasep_env.boundedzip import check_members, read_member
 
 __all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz", "write_npz"]
 
@@ -38,6 +41,9 @@ FORMAT_VERSION = 1
 MAX_FILE_BYTES = 32 * 2**20
 MAX_MEMBER_BYTES = 32 * 2**20
 MAX_META_BYTES = 16 * 2**20
+#: Largest compression ratio of a member over 64 KiB (the shipped file's largest is 10.6,
+#: the JSON metadata; a zip bomb's is in the hundreds).
+MAX_RATIO = 50.0
 _MEMBERS = {
     "format_version": (np.int64, 0),
     "time_ms": (np.int64, 1),
@@ -81,19 +87,10 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
     atomic_write(path, buf.getvalue())
 
 
-def _read_member(zf: zipfile.ZipFile, name: str, path: Path, limit: int) -> np.ndarray:
-    try:
-        info = zf.getinfo(f"{name}.npy")
-    except KeyError:
-        raise RealTrafficFileError(f"{path}: member {name!r} is missing") from None
-    if info.file_size > limit:
-        raise RealTrafficFileError(
-            f"{path}: member {name!r} inflates to {info.file_size} bytes (limit {limit})"
-        )
-    with zf.open(info) as fh:
-        raw = fh.read(limit + 1)  # the header's size may lie: never read past the limit
-    if len(raw) > limit:
-        raise RealTrafficFileError(f"{path}: member {name!r} is larger than {limit} bytes")
+def _member_array(
+    zf: zipfile.ZipFile, infos: dict[str, zipfile.ZipInfo], name: str, path: Path
+) -> np.ndarray:
+    raw = read_member(zf, infos[f"{name}.npy"], _limits()[name])
     try:
         arr = np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
@@ -105,6 +102,12 @@ def _read_member(zf: zipfile.ZipFile, name: str, path: Path, limit: int) -> np.n
             f"expected {np.dtype(dtype)} and {ndim}"
         )
     return arr
+
+
+def _limits() -> dict[str, int]:
+    """The most bytes each member may inflate to (read at call time: tests lower them)."""
+    small = {"format_version": 1024, "meta": MAX_META_BYTES}
+    return {name: small.get(name, MAX_MEMBER_BYTES) for name in _MEMBERS}
 
 
 def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -133,17 +136,24 @@ def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
         raise RealTrafficFileError(f"{path}: not a real-traffic .npz file ({exc})") from exc
     with zf:
         try:
-            version = _read_member(zf, "format_version", path, 1024)
+            expected = {f"{name}.npy": limit for name, limit in _limits().items()}
+            infos = check_members(zf, expected, MAX_RATIO)
+        except ValueError as exc:
+            raise RealTrafficFileError(f"{path}: {exc}") from None
+        try:
+            version = _member_array(zf, infos, "format_version", path)
             if int(version) != FORMAT_VERSION:
                 raise RealTrafficFileError(
                     f"{path}: format_version {int(version)}, this reader needs {FORMAT_VERSION}"
                 )
             arrays = {
-                name: _read_member(zf, name, path, MAX_MEMBER_BYTES)
+                name: _member_array(zf, infos, name, path)
                 for name in ("time_ms", "pos_cm", "vel_cms", "track_start")
             }
-            raw_meta = _read_member(zf, "meta", path, MAX_META_BYTES)
-        except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError) as exc:
+            raw_meta = _member_array(zf, infos, "meta", path)
+        except RealTrafficFileError:
+            raise
+        except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError) as exc:
             raise RealTrafficFileError(f"{path}: corrupt zip member ({exc})") from exc
     try:
         meta = json.loads(raw_meta.tobytes().decode("utf-8"))
