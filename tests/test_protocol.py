@@ -265,3 +265,18 @@ def test_the_shipped_seed_is_chosen_on_validation_by_the_selection_rule(tmp_path
     (seeds.seed_dir(out, 2) / "selection.csv").write_text("policy,agent_steps\nx,1\n")
     with pytest.raises(ValueError, match="no numeric"):
         seeds.ship(out, 3)
+
+
+def test_publish_names_its_files_and_never_overwrites(tmp_path, capsys):
+    prefix = tmp_path / "results" / "seeds_shared"
+    names = [q.name for q in seeds.published(prefix, scaling=True)]
+    assert names == ["seeds_shared.md", "seeds_shared.json", "seeds_shared_curves.png",
+                     "seeds_shared_scaling.md", "seeds_shared_scaling.json",
+                     "seeds_shared_scaling.png"]  # fmt: skip
+    prefix.parent.mkdir()
+    prefix.with_name("seeds_shared_curves.png").write_bytes(b"mine")
+    with pytest.raises(SystemExit):
+        seeds.main(["--recipe", "shared", "--out-dir", str(tmp_path / "r"), "--publish",
+                    str(prefix)])  # fmt: skip
+    assert "seeds_shared_curves.png exists (pass --force" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()  # refused before anything ran

@@ -26,8 +26,10 @@ Stages (each skipped when its output exists, so an interrupted run picks up wher
    a 95 % stratified bootstrap interval (runs resampled within each scenario family, as
    ``rliable`` does; :func:`uasep_env.metrics.statistics.stratified_bootstrap_iqm`), the
    targets (met / not met, from these numbers) and ``curves.png``, the learning curves of all
-   seeds in one figure. ``--scaling-episodes N`` adds ``baselines/scaling.py`` over the
-   selected checkpoints (``<out>/scaling.*``).
+   seeds in one figure; ``--publish PREFIX`` copies them (and the scaling tables) to
+   ``PREFIX.md`` etc. for the repository. ``--scaling-episodes N`` adds
+   ``baselines/scaling.py`` over the selected checkpoints (``<out>/scaling.*``, kept when
+   it exists).
 """
 
 from __future__ import annotations
@@ -344,7 +346,8 @@ def report(
             "(no less safe than the APF, then the lowest mean max deviation; "
             "`train/select_checkpoint.py`).",
             "",
-            "Learning curves of every seed: `curves.png`.",
+            "Learning curves of every seed: `curves.png` in the run folder (published as "
+            "`<name>_curves.png` beside this file).",
             "",
         ]
     )
@@ -424,6 +427,15 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--scaling-episodes", type=int, default=0)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument(
+        "--publish",
+        type=Path,
+        default=None,
+        metavar="PREFIX",
+        help="also write the report to PREFIX.md, PREFIX.json, PREFIX_curves.png (and "
+        "PREFIX_scaling.*), e.g. baselines/results/seeds_residual_apf",
+    )
+    p.add_argument("--force", action="store_true", help="replace published files")
+    p.add_argument(
         "--ship-to",
         type=Path,
         default=None,
@@ -439,6 +451,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         if flag in extra:
             p.error(f"{flag} is set per seed by this driver; do not pass it after --")
     out = args.out_dir
+    if args.publish is not None and not args.force:
+        taken = [q for q in published(args.publish, args.scaling_episodes > 0) if q.exists()]
+        if taken:
+            p.error(f"--publish: {taken[0]} exists (pass --force to replace it)")
     out.mkdir(parents=True, exist_ok=True)
     command = "python train/seeds.py " + shlex.join(argv + (["--", *extra] if extra else []))
 
@@ -457,7 +473,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     atomic_write(out / "seeds.md", text)
     write_json(data, out / "seeds.json")
     plot_curves(out, args.seeds, args.recipe)
-    if args.scaling_episodes:
+    if args.scaling_episodes and not (out / "scaling.json").exists():
         sys.path.insert(0, str(ROOT / "baselines"))
         import scaling
 
@@ -474,8 +490,26 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 "--force",
             ]
         )
+    if args.publish is not None:
+        sources = [out / "seeds.md", out / "seeds.json", out / "curves.png"]
+        if args.scaling_episodes:
+            sources += [out / f"scaling{ext}" for ext in (".md", ".json", ".png")]
+        targets = published(args.publish, args.scaling_episodes > 0)
+        for src, dst in zip(sources, targets, strict=True):
+            atomic_write(dst, src.read_bytes())
+        print(f"published {', '.join(map(str, targets))}", flush=True)
     print(text)
     return data
+
+
+def published(prefix: Path, scaling: bool) -> list[Path]:
+    """The files ``--publish PREFIX`` writes: the report, its data, the curves (and scaling)."""
+    name = prefix.name
+    out = [prefix.with_name(f"{name}.md"), prefix.with_name(f"{name}.json"),
+           prefix.with_name(f"{name}_curves.png")]  # fmt: skip
+    if scaling:
+        out += [prefix.with_name(f"{name}_scaling{ext}") for ext in (".md", ".json", ".png")]
+    return out
 
 
 if __name__ == "__main__":
