@@ -35,7 +35,7 @@ from paper_experiment import ROWS, table  # noqa: E402
 
 CHECKPOINTS = ROOT / "checkpoints"
 APFS = ("apf", "motion-state-apf", "traditional-apf")
-LEARNED = ("ppo_shared", "ppo_residual_apf")
+LEARNED = ("ppo_shared", "ppo_residual_apf", "mappo")
 #: Rows of the tables: the paper's, with the combined loss-of-separation rate first.
 TABLE_ROWS = (
     ("episodes with loss of separation (any)", "episode.loss_of_separation", "rate", ".1%"),
@@ -84,12 +84,13 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
             ("residual: mean max deviation >= 25 % below the APF's",
              f"{d:.1f} m vs {da:.1f} m ({(1 - d / da):+.0%} lower)", d <= 0.75 * da)
         )  # fmt: skip
-    if "ppo_shared" in res:
-        c = res["ppo_shared"]["episode.collision"]
-        out.append(
-            ("pure: collision rate <= 5 %",
-             f"{c['rate']:.1%} [{c['ci_low']:.1%}, {c['ci_high']:.1%}]", c["rate"] <= 0.05)
-        )  # fmt: skip
+    for name, what in (("ppo_shared", "pure"), ("mappo", "MAPPO")):
+        if name in res:
+            c = res[name]["episode.collision"]
+            out.append(
+                (f"{what}: collision rate <= 5 %",
+                 f"{c['rate']:.1%} [{c['ci_low']:.1%}, {c['ci_high']:.1%}]", c["rate"] <= 0.05)
+            )  # fmt: skip
     return out
 
 

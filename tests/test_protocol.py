@@ -280,3 +280,45 @@ def test_publish_names_its_files_and_never_overwrites(tmp_path, capsys):
                     str(prefix)])  # fmt: skip
     assert "seeds_shared_curves.png exists (pass --force" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()  # refused before anything ran
+
+
+def _fake_seeds_run(folder, recipe, steps, collisions):
+    metric = {"iqm": 0.0, "ci_low": 0.0, "ci_high": 0.0}
+    agg = {key: dict(metric) for key, _, _ in seeds.METRICS}
+    agg["episode.collision"] = {"iqm": collisions, "ci_low": 0.0, "ci_high": 2 * collisions}
+    agg["episode.max_deviation"] = {"iqm": 20.0, "ci_low": 18.0, "ci_high": 22.0}
+    data = {"recipe": recipe, "seeds": 2, "across_seeds": agg,
+            "held_out_seeds": {"first": 5_000_000, "count": 500},
+            "training": {f"seed_{k}": {"agent_steps": steps * (k + 1), "wall_s": 3300.0}
+                         for k in range(2)}}  # fmt: skip
+    for k in range(2):
+        d = seeds.seed_dir(folder, k)
+        d.mkdir(parents=True)
+        (d / "progress.csv").write_text(
+            "agent_steps,wall_s,episodes,return_mean,collision_rate,loss_of_separation_rate,"
+            "max_deviation_mean,episode_length_mean\n100,60,3,5.0,0.1,0.2,30.0,50\n"
+            "200,3300,6,6.0,0.0,0.1,25.0,50\n"
+        )
+    (folder / "seeds.json").write_text(json.dumps(data))
+
+
+def test_compare_recipes_at_equal_wall_time(tmp_path, capsys):
+    import compare_recipes
+
+    _fake_seeds_run(tmp_path / "shared", "shared", 40_000_000, 0.04)
+    _fake_seeds_run(tmp_path / "mappo", "mappo", 100_000_000, 0.02)
+    out = tmp_path / "cmp"
+    argv = [str(tmp_path / "shared"), str(tmp_path / "mappo"), "--out", str(out)]
+    text = compare_recipes.main(argv)
+    rows = {r[0]: r[1:] for r in (
+        [c.strip() for c in line.strip("|").split("|")] for line in text.splitlines()
+        if line.startswith("| shared") or line.startswith("| mappo"))}  # fmt: skip
+    assert rows["shared"][:4] == ["2", "60.0M (40.0-80.0M)", "55.0 (55.0-55.0)",
+                                  "4.0% [0.0%, 8.0%]"]  # fmt: skip
+    assert rows["mappo"][1] == "150.0M (100.0-200.0M)" and "took 55 min" in text
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    with pytest.raises(SystemExit):  # no silent overwrite
+        compare_recipes.main(argv)
+    with pytest.raises(SystemExit):
+        compare_recipes.main([str(tmp_path / "nope"), "--out", str(tmp_path / "x")])
+    assert "nope/seeds.json: not found" in capsys.readouterr().err
