@@ -32,8 +32,9 @@ Writes ``<out>.md`` (one table per sweep: rates with 95 % Wilson intervals, mean
 95 % Student-t intervals, from :func:`uasep_env.metrics.aggregate`), ``<out>.json`` (every
 aggregate of every cell) and ``<out>.png`` (every metric against the number of UAVs and of
 obstacles, with the intervals), and prints the targets: at 8 and 32 UAVs, each
-non-APF policy's collision rate no worse than the APF's (its measured rate at most the upper
-bound of the APF's Wilson interval). An existing output is refused unless ``--force``.
+non-APF policy's collision rate no worse than the APF's (the 95 % Wilson intervals overlap
+or the policy's is lower: :func:`uasep_env.metrics.statistics.no_worse_rate`). An existing
+output is refused unless ``--force``.
 """
 
 from __future__ import annotations

@@ -169,7 +169,7 @@ def test_seed_driver_resumes_and_reports(tmp_path):
     shipped = {"seed": 1, "validation": {}}
     text, data = seeds.report("shared", out, 2, result, "python train/seeds.py ...", shipped)
     assert "IQM across seeds" in text and "at most 5 % collisions" in text
-    assert "Shipped: seed 1's checkpoint" in text and data["shipped"]["seed"] == 1
+    assert "Chosen to ship: seed 1's checkpoint" in text and data["shipped"]["seed"] == 1
     agg = data["across_seeds"]["episode.max_deviation"]
     assert agg["ci_low"] <= agg["iqm"] <= agg["ci_high"]
     assert np.array(agg["scores"]).shape[0] == 2
@@ -254,7 +254,7 @@ def test_the_shipped_seed_is_chosen_on_validation_by_the_selection_rule(tmp_path
     assert shipped["seed"] == 1
     picks = shipped["validation"]["seeds"]
     assert [p["max_deviation"] for p in picks] == [33.0, 31.0, 15.0]
-    assert picks[1]["policy"].endswith("step_1/policy.zip")
+    assert picks[1]["policy"] == "seed_1/checkpoints/step_1/policy.zip"  # no machine's folder
     # None as safe as the APF: the lowest in early ends, collisions, losses, in that order.
     rows, apf = select_checkpoint.read_selection(seeds.seed_dir(out, 2))
     assert select_checkpoint.choose(rows, {**apf, "terminated": -1.0})["max_deviation"] == 15.0
@@ -263,7 +263,7 @@ def test_the_shipped_seed_is_chosen_on_validation_by_the_selection_rule(tmp_path
     with pytest.raises(ValueError, match="seed 2: its selection's APF figures"):
         seeds.ship(out, 3)
     (seeds.seed_dir(out, 2) / "selection.csv").write_text("policy,agent_steps\nx,1\n")
-    with pytest.raises(ValueError, match="no numeric"):
+    with pytest.raises(ValueError, match=r"selection\.csv, line 2: needs a policy"):
         seeds.ship(out, 3)
 
 
@@ -280,6 +280,20 @@ def test_publish_names_its_files_and_never_overwrites(tmp_path, capsys):
                     str(prefix)])  # fmt: skip
     assert "seeds_shared_curves.png exists (pass --force" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()  # refused before anything ran
+    with pytest.raises(SystemExit):  # --ship-to never overwrites either
+        seeds.main(["--recipe", "shared", "--out-dir", str(tmp_path / "r"), "--ship-to",
+                    str(prefix.with_name("seeds_shared_curves.png"))])  # fmt: skip
+    assert "exists (pass --force" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="give a file name prefix"):
+        seeds.published(Path("."), scaling=False)
+    # A sweep counts as done only whole, and with the episodes asked for.
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "scaling.json").write_text(json.dumps({"seeds": {"count": 50}}))
+    assert not seeds.scaling_done(run, 50)  # the .md and .png were never written
+    (run / "scaling.md").write_text("x")
+    (run / "scaling.png").write_bytes(b"x")
+    assert seeds.scaling_done(run, 50) and not seeds.scaling_done(run, 100)
 
 
 def _fake_seeds_run(folder, recipe, steps, collisions):
@@ -315,10 +329,26 @@ def test_compare_recipes_at_equal_wall_time(tmp_path, capsys):
         if line.startswith("| shared") or line.startswith("| mappo"))}  # fmt: skip
     assert rows["shared"][:4] == ["2", "60.0M (40.0-80.0M)", "55.0 (55.0-55.0)",
                                   "4.0% [0.0%, 8.0%]"]  # fmt: skip
-    assert rows["mappo"][1] == "150.0M (100.0-200.0M)" and "took 55 min" in text
+    assert rows["mappo"][1] == "150.0M (100.0-200.0M)"
+    assert "longest run: shared 55.0 min, mappo 55.0 min" in text
     assert out.with_suffix(".png").stat().st_size > 10_000
     with pytest.raises(SystemExit):  # no silent overwrite
         compare_recipes.main(argv)
     with pytest.raises(SystemExit):
         compare_recipes.main([str(tmp_path / "nope"), "--out", str(tmp_path / "x")])
     assert "nope/seeds.json: not found" in capsys.readouterr().err
+    # Budgets are read from the checkpoints: unequal ones are not "equal wall time".
+    cfg = make_config(scenario="random")
+    for run, minutes in (("shared", 55.0), ("mappo", 30.0)):
+        for k in range(2):
+            path = seeds.seed_dir(tmp_path / run, k) / "policy.zip"
+            weights = [(np.zeros((3, ObservationLayout.from_config(cfg).dim), np.float32),
+                        np.zeros(3, np.float32))]  # fmt: skip
+            meta = PolicyCheckpoint(config=cfg.to_dict(), obs_dim=weights[0][0].shape[1],
+                                    activation="tanh", hidden=(), obs_norm=False,
+                                    info={"args": {"max_minutes": minutes}})  # fmt: skip
+            save_policy(path, meta, weights)
+    assert compare_recipes.budget_minutes(tmp_path / "shared", {"seeds": 2}) == 55.0
+    with pytest.raises(SystemExit):
+        compare_recipes.main([*argv, "--force"])
+    assert "different --max-minutes" in capsys.readouterr().err

@@ -173,6 +173,11 @@ def test_other_format_version_is_named(tmp_path):
     _rewrite(rt.DEFAULT_PATH, path, {"format_version.npy": _npy(np.int64(9))})
     with pytest.raises(rt.RealTrafficFileError, match=r"v9\.npz.*format_version 9"):
         rt.RealTrafficDataset(path)
+    # Another version may hold other members: still named by its version, not as corrupt.
+    with zipfile.ZipFile(path, "a") as z:
+        z.writestr("heading_cdeg.npy", _npy(np.zeros(3, np.int32)))
+    with pytest.raises(rt.RealTrafficFileError, match=r"v9\.npz.*format_version 9"):
+        rt.RealTrafficDataset(path)
 
 
 def test_pickled_member_is_refused_not_loaded(tmp_path):

@@ -47,7 +47,29 @@ def load_run(folder: Path) -> dict[str, Any]:
     for key in ("recipe", "seeds", "across_seeds", "training", "held_out_seeds"):
         if key not in data:
             raise ValueError(f"{path}: no {key!r}: not a train/seeds.py report")
+    if not any(f.get("wall_s") for f in data["training"].values()):
+        raise ValueError(f"{path}: no seed's training facts (wall_s): did its seeds train?")
     return data
+
+
+def budget_minutes(folder: Path, data: dict[str, Any]) -> float | None:
+    """The ``--max-minutes`` every seed of a run trained with (None when unrecorded).
+
+    Raises:
+        ValueError: The seeds of one run had different budgets (named).
+    """
+    from uasep_env.policies import load_policy
+
+    budgets = {}
+    for k in range(int(data["seeds"])):
+        path = seeds_driver.seed_dir(folder, k) / "policy.zip"
+        if path.exists():
+            args = load_policy(path).meta.info.get("args") or {}
+            if "max_minutes" in args:
+                budgets[k] = float(args["max_minutes"])
+    if len(set(budgets.values())) > 1:
+        raise ValueError(f"{folder}: its seeds trained with different --max-minutes {budgets}")
+    return next(iter(budgets.values()), None)
 
 
 def table(runs: list[tuple[Path, dict[str, Any]]]) -> str:
@@ -109,7 +131,11 @@ def _wall_minutes(path: Path) -> np.ndarray:
     import csv
 
     with path.open(newline="") as fh:
-        return np.array([float(r["wall_s"]) / 60.0 for r in csv.DictReader(fh)])
+        rows = list(csv.DictReader(fh))
+    try:
+        return np.array([float(r["wall_s"]) / 60.0 for r in rows])
+    except (KeyError, TypeError, ValueError):
+        raise ValueError(f"{path}: every row needs a numeric wall_s") from None
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -131,8 +157,17 @@ def main(argv: list[str] | None = None) -> str:
         runs = [(folder, load_run(folder)) for folder in args.runs]
     except ValueError as err:
         p.error(str(err))
-    budgets = sorted({round(max(f.get("wall_s", 0.0) for f in d["training"].values() if f) / 60)
-                      for _, d in runs})  # fmt: skip
+    try:
+        budgets = {d["recipe"]: budget_minutes(folder, d) for folder, d in runs}
+    except ValueError as err:
+        p.error(str(err))
+    known = {b for b in budgets.values() if b is not None}
+    if len(known) > 1:
+        p.error(f"the recipes trained with different --max-minutes: {budgets}")
+    longest = {
+        d["recipe"]: max(f.get("wall_s") or 0.0 for f in d["training"].values()) / 60
+        for _, d in runs
+    }
     held = {json.dumps(d["held_out_seeds"], sort_keys=True) for _, d in runs}
     if len(held) != 1:
         p.error("the runs were evaluated on different held-out encounters: "
@@ -143,9 +178,10 @@ def main(argv: list[str] | None = None) -> str:
             "# Recipes at equal wall time",
             "",
             f"Made by `python train/compare_recipes.py {shlex.join(argv)}`. Every seed "
-            "trained within its recipe's wall-clock budget (`--max-minutes`; the longest "
-            f"run per recipe took {', '.join(map(str, budgets))} min, rounded); each seed's "
-            "checkpoint chosen on validation "
+            "trained with the same wall-clock budget (`--max-minutes` "
+            f"{', '.join(sorted(f'{b:g}' for b in known)) or 'not recorded'}; longest run: "
+            + ", ".join(f"{r} {m:.1f} min" for r, m in longest.items())
+            + "); each seed's checkpoint chosen on validation "
             f"encounters only; {bank['count']} held-out encounters (seeds {bank['first']:,}+). "
             "Across seeds: interquartile mean of the per-family scores with a 95 % stratified "
             "bootstrap interval (`train/seeds.py`). Learning curves against wall time: "
@@ -157,7 +193,10 @@ def main(argv: list[str] | None = None) -> str:
     )
     atomic_write(md, text)
     if not args.no_figure:
-        plot(runs, png)
+        try:
+            plot(runs, png)
+        except ValueError as err:
+            p.error(str(err))
     print(text)
     return text
 

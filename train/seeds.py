@@ -181,7 +181,13 @@ def ship(out: Path, seeds: int) -> dict[str, Any]:
                 "the seeds were not selected on the same validation encounters"
             )
         apf = apf_k
-        picks.append({"seed": k, **select_checkpoint.choose(rows, apf_k)})
+        pick = select_checkpoint.choose(rows, apf_k)
+        # Named from the run folder: results files name no machine's folder.
+        where = Path(pick["policy"])
+        run = seed_dir(out, k)
+        if where.is_relative_to(run):
+            where = where.relative_to(run.parent)
+        picks.append({"seed": k, **pick, "policy": where.as_posix()})
     best = select_checkpoint.choose(picks, apf)
     return {"seed": best["seed"], "validation": {"apf": apf, "seeds": picks}}
 
@@ -292,7 +298,13 @@ def _training_facts(run: Path) -> dict[str, Any]:
 
 
 def report(
-    recipe: str, out: Path, seeds: int, result: Any, command: str, shipped: dict[str, Any]
+    recipe: str,
+    out: Path,
+    seeds: int,
+    result: Any,
+    command: str,
+    shipped: dict[str, Any],
+    curves_name: str = "curves.png",
 ) -> tuple[str, dict]:
     """Stage 4: the markdown and JSON of every seed and of the aggregate."""
     from uasep_env.tables import render_table
@@ -341,13 +353,12 @@ def report(
                 markdown=True,
             ),
             "",
-            f"Shipped: seed {shipped['seed']}'s checkpoint, chosen across seeds on the "
-            "validation encounters only, by the rule that chose each seed's checkpoint "
+            f"Chosen to ship: seed {shipped['seed']}'s checkpoint, chosen across seeds on "
+            "the validation encounters only, by the rule that chose each seed's checkpoint "
             "(no less safe than the APF, then the lowest mean max deviation; "
             "`train/select_checkpoint.py`).",
             "",
-            "Learning curves of every seed: `curves.png` in the run folder (published as "
-            "`<name>_curves.png` beside this file).",
+            f"Learning curves of every seed: `{curves_name}`.",
             "",
         ]
     )
@@ -434,7 +445,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         help="also write the report to PREFIX.md, PREFIX.json, PREFIX_curves.png (and "
         "PREFIX_scaling.*), e.g. baselines/results/seeds_residual_apf",
     )
-    p.add_argument("--force", action="store_true", help="replace published files")
+    p.add_argument("--force", action="store_true", help="replace the --publish and --ship-to files")
     p.add_argument(
         "--ship-to",
         type=Path,
@@ -451,10 +462,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         if flag in extra:
             p.error(f"{flag} is set per seed by this driver; do not pass it after --")
     out = args.out_dir
-    if args.publish is not None and not args.force:
-        taken = [q for q in published(args.publish, args.scaling_episodes > 0) if q.exists()]
-        if taken:
-            p.error(f"--publish: {taken[0]} exists (pass --force to replace it)")
+    # Outputs outside the run folder: checked before hours of training, never overwritten
+    # unless --force.
+    targets = [] if args.publish is None else published(args.publish, args.scaling_episodes > 0)
+    if args.ship_to is not None:
+        targets.append(args.ship_to)
+    taken = [q for q in targets if q.exists()]
+    if taken and not args.force:
+        p.error(f"{taken[0]} exists (pass --force to replace it)")
     out.mkdir(parents=True, exist_ok=True)
     command = "python train/seeds.py " + shlex.join(argv + (["--", *extra] if extra else []))
 
@@ -468,12 +483,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         atomic_write(args.ship_to, chosen[shipped["seed"]].read_bytes())
         print(f"copied {chosen[shipped['seed']]} -> {args.ship_to}", flush=True)
     result = held_out(chosen, args.episodes, args.workers)
-    text, data = report(args.recipe, out, args.seeds, result, command, shipped)
+    curves = "curves.png" if args.publish is None else published(args.publish, False)[2].name
+    text, data = report(args.recipe, out, args.seeds, result, command, shipped, curves)
     data["driver_wall_s"] = {"train": t_train, "total": time.perf_counter() - t0}
     atomic_write(out / "seeds.md", text)
     write_json(data, out / "seeds.json")
     plot_curves(out, args.seeds, args.recipe)
-    if args.scaling_episodes and not (out / "scaling.json").exists():
+    if args.scaling_episodes and not scaling_done(out, args.scaling_episodes):
         sys.path.insert(0, str(ROOT / "baselines"))
         import scaling
 
@@ -493,18 +509,44 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.publish is not None:
         sources = [out / "seeds.md", out / "seeds.json", out / "curves.png"]
         if args.scaling_episodes:
-            sources += [out / f"scaling{ext}" for ext in (".md", ".json", ".png")]
-        targets = published(args.publish, args.scaling_episodes > 0)
-        for src, dst in zip(sources, targets, strict=True):
+            sources += [out / f"scaling{ext}" for ext in SCALING_FILES]
+        missing = [q for q in sources if not q.exists()]
+        if missing:  # all or nothing: a half publication would mix two runs
+            raise SystemExit(f"--publish: {missing[0]} was not written; nothing published")
+        dests = published(args.publish, args.scaling_episodes > 0)
+        for src, dst in zip(sources, dests, strict=True):
             atomic_write(dst, src.read_bytes())
-        print(f"published {', '.join(map(str, targets))}", flush=True)
+        print(f"published {', '.join(map(str, dests))}", flush=True)
     print(text)
     return data
 
 
+#: What ``baselines/scaling.py --out <run>/scaling`` writes (the JSON first).
+SCALING_FILES = (".md", ".json", ".png")
+
+
+def scaling_done(out: Path, episodes: int) -> bool:
+    """Whether ``<out>/scaling.*`` holds a complete sweep of ``episodes`` per cell."""
+    import json
+
+    if not all((out / f"scaling{ext}").exists() for ext in SCALING_FILES):
+        return False
+    try:
+        data = json.loads((out / "scaling.json").read_text())
+        return int(data["seeds"]["count"]) == episodes
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
 def published(prefix: Path, scaling: bool) -> list[Path]:
-    """The files ``--publish PREFIX`` writes: the report, its data, the curves (and scaling)."""
+    """The files ``--publish PREFIX`` writes: the report, its data, the curves (and scaling).
+
+    Raises:
+        SystemExit: ``PREFIX`` has no file name (``.``, ``dir/``).
+    """
     name = prefix.name
+    if not name or name in (".", ".."):
+        raise SystemExit(f"--publish {prefix}: give a file name prefix, e.g. results/seeds_x")
     out = [prefix.with_name(f"{name}.md"), prefix.with_name(f"{name}.json"),
            prefix.with_name(f"{name}_curves.png")]  # fmt: skip
     if scaling:

@@ -63,18 +63,21 @@ def read_selection(run: Path) -> tuple[list[dict[str, Any]], dict[str, float]]:
     with (run / "selection.csv").open(newline="") as fh:
         table = list(csv.DictReader(fh))
     rows, apf = [], None
-    for r in table:
+    where = run / "selection.csv"
+    for line, r in enumerate(table, start=2):
         try:
             figs = {k: float(r[k]) for k in KEYS}
+            name = r["policy"]
+            steps = None if name == "apf" or not r.get("agent_steps") else int(r["agent_steps"])
         except (KeyError, TypeError, ValueError):
-            raise ValueError(f"{run / 'selection.csv'}: row {r.get('policy')!r} has no "
-                             f"numeric {', '.join(KEYS)}") from None  # fmt: skip
-        if r["policy"] == "apf":
+            raise ValueError(
+                f"{where}, line {line}: needs a policy, an integer agent_steps and numeric "
+                f"{', '.join(KEYS)}; got {dict(r)!r:.200}"
+            ) from None
+        if name == "apf":
             apf = figs
         else:
-            steps = r.get("agent_steps")
-            rows.append({"policy": r["policy"], "agent_steps": int(steps) if steps else None,
-                         **figs})  # fmt: skip
+            rows.append({"policy": name, "agent_steps": steps, **figs})
     if apf is None:
         raise ValueError(f"{run / 'selection.csv'}: no apf row")
     return rows, apf

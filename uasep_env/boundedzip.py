@@ -11,9 +11,10 @@ reader adds its path and raises its own error class.
 from __future__ import annotations
 
 import zipfile
+from collections import Counter
 from collections.abc import Mapping
 
-__all__ = ["RATIO_FREE_BYTES", "check_members", "read_member"]
+__all__ = ["RATIO_FREE_BYTES", "check_member", "check_members", "read_member"]
 
 #: Members up to this size may compress well (JSON deflates about 5:1): no ratio check.
 RATIO_FREE_BYTES = 64 * 1024
@@ -39,7 +40,8 @@ def check_members(
     """
     infos = z.infolist()
     names = [i.filename for i in infos]
-    dupes = sorted({n for n in names if names.count(n) > 1})
+    counts = Counter(names)  # linear: a directory of many tiny entries must not cost minutes
+    dupes = sorted(n for n, c in counts.items() if c > 1)
     if dupes:
         raise ValueError(f"duplicate member(s) {', '.join(map(repr, dupes[:3]))}")
     extra = [n for n in names if n not in expected]
@@ -49,20 +51,27 @@ def check_members(
     missing = [n for n in expected if n not in names]
     if missing:
         raise ValueError(f"missing member(s) {', '.join(map(repr, missing))}")
-    out = {}
     for info in infos:
-        if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
-            raise ValueError(f"{info.filename}: compression method {info.compress_type} refused")
-        if info.flag_bits & 0x1:
-            raise ValueError(f"{info.filename}: encrypted members are refused")
-        bound = expected[info.filename]
-        if info.file_size > bound:
-            raise ValueError(f"{info.filename}: {info.file_size:,} bytes declared, limit {bound:,}")
-        ratio = info.file_size / max(info.compress_size, 1)
-        if info.file_size > RATIO_FREE_BYTES and ratio > max_ratio:
-            raise ValueError(f"{info.filename}: compression ratio {ratio:,.0f}, limit {max_ratio}")
-        out[info.filename] = info
-    return out
+        check_member(info, expected[info.filename], max_ratio)
+    return {info.filename: info for info in infos}
+
+
+def check_member(info: zipfile.ZipInfo, limit: int, max_ratio: float) -> None:
+    """Check one member's directory entry (see :func:`check_members`); nothing is read.
+
+    Raises:
+        ValueError: Another compression method, encryption, a declared size over ``limit``
+            or a compression ratio over ``max_ratio`` (for members over 64 KiB).
+    """
+    if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+        raise ValueError(f"{info.filename}: compression method {info.compress_type} refused")
+    if info.flag_bits & 0x1:
+        raise ValueError(f"{info.filename}: encrypted members are refused")
+    if info.file_size > limit:
+        raise ValueError(f"{info.filename}: {info.file_size:,} bytes declared, limit {limit:,}")
+    ratio = info.file_size / max(info.compress_size, 1)
+    if info.file_size > RATIO_FREE_BYTES and ratio > max_ratio:
+        raise ValueError(f"{info.filename}: compression ratio {ratio:,.0f}, limit {max_ratio}")
 
 
 def read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo, limit: int) -> bytes:

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.atomic import atomic_write
-from uasep_env.boundedzip import check_members, read_member
+from uasep_env.boundedzip import check_member, check_members, read_member
 
 __all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz", "write_npz"]
 
@@ -136,16 +136,26 @@ def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
         raise RealTrafficFileError(f"{path}: not a real-traffic .npz file ({exc})") from exc
     with zf:
         try:
+            # The version first, alone: a file of another version may hold other members,
+            # and should be named as such, not as a corrupt one.
+            info = zf.NameToInfo.get("format_version.npy")
+            if info is not None:
+                check_member(info, _limits()["format_version"], MAX_RATIO)
+                version = _member_array(zf, {info.filename: info}, "format_version", path)
+                if int(version) != FORMAT_VERSION:
+                    raise RealTrafficFileError(
+                        f"{path}: format_version {int(version)}, this reader needs "
+                        f"{FORMAT_VERSION}"
+                    )
             expected = {f"{name}.npy": limit for name, limit in _limits().items()}
             infos = check_members(zf, expected, MAX_RATIO)
+        except RealTrafficFileError:
+            raise
         except ValueError as exc:
             raise RealTrafficFileError(f"{path}: {exc}") from None
+        except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError) as exc:
+            raise RealTrafficFileError(f"{path}: corrupt zip member ({exc})") from exc
         try:
-            version = _member_array(zf, infos, "format_version", path)
-            if int(version) != FORMAT_VERSION:
-                raise RealTrafficFileError(
-                    f"{path}: format_version {int(version)}, this reader needs {FORMAT_VERSION}"
-                )
             arrays = {
                 name: _member_array(zf, infos, name, path)
                 for name in ("time_ms", "pos_cm", "vel_cms", "track_start")
