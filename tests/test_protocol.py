@@ -218,13 +218,22 @@ def test_mappo_recipe_trains_exports_and_flies(tmp_path):
     # The numpy actor is the trained torch actor's mean.
     args = mappo.ppo_shared.parse_args(argv, mappo.Args())
     cfg = mappo.ppo_shared.make_env_config(args)
-    venv, _, agent = mappo.build(args, cfg)
+    venv, view, agent = mappo.build(args, cfg)
+    assert agent.training  # skrl agents start in evaluation mode: no storage, no update
+    initial = [q.detach().clone() for q in agent.policies["uav_0"].parameters()]
     mappo.load_checkpoint(agent, venv, out / "checkpoints" / "latest")
+    trained = list(agent.policies["uav_0"].parameters())
+    assert any(not torch.equal(a, b) for a, b in zip(initial, trained, strict=True))
     obs = np.random.default_rng(0).normal(size=(5, policy.meta.obs_dim)).astype(np.float32)
     actor = agent.policies["uav_0"]
     with torch.no_grad():
         mean = actor.net(torch.from_numpy(venv.normalize_obs(obs).astype(np.float32))).numpy()
     np.testing.assert_allclose(policy(obs), np.clip(mean, -1, 1), atol=1e-5)
+    # The critic reads the agent-specific global state: global state and own observation.
+    view.reset()  # (after the comparison: a reset updates the observation statistics)
+    states = view.state()
+    assert states["uav_0"].shape[-1] == view.base.core.state().shape[-1] + policy.meta.obs_dim
+    assert not torch.equal(states["uav_0"], states["uav_1"])
     # And it flies 8 UAVs (fixed K).
     entry = scaling.parse_policies([str(out / "policy.zip")])[0]
     cfg8 = scaling.cell_config(8, 1, entry=entry, episode_duration=4.0)

@@ -11,9 +11,10 @@ conventions of ``train/ppo_shared.py`` (every flag of it applies where it means 
 * Environment: ``n_envs`` batched environments (:class:`uasep_env.envs.sb3.UAVSharedVecEnv`
   under SB3's ``VecMonitor`` and ``VecNormalize``: the same observation normalisation as the
   PPO recipes), seen by skrl as one multi-agent environment with ``num_envs = n_envs``:
-  agent ``uav_i`` observes its own K-nearest observation; every agent's critic reads the
-  global true state (:func:`uasep_env.observation.global_state`, normalised by skrl's
-  ``RunningStandardScaler``).
+  agent ``uav_i`` observes its own K-nearest observation; its critic reads the
+  agent-specific global state: the global true state
+  (:func:`uasep_env.observation.global_state`) and the agent's own observation, normalised
+  by skrl's ``RunningStandardScaler``.
 * Networks: the actor is an MLP (``--hidden``, ``--activation``) giving the Gaussian's mean,
   with a state-independent log-std, **shared by every UAV** (parameter sharing; skrl updates
   it once per agent and iteration, each agent with its own Adam state). The critic is an MLP
@@ -111,7 +112,9 @@ def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
     class Actor(GaussianMixin, Model):
         def __init__(self, obs_space: Any, act_space: Any) -> None:
             Model.__init__(self, observation_space=obs_space, action_space=act_space, device="cpu")
-            GaussianMixin.__init__(self, clip_actions=True, role="policy")
+            # Unclipped samples: skrl would take the log-probability of the clipped action
+            # (a biased gradient); the environment clips to its box itself, as for SB3's PPO.
+            GaussianMixin.__init__(self, clip_actions=False, role="policy")
             self.net = mlp(self.num_observations, self.num_actions)
             self.log_std = torch.nn.Parameter(torch.full((self.num_actions,), args.log_std_init))
 
@@ -143,7 +146,9 @@ def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
         "gae_lambda": args.gae_lambda,
         "learning_rate": args.learning_rate,
         "ratio_clip": args.clip_range,
-        "value_clip": args.clip_range,
+        # No value clipping, as the PPO recipes (SB3's clip_range_vf=None): skrl's clipped
+        # value loss gives no gradient to a prediction that moved more than the clip.
+        "value_clip": 0.0,
         "entropy_loss_scale": args.ent_coef,
         "value_loss_scale": args.value_loss_scale,
         "grad_norm_clip": args.grad_norm_clip,
@@ -176,6 +181,9 @@ def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
         cfg=cfg,
     )
     agent.init()
+    # skrl's own trainers switch training on; this loop is ours, so it must: without it skrl
+    # stores no transition and never updates (the agent starts in evaluation mode).
+    agent.enable_training_mode(True)
     assert isinstance(env.state_spaces[uid0], gymnasium.spaces.Box)
     return venv, env, agent
 
@@ -198,10 +206,16 @@ class SkrlView:
         self.observation_spaces = {a: venv.observation_space for a in self.possible_agents}
         self.action_spaces = {a: venv.action_space for a in self.possible_agents}
         clip = base.config.observation.clip
-        width = base.core.state().shape[-1]
-        space = gymnasium.spaces.Box(-clip, clip, (width,), np.float32)
+        # The agent-specific global state of MAPPO (Yu et al. 2022): the global state and the
+        # agent's own (normalised) observation, so the shared critic knows whose return it
+        # predicts. (A one-hot agent id would not do: each agent's state normaliser would
+        # centre its constant column to zero.)
+        width = base.core.state().shape[-1] + int(np.prod(venv.observation_space.shape))
+        space = gymnasium.spaces.Box(-np.inf, np.inf, (width,), np.float32)
+        self.clip = clip
         self.state_spaces = {a: space for a in self.possible_agents}
         self.infos: list[dict] = []
+        self._obs: dict = {}
 
     def _split(self, flat: np.ndarray) -> dict:
         import torch
@@ -211,14 +225,15 @@ class SkrlView:
 
     def reset(self) -> tuple[dict, dict]:
         """Reset every environment; per-agent observations."""
-        return self._split(self.venv.reset()), {}
+        self._obs = self._split(self.venv.reset())
+        return self._obs, {}
 
     def state(self) -> dict:
-        """Every agent's critic input: the global state of its environment."""
+        """Every agent's critic input: its environment's global state and its observation."""
         import torch
 
         s = torch.from_numpy(np.asarray(self.base.core.state(), dtype=np.float32))
-        return {a: s for a in self.possible_agents}
+        return {a: torch.cat([s, self._obs[a]], dim=-1) for a in self.possible_agents}
 
     def step(self, actions: dict) -> tuple:
         """Step with per-agent actions ``(n_envs, 3)``; finished environments auto-reset."""
@@ -228,19 +243,18 @@ class SkrlView:
         obs, rew, dones, infos = self.venv.step(stacked.reshape(-1, 3))
         self.infos = infos
         done = dones.reshape(self.num_envs, self.n)[:, :1]
-        trunc = (
-            np.array(
-                [infos[e * self.n].get("TimeLimit.truncated", False) for e in range(self.num_envs)]
-            )[:, None]
-            & done
-        )
-        term, trunc = torch.from_numpy(done & ~trunc), torch.from_numpy(trunc)
+        # The time limit counts as an end: the global state holds the episode's progress, so
+        # a state at the limit is terminal, and skrl's GAE (time_limit_bootstrap off) would
+        # otherwise run on into the next episode, which the auto-reset has already begun.
+        term = torch.from_numpy(done.copy())
+        trunc = torch.zeros_like(term)
         r = rew.reshape(self.num_envs, self.n)
         rewards = {
             a: torch.from_numpy(r[:, i : i + 1].copy()) for i, a in enumerate(self.possible_agents)
         }
+        self._obs = self._split(obs)
         return (
-            self._split(obs),
+            self._obs,
             rewards,
             {a: term for a in self.possible_agents},
             {a: trunc for a in self.possible_agents},
