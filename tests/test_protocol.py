@@ -170,6 +170,19 @@ def test_seed_driver_resumes_and_reports(tmp_path):
     text, data = seeds.report("shared", out, 2, result, "python train/seeds.py ...", shipped)
     assert "IQM across seeds" in text and "at most 5 % collisions" in text
     assert "Chosen to ship: seed 1's checkpoint" in text and data["shipped"]["seed"] == 1
+    assert "apf, the same IQM over families" in text
+    text, data = seeds.report("residual_apf", out, 2, result, "python ...", shipped)
+    met = {t["target"].split(":")[0]: t for t in data["targets"]}
+    assert "every seed as safe as the APF" in met["collision"]["target"]
+    dev = data["across_seeds"]["episode.max_deviation"]
+    assert (
+        f"vs APF {dev['apf_iqm']:.1f} m"
+        in met[
+            "mean max deviation at least 25 % below "
+            "the APF's (IQM over seeds x families, the "
+            "APF through the same statistic)"
+        ]["measured"]
+    )
     agg = data["across_seeds"]["episode.max_deviation"]
     assert agg["ci_low"] <= agg["iqm"] <= agg["ci_high"]
     assert np.array(agg["scores"]).shape[0] == 2

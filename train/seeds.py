@@ -232,10 +232,15 @@ def across_seeds(result: Any, seeds: int) -> dict[str, dict[str, Any]]:
         mat = np.array([[p.get(f, math.nan) for f in families] for p in per])
         keep = np.isfinite(mat).all(axis=0)
         point, lo, hi = stratified_bootstrap_iqm(mat[:, keep])
+        # The APF through the same statistic (its per-family scores, one "run"), so that a
+        # learned IQM is compared with like: the IQM trims families, a plain mean does not.
+        apf = family_scores(result, "apf", key)
+        apf_scores = np.array([[apf.get(f, math.nan) for f in families]])[:, keep]
         out[key] = {
             "iqm": point,
             "ci_low": lo,
             "ci_high": hi,
+            "apf_iqm": stratified_bootstrap_iqm(apf_scores)[0],
             "families": families,
             "scores": mat.tolist(),
         }
@@ -247,25 +252,36 @@ def targets(
 ) -> list[tuple[str, str, bool]]:
     """The issue's targets for ``recipe``, from the measured aggregate across seeds."""
     apf = result.results["apf"].aggregate
+    labels = [lab for lab in result.policies if lab != "apf"]
     out = []
     if recipe == "residual_apf":
         for key in ("episode.collision", "episode.loss_of_separation"):
-            a, s = apf[key], agg[key]
+            # Every seed on its own (Wilson intervals over the same encounters as the APF's):
+            # stricter than the IQM, which trims the families where a seed does worst.
+            a = apf[key]
+            worst = max(labels, key=lambda lab: result.results[lab].aggregate[key]["ci_low"])
+            w = result.results[worst].aggregate[key]
             out.append(
                 (
-                    f"{key.removeprefix('episode.')}: as safe as the APF (intervals overlap "
-                    "or lower)",
-                    f"IQM {s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] "
+                    f"{key.removeprefix('episode.')}: every seed as safe as the APF "
+                    "(intervals overlap or lower)",
+                    f"worst {worst}: {w['rate']:.1%} [{w['ci_low']:.1%}, {w['ci_high']:.1%}] "
                     f"vs APF {a['rate']:.1%} [{a['ci_low']:.1%}, {a['ci_high']:.1%}]",
-                    no_worse_rate(s, a),
+                    all(no_worse_rate(result.results[lab].aggregate[key], a) for lab in labels),
                 )
             )
-        a, s = apf["episode.max_deviation"]["mean"], agg["episode.max_deviation"]["iqm"]
-        cut = 1.0 - s / a
+        d = agg["episode.max_deviation"]
+        cut = 1.0 - d["iqm"] / d["apf_iqm"]
+        means = [result.results[lab].aggregate["episode.max_deviation"]["mean"] for lab in labels]
+        plain = apf["episode.max_deviation"]["mean"]
         out.append(
             (
-                "mean max deviation at least 25 % below the APF's",
-                f"IQM {s:.1f} m vs APF {a:.1f} m ({cut:+.1%} less)",
+                "mean max deviation at least 25 % below the APF's (IQM over seeds x families, "
+                "the APF through the same statistic)",
+                f"IQM {d['iqm']:.1f} m [{d['ci_low']:.1f}, {d['ci_high']:.1f}] vs APF "
+                f"{d['apf_iqm']:.1f} m ({cut:+.1%} less); plain means {min(means):.1f}-"
+                f"{max(means):.1f} m vs {plain:.1f} m ({1 - max(means) / plain:+.1%} to "
+                f"{1 - min(means) / plain:+.1%})",
                 cut >= 0.25,
             )
         )
@@ -327,6 +343,11 @@ def report(
             else f"{s['iqm']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]"
         )
     rows.append(iqm_row)
+    apf_row = ["apf, the same IQM over families", "", ""]
+    for key, _, kind in METRICS:
+        v = agg[key]["apf_iqm"]
+        apf_row.append(f"{v:.1%}" if kind == "rate" else f"{v:.1f}")
+    rows.append(apf_row)
     tg = targets(recipe, result, agg)
     n = len(result.seeds)
     text = "\n".join(
