@@ -88,12 +88,7 @@ def table(runs: list[tuple[Path, dict[str, Any]]]) -> str:
             f"{np.mean(wall):.1f} ({np.min(wall):.1f}-{np.max(wall):.1f})",
         ]
         for key, _, kind in seeds_driver.METRICS:
-            s = data["across_seeds"][key]
-            row.append(
-                f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}]"
-                if kind == "rate"
-                else f"{s['iqm']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]"
-            )
+            row.append(seeds_driver.iqm_cell(data["across_seeds"][key], kind))
         rows.append(row)
     return render_table(headers, rows, align=["left"] + ["right"] * (len(headers) - 1),
                         markdown=True)  # fmt: skip

@@ -298,6 +298,13 @@ def targets(
     return out
 
 
+def iqm_cell(stats: dict[str, Any], kind: str) -> str:
+    """An across-seeds aggregate as a table cell: IQM [95 % interval]."""
+    if kind == "rate":
+        return f"{stats['iqm']:.1%} [{stats['ci_low']:.1%}, {stats['ci_high']:.1%}]"
+    return f"{stats['iqm']:.1f} [{stats['ci_low']:.1f}, {stats['ci_high']:.1f}]"
+
+
 def _fmt(stats: dict[str, Any], kind: str) -> str:
     if kind == "rate":
         return f"{stats['rate']:.1%} [{stats['ci_low']:.1%}, {stats['ci_high']:.1%}]"
@@ -334,14 +341,7 @@ def report(
         steps = f"{facts['agent_steps']:,}" if "agent_steps" in facts else "-"
         wall = f"{facts['wall_s'] / 60:.1f}" if "wall_s" in facts else "-"
         rows.append([label, steps, wall, *(_fmt(a[k], kind) for k, _, kind in METRICS)])
-    iqm_row = ["IQM across seeds", "", ""]
-    for key, _, kind in METRICS:
-        s = agg[key]
-        iqm_row.append(
-            f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}]"
-            if kind == "rate"
-            else f"{s['iqm']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]"
-        )
+    iqm_row = ["IQM across seeds", "", "", *(iqm_cell(agg[key], kind) for key, _, kind in METRICS)]
     rows.append(iqm_row)
     apf_row = ["apf, the same IQM over families", "", ""]
     for key, _, kind in METRICS:
