@@ -144,8 +144,7 @@ def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
                 version = _member_array(zf, {info.filename: info}, "format_version", path)
                 if int(version) != FORMAT_VERSION:
                     raise RealTrafficFileError(
-                        f"{path}: format_version {int(version)}, this reader needs "
-                        f"{FORMAT_VERSION}"
+                        f"{path}: format_version {int(version)}, this reader needs {FORMAT_VERSION}"
                     )
             expected = {f"{name}.npy": limit for name, limit in _limits().items()}
             infos = check_members(zf, expected, MAX_RATIO)
