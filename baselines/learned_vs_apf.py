@@ -17,6 +17,7 @@ Writes ``baselines/results/learned_vs_apf.md`` (the tables the README shows: mea
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -63,10 +64,14 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
         if name not in meta:
             out.append((f"{name}: trained and shipped", "missing", None))
             continue
-        wall = float(meta[name].get("wall_s", float("nan")))
-        steps = int(meta[name].get("agent_steps", 0))
+        facts, note = meta[name], ""
+        if "reproduces" in facts:  # retrained to a report's checkpoint: the original run's
+            facts = facts["reproduces"]["original_training"]  # budget is the recipe's
+            note = f" (the run it reproduces bit for bit, {meta[name]['reproduces']['report']})"
+        wall = float(facts.get("wall_s", float("nan")))
+        steps = int(facts.get("agent_steps", 0))
         out.append(
-            (f"{name}: trains in <= 60 min", f"{wall / 60:.1f} min, {steps:,} agent-steps",
+            (f"{name}: trains in <= 60 min", f"{wall / 60:.1f} min, {steps:,} agent-steps{note}",
              wall <= TRAINING_BUDGET_S)
         )  # fmt: skip
     if "ppo_residual_apf" in res:
@@ -108,6 +113,10 @@ def main(argv: list[str] | None = None) -> str:
     policies = compared_policies()
     meta = {name: load_policy(CHECKPOINTS / f"{name}.zip").meta.info for name in LEARNED
             if name in policies}  # fmt: skip
+    for name in meta:  # train/reproduce.py --ship-to: what a retrained file reproduces
+        side = CHECKPOINTS / f"{name}_reproduction.json"
+        if side.exists():
+            meta[name] = {**meta[name], "reproduces": json.loads(side.read_text())}
     sections = []
     results = {}
     for scenario, seeds in (

@@ -1,0 +1,177 @@
+"""Retrain the checkpoint a seeds report chose and check it against the report, bit for bit.
+
+    python train/reproduce.py baselines/results/seeds_residual_apf.json --out-dir runs/repro
+    python train/reproduce.py REPORT --seed 1 --out-dir runs/repro_s1 --ship-to my.zip
+
+A training run is deterministic given its seed and its agent-steps (seeded environments, one
+torch thread; tested in ``tests/test_reproduce.py``); the wall-clock budget only decides where
+a run stops. So the checkpoint that ``train/seeds.py`` chose for seed ``k`` (``--seed``,
+default: the one the report shipped) is retrained by running the report's recipe with
+``--seed 1000*k`` until it saves the checkpoint at that agent-step count, from scratch (a
+resumed run is not bit-exact). The wall budget is lifted (``--max-minutes``) so that a loaded
+machine still reaches the step count.
+
+Then the checkpoint plays the report's held-out encounters and every per-seed figure of the
+report (counts, sums, means, intervals) is compared with the published one: all equal, or the
+script exits 1 naming the differences. ``<out-dir>/reproduction.json`` records the
+comparison. ``--ship-to`` copies a reproduced checkpoint (never one that differs) and writes
+``<stem>_reproduction.json`` beside it: which report and seed it reproduces, and the original
+run's training facts (its wall time and agent-steps), which the reproduction's own
+``policy.zip`` cannot carry. A run folder that already holds the checkpoint is not retrained.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+#: The figures of one metric compared with the report (all must be equal).
+FIELDS = ("n", "n_valid", "successes", "sum", "mean", "ci_low", "ci_high")
+
+
+def chosen_checkpoint(report: dict[str, Any], seed: int | None) -> tuple[int, int, str]:
+    """``(seed, agent_steps, recipe)`` of the checkpoint the report chose for ``seed``.
+
+    Raises:
+        ValueError: The report has no such seed, or its choice is not a step checkpoint.
+    """
+    picks = report["shipped"]["validation"]["seeds"]
+    k = int(report["shipped"]["seed"]) if seed is None else seed
+    by_seed = {int(p["seed"]): p for p in picks}
+    if k not in by_seed:
+        raise ValueError(f"--seed {k}: the report has seeds {sorted(by_seed)}")
+    pick = by_seed[k]
+    name = Path(pick["policy"]).parent.name
+    if not name.startswith("step_"):
+        raise ValueError(
+            f"seed {k}: the chosen policy {pick['policy']!r} is a run's final policy, not a "
+            "step checkpoint; retrain with the report's own command instead"
+        )
+    return k, int(pick["agent_steps"]), str(report["recipe"])
+
+
+def train_command(recipe: str, run: Path, k: int, steps: int, extra: list[str]) -> list[str]:
+    """The recipe's command that saves ``checkpoints/step_<steps>`` of seed ``k``."""
+    sys.path.insert(0, str(HERE))
+    from seeds import RECIPES, SEED_STRIDE
+
+    # A checkpoint is saved only below the step budget, so the run goes one step further
+    # (to the end of that rollout) and stops there.
+    return [
+        sys.executable, str(HERE / RECIPES[recipe]), "--out-dir", str(run),
+        "--seed", str(SEED_STRIDE * k), "--torch-threads", "1", "--no-progress",
+        "--total-timesteps", str(steps + 1), "--max-minutes", "100000", *extra,
+    ]  # fmt: skip
+
+
+def compare(now: dict[str, Any], published: dict[str, Any]) -> list[str]:
+    """Every figure of ``published`` (per metric) that ``now`` does not equal exactly."""
+    bad = []
+    for key, stats in published.items():
+        for field in FIELDS:
+            if field not in stats:
+                continue
+            a, b = now.get(key, {}).get(field), stats[field]
+            same = a == b or (
+                isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)
+            )
+            if not same:
+                bad.append(f"{key}.{field}: {a!r}, published {b!r}")
+    return bad
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Retrain (unless done), compare, optionally ship; return the comparison."""
+    from uasep_env import make_config
+    from uasep_env.atomic import atomic_write
+    from uasep_env.evaluation import evaluate
+    from uasep_env.jsonio import dumps
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    extra: list[str] = []
+    if "--" in argv:
+        at = argv.index("--")
+        argv, extra = argv[:at], argv[at + 1 :]
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("report", type=Path, help="a seeds report (train/seeds.py's seeds.json)")
+    p.add_argument("--seed", type=int, default=None, help="default: the seed the report shipped")
+    p.add_argument("--out-dir", type=Path, required=True)
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--ship-to", type=Path, default=None)
+    p.add_argument("--force", action="store_true", help="replace the --ship-to files")
+    args = p.parse_args(argv)
+    try:
+        report = json.loads(args.report.read_text())
+        k, steps, recipe = chosen_checkpoint(report, args.seed)
+        bank = report["held_out_seeds"]
+        published = report["per_seed"][f"seed_{k}"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        p.error(f"{args.report}: not a seeds report with a chosen checkpoint ({e})")
+    ship = [] if args.ship_to is None else [args.ship_to, sidecar(args.ship_to)]
+    taken = [q for q in ship if q.exists()]
+    if taken and not args.force:
+        p.error(f"{taken[0]} exists (pass --force to replace it)")
+
+    run = args.out_dir / f"seed_{k}"
+    checkpoint = run / "checkpoints" / f"step_{steps}" / "policy.zip"
+    cmd = train_command(recipe, run, k, steps, extra)
+    if not checkpoint.exists():
+        if run.exists():
+            p.error(f"{run} exists without {checkpoint}: a resumed run is not bit-exact; "
+                    "remove the folder to retrain from scratch")  # fmt: skip
+        args.out_dir.mkdir(parents=True, exist_ok=True)
+        env = dict(os.environ, OMP_NUM_THREADS="1")
+        env["PYTHONPATH"] = os.pathsep.join(q for q in (str(ROOT), env.get("PYTHONPATH")) if q)
+        print(f"seed {k}: {' '.join(cmd[1:])}", flush=True)
+        with (args.out_dir / f"seed_{k}.log").open("a") as log:
+            subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, check=True)
+        if not checkpoint.exists():
+            raise SystemExit(f"training ended without {checkpoint}")
+
+    seeds = list(range(int(bank["first"]), int(bank["first"]) + int(bank["count"])))
+    label = f"seed_{k}"
+    result = evaluate({label: str(checkpoint)}, make_config(scenario="random"), seeds,
+                      workers=args.workers)  # fmt: skip
+    now = json.loads(dumps(result.results[label].aggregate))
+    bad = compare(now, published)
+    record = {
+        "report": args.report.as_posix(),
+        "seed": k,
+        "agent_steps": steps,
+        "checkpoint": checkpoint.relative_to(args.out_dir).as_posix(),
+        "command": "python train/reproduce.py " + " ".join(map(str, argv)),
+        "training_command": "python " + " ".join(
+            Path(c).relative_to(ROOT).as_posix() if c.startswith(str(ROOT)) else c
+            for c in cmd[1:]
+        ),
+        "held_out": {"seeds": bank, "identical": not bad, "differences": bad},
+        "original_training": report.get("training", {}).get(label, {}),
+    }
+    atomic_write(args.out_dir / "reproduction.json", dumps(record, indent=1))
+    if bad:
+        print(f"NOT reproduced: {len(bad)} figures differ, e.g. {bad[:3]}", flush=True)
+        raise SystemExit(1)
+    print(f"reproduced: seed {k}'s checkpoint at {steps:,} agent-steps flies the report's "
+          f"{len(seeds)} held-out encounters with every figure identical", flush=True)  # fmt: skip
+    if args.ship_to is not None:
+        atomic_write(args.ship_to, checkpoint.read_bytes())
+        atomic_write(sidecar(args.ship_to), dumps(record, indent=1))
+        print(f"copied {checkpoint} -> {args.ship_to}", flush=True)
+    return record
+
+
+def sidecar(ship_to: Path) -> Path:
+    """Where ``--ship-to`` records what the shipped file reproduces."""
+    return ship_to.with_name(f"{ship_to.stem}_reproduction.json")
+
+
+if __name__ == "__main__":
+    main()
