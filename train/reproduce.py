@@ -137,6 +137,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             raise SystemExit(f"training ended without {checkpoint}")
 
     seeds = list(range(int(bank["first"]), int(bank["first"]) + int(bank["count"])))
+    validation = report["shipped"]["validation"]
+    pick = next(q for q in validation["seeds"] if int(q["seed"]) == k)
     label = f"seed_{k}"
     result = evaluate({label: str(checkpoint)}, make_config(scenario="random"), seeds,
                       workers=args.workers)  # fmt: skip
@@ -148,12 +150,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "agent_steps": steps,
         "checkpoint": checkpoint.relative_to(args.out_dir).as_posix(),
         "command": "python train/reproduce.py " + " ".join(map(str, argv)),
-        "training_command": "python " + " ".join(
-            Path(c).relative_to(ROOT).as_posix() if c.startswith(str(ROOT)) else c
-            for c in cmd[1:]
+        "training_command": "python "
+        + " ".join(
+            Path(c).relative_to(ROOT).as_posix() if c.startswith(str(ROOT)) else c for c in cmd[1:]
         ),
         "held_out": {"seeds": bank, "identical": not bad, "differences": bad},
         "original_training": report.get("training", {}).get(label, {}),
+        # How it was chosen (on validation encounters only), as the report gives it.
+        "validation": {"apf": validation.get("apf"), "chosen": pick},
     }
     atomic_write(args.out_dir / "reproduction.json", dumps(record, indent=1))
     if bad:
