@@ -9,6 +9,7 @@ import pytest
 
 # Importing the modules registers their twins.
 from uasep_env import _numba, formation, geometry, observation, reachable, rewards  # noqa: F401
+from uasep_env.policies import learned  # noqa: F401 (registers the network's twin)
 from uasep_env.reachable import distance
 
 pytestmark = pytest.mark.skipif(
@@ -147,6 +148,13 @@ def _case_plan():
     return w.plan, w.time, w._plan_offsets
 
 
+def _case_dense():
+    rng = np.random.default_rng(22)
+    x = rng.normal(0, 3, size=(37, 61)).astype(np.float32)
+    w = rng.normal(0, 0.2, size=(61, 128)).astype(np.float32).astype(np.float64)
+    return x, w, rng.normal(0, 0.1, size=128).astype(np.float32).astype(np.float64)
+
+
 #: One case per compiled twin; a new twin without a case fails the registry test.
 TWIN_CASES = {
     "nearest_on_ellipsoids": _case_nearest,
@@ -156,6 +164,7 @@ TWIN_CASES = {
     "assemble_observations": _case_observations,
     "reward_terms": _case_rewards,
     "plan_now": _case_plan,
+    "dense": _case_dense,
 }
 
 

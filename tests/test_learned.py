@@ -3,8 +3,12 @@
 import io
 import itertools
 import json
+import os
 import pickle
+import platform
 import re
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -52,11 +56,12 @@ def _random_checkpoint(path, cfg, hidden=(16, 8), seed=0, obs_norm=True):
 
 
 def _reference_forward(weights, mean, var, obs):
+    """The network in float64 with numpy's matmul (any summation order)."""
     x = np.clip((obs.astype(np.float64) - mean) / np.sqrt(var + 1e-8), -10, 10).astype(np.float32)
     for w, b in weights[:-1]:
-        x = np.tanh(x @ w.T + b)
+        x = np.tanh((x @ w.T.astype(np.float64) + b).astype(np.float32))
     w, b = weights[-1]
-    return np.clip(x @ w.T + b, -1, 1)
+    return np.clip(x @ w.T.astype(np.float64) + b, -1, 1).astype(np.float32)
 
 
 def test_round_trip_reproduces_the_network(tmp_path):
@@ -65,13 +70,49 @@ def test_round_trip_reproduces_the_network(tmp_path):
     assert is_policy_checkpoint(tmp_path / "p.zip")
     policy = load_policy(tmp_path / "p.zip")
     obs = EnvCore(cfg, 4).reset(seed=0)
-    np.testing.assert_array_equal(policy(obs), _reference_forward(weights, mean, var, obs))
+    # Equal up to the summation order (learned.dense sums in one fixed order).
+    np.testing.assert_allclose(
+        policy(obs), _reference_forward(weights, mean, var, obs), rtol=0, atol=1e-6
+    )
     # The archive holds JSON and a pickle-free npz only.
     with zipfile.ZipFile(tmp_path / "p.zip") as z:
         assert sorted(z.namelist()) == ["uasep_policy.json", "weights.npz"]
         desc = json.loads(z.read("uasep_policy.json"))
         np.load(io.BytesIO(z.read("weights.npz")), allow_pickle=False)
     assert desc["config"]["action"]["mode"] == "direct"
+
+
+FLY = """
+import hashlib, sys
+import numpy as np
+from uasep_env import make_config
+from uasep_env.envs.core import EnvCore
+from uasep_env.policies import load_policy
+obs = EnvCore(make_config(scenario="random"), 64).reset(seed=3)
+x = np.random.default_rng(0).normal(size=(512, 128)).astype(np.float32)
+print(hashlib.sha256(load_policy(sys.argv[1])(obs).tobytes()).hexdigest(),
+      hashlib.sha256((x @ x.T).tobytes()).hexdigest())
+"""
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 BLAS kernels")
+def test_the_network_gives_the_same_bits_whichever_blas_kernel_runs(tmp_path):
+    """A BLAS kernel's summation order depends on the CPU it is chosen for; the policy's not.
+
+    OpenBLAS picks its kernel by the CPU (``OPENBLAS_CORETYPE`` forces one): Haswell's and
+    SkylakeX's matmuls differ in the last bits, which a closed loop grows into another
+    episode. The policy gives the same bits under each, with and without numba.
+    """
+    cfg = make_config(scenario="random")
+    _random_checkpoint(tmp_path / "p.zip", cfg, hidden=(128, 128))
+    (tmp_path / "fly.py").write_text(FLY)
+    digests = {}
+    for core, numba in (("Prescott", "1"), ("Haswell", "0"), ("SkylakeX", "1")):
+        env = {**os.environ, "OPENBLAS_CORETYPE": core, "UASEP_NUMBA": numba}
+        out = subprocess.run([sys.executable, str(tmp_path / "fly.py"), str(tmp_path / "p.zip")],
+                             env=env, capture_output=True, text=True, check=True)  # fmt: skip
+        digests[core] = out.stdout.split()
+    assert len({d[0] for d in digests.values()}) == 1, digests
 
 
 def test_residual_checkpoint_in_a_direct_env_equals_the_residual_env(tmp_path):

@@ -16,7 +16,8 @@ kernel receives as keyword arguments. These modules import nothing else of the p
 * :func:`separations` -- :func:`uasep_env.geometry.nearest_separations`;
 * :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
 * :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`;
-* :func:`plan_now` -- :func:`uasep_env.formation.planned_state`.
+* :func:`plan_now` -- :func:`uasep_env.formation.planned_state`;
+* :func:`dense` -- :func:`uasep_env.policies.learned.dense` (a policy network's layer).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from uasep_env._kernels.ellipsoids import (
     pairwise_distances,
     region_distances,
 )
+from uasep_env._kernels.network import dense
 from uasep_env._kernels.observations import assemble_observations
 from uasep_env._kernels.plan import plan_now
 from uasep_env._kernels.rewards import reward_terms
@@ -33,6 +35,7 @@ from uasep_env._kernels.separations import separations
 
 __all__ = [
     "assemble_observations",
+    "dense",
     "nearest_on_ellipsoids",
     "pairwise_distances",
     "plan_now",

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from uasep_env._numba import compiled_twin
 from uasep_env.actions import ResidualAPF
 from uasep_env.config import EnvConfig
 from uasep_env.observation import ObservationLayout
@@ -64,6 +65,33 @@ __all__ = [
     "load_sb3_policy",
     "save_policy",
 ]
+
+
+@compiled_twin("dense")
+def dense(x: np.ndarray, wt: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """One layer, ``x @ wt + b``, summed input by input in float64 and rounded to float32.
+
+    A BLAS kernel sums in an order that depends on the CPU it dispatches to (OpenBLAS's
+    Haswell and SkylakeX kernels differ in the last bits), and a closed loop grows a last bit
+    into another episode. The products of float32 numbers are exact in float64 and the sum
+    runs in one fixed order of elementwise IEEE operations, so every CPU and numpy version
+    computes the same bits (with numba, the kernel ``dense``, the same operations).
+
+    Args:
+        x: Inputs ``(rows, n_in)``, float32.
+        wt: The transposed weights ``(n_in, n_out)``, float64.
+        b: The bias ``(n_out,)``, float64.
+
+    Returns:
+        ``(rows, n_out)`` float32.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    acc = np.empty((x.shape[0], b.shape[0]), dtype=np.float64)
+    acc[...] = b
+    for i in range(wt.shape[0]):
+        acc += x[:, i, None] * wt[i]
+    return acc.astype(np.float32)
+
 
 _ACTIVATIONS = {
     "tanh": np.tanh,
@@ -129,7 +157,12 @@ class LearnedPolicy:
                 f"environment computes its base APF (this is a {self.mode} policy in a "
                 f"{config.action.mode} environment)"
             )
-        self._layers = [(np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in weights]
+        # float32 as stored, kept transposed in float64 for :func:`dense`.
+        self._layers = [
+            (np.ascontiguousarray(np.asarray(w, np.float32).T, dtype=np.float64),
+             np.asarray(b, np.float32).astype(np.float64))
+            for w, b in weights
+        ]  # fmt: skip
         self._act = _ACTIVATIONS[meta.activation]
         if meta.obs_norm:
             self._mean = np.asarray(obs_mean, dtype=np.float64)
@@ -141,10 +174,12 @@ class LearnedPolicy:
         if self.meta.obs_norm:
             x = np.clip((x - self._mean) / self._std, -self.meta.clip_obs, self.meta.clip_obs)
             x = x.astype(np.float32)
-        for w, b in self._layers[:-1]:
-            x = self._act(x @ w.T + b)
-        w, b = self._layers[-1]
-        return x @ w.T + b
+        shape = x.shape[:-1]
+        x = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+        for wt, b in self._layers[:-1]:
+            x = self._act(dense(x, wt, b))
+        x = dense(x, *self._layers[-1])
+        return x.reshape(*shape, x.shape[-1])
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         """Actions ``(..., 3)`` in ``[-1, 1]`` for observations ``(..., obs_dim)``."""
