@@ -66,8 +66,11 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
             continue
         facts, note = meta[name], ""
         if "reproduces" in facts:  # retrained to a report's checkpoint: the original run's
-            facts = facts["reproduces"]["original_training"]  # budget is the recipe's
-            note = f" (the run it reproduces bit for bit, {meta[name]['reproduces']['report']})"
+            rep = facts["reproduces"]  # budget is the recipe's
+            facts = rep["original_training"]
+            how = ("reproduces it bit for bit" if rep["held_out"]["identical"] else
+                   "was retrained from that seed to its checkpoint's agent-steps, not bit for bit")
+            note = f" (the original run, {rep['report']} seed {rep['seed']}; this file {how})"
         wall = float(facts.get("wall_s", float("nan")))
         steps = int(facts.get("agent_steps", 0))
         out.append(

@@ -25,7 +25,8 @@ The knobs (``scale`` multiplies the gains that set the margin in the reference g
   ``obstacle_time`` are scaled (its correction was trained on the default base);
 * ``ppo-shared`` -- the shipped pure policy has no gain; what sets its margin is the region it
   observes, so the prediction horizon is swept (trained at 10 s; other horizons are outside
-  its training distribution).
+  its training distribution);
+* ``mappo`` -- the shipped MAPPO actor, swept the same way.
 
 Writes ``docs/figures/tradeoff.csv`` (one row per method, setting and scenario: every
 statistic with its interval), ``docs/figures/tradeoff_{paper,bank}.png`` and
@@ -168,6 +169,15 @@ METHODS: tuple[Method, ...] = (
         HORIZONS_S,
         10.0,
         lambda c, _h: load_policy(CHECKPOINTS / "ppo_shared.zip", c, "ppo-shared"),
+        lambda h: {"prediction": {"horizon": h}},
+    ),
+    Method(
+        "mappo",
+        "MAPPO",
+        "prediction horizon (s)",
+        HORIZONS_S,
+        10.0,
+        lambda c, _h: load_policy(CHECKPOINTS / "mappo.zip", c, "mappo"),
         lambda h: {"prediction": {"horizon": h}},
     ),
 )

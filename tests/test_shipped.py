@@ -82,8 +82,8 @@ def flown() -> dict[str, Any]:
     return json.loads(result.to_json())["results"]
 
 
-def test_two_checkpoints_ship():
-    assert {p.stem for p in CHECKPOINTS} == {"ppo_shared", "ppo_residual_apf"}
+def test_three_checkpoints_ship():
+    assert {p.stem for p in CHECKPOINTS} == {"ppo_shared", "ppo_residual_apf", "mappo"}
 
 
 @pytest.mark.parametrize(
