@@ -95,11 +95,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     from uasep_env.evaluation import evaluate
     from uasep_env.jsonio import dumps
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    extra: list[str] = []
-    if "--" in argv:
-        at = argv.index("--")
-        argv, extra = argv[:at], argv[at + 1 :]
+    sys.path.insert(0, str(HERE))
+    from seeds import split_recipe_args
+
+    argv, extra = split_recipe_args(argv)
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("report", type=Path, help="a seeds report (train/seeds.py's seeds.json)")
     p.add_argument("--seed", type=int, default=None, help="default: the seed the report shipped")

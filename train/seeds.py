@@ -438,17 +438,22 @@ def plot_curves(out: Path, seeds: int, title: str) -> Path:
     return path
 
 
+def split_recipe_args(argv: list[str] | None) -> tuple[list[str], list[str]]:
+    """``(this script's arguments, the recipe's)``: those after ``--`` go to the recipe."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--" not in argv:
+        return argv, []
+    at = argv.index("--")
+    return argv[:at], argv[at + 1 :]
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Run the stages; return the report's JSON data."""
     import shlex
 
     from uasep_env.jsonio import write_json
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    extra: list[str] = []
-    if "--" in argv:
-        at = argv.index("--")
-        argv, extra = argv[:at], argv[at + 1 :]
+    argv, extra = split_recipe_args(argv)
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--recipe", choices=sorted(RECIPES), required=True)
     p.add_argument("--seeds", type=int, default=3, help="number of training seeds")
