@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -33,12 +32,19 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+import seeds as seeds_driver  # noqa: E402
+
 #: The figures of one metric compared with the report (all must be equal).
 FIELDS = ("n", "n_valid", "successes", "sum", "mean", "ci_low", "ci_high")
 
 
-def chosen_checkpoint(report: dict[str, Any], seed: int | None) -> tuple[int, int, str]:
-    """``(seed, agent_steps, recipe)`` of the checkpoint the report chose for ``seed``.
+def chosen_checkpoint(report: dict[str, Any], seed: int | None) -> tuple[int, dict[str, Any]]:
+    """``(seed, row)`` of the checkpoint the report chose for ``seed``.
+
+    The row is the report's validation figures of that checkpoint, with its ``policy`` and
+    ``agent_steps``.
 
     Raises:
         ValueError: The report has no such seed, or its choice is not a step checkpoint.
@@ -55,19 +61,16 @@ def chosen_checkpoint(report: dict[str, Any], seed: int | None) -> tuple[int, in
             f"seed {k}: the chosen policy {pick['policy']!r} is a run's final policy, not a "
             "step checkpoint; retrain with the report's own command instead"
         )
-    return k, int(pick["agent_steps"]), str(report["recipe"])
+    return k, pick
 
 
 def train_command(recipe: str, run: Path, k: int, steps: int, extra: list[str]) -> list[str]:
     """The recipe's command that saves ``checkpoints/step_<steps>`` of seed ``k``."""
-    sys.path.insert(0, str(HERE))
-    from seeds import RECIPES, SEED_STRIDE
-
     # A checkpoint is saved only below the step budget, so the run goes one step further
     # (to the end of that rollout) and stops there.
     return [
-        sys.executable, str(HERE / RECIPES[recipe]), "--out-dir", str(run),
-        "--seed", str(SEED_STRIDE * k), "--torch-threads", "1", "--no-progress",
+        sys.executable, str(HERE / seeds_driver.RECIPES[recipe]), "--out-dir", str(run),
+        "--seed", str(seeds_driver.SEED_STRIDE * k), "--torch-threads", "1", "--no-progress",
         "--total-timesteps", str(steps + 1), "--max-minutes", "100000", *extra,
     ]  # fmt: skip
 
@@ -95,10 +98,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     from uasep_env.evaluation import evaluate
     from uasep_env.jsonio import dumps
 
-    sys.path.insert(0, str(HERE))
-    from seeds import split_recipe_args
-
-    argv, extra = split_recipe_args(argv)
+    argv, extra = seeds_driver.split_recipe_args(argv)
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("report", type=Path, help="a seeds report (train/seeds.py's seeds.json)")
     p.add_argument("--seed", type=int, default=None, help="default: the seed the report shipped")
@@ -109,7 +109,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     args = p.parse_args(argv)
     try:
         report = json.loads(args.report.read_text())
-        k, steps, recipe = chosen_checkpoint(report, args.seed)
+        k, pick = chosen_checkpoint(report, args.seed)
+        steps, recipe = int(pick["agent_steps"]), str(report["recipe"])
         bank = report["held_out_seeds"]
         published = report["per_seed"][f"seed_{k}"]
     except (OSError, ValueError, KeyError, TypeError) as e:
@@ -127,8 +128,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             p.error(f"{run} exists without {checkpoint}: a resumed run is not bit-exact; "
                     "remove the folder to retrain from scratch")  # fmt: skip
         args.out_dir.mkdir(parents=True, exist_ok=True)
-        env = dict(os.environ, OMP_NUM_THREADS="1")
-        env["PYTHONPATH"] = os.pathsep.join(q for q in (str(ROOT), env.get("PYTHONPATH")) if q)
+        env = {**seeds_driver.recipe_env(), "OMP_NUM_THREADS": "1"}
         print(f"seed {k}: {' '.join(cmd[1:])}", flush=True)
         with (args.out_dir / f"seed_{k}.log").open("a") as log:
             subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, check=True)
@@ -136,8 +136,6 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             raise SystemExit(f"training ended without {checkpoint}")
 
     seeds = list(range(int(bank["first"]), int(bank["first"]) + int(bank["count"])))
-    validation = report["shipped"]["validation"]
-    pick = next(q for q in validation["seeds"] if int(q["seed"]) == k)
     label = f"seed_{k}"
     result = evaluate({label: str(checkpoint)}, make_config(scenario="random"), seeds,
                       workers=args.workers)  # fmt: skip
@@ -156,7 +154,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "held_out": {"seeds": bank, "identical": not bad, "differences": bad},
         "original_training": report.get("training", {}).get(label, {}),
         # How it was chosen (on validation encounters only), as the report gives it.
-        "validation": {"apf": validation.get("apf"), "chosen": pick},
+        "validation": {"apf": report["shipped"]["validation"].get("apf"), "chosen": pick},
     }
     atomic_write(args.out_dir / "reproduction.json", dumps(record, indent=1))
     if bad:

@@ -69,7 +69,8 @@ def _python() -> list[str]:
     return [sys.executable]
 
 
-def _env() -> dict[str, str]:
+def recipe_env() -> dict[str, str]:
+    """The environment a recipe runs in: this checkout on the path, one OpenMP thread."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
     env.setdefault("OMP_NUM_THREADS", "1")
@@ -117,9 +118,8 @@ def train_all(recipe: str, out: Path, seeds: int, parallel: int, extra: list[str
             # The log lies beside the run folder: a recipe refuses a used --out-dir.
             log = (out / f"seed_{k}.log").open("a")
             print(f"seed {k}: {' '.join(cmd[1:])}", flush=True)
-            running.append(
-                (k, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=_env()), log)
-            )
+            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=recipe_env())
+            running.append((k, proc, log))
         time.sleep(1.0)
         for item in list(running):
             k, proc, log = item
