@@ -15,28 +15,28 @@ observing UAV. Positions are divided by ``observation.position_scale`` (m), velo
 ``uav.max_speed`` (m/s), accelerations by ``uav.max_accel`` (m/s^2); every entry is then
 clipped to ``[-clip, clip]``.
 
-======================  ====  ==========================================================
-Feature                 Size  Meaning (before scaling)
-======================  ====  ==========================================================
-``slot_offset``         3     desired slot (eq. 7, from estimates) minus own position (m)
-``plan_offset``         3     own planned position minus own position (m)
-``velocity``            3     own estimated velocity (m/s)
-``plan_velocity``       3     planned velocity of the formation (m/s)
-``formation_velocity``  3     formation mean velocity ``v_o`` (eq. 5) (m/s)
-``goal_offset``         3     planned formation centre minus the estimated centre (m)
-``waypoint_dir``        3     unit direction of the planned path now
-``waypoint_dist``       1     distance from the centre to the final way-point (m)
-``last_accel``          3     own last commanded acceleration (m/s^2)
-``progress``            1     elapsed fraction of the episode
-per nearest UAV (K_u)   8     relative position (3, m), relative velocity (3, m/s),
-                              distance (1, m), presence mask (1)
-per nearest obstacle    16    reachable-ellipsoid centre relative to the UAV (3, m),
-(K_o)                         semi-axes (longitudinal, lateral, vertical) (3, m),
-                              heading (cos, sin) (2), obstacle position relative to the
-                              UAV (3, m), obstacle velocity relative to the UAV (3, m/s),
-                              signed distance from the UAV to the ellipsoid (1, m),
-                              presence mask (1)
-======================  ====  ==========================================================
+==========================  ====  ======================================================
+Feature                     Size  Meaning (before scaling)
+==========================  ====  ======================================================
+``slot_offset``             3     desired slot (eq. 7, from estimates) minus own position (m)
+``plan_offset``             3     own planned position minus own position (m)
+``velocity``                3     own estimated velocity (m/s)
+``plan_velocity``           3     planned velocity of the formation (m/s)
+``formation_velocity``      3     formation mean velocity ``v_o`` (eq. 5) (m/s)
+``goal_offset``             3     planned formation centre minus the estimated centre (m)
+``waypoint_dir``            3     unit direction of the planned path now
+``waypoint_dist``           1     distance from the centre to the final way-point (m)
+``last_accel``              3     own last commanded acceleration (m/s^2)
+``progress``                1     elapsed fraction of the episode
+per nearest UAV (K_u)       8     relative position (3, m), relative velocity (3, m/s),
+                                  distance (1, m), presence mask (1)
+per nearest obstacle (K_o)  16    reachable-ellipsoid centre relative to the UAV (3, m),
+                                  semi-axes (longitudinal, lateral, vertical) (3, m),
+                                  heading (cos, sin) (2), obstacle position relative to the
+                                  UAV (3, m), obstacle velocity relative to the UAV (3, m/s),
+                                  signed distance from the UAV to the ellipsoid (1, m),
+                                  presence mask (1)
+==========================  ====  ======================================================
 
 UAVs are sorted by estimated distance, obstacles by distance to their reachable region;
 absent entries (fewer than K, or beyond ``sensing_range``) are zero with mask 0.

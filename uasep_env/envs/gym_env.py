@@ -21,31 +21,36 @@ class FormationEnv(ViewMixin, gymnasium.Env):
     """All UAVs of the formation controlled by one (centralised) agent.
 
     The same world, observations and rewards as
-    :class:`~uasep_env.envs.parallel.UAVSeparationParallelEnv`, seen jointly.
+    :class:`~uasep_env.envs.parallel.UAVSeparationParallelEnv`, seen jointly. Each
+    registered id has a card in the documentation (``docs/envs/``).
 
-    ## Action space
-    ``Box(-1, 1, (3 N,), float32)``: the UAVs' normalised accelerations, UAV-major. Only
-    real numbers are actions (:class:`~uasep_env.envs.core.ActionTypeError` otherwise);
-    finite values outside the box are clipped and counted per UAV in
-    ``info["clipped_actions"]``, or raise ``ValueError`` with ``action={"strict": True}``.
+    Action space:
+        ``Box(-1, 1, (3 N,), float32)``: the UAVs' normalised accelerations, UAV-major.
+        Only real numbers are actions (:class:`~uasep_env.envs.core.ActionTypeError`
+        otherwise); finite values outside the box are clipped and counted per UAV in
+        ``info["clipped_actions"]``, or raise ``ValueError`` with ``action={"strict": True}``.
 
-    ## Observation space
-    ``Box(-clip, clip, (N D,), float32)``: the agents' observations concatenated.
+    Observation space:
+        ``Box(-clip, clip, (N D,), float32)``: the agents' observations concatenated.
 
-    ## Rewards
-    The mean of the agents' rewards; ``info["rewards"]`` has each agent's reward and
-    ``info["reward_<term>"]`` the mean of each named term (flat keys, so that vector
-    wrappers and TorchRL batch them; the PettingZoo view nests them in ``reward_terms``).
+    Rewards:
+        The mean of the agents' rewards; ``info["rewards"]`` has each agent's reward and
+        ``info["reward_<term>"]`` the mean of each named term (flat keys, so that vector
+        wrappers and TorchRL batch them; the PettingZoo view nests them in
+        ``reward_terms``).
 
-    ## Episode end
-    Terminated on a collision, truncated at the time limit ``episode_duration``. The
-    registered ids declare it as ``spec.max_episode_steps`` (1000 steps at the default
-    200 s), so ``gymnasium.make`` adds a ``TimeLimit`` at the same step; for longer
-    episodes pass ``max_episode_steps`` to ``gymnasium.make`` as well (the earlier limit
-    wins). Stepping a finished episode raises ``RuntimeError`` until :meth:`reset`.
+    Episode end:
+        Terminated on a collision (within ``uav.collision_distance``) or when a UAV is
+        lost, farther than ``uav.lost_distance`` (300 m) from its planned position
+        (``info["lost"]``; random actions end episodes this way). Truncated at the time
+        limit ``episode_duration`` or the end of the plan. The registered ids declare it as
+        ``spec.max_episode_steps`` (1000 steps at the default 200 s), so ``gymnasium.make``
+        adds a ``TimeLimit`` at the same step; for longer episodes pass
+        ``max_episode_steps`` to ``gymnasium.make`` as well (the earlier limit wins).
+        Stepping a finished episode raises ``RuntimeError`` until :meth:`reset`.
 
-    ## Arguments
-    Any :class:`~uasep_env.config.EnvConfig` field as a keyword, validated.
+    Configuration:
+        Any :class:`~uasep_env.config.EnvConfig` field as a keyword, validated.
     """
 
     # The render modes this installation can draw (none without matplotlib, the viz extra).
