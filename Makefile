@@ -3,7 +3,8 @@
 #   make test   -- ruff + the whole test suite (with the ecosystem's clients: the clients extra)
 # and CI's further jobs (.ci/run):
 #   make test-floors  -- env, vector, convention, real-traffic and checkpoint tests on the floors
-#                        (.ci/floors.txt), without numba or any extra, in a venv of their own
+#                        (.ci/floors.txt), without numba or any extra, in a venv of their own;
+#                        every test file collects there (no import error without the extras)
 #   make test-package -- build wheel + sdist, twine check, install the wheel in a clean venv
 #                        outside the repo and run uasep-eval on a shipped policy by name
 #   make test-benchmarl -- BenchMARL's MAPPO on a custom task, in a venv of its own
@@ -68,10 +69,15 @@ FLOORS_TESTS := tests/test_envs.py tests/test_vector.py tests/test_conventions.p
 	tests/test_banks.py tests/test_shipped.py tests/test_pinned_numbers.py \
 	tests/test_checkpoint_layout.py tests/test_checkpoint_limits.py
 
+# Then a plain pytest without any extra (what a pip user runs on the sdist) collects every test
+# file: tests needing an extra skip (pytest.importorskip, conftest's hypothesis stand-ins),
+# none fails to import.
 test-floors: $(FLOORS_VENV)/.floors
 	@! $(FLOORS_VENV)/bin/python -c "import numba" 2>/dev/null || (echo "numba in the floors venv" && false)
 	$(FLOORS_VENV)/bin/python -m pip list --format=freeze | grep -iE "^(numpy|gymnasium|pettingzoo|scipy|tabulate)=="
 	cd $(CURDIR) && $(FLOORS_VENV)/bin/python -m pytest -q -p no:cacheprovider $(FLOORS_TESTS)
+	cd $(CURDIR) && $(FLOORS_VENV)/bin/python -m pytest -qq -p no:cacheprovider --collect-only \
+		tests > $(FLOORS_VENV)/collect.log 2>&1 || (tail -30 $(FLOORS_VENV)/collect.log && false)
 
 # sdist, then the wheel built from it (so the sdist is complete); the clean venv takes the
 # wheel's dependencies from pip's cache after the first run.

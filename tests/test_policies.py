@@ -2,8 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from conftest import given, settings, st
 
 from uasep_env import make_config
 from uasep_env.envs.core import EnvCore
