@@ -37,6 +37,7 @@ from uasep_env.observation_layout import ObservationLayout
 from uasep_env.registration import ENV_IDS, ENV_VERSION, ENV_VERSIONS, FIRST_VERSION
 from uasep_env.rewards import TERMS
 from uasep_env.scenarios import FAMILIES
+from uasep_env.scenarios.registry import ScenarioFamily
 
 ROOT = Path(__file__).resolve().parents[1]
 CARDS = ROOT / "docs" / "envs"
@@ -124,6 +125,14 @@ def random_episode_ends(env_id: str, seeds: range = RANDOM_SEEDS) -> list[tuple[
     return out
 
 
+def _summary(family: ScenarioFamily) -> str:
+    """The family's one-line summary; a mix's names its families (its own says "below")."""
+    if family.mix is None:
+        return family.summary
+    names = ", ".join(f"`{name}`" for name in family.mix.weights)
+    return f"One of the scenario families {names}, drawn per episode."
+
+
 def _random_summary(env_id: str) -> str:
     by_how: dict[str, list[str]] = {}
     for steps, how in random_episode_ends(env_id):
@@ -163,13 +172,13 @@ def render_card(env_id: str) -> str:
         "",
         f"![An episode of {env_id} under the paper's APF]({name}.gif)",
         "",
-        f"*The paper's APF ({{class}}`~uasep_env.policies.APF`), seed {GIF_SEED}, one frame "
+        f"*The paper's APF ({{class}}`uasep_env.policies.APF`), seed {GIF_SEED}, one frame "
         f"every {GIF_EVERY} steps ({GIF_EVERY * cfg.step_duration:g} s), drawn by "
-        "{class}`~uasep_env.viz.frames.Renderer`: the 3D view and the top view, UAV trails, "
+        "{class}`uasep_env.viz.frames.Renderer`: the 3D view and the top view, UAV trails, "
         "planned tracks (dotted), obstacles (red crosses) and their predicted reachable "
         "ellipsoids.*",
         "",
-        f"{family.summary} {family.parameters} (scenario family `{family.name}`, "
+        f"{_summary(family)} {family.parameters} (scenario family `{family.name}`, "
         "[Scenarios](../environment.md#scenarios)).",
         "",
         "| | |",
@@ -303,7 +312,7 @@ def render_index() -> str:
         rows.append(
             [
                 f"[`{env_id}`]({card_name(env_id)}.md)",
-                FAMILIES[cfg.scenario].summary,
+                _summary(FAMILIES[cfg.scenario]),
                 str(cfg.n_uavs),
                 str(cfg.n_obstacles),
                 _code(space.shape),
