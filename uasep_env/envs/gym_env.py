@@ -42,7 +42,7 @@ class FormationEnv(ViewMixin, gymnasium.Env):
     Episode end:
         Terminated on a collision (within ``uav.collision_distance``) or when a UAV is
         lost, farther than ``uav.lost_distance`` (300 m) from its planned position
-        (``info["lost"]``; random actions end episodes this way). Truncated at the time
+        (``info["lost"]``; uniformly random actions end most episodes so). Truncated at the time
         limit ``episode_duration`` or the end of the plan. The registered ids declare it as
         ``spec.max_episode_steps`` (1000 steps at the default 200 s), so ``gymnasium.make``
         adds a ``TimeLimit`` at the same step; for longer episodes pass

@@ -70,7 +70,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
         Termination, for every agent at once (the formation's mission fails): any UAV comes
         within ``uav.collision_distance`` of another UAV or an obstacle, or a UAV is lost,
         farther than ``uav.lost_distance`` (300 m) from its planned position
-        (``infos[agent]["lost"]``; random actions end episodes this way). Truncation: the
+        (``infos[agent]["lost"]``; uniformly random actions end most episodes so). Truncation: the
         time limit ``episode_duration``, or the end of the planned trajectory.
 
     Info:
