@@ -244,8 +244,8 @@ def _collision_course(kind: str) -> ScenarioFamily:
         parameters=(
             "The paper's straight plan and pattern; the obstacle flies straight at 3-12 m/s, "
             "never manoeuvres, at the altitude of a random UAV's plan, and reaches that UAV's "
-            "planned position at 45-60 % of the episode (at most of 200 s; at least 20 s in). Without avoidance "
-            "it collides; a safety test's encounter."
+            "planned position at 45-60 % of the episode (at most of 200 s; at least 20 s "
+            "in). Without avoidance it collides; a safety test's encounter."
         ),
         generate=generate,
     )
