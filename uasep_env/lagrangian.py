@@ -218,8 +218,8 @@ def apf_cost_budget(config: Any, seeds: Iterable[int], workers: int = 1) -> Cost
     from uasep_env.evaluation import evaluate
 
     cfg = make_config(config).replace(action={"mode": "direct"})
-    check(cfg.cost.region == 0.0, "cost.region", cfg.cost.region,
-          "must be 0 for a budget from the metrics (they do not time region intrusions)")  # fmt: skip
+    reason = "must be 0 for a budget from the metrics (they do not time region intrusions)"
+    check(cfg.cost.region == 0.0, "cost.region", cfg.cost.region, reason)
     seeds = [int(s) for s in seeds]
     check(len(seeds) > 0, "seeds", seeds, "must name at least one encounter")
     result = evaluate({"apf": "apf"}, cfg, seeds, workers=workers)

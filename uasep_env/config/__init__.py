@@ -18,6 +18,7 @@ from uasep_env.config.env import AS_PUBLISHED, FORMATION_PATTERNS, EnvConfig, ma
 from uasep_env.config.groups import (
     ACTION_MODES,
     FLIGHT_ALTITUDE,
+    REWARD_PRESETS,
     ActionConfig,
     AirspaceConfig,
     CostWeights,
@@ -25,7 +26,6 @@ from uasep_env.config.groups import (
     ObservationConfig,
     ObstacleConfig,
     PredictionConfig,
-    REWARD_PRESETS,
     RewardWeights,
     UAVConfig,
 )
@@ -45,6 +45,7 @@ __all__ = [
     "AS_PUBLISHED",
     "FLIGHT_ALTITUDE",
     "FORMATION_PATTERNS",
+    "REWARD_PRESETS",
     "SCENARIOS",
     "ActionConfig",
     "AirspaceConfig",
@@ -54,7 +55,6 @@ __all__ = [
     "ObservationConfig",
     "ObstacleConfig",
     "PredictionConfig",
-    "REWARD_PRESETS",
     "RewardWeights",
     "UAVConfig",
     "make_config",

@@ -2,10 +2,10 @@
 
 :class:`UAVConfig` (limits of the cooperative UAVs), :class:`NoiseConfig`,
 :class:`ObstacleConfig`, :class:`PredictionConfig`, :class:`ObservationConfig`,
-:class:`RewardWeights`, :class:`CostWeights` and :class:`ActionConfig`; :class:`~uasep_env.config.EnvConfig` holds
-one of each. Every numeric field is bounded to a physically meaningful range
-(:mod:`uasep_env.config.checks`); an invalid value raises a :class:`ValueError` naming the
-dotted field.
+:class:`RewardWeights`, :class:`CostWeights` and :class:`ActionConfig`;
+:class:`~uasep_env.config.EnvConfig` holds one of each. Every numeric field is bounded to a
+physically meaningful range (:mod:`uasep_env.config.checks`); an invalid value raises a
+:class:`ValueError` naming the dotted field.
 
 Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 """
@@ -49,6 +49,7 @@ __all__ = [
     "OBSTACLE_MODELS",
     "REPLAY_SPEED_SCALE_RANGE",
     "REPLAY_SPLITS",
+    "REWARD_PRESETS",
     "ActionConfig",
     "AirspaceConfig",
     "CostWeights",
@@ -56,7 +57,6 @@ __all__ = [
     "ObservationConfig",
     "ObstacleConfig",
     "PredictionConfig",
-    "REWARD_PRESETS",
     "RewardWeights",
     "UAVConfig",
 ]

@@ -9,9 +9,9 @@ import numpy as np
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_seed
+from uasep_env.costs import COST_TERMS
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
-from uasep_env.costs import COST_TERMS
 from uasep_env.rewards import REWARD_TERMS
 from uasep_env.viz.requirements import available_render_modes, checked_render_mode
 

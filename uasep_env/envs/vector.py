@@ -18,9 +18,9 @@ from gymnasium.vector.utils import batch_space
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_positive_int, check_seed
+from uasep_env.costs import COST_TERMS
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
-from uasep_env.costs import COST_TERMS
 from uasep_env.rewards import REWARD_TERMS, team_mean
 from uasep_env.viz.requirements import (
     available_render_modes,
