@@ -143,23 +143,29 @@ def test_sb3_cost_is_positive_exactly_on_loss():
     _assert_both_seen(seen)
 
 
-def _play(config: dict, read_cost: bool, steps: int = 150):
-    """A seeded episode with random actions: everything each step returns except the cost."""
+def _play(config: dict, read_cost: bool, steps: int = 200):
+    """A seeded episode on the collision course with small random actions: everything each
+    step returns except the cost, and each step's rewards recomputed from the world."""
+    from uasep_env.rewards import compute_rewards
+
     env = uasep_env.parallel_env(**config)
     obs, _ = env.reset(seed=11)
+    _collision_course(env.world)
     rng = np.random.default_rng(0)
-    out = [obs]
+    out, costs = [obs], []
     for _ in range(steps):
         if not env.agents:
             break
-        act = {a: rng.uniform(-1, 1, 3).astype(np.float32) for a in env.agents}
+        act = {a: rng.uniform(-0.2, 0.2, 3).astype(np.float32) for a in env.agents}
         obs, rew, term, trunc, infos = env.step(act)
         if read_cost:
-            _ = [(i["cost"], dict(i["cost_terms"])) for i in infos.values()]
+            costs.append([i["cost"] for i in infos.values()])
         for info in infos.values():
             del info["cost"], info["cost_terms"]
+        own, _ = compute_rewards(env.world, env.config.reward)
+        np.testing.assert_array_equal(list(rew.values()), own[0])  # nothing but the terms
         out.append((obs, rew, term, trunc, infos, env.world.uav_pos.copy()))
-    return out
+    return out, costs
 
 
 def _same(a, b) -> None:
@@ -169,12 +175,15 @@ def _same(a, b) -> None:
 
 
 def test_cost_changes_no_reward_and_no_episode():
-    cfg = {"scenario": "crossing", "episode_duration": 30.0}
-    base = _play(cfg, read_cost=False)
-    _same(base, _play(cfg, read_cost=True))
+    base, _ = _play(CFG, read_cost=False)
+    read, costs = _play(CFG, read_cost=True)
+    _same(base, read)
+    assert np.max(costs) > 0 and np.min(costs) == 0  # the episode has losses and none
     # Other cost weights (the region term on): the same episode and rewards, bit for bit.
-    heavy = {**cfg, "cost": {"separation_uav": 7.0, "separation_obstacle": 0.0, "region": 3.0}}
-    _same(base, _play(heavy, read_cost=True))
+    heavy = {**CFG, "cost": {"separation_uav": 7.0, "separation_obstacle": 0.0, "region": 3.0}}
+    other, other_costs = _play(heavy, read_cost=True)
+    _same(base, other)
+    assert other_costs != costs
 
 
 def test_cost_weights_combine_terms():
