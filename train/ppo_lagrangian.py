@@ -48,7 +48,8 @@ COST_FILES = ("cost_progress.csv", "cost_curves.png", "budget.json")
 class Args(ppo_shared.Args):
     """``ppo_shared.Args`` with the constraint's options."""
 
-    config: str = "reward=task"  # env overrides; the task reward by default
+    # env overrides; keep reward=task in them for the task reward (this default)
+    config: str = "reward=task"
     cost: str = "cost"  # the constrained cost: "cost" or one of uasep_env.costs.COST_TERMS
     cost_limit: str = "apf"  # a number >= 0, "apf" or "apf-rate" (module docstring)
     budget_episodes: int = 1000  # validation encounters the APF's budget is measured on
@@ -154,6 +155,8 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
 
     torch.set_num_threads(args.torch_threads)
     config = ppo_shared.make_env_config(args)
+    task = config.reward == config.reward.task()
+    print(f"reward: {'the task reward' if task else config.reward} (--config {args.config!r})")
     out = Path(args.out_dir)
     prepare_out_dir(out, "", args.overwrite)
     for name in COST_FILES:  # --overwrite: ppo_shared's files are gone, ours too

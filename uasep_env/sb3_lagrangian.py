@@ -46,7 +46,10 @@ from uasep_env.lagrangian import PIDLagrangian
 
 __all__ = ["COST_FIELDS", "LagrangianCallback", "cost_reader", "plot_cost_curves"]
 
-#: Columns of the callback's CSV (one row per rollout).
+#: Columns of the callback's CSV, one row per rollout: agent-steps, agent-episodes ended so
+#: far (one per UAV), the mean episode cost per agent of the rollout's episodes (what the
+#: multiplier was updated with; empty: none ended) and of the last 200, the limit, and the
+#: multiplier after the update.
 COST_FIELDS = (
     "agent_steps",
     "episodes",
