@@ -66,7 +66,7 @@ $(FLOORS_VENV)/.floors: .ci/floors.txt pyproject.toml
 FLOORS_TESTS := tests/test_envs.py tests/test_vector.py tests/test_conventions.py \
 	tests/test_config.py tests/test_packaging.py tests/test_replay.py tests/test_real_traffic.py \
 	tests/test_banks.py tests/test_shipped.py tests/test_pinned_numbers.py \
-	tests/test_checkpoint_layout.py tests/test_checkpoint_limits.py
+	tests/test_checkpoint_layout.py tests/test_checkpoint_limits.py tests/test_costs.py
 
 test-floors: $(FLOORS_VENV)/.floors
 	@! $(FLOORS_VENV)/bin/python -c "import numba" 2>/dev/null || (echo "numba in the floors venv" && false)
