@@ -67,7 +67,7 @@ $(FLOORS_VENV)/.floors: .ci/floors.txt pyproject.toml
 FLOORS_TESTS := tests/test_envs.py tests/test_vector.py tests/test_conventions.py \
 	tests/test_config.py tests/test_packaging.py tests/test_replay.py tests/test_real_traffic.py \
 	tests/test_banks.py tests/test_shipped.py tests/test_pinned_numbers.py \
-	tests/test_checkpoint_layout.py tests/test_checkpoint_limits.py
+	tests/test_checkpoint_layout.py tests/test_checkpoint_limits.py tests/test_costs.py
 
 # Then a plain pytest without any extra (what a pip user runs on the sdist) collects every test
 # file: tests needing an extra skip (pytest.importorskip, conftest's hypothesis stand-ins),

@@ -51,6 +51,7 @@ ENV_SECTIONS = (
     "Action space",
     "Observation space",
     "Rewards",
+    "Cost",
     "Episode end",
     "Info",
     "Configuration",

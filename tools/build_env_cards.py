@@ -4,6 +4,7 @@ Every fact on a card is read from the code when the card is written: the spaces 
 shapes from live environments (the PettingZoo and the Gymnasium view of the id), the
 observation layout (:class:`uasep_env.observation_layout.ObservationLayout`), the reward
 terms and weights (:data:`uasep_env.rewards.TERMS`, the id's ``reward`` config), the
+cost terms and weights (:data:`uasep_env.costs.TERMS`, the id's ``cost`` config), the
 limits that end an episode (the id's ``uav`` config), how uniformly random actions end
 episodes (played here), the arguments (:class:`uasep_env.config.EnvConfig`'s fields, with
 the id's values) and the version history (:data:`uasep_env.registration.ENV_VERSIONS`).
@@ -33,6 +34,7 @@ import numpy as np
 import uasep_env
 from uasep_env.atomic import atomic_write
 from uasep_env.config import EnvConfig, make_config
+from uasep_env.costs import TERMS as COST_TERMS
 from uasep_env.observation_layout import ObservationLayout
 from uasep_env.registration import ENV_IDS, ENV_VERSION, ENV_VERSIONS, FIRST_VERSION
 from uasep_env.rewards import TERMS
@@ -244,6 +246,22 @@ def render_card(env_id: str) -> str:
         "",
         f"Shared fraction `reward.shared` = {cfg.reward.shared:g} (each agent's reward mixes "
         "in the team's mean by this much).",
+        "",
+        "## Costs",
+        "",
+        "The cost channel of constrained RL, beside the reward and in none of it "
+        "([Costs](../environment.md#costs)): per agent, the weighted sum of indicator terms, "
+        'each 1 in a step in which its safety flag holds; `infos[agent]["cost"]` and '
+        '`infos[agent]["cost_terms"]` (the Gymnasium view: `info["cost"]`, the agents\' '
+        "mean).",
+        "",
+        _table(
+            ["term", "weight", "1 when"],
+            [
+                [_code(c.name), f"{getattr(cfg.cost, c.name):g}", f'`infos[agent]["{c.safety}"]`']
+                for c in COST_TERMS
+            ],
+        ),
         "",
         "## Episode end",
         "",

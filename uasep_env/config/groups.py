@@ -2,10 +2,10 @@
 
 :class:`UAVConfig` (limits of the cooperative UAVs), :class:`NoiseConfig`,
 :class:`ObstacleConfig`, :class:`PredictionConfig`, :class:`ObservationConfig`,
-:class:`RewardWeights` and :class:`ActionConfig`; :class:`~uasep_env.config.EnvConfig` holds
-one of each. Every numeric field is bounded to a physically meaningful range
-(:mod:`uasep_env.config.checks`); an invalid value raises a :class:`ValueError` naming the
-dotted field.
+:class:`RewardWeights`, :class:`CostWeights` and :class:`ActionConfig`;
+:class:`~uasep_env.config.EnvConfig` holds one of each. Every numeric field is bounded to a
+physically meaningful range (:mod:`uasep_env.config.checks`); an invalid value raises a
+:class:`ValueError` naming the dotted field.
 
 Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 """
@@ -49,8 +49,10 @@ __all__ = [
     "OBSTACLE_MODELS",
     "REPLAY_SPEED_SCALE_RANGE",
     "REPLAY_SPLITS",
+    "REWARD_PRESETS",
     "ActionConfig",
     "AirspaceConfig",
+    "CostWeights",
     "NoiseConfig",
     "ObservationConfig",
     "ObstacleConfig",
@@ -394,6 +396,62 @@ class RewardWeights:
         for f in fields(self):
             check_finite(f"reward.{f.name}", getattr(self, f.name), MAX_WEIGHT)
         check(0.0 <= self.shared <= 1.0, "reward.shared", self.shared, "must be in [0, 1]")
+
+    @classmethod
+    def task(cls) -> RewardWeights:
+        """The task reward for constrained training: no separation or collision terms.
+
+        The default weights of ``deviation``, ``control``, ``smoothness`` and ``progress``,
+        every separation term and the collision term at 0: safety is left to the cost
+        channel (:mod:`uasep_env.costs`) and its constraint. A step alive still earns
+        between 0.75 and 1 (``uasep_env.rewards.reward_bounds``), so ending an episode
+        early (a collision, a lost UAV) never pays. ``make_config(reward="task")``.
+        """
+        return cls(separation_inner=0.0, separation_obstacle=0.0, separation_region=0.0,
+                   collision=0.0)  # fmt: skip
+
+    @classmethod
+    def preset(cls, name: str) -> RewardWeights:
+        """The named weights of :data:`REWARD_PRESETS` (``make_config(reward=name)``).
+
+        Raises:
+            ValueError: An unknown name, named with the presets.
+        """
+        check(name in REWARD_PRESETS, "reward", name, f"must be one of {REWARD_PRESETS} or a dict")
+        return cls() if name == "default" else cls.task()
+
+
+#: Names ``reward=`` accepts in place of a dict (:meth:`RewardWeights.preset`): the default
+#: weights, or the task reward of constrained training (:meth:`RewardWeights.task`).
+REWARD_PRESETS = ("default", "task")
+
+
+@dataclass(frozen=True, kw_only=True)
+class CostWeights:
+    """Weights of the named cost terms (see :mod:`uasep_env.costs`).
+
+    Each agent's cost in a step is ``sum_k w_k * term_k``, each term an indicator (1 in a
+    step in which the condition holds, else 0), so a weight is a cost per environment step
+    (dimensionless). The cost changes no reward and no episode; constrained training
+    (:mod:`uasep_env.lagrangian`) bounds its expected sum over an episode.
+
+    Attributes:
+        separation_uav: Cost per step in loss of separation with another UAV (closer than
+            ``uav.separation_distance`` during the step).
+        separation_obstacle: Cost per step in loss of separation with an obstacle (closer
+            than ``uav.obstacle_separation`` during the step).
+        region: Cost per step inside an obstacle's predicted reachable region (0 by
+            default: the region is a prediction, not a loss of separation; with a weight,
+            the cost is also positive inside it).
+    """
+
+    separation_uav: float = 1.0  # cost per step
+    separation_obstacle: float = 1.0  # cost per step
+    region: float = 0.0  # cost per step
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            check_positive(f"cost.{f.name}", getattr(self, f.name), allow_zero=True, hi=MAX_WEIGHT)
 
 
 #: Names accepted for ``ActionConfig.mode`` (see :mod:`uasep_env.actions`).

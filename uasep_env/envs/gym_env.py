@@ -9,6 +9,7 @@ import numpy as np
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_seed
+from uasep_env.costs import COST_TERMS
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS
@@ -39,13 +40,19 @@ class FormationEnv(ViewMixin, gymnasium.Env):
         wrappers and TorchRL batch them; the PettingZoo view nests them in
         ``reward_terms``).
 
+    Cost:
+        ``info["cost"]``: the mean of the agents' costs (:mod:`uasep_env.costs`; > 0
+        exactly when a UAV has lost separation, with the default ``cost`` weights),
+        ``info["costs"]`` each agent's and ``info["cost_<term>"]`` the mean of each named
+        term. In no reward.
+
     Episode end:
         Terminated on a collision (within ``uav.collision_distance``) or when a UAV is
         lost, farther than ``uav.lost_distance`` (300 m) from its planned position
-        (``info["lost"]``; uniformly random actions end most episodes so). Truncated at the time
-        limit ``episode_duration`` or the end of the plan. The registered ids declare it as
-        ``spec.max_episode_steps`` (1000 steps at the default 200 s), so ``gymnasium.make``
-        adds a ``TimeLimit`` at the same step; for longer episodes pass
+        (``info["lost"]``; uniformly random actions end most episodes so). Truncated at the
+        time limit ``episode_duration`` or the end of the plan. The registered ids declare it
+        as ``spec.max_episode_steps`` (1000 steps at the default 200 s), so
+        ``gymnasium.make`` adds a ``TimeLimit`` at the same step; for longer episodes pass
         ``max_episode_steps`` to ``gymnasium.make`` as well (the earlier limit wins).
         Stepping a finished episode raises ``RuntimeError`` until :meth:`reset`.
 
@@ -106,6 +113,9 @@ class FormationEnv(ViewMixin, gymnasium.Env):
             "rewards": res.rewards[0].copy(),
             **{"reward_" + k: float(res.terms[k][0].mean()) for k in REWARD_TERMS},
             **{k: v[0].copy() for k, v in res.safety.items()},
+            "cost": float(res.cost[0].mean()),
+            "costs": res.cost[0].copy(),
+            **{"cost_" + k: float(res.cost_terms[k][0].mean()) for k in COST_TERMS},
             "clipped_actions": clipped_counts(outside, (n,)),
         }
         terminated, truncated = bool(res.terminated[0]), bool(res.truncated[0])

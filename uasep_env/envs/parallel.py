@@ -77,8 +77,10 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
         ``reward_terms``, ``min_uav_distance``, ``min_obstacle_distance``,
         ``min_region_distance`` (m), the flags ``loss_of_separation_uav``,
         ``loss_of_separation_obstacle``, ``in_reachable_region``, ``collision``, ``lost``,
-        and ``clipped_actions``: how many components of the agent's action were clipped to
-        the box.
+        ``clipped_actions``: how many components of the agent's action were clipped to the
+        box, and the cost channel: ``cost`` and its unweighted ``cost_terms``
+        (:mod:`uasep_env.costs`; > 0 exactly when the UAV has lost separation, with the
+        default ``cost`` weights; in no reward).
 
     Configuration:
         Any :class:`~uasep_env.config.EnvConfig` field as a keyword (nested dicts for the

@@ -191,6 +191,66 @@ def _large_formation(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpe
     return assemble("large_formation", config, lay, obstacles)
 
 
+# ---- Collision courses: encounters that end in a collision unless the formation avoids ------
+_COLLISION_MEET_RANGE = (0.45, 0.6)  # fraction of the episode (at most the 200 s timeline)
+_COLLISION_MIN_MEET_S = 20.0  # so that no short episode starts inside the separation
+_COLLISION_HEADINGS = {  # the obstacle's heading relative to the plan's (rad), by kind
+    "head_on": lambda rng: math.pi,
+    "crossing": lambda rng: (1.0 if rng.random() < 0.5 else -1.0) * math.pi / 2,
+}
+
+
+def _collision_course(kind: str) -> ScenarioFamily:
+    """A non-manoeuvring obstacle aimed exactly at a UAV's planned position, at its altitude.
+
+    Safety tests need encounters that plan tracking alone does not survive: the paper's
+    obstacle passes 10 m below the formation, and every drawn family's obstacle has an
+    altitude offset and a pilot who may turn away. Here nothing but the controller separates
+    the aircraft.
+    """
+
+    def generate(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
+        n, ob = config.n_uavs, config.obstacle
+        lay = layout(  # in formation, at cruise speed along the plan
+            config,
+            straight_plan(config),
+            start=lambda slots, d: (slots.copy(), np.tile(d * config.cruise_speed, (n, 1))),
+        )
+        timeline = min(config.episode_duration, TIMELINE_S)
+        meet = max(rng.uniform(*_COLLISION_MEET_RANGE) * timeline, _COLLISION_MIN_MEET_S)
+        who = int(rng.integers(n))
+        target = planned_position(lay.plan, meet, lay.slots)[who]
+        heading = _COLLISION_HEADINGS[kind](rng)  # the plan heads north (0 rad)
+        speed = rng.uniform(*SPEED_RANGE_MPS)
+        pos = target.copy()
+        pos[:2] -= speed * meet * np.array([math.cos(heading), math.sin(heading)])
+        hold = 2.0 * config.episode_duration  # the pilot never reacts
+        first = ObstacleStart(
+            pos=pos,
+            heading=heading,
+            speed=speed,
+            max_turn_rate=ob.max_turn_rate,
+            max_climb_rate=ob.max_climb_rate,
+            climb_rate=0.0,
+            hold_until=hold,
+        )
+        obstacles = obstacle_slots(config, lambda: first, lambda: _background(rng, config, lay))
+        return assemble(f"collision_{kind}", config, lay, obstacles)
+
+    what = "head-on" if kind == "head_on" else "at right angles, from either side"
+    return ScenarioFamily(
+        name=f"collision_{kind}",
+        summary=f"A collision course: a straight-flying obstacle meets a UAV {what}.",
+        parameters=(
+            "The paper's straight plan and pattern; the obstacle flies straight at 3-12 m/s, "
+            "never manoeuvres, at the altitude of a random UAV's plan, and reaches that UAV's "
+            "planned position at 45-60 % of the episode (at most of 200 s; at least 20 s "
+            "in). Without avoidance it collides; a safety test's encounter."
+        ),
+        generate=generate,
+    )
+
+
 def _random(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
     return FAMILIES[RANDOM_MIX.draw(rng)].generate(rng, config)
 
@@ -245,6 +305,10 @@ register(
         defaults={"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
     )
 )
+
+# Collision courses: not in RANDOM_MIX, so no existing bank moves.
+for _kind in _COLLISION_HEADINGS:
+    register(_collision_course(_kind))
 
 # Recorded aircraft (issue 20): not in RANDOM_MIX, so no existing bank moves.
 register(
