@@ -575,3 +575,19 @@ def test_serial_loops_with_one_thread(monkeypatch):
     assert not common._parallel(10 * common.PARALLEL_MIN)
     monkeypatch.setattr(common, "_threads", [2])
     assert common._parallel(common.PARALLEL_MIN) and not common._parallel(common.PARALLEL_MIN - 1)
+
+
+def test_noise_threads_take_the_process_share(monkeypatch):
+    """The noise pool never starts more threads than the process's share of the cores."""
+    from uasep_env import cores, noise
+
+    calls = []
+    monkeypatch.setattr(noise, "process_share", lambda: 1)
+    noise._run_chunked(calls.append, np.arange(4 * noise.REFILL_CHUNK))
+    assert len(calls) == 1  # one share: no pool, one call
+    monkeypatch.setattr(noise, "process_share", lambda: 2)
+    monkeypatch.setattr(noise, "_pool", [])
+    noise._run_chunked(calls.append, np.arange(4 * noise.REFILL_CHUNK))
+    assert len(calls) == 3 and noise._pool[0]._max_workers == 2
+    noise._pool[0].shutdown()
+    assert cores.core_share({"UASEP_WORKERS": "2"}, cores=2) == 1

@@ -4,23 +4,21 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 
 import numba
+
+from uasep_env.cores import core_share, explicit_threads
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 #: Points per call above which the loop is spread over the cores (thread start-up costs).
 PARALLEL_MIN = 2048
-#: The fewest threads the parallel loops are chosen with by default: on the project's 2-core
-#: machine two threads
-#: gained nothing at 4096 environments (0.406M against 0.404M agent-steps/s) and lost most
-#: of the throughput under load, where a loop waits for its slowest thread.
+#: The fewest threads the parallel loops are chosen with by default: on the project's
+#: 2-core machine two threads gained nothing at 4096 environments (0.406M against 0.404M
+#: agent-steps/s) and lost most of the throughput under load, where a loop waits for its
+#: slowest thread.
 PARALLEL_MIN_THREADS = 4
-#: ``UASEP_THREADS=N``: the kernels' threads in this process (the user's choice wins).
-THREADS_VARIABLE = "UASEP_THREADS"
-#: ``UASEP_WORKERS=N``: set by the project's tools in the N processes they start side by
-#: side, which then share the cores the machine gives them.
-WORKERS_VARIABLE = "UASEP_WORKERS"
 # numba's OpenMP layer (GNU) kills a forked child that runs a parallel loop after its
 # parent has run one; forked children (multiprocessing workers) use the serial loops.
 _forked = [False]
@@ -28,38 +26,20 @@ os.register_at_fork(after_in_child=lambda: _forked.__setitem__(0, True))
 _threads: list[int] = []
 
 
-def _positive_int(name: str, value: str) -> int:
-    try:
-        n = int(value)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise ValueError(f"{name}={value!r}: must be a whole number >= 1")
-    return n
+def decide_threads(environ: Mapping[str, str] | None = None, cores: int | None = None) -> int:
+    """The threads of this process's compiled loops (1: the serial loops).
 
-
-def decide_threads(environ: dict | None = None, cores: int | None = None) -> int:
-    """The threads this process's kernels may use: its share of the cores it may run on.
-
-    ``UASEP_THREADS`` if set (the user's choice: 1 runs the serial loops); else the cores of
-    this process's affinity mask divided among the ``UASEP_WORKERS`` processes started side
-    by side (1 if unset), or 1 where that share is under :data:`PARALLEL_MIN_THREADS`.
+    ``UASEP_THREADS`` if set (the user's choice); else this process's share of the cores
+    (:func:`uasep_env.cores.core_share`), or 1 where that share is under
+    :data:`PARALLEL_MIN_THREADS`.
 
     Args:
         environ: The environment variables (default ``os.environ``).
-        cores: The cores this process may use (default: its affinity mask).
-
-    Raises:
-        ValueError: For a variable that is not a whole number >= 1, naming it.
+        cores: The cores this process may run on (default: its affinity mask).
     """
-    env = os.environ if environ is None else environ
-    if env.get(THREADS_VARIABLE, "").strip():
-        return _positive_int(THREADS_VARIABLE, env[THREADS_VARIABLE])
-    if cores is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
-    workers = env.get(WORKERS_VARIABLE, "").strip()
-    share = cores // _positive_int(WORKERS_VARIABLE, workers) if workers else cores
-    return share if share >= PARALLEL_MIN_THREADS else 1
+    share = core_share(environ, cores)
+    chosen = explicit_threads(environ) is not None
+    return share if chosen or share >= PARALLEL_MIN_THREADS else 1
 
 
 def threads() -> int:
