@@ -56,7 +56,15 @@ def test_nearest_point_kernel_matches_numpy_bit_for_bit():
         np.testing.assert_array_equal(g, w)
 
 
-def test_parallel_and_serial_loops_agree():
+@pytest.fixture
+def parallel_loops(monkeypatch):
+    """The parallel loops run for big calls, whatever this machine's core count decides."""
+    from uasep_env._kernels import common
+
+    monkeypatch.setattr(common, "_threads", [2])
+
+
+def test_parallel_and_serial_loops_agree(parallel_loops):
     from uasep_env._kernels import common
 
     pts, ctr, ax, hd = _cases(np.random.default_rng(1), 2 * common.PARALLEL_MIN)
@@ -235,7 +243,7 @@ def test_episodes_are_bit_identical_with_and_without_numba(monkeypatch):
         np.testing.assert_array_equal(f, s)
 
 
-def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
+def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form(parallel_loops):
     from uasep_env._kernels import common
 
     rng = np.random.default_rng(4)
@@ -266,7 +274,7 @@ def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
         {"n_uavs": 4, "n_obstacles": 0},
     ],
 )
-def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
+def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config, parallel_loops):
     from uasep_env import observation
     from uasep_env.envs.core import EnvCore
 
@@ -406,7 +414,7 @@ def test_formation_frame_kernel_matches_numpy_including_fallbacks():
 
 
 @pytest.mark.parametrize(("n_envs", "shared"), [(3, 0.0), (800, 0.4)])  # serial, parallel
-def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shared):
+def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shared, parallel_loops):
     from uasep_env import make_config, rewards
     from uasep_env.envs.core import EnvCore
 
@@ -491,7 +499,7 @@ def _big_rollout(_: int = 0) -> np.ndarray:
     return res.obs
 
 
-def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel():
+def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel(parallel_loops):
     """numba's GNU OpenMP layer would kill the child; forked children use the serial loops."""
     import multiprocessing
 
@@ -542,3 +550,44 @@ def test_install_time_warm_up_command_runs_without_numba():
         check=True,
     )
     assert "numba kernels: not in use" in out.stdout
+
+
+def test_threads_are_the_process_share_of_its_cores():
+    """N processes started side by side never ask for more threads than the cores."""
+    from uasep_env._kernels.common import PARALLEL_MIN_THREADS, decide_threads
+
+    assert PARALLEL_MIN_THREADS == 4  # the cases below are written for it
+    assert decide_threads({}, cores=16) == 16
+    assert decide_threads({"UASEP_WORKERS": "4"}, cores=16) == 4
+    assert decide_threads({"UASEP_WORKERS": "8"}, cores=16) == 1  # 2 threads do not pay
+    assert decide_threads({}, cores=2) == 1
+    assert decide_threads({"UASEP_WORKERS": "3"}, cores=2) == 1
+    assert decide_threads({"UASEP_THREADS": "2", "UASEP_WORKERS": "8"}, cores=16) == 2
+    for name, value in (("UASEP_THREADS", "0"), ("UASEP_WORKERS", "two")):
+        with pytest.raises(ValueError, match=f"{name}='{value}'"):
+            decide_threads({name: value}, cores=4)
+
+
+def test_serial_loops_with_one_thread(monkeypatch):
+    from uasep_env._kernels import common
+
+    monkeypatch.setattr(common, "_threads", [1])
+    assert not common._parallel(10 * common.PARALLEL_MIN)
+    monkeypatch.setattr(common, "_threads", [2])
+    assert common._parallel(common.PARALLEL_MIN) and not common._parallel(common.PARALLEL_MIN - 1)
+
+
+def test_noise_threads_take_the_process_share(monkeypatch):
+    """The noise pool never starts more threads than the process's share of the cores."""
+    from uasep_env import cores, noise
+
+    calls = []
+    monkeypatch.setattr(noise, "process_share", lambda: 1)
+    noise._run_chunked(calls.append, np.arange(4 * noise.REFILL_CHUNK))
+    assert len(calls) == 1  # one share: no pool, one call
+    monkeypatch.setattr(noise, "process_share", lambda: 2)
+    monkeypatch.setattr(noise, "_pool", [])
+    noise._run_chunked(calls.append, np.arange(4 * noise.REFILL_CHUNK))
+    assert len(calls) == 3 and noise._pool[0]._max_workers == 2
+    noise._pool[0].shutdown()
+    assert cores.core_share({"UASEP_WORKERS": "2"}, cores=2) == 1

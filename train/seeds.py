@@ -118,7 +118,9 @@ def train_all(recipe: str, out: Path, seeds: int, parallel: int, extra: list[str
             # The log lies beside the run folder: a recipe refuses a used --out-dir.
             log = (out / f"seed_{k}.log").open("a")
             print(f"seed {k}: {' '.join(cmd[1:])}", flush=True)
-            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=recipe_env())
+            # The seeds side by side share the cores: each recipe's kernels take its share.
+            env = dict(recipe_env(), UASEP_WORKERS=str(parallel))
+            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)
             running.append((k, proc, log))
         time.sleep(1.0)
         for item in list(running):

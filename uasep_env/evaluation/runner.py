@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
@@ -336,7 +337,10 @@ def _run_tasks(
                 progress(sizes[ci])
         return done
     ctx = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx)
+    n = min(workers, len(tasks))
+    pool = ProcessPoolExecutor(
+        max_workers=n, mp_context=ctx, initializer=_share_cores, initargs=(n,)
+    )
     try:
         futures: dict[Future[Any], tuple[str, int]] = {
             pool.submit(_run_chunk, *args): (label, ci) for label, ci, args in tasks
@@ -351,6 +355,11 @@ def _run_tasks(
         raise
     pool.shutdown()
     return done
+
+
+def _share_cores(workers: int) -> None:
+    """In a worker: its compiled kernels take its share of the cores (``UASEP_WORKERS``)."""
+    os.environ.setdefault("UASEP_WORKERS", str(workers))
 
 
 def _run_on_ray(
