@@ -168,3 +168,19 @@ def test_a_recipe_without_torch_is_one_line_naming_the_extra(monkeypatch, tmp_pa
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "needs torch" in err and "uasep-env[train]" in err
     assert not (tmp_path / "run").exists()
+
+
+def test_report_help_lists_every_flag_with_its_default(capsys):
+    from uasep_env.reporting.scaling import build_parser, cli
+
+    parser = build_parser("uasep-report")
+    text = parser.format_help()
+    for action in parser._actions:
+        if action.option_strings and action.dest != "help":
+            assert action.option_strings[0] in text
+    assert text.count("(default:") == len(parser._actions) - 1  # all but --help
+    with pytest.raises(SystemExit) as info:
+        cli(["--episodes", "-3"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "argument --episodes" in err
