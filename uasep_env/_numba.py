@@ -48,9 +48,10 @@ def _disabled() -> bool:
 
 #: What :func:`note_slow_kernels` says when numba is not installed.
 SLOW_NOTE = (
-    "note: numba is not installed, so the environment runs its numpy reference code, about "
-    '4x slower (same numbers); pip install "uasep-env[fast]" for the compiled kernels, or '
-    "set UASEP_NUMBA=0 to silence this note"
+    "note: numba is not installed, so the environment runs its numpy reference code: the "
+    "same numbers, slower (an evaluation takes about twice as long); "
+    'pip install "uasep-env[fast]" for the compiled kernels, or set UASEP_NUMBA=0 to '
+    "silence this note"
 )
 
 
