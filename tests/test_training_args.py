@@ -52,7 +52,6 @@ BAD = [
     ("--torch-threads", "0"),
     ("--config", "nokey"),
     ("--config", "dt=-1"),
-    ("--resume", "/no/such/checkpoint"),
 ]
 
 RECIPES = {
@@ -158,6 +157,18 @@ def test_recipe_help_lists_every_flag_with_its_default(capsys):
     assert text.count("(default:") >= len(mappo.Args.__dataclass_fields__)
     assert main(["nope"]) == 2
     assert "unknown recipe 'nope'" in capsys.readouterr().err
+
+
+def test_a_missing_resume_folder_is_one_line_before_anything_runs(tmp_path, capsys):
+    from uasep_env.training.cli import main
+
+    pytest.importorskip("torch")
+    pytest.importorskip("stable_baselines3")
+    argv = ["ppo_shared", "--resume", str(tmp_path / "nope"), "--out-dir", str(tmp_path / "r")]
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1 and "no such checkpoint folder" in err
+    assert not (tmp_path / "r").exists()
 
 
 def test_a_recipe_without_torch_is_one_line_naming_the_extra(monkeypatch, tmp_path, capsys):

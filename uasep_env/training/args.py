@@ -124,13 +124,6 @@ def out_path(text: str) -> str:
     return text
 
 
-def optional_dir(text: str) -> str:
-    """An argparse type: ``""`` (none) or an existing folder."""
-    if text and not Path(text).is_dir():
-        raise argparse.ArgumentTypeError(f"no such folder {text!r}")
-    return text
-
-
 def config_overrides(text: str) -> str:
     """An argparse type: space-separated ``KEY=VALUE`` env overrides (checked for syntax)."""
     from uasep_env.evaluation.overrides import parse_config_overrides
@@ -225,7 +218,9 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "checkpoint_every": (positive_int, "agent-steps between checkpoints"),
     "eval_episodes": (non_negative_int, "validation encounters at the end"),
     "out_dir": (out_path, "the run's folder"),
-    "resume": (optional_dir, "a checkpoint folder to continue from"),
+    # Checked when the run starts (rundir.check_checkpoint: one line, status 1, naming what
+    # the folder lacks), as it always was.
+    "resume": (str, "a checkpoint folder to continue from"),
     "overwrite": (None, "replace a previous run's files in --out-dir"),
     "tensorboard": (None, "also write TensorBoard logs (out_dir/tb)"),
     "torch_threads": (positive_int, "torch CPU threads"),
