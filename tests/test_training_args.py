@@ -195,3 +195,20 @@ def test_report_help_lists_every_flag_with_its_default(capsys):
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "argument --episodes" in err
+
+
+def test_a_recipe_may_extend_args_with_fields_of_its_own(capsys):
+    from dataclasses import dataclass
+
+    from uasep_env.training.args import Args, parse_args
+
+    @dataclass
+    class Mine(Args):
+        cost_limit: float = 0.1
+        lagrange_steps: int = 3
+        dual: bool = True
+
+    args = parse_args(["--cost-limit", "0.5", "--no-dual"], Mine())
+    assert (args.cost_limit, args.lagrange_steps, args.dual) == (0.5, 3, False)
+    _refused(lambda argv: parse_args(argv, Mine()), ["--cost-limit", "nan"], capsys,
+             "--cost-limit")  # fmt: skip

@@ -88,6 +88,10 @@ non_negative_float = _bounded(float, 0.0)
 unit_interval = _bounded(float, 0.0, 1.0)
 
 
+def _int(text: str) -> int:
+    return int(_number(int, text))
+
+
 def finite_float(text: str) -> float:
     """An argparse type: any finite number."""
     return float(_number(float, text))
@@ -240,6 +244,9 @@ def build_parser(
 ) -> OneLineParser:
     """The parser of a recipe: one validated ``--kebab-case`` flag per field of ``defaults``.
 
+    A field listed in :data:`FIELDS` gets its validator and help; a subclass's other fields
+    are parsed by their annotation (``int``, a finite ``float``, ``bool`` on/off, ``str``).
+
     Args:
         defaults: The recipe's defaults (an :class:`Args` or a subclass's instance).
         prog: The program name in messages (default: the script's).
@@ -253,7 +260,10 @@ def build_parser(
     for f in dataclasses.fields(base):
         flag = "--" + f.name.replace("_", "-")
         default = getattr(base, f.name)
-        validator, text = FIELDS[f.name]
+        # A recipe's own field without an entry in FIELDS is typed by its annotation.
+        kind = getattr(f.type, "__name__", f.type)  # a type, or its name under PEP 563
+        fallback = {"bool": None, "int": _int, "float": finite_float}.get(str(kind), str)
+        validator, text = FIELDS.get(f.name, (fallback, f.name.replace("_", " ")))
         if validator is None:
             parser.add_argument(
                 flag, action=argparse.BooleanOptionalAction, default=default, help=text
