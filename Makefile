@@ -7,6 +7,7 @@
 #                        every test file collects there (no import error without the extras)
 #   make test-package -- build wheel + sdist, twine check, install the wheel in a clean venv
 #                        outside the repo and run uasep-eval on a shipped policy by name
+#                        (and uasep-train / uasep-report --help there, without torch)
 #   make test-benchmarl -- BenchMARL's MAPPO on a custom task, in a venv of its own
 #   make docs   -- the documentation site, warnings as errors
 PYTHON ?= python3
@@ -91,6 +92,11 @@ test-package: $(VENV)/.all
 	cd $(PKG_DIR) && venv/bin/uasep-eval --policy ppo_residual_apf,apf \
 		--config episode_duration=20 --json run.json
 	cd $(PKG_DIR) && ! venv/bin/python -c "import matplotlib" 2>/dev/null
+	cd $(PKG_DIR) && ! venv/bin/python -c "import torch" 2>/dev/null
+	cd $(PKG_DIR) && for r in "" ppo_shared ppo_residual_apf mappo; do \
+		venv/bin/uasep-train $$r --help > train_help.txt || exit 1; done
+	cd $(PKG_DIR) && grep -q -- "--checkpoint-every CHECKPOINT_EVERY" train_help.txt
+	cd $(PKG_DIR) && venv/bin/uasep-report --help | grep -q -- "--held-out-episodes"
 	cd $(PKG_DIR) && mkdir sdist && tar xzf dist/*.tar.gz -C sdist --strip-components 1
 	cd $(PKG_DIR)/sdist && $(abspath $(BIN))/python -m pytest -q -p no:cacheprovider \
 		--collect-only tests > collect.log || (tail -30 collect.log && false)

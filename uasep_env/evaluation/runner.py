@@ -28,7 +28,17 @@ from uasep_env.evaluation.results import (
     PolicyResult,
 )
 from uasep_env.metrics import aggregate, episode_metrics
-from uasep_env.policies import POLICIES, Policy, RandomPolicy, check_policy_name, make_policy
+from uasep_env.policies import (
+    POLICIES,
+    CheckpointError,
+    Policy,
+    RandomPolicy,
+    check_policy_name,
+    checkpoint_path,
+    load_policy,
+    make_policy,
+    observed_config,
+)
 from uasep_env.rollout import (
     DEFAULT_DEVIATION_THRESHOLD_M,
     DEFAULT_SETTLE_TIME_S,
@@ -43,6 +53,7 @@ __all__ = [
     "PolicySpec",
     "default_batch_size",
     "evaluate",
+    "policy_config",
 ]
 
 #: Largest number of episodes simulated together in one batched simulator (by default).
@@ -88,6 +99,32 @@ def _normalise_policies(
         elif not isinstance(spec, Policy):
             raise ValueError(f"policy {label!r}: expected a name, a path or a Policy, got {spec!r}")
     return out
+
+
+def policy_config(spec: PolicySpec, config: EnvConfig) -> EnvConfig:
+    """The config a policy observes the comparison's episodes with.
+
+    ``config`` itself, except for a policy checkpoint (a file or a shipped name) that does
+    not fit it as given (another formation size, obstacle count or K nearest): it observes
+    with its training observation (:func:`~uasep_env.policies.observed_config`), as the
+    scaling report does. The observation does not move the world, so the episodes are the
+    ones every other policy plays.
+
+    Args:
+        spec: A policy name, path or object.
+        config: The comparison's environment.
+
+    Returns:
+        The config to build and run the policy with.
+    """
+    path = checkpoint_path(spec) if isinstance(spec, str) and spec not in POLICIES else None
+    if path is None:
+        return config
+    try:
+        load_policy(path, config)
+    except CheckpointError:
+        return observed_config(path, config)
+    return config
 
 
 def default_batch_size(n_episodes: int) -> int:
@@ -207,7 +244,9 @@ def evaluate(
             or a mapping ``label -> name / path / Policy object``. Names are rebuilt fresh for
             every chunk (reproducible for any ``workers``); a policy object is reused as is
             (with ``workers > 1`` it is pickled to the workers).
-        config: Environment config (or dict for :func:`make_config`, None for defaults).
+        config: Environment config (or dict for :func:`make_config`, None for defaults). A
+            policy checkpoint that does not fit it (another size or K nearest) observes it
+            with its training observation (:func:`policy_config`; the same episodes).
         seeds: One seed per episode; every policy plays the same seeds.
         workers: Processes (``1``: in-process; more: a ``spawn`` process pool).
         batch_size: Episodes per batched simulator (a chunk); None:
@@ -256,13 +295,14 @@ def evaluate(
     if int(batch_size) < 1:
         raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
     chunks = _chunks(seed_list, int(batch_size))
+    observed = {label: policy_config(spec, cfg) for label, spec in specs.items()}
     tasks = [
         (
             label,
             ci,
             (
                 spec,
-                cfg,
+                observed[label],
                 chunk,
                 deviation_threshold,
                 settle_time,
@@ -308,6 +348,10 @@ def evaluate(
         ),
         results=results,
         elapsed_s=time.perf_counter() - t0,
+        observations={
+            label: c.to_dict()["observation"] for label, c in observed.items() if c != cfg
+        }
+        or None,
         episodes=kept if keep_episodes > 0 else {},
     )
 

@@ -13,15 +13,16 @@ from pathlib import Path
 from uasep_env.config import EnvConfig
 from uasep_env.policies.apf import APF, APFGains, MotionStateAPF, TraditionalAPF
 from uasep_env.policies.base import Policy, RandomPolicy, ZeroPolicy
-from uasep_env.policies.learned import (
-    CheckpointError,
+from uasep_env.policies.checkpoint import CheckpointError
+from uasep_env.policies.checkpoint_policy import (
     LearnedPolicy,
-    SB3Policy,
     checkpoint_config,
+    checkpoint_path,
     is_policy_checkpoint,
     load_policy,
-    load_sb3_policy,
+    observed_config,
 )
+from uasep_env.policies.sb3_policy import SB3Policy, load_sb3_policy
 from uasep_env.policies.shipped import shipped_policies, shipped_policy_path
 
 __all__ = [
@@ -38,10 +39,12 @@ __all__ = [
     "ZeroPolicy",
     "check_policy_name",
     "checkpoint_config",
+    "checkpoint_path",
     "is_policy_checkpoint",
     "load_policy",
     "load_sb3_policy",
     "make_policy",
+    "observed_config",
     "shipped_policies",
     "shipped_policy_path",
 ]
