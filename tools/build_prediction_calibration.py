@@ -29,8 +29,13 @@ deviation; the quantile level giving the least median volume). Quantile ``q``: f
 VALIDATION flights, the ``k``-th smallest score with ``k`` the larger of the marginal split-
 conformal index ``ceil((n + 1)(1 - alpha))`` and the training-conditional (PAC) one, the least
 ``k`` with ``P(Binomial(n, 1 - alpha) <= k - 1) >= 1 - delta`` (``scipy.stats.binom``). A cell
-with ``k > n`` is not calibrated (the env uses the most conservative region for it). The test
-flights are never read here.
+with ``k > n``, or with fewer than :data:`MIN_CALIBRATION_TRACKS` distinct calibration tracks
+(windows of one flight are far from exchangeable), is not calibrated: the env gives that class
+the most conservative region. The test flights are never read here.
+
+``--classes`` rebuilds only some classes' cells (the test of this script rebuilds the
+helicopter and fixed-wing cells and compares them with the shipped table's; the full rebuild,
+about 80 s on 2 shared cores, reproduces the shipped file byte for byte).
 """
 
 from __future__ import annotations
@@ -73,9 +78,14 @@ PIECE_S = 240.0
 SHAPE_LEVELS = (0.5, 0.7, 0.85, 0.95, 0.99)
 #: Training windows the shape search uses at most (evenly spaced).
 SHAPE_WINDOWS = 3000
-#: Synthetic (dubins) episodes per split and their seeds (disjoint from every bank's).
-DUBINS_EPISODES = 48
-DUBINS_SEEDS = {"train": 7_000_000, "validation": 7_100_000, "test": 7_200_000}
+#: Synthetic (dubins) episodes per split and the first seed of each: inside the project's
+#: training, validation and held-out (test) seed ranges (:mod:`uasep_env.scenarios.seeds`).
+DUBINS_EPISODES = 400
+#: Least distinct calibration tracks (episodes for dubins) for a cell to be calibrated: windows
+#: of one flight are far from exchangeable, so a class seen in fewer is not calibrated on its
+#: own and gets the most conservative region.
+MIN_CALIBRATION_TRACKS = 5
+DUBINS_SEEDS = {"train": 900_000, "validation": 4_000_000, "test": 5_000_000}
 REAL_CLASSES = ("glider", "helicopter", "fixed_wing")
 CLASSES = ("dubins", *REAL_CLASSES)
 
@@ -89,7 +99,7 @@ class Paths:
         est_pos: ``(S, K, 3)`` estimated positions (m).
         est_vel: ``(S, K, 3)`` estimated ground velocities (m/s).
         length: ``(S,)`` samples of each row.
-        source: ``(S,)`` dataset track index (``-1`` for synthetic rows).
+        source: ``(S,)`` dataset track index (negative for synthetic rows, one per obstacle).
     """
 
     pos: np.ndarray
@@ -197,7 +207,10 @@ def dubins_paths(split: str, cfg: EnvConfig, episodes: int = DUBINS_EPISODES) ->
     active = world.obstacles.active.reshape(-1)
     flat = lambda a: a.reshape(-1, steps + 1, 3)[active]  # noqa: E731
     n = int(active.sum())
-    return Paths(flat(pos), flat(est_p), flat(est_v), np.full(n, steps + 1), np.full(n, -1))
+    # Each synthetic obstacle is its own "track" (source), so the count of calibration tracks
+    # is that of obstacles.
+    src = -1 - np.arange(n, dtype=np.int64)
+    return Paths(flat(pos), flat(est_p), flat(est_v), np.full(n, steps + 1), src)
 
 
 @dataclass
@@ -325,6 +338,9 @@ def calibrate_cell(
     }
     if len(w_tr.row) < 20 or n < 1:
         return {**cell, "calibrated": False, "why": "too few windows"}
+    if cell["calibration_tracks"] < MIN_CALIBRATION_TRACKS:
+        why = f"{cell['calibration_tracks']} calibration tracks < {MIN_CALIBRATION_TRACKS}"
+        return {**cell, "calibrated": False, "why": why}
     shape = fit_shape(train, w_tr, horizon, mode, dt, rho)
     sc = np.sort(scores(val, w_val, horizon, mode, dt, shape["lam"], rho))
     k_marg, k_pac = conformal_index(n)
@@ -411,8 +427,13 @@ def main(argv: list[str] | None = None) -> int:
     """Command line: see the module docstring."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=DEFAULT_TABLE)
+    p.add_argument("--classes", default=",".join(CLASSES), help="comma-separated subset")
     args = p.parse_args(argv)
-    write_json(build(), args.out)
+    classes = tuple(c for c in args.classes.split(",") if c)
+    bad = [c for c in classes if c not in CLASSES]
+    if bad or not classes:
+        p.error(f"--classes: unknown class(es) {bad}; choose from {list(CLASSES)}")
+    write_json(build(classes), args.out)
     print(f"wrote {args.out}")
     return 0
 
