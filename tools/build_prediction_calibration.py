@@ -57,7 +57,7 @@ from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.groups import CALIBRATED_HORIZONS
 from uasep_env.dynamics import measure
 from uasep_env.estimation import KalmanModel
-from uasep_env.jsonio import write_json
+from uasep_env.jsonio import dumps, write_json  # noqa: F401 -- dumps: for the test
 from uasep_env.reachable.calibrated import (
     CENTRE_FRACTION,
     DEFAULT_TABLE,

@@ -8,6 +8,10 @@ import numba
 import numpy as np
 
 from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel
+from uasep_env.obstacles import AIRCRAFT_CLASSES
+
+#: Entries of the optional ``obstacle_class`` feature (one-hot).
+_N_CLASSES = len(AIRCRAFT_CLASSES)
 
 
 @numba.njit(inline="always", **_JIT)
@@ -217,6 +221,10 @@ def _obstacle_features(out, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001,
         _put(out, e, i, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
     if cols.obstacle_mask >= 0:
         _put(out, e, i, c + cols.obstacle_mask, 1.0, clip)
+    if cols.obstacle_class >= 0:  # one-hot of the aircraft class code
+        code = x.aircraft_class[e, j]
+        for a in range(_N_CLASSES):
+            _put(out, e, i, c + cols.obstacle_class + a, 1.0 if code == a else 0.0, clip)
 
 
 @numba.njit(**_JIT)
