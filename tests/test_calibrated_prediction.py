@@ -145,13 +145,14 @@ def test_obstacles_carry_their_aircraft_class() -> None:
 def test_the_env_region_holds_the_replayed_path() -> None:
     """In the world: the region predicted at t holds the true path over (t, t + 10 s].
 
-    On 4 short real-traffic episodes (test flights, 60 s): the calibration's target is 95 %;
-    at least 90 % of the windows must hold (the default enclosing region holds about 55 %).
+    On 4 real-traffic episodes (test flights, 200 s, seeded): the calibration's target is
+    95 %, and it holds here in 97.8 % of the windows (the regions shrunk to 0.6 of their size:
+    92 %; the default enclosing region holds about 55 %).
     """
     h = 10.0
-    world = World(make_config(_calibrated_bank(horizon=h), episode_duration=60.0), n_envs=4)
+    world = World(make_config(_calibrated_bank(horizon=h), episode_duration=200.0), n_envs=4)
     world.reset(seed=6_000_000)
-    steps = 300
+    steps = 1000
     zero = np.zeros((4, world.n_uavs, 3))
     centres, axes, heads, pos = [], [], [], []
     for k in range(steps + 1):
@@ -167,7 +168,7 @@ def test_the_env_region_holds_the_replayed_path() -> None:
     ok = np.ones((len(starts), 4, 1), dtype=bool)
     for j in range(1, n_h + 1):
         ok &= reachable.contains(pos[starts + j], centres[starts], axes[starts], heads[starts])
-    assert ok.mean() >= 0.9, ok.mean(axis=0)
+    assert ok.mean() >= 0.95, ok.mean(axis=0)
 
 
 def test_frozen_environments_keep_their_calibrated_region() -> None:
