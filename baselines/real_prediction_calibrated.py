@@ -306,13 +306,15 @@ def plot(res: dict[str, Any], path: Path) -> None:
     rows = [r for r in res["offline"] if "calibrated" in r]
     classes = list(dict.fromkeys(r["class"] for r in rows))
     fig, axs = plt.subplots(1, len(classes), figsize=(4 * len(classes), 3.6), squeeze=False)
-    marks = {"calibrated": "o", "enclosing": "s", "enclosing_95": "^", "speed_sphere": "D"}
+    colours = {"calibrated": "C0", "enclosing": "C1", "enclosing_95": "C2", "speed_sphere": "C3"}
+    marks = {5.0: "o", 10.0: "s", 20.0: "^"}
     for ax, cls in zip(axs[0], classes, strict=True):
         for r in (r for r in rows if r["class"] == cls):
-            for key, mk in marks.items():
+            for key, colour in colours.items():
                 d = r[key]
-                ax.scatter(d["median_volume_m3"], d["rate"], marker=mk,
-                           label=f"{key}, {r['horizon_s']:g} s", alpha=0.8)  # fmt: skip
+                ax.scatter(d["median_volume_m3"], d["rate"], color=colour,
+                           marker=marks.get(r["horizon_s"], "x"),
+                           label=f"{key}, {r['horizon_s']:g} s", alpha=0.85)  # fmt: skip
         ax.axhline(TARGET, color="k", lw=0.8, ls="--")
         ax.set_xscale("log")
         ax.set_title(cls)
