@@ -183,7 +183,12 @@ def test_frozen_environments_keep_their_calibrated_region() -> None:
 
 
 def test_the_class_feature_is_optional_and_one_hot() -> None:
+    from uasep_env._kernels.observations import _N_CLASSES
     from uasep_env.observation import build_observations
+    from uasep_env.observation_layout import FEATURES
+
+    size = next(f.size for f in FEATURES if f.key == "obstacle_class")
+    assert size == _N_CLASSES == len(AIRCRAFT_CLASSES)
 
     conf = make_config(_calibrated_bank(), episode_duration=1.0)
     default = ObservationLayout.from_config(conf)

@@ -8,10 +8,11 @@ import numba
 import numpy as np
 
 from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel
-from uasep_env.obstacles import AIRCRAFT_CLASSES
 
-#: Entries of the optional ``obstacle_class`` feature (one-hot).
-_N_CLASSES = len(AIRCRAFT_CLASSES)
+#: Entries of the optional ``obstacle_class`` feature: one per code of
+#: ``uasep_env.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
+#: ``tests/test_calibrated_prediction.py`` checks the count).
+_N_CLASSES = 5
 
 
 @numba.njit(inline="always", **_JIT)
