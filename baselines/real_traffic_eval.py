@@ -372,7 +372,7 @@ def main(argv: list[str] | None = None) -> str:
         run_line = (
             f"Run time: {c_real:.0f} s for the real-traffic bank with the calibrated prediction, "
             f"{c_all:.0f} s for its three banks (`python baselines/real_traffic_eval.py "
-            f"--prediction {args.prediction} --workers {args.workers}`, 2 shared cores)."
+            f"{' '.join(sys.argv[1:] if argv is None else argv)}`, 2 shared cores, under load)."
         )
         page = calibrated_page(enc, cal, classes, real_what, syn_what, run_line)
         atomic_write(args.out / "real_traffic_eval_calibrated.md", page.encode("utf-8"))
