@@ -227,3 +227,23 @@ def test_the_builder_rebuilds_the_shipped_cells() -> None:
         assert fresh[key] == shipped[key], key
     for cls in ("helicopter", "fixed_wing"):
         assert fresh["flights"][cls] == shipped["flights"][cls]
+
+
+def test_real_traffic_eval_plays_every_registered_controller(monkeypatch) -> None:
+    """The controller list comes from the policy registry (a controller added there appears)."""
+    import sys
+
+    from uasep_env import policies
+
+    monkeypatch.syspath_prepend(str(ROOT / "baselines"))
+    rte = __import__("real_traffic_eval")
+    names = rte.registry_controllers()
+    assert set(policies.POLICIES) - set(names) == {"zero", "random"}
+    assert set(policies.shipped_policies()) <= set(names)
+    monkeypatch.setitem(policies.POLICIES, "new-controller", policies.POLICIES["apf"])
+    assert "new-controller" in rte.registry_controllers()
+    assert rte.with_fit({"scenario": "random"}, "calibrated")["prediction"] == {"fit": "calibrated"}
+    assert rte.with_fit({"scenario": "random"}, "enclosing") == {"scenario": "random"}
+    with pytest.raises(SystemExit):
+        rte.main(["--prediction", "conformal"])
+    sys.modules.pop("real_traffic_eval", None)
