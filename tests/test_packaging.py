@@ -194,6 +194,7 @@ def test_build_copies_the_repo_checkpoints_into_the_package(tmp_path):
     for a, b in zip(shipped, source, strict=True):
         assert a.read_bytes() == b.read_bytes(), a.name
     assert (tmp_path / "uasep_env" / "data" / "ellipse_table.npz").is_file()
+    assert (tmp_path / "uasep_env" / "data" / "prediction_calibration.json").is_file()
 
 
 # --------------------------------------------------------- item 5: package metadata

@@ -7,8 +7,8 @@ Every agent gets one flat ``float32`` vector; the layout (which features of
 into SI quantities and names its entries (checkpoints record the names). The reference APF
 controllers act on decoded observations, so they and learned policies see exactly the same
 information. Optional features (``Feature.default`` false) are added by naming them in
-``observation.optional_features``; there are none yet (``docs/extending.md`` shows how to
-add one).
+``observation.optional_features``: ``obstacle_class`` (below; ``docs/extending.md`` shows how
+to add one).
 
 All vectors are expressed along the NED axes (x north, y east, z down), relative to the
 observing UAV. Positions are divided by ``observation.position_scale`` (m), velocities by
@@ -36,6 +36,10 @@ per nearest obstacle (K_o)  16    reachable-ellipsoid centre relative to the UAV
                                   UAV (3, m), obstacle velocity relative to the UAV (3, m/s),
                                   signed distance from the UAV to the ellipsoid (1, m),
                                   presence mask (1)
+``obstacle_class``          5     optional, per nearest obstacle: its aircraft class,
+                                  one-hot over :data:`uasep_env.obstacles.AIRCRAFT_CLASSES`
+                                  (unknown, dubins, glider, helicopter, fixed_wing), like
+                                  ADS-B's emitter category
 ==========================  ====  ======================================================
 
 UAVs are sorted by estimated distance, obstacles by distance to their reachable region;
@@ -120,6 +124,7 @@ FEATURES: tuple[Feature, ...] = (
     Feature("obstacle", "rel_vel", 3, "vel"),
     Feature("obstacle", "region_dist", 1, "pos"),
     Feature("obstacle", "mask", 1, "unit"),
+    Feature("obstacle", "class", 5, "unit", default=False),
 )
 _BY_KEY = {f.key: f for f in FEATURES}
 _BLOCKS = ("self", "uav", "obstacle")

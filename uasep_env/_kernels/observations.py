@@ -9,6 +9,11 @@ import numpy as np
 
 from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel
 
+#: Entries of the optional ``obstacle_class`` feature: one per code of
+#: ``uasep_env.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
+#: ``tests/test_calibrated_prediction.py`` checks the count).
+_N_CLASSES = 5
+
 
 @numba.njit(inline="always", **_JIT)
 def _put(out, e, i, col, value, clip):  # noqa: ANN001, ANN202
@@ -217,6 +222,10 @@ def _obstacle_features(out, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001,
         _put(out, e, i, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
     if cols.obstacle_mask >= 0:
         _put(out, e, i, c + cols.obstacle_mask, 1.0, clip)
+    if cols.obstacle_class >= 0:  # one-hot of the aircraft class code
+        code = x.aircraft_class[e, j]
+        for a in range(_N_CLASSES):
+            _put(out, e, i, c + cols.obstacle_class + a, 1.0 if code == a else 0.0, clip)
 
 
 @numba.njit(**_JIT)

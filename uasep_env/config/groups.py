@@ -280,6 +280,10 @@ class AirspaceConfig:
         )
 
 
+#: Horizons (s) at which ``prediction.fit="calibrated"`` is calibrated (its shipped table).
+CALIBRATED_HORIZONS = (5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
+
+
 @dataclass(frozen=True)
 class PredictionConfig:
     """Reachable-set prediction of the obstacles (paper eqs. 9-18, see notes).
@@ -288,11 +292,14 @@ class PredictionConfig:
         horizon: Prediction horizon ``t`` (s); the paper uses 10 s.
         mode: ``"swept"`` (every point reachable within the horizon, the default used for
             separation) or ``"terminal"`` (reachable at exactly the horizon, the paper's S1..S5).
-        fit: ``"enclosing"`` (an ellipsoid that provably encloses the set, the default) or
+        fit: ``"enclosing"`` (an ellipsoid that provably encloses the set, the default),
             ``"paper"`` (eqs. 17-18 as published: axes from the set's extents, a circular
-            section across the heading; it does not enclose the set). With
+            section across the heading; it does not enclose the set; with
             ``mode="terminal"`` this is the paper's prediction as published, see
-            :data:`AS_PUBLISHED`.
+            :data:`AS_PUBLISHED`) or ``"calibrated"`` (a constant-velocity region sized by
+            split conformal prediction per aircraft class on recorded flights,
+            :mod:`uasep_env.reachable.calibrated`; horizons of
+            :data:`CALIBRATED_HORIZONS` only).
         kalman: Whether UAVs and obstacle tracks are Kalman filtered; off, the raw noisy
             measurements are used as estimates.
     """
@@ -305,7 +312,15 @@ class PredictionConfig:
     def __post_init__(self) -> None:
         check_positive("prediction.horizon", self.horizon, hi=600.0)
         check_one_of("prediction.mode", self.mode, ("swept", "terminal"))
-        check_one_of("prediction.fit", self.fit, ("enclosing", "paper"))
+        check_one_of("prediction.fit", self.fit, ("enclosing", "paper", "calibrated"))
+        if self.fit == "calibrated":
+            check(
+                any(abs(self.horizon - h) < 1e-9 for h in CALIBRATED_HORIZONS),
+                "prediction.horizon",
+                self.horizon,
+                f"must be one of {list(CALIBRATED_HORIZONS)} s with prediction.fit="
+                "'calibrated' (the horizons its shipped table calibrates)",
+            )
         check(isinstance(self.kalman, bool), "prediction.kalman", self.kalman, "must be a bool")
 
 
