@@ -22,6 +22,21 @@ from uasep_env.metrics import EpisodeRecord
 #: The repository root (the tests run scripts and read results files from it).
 ROOT = Path(__file__).resolve().parents[1]
 
+#: Seconds a test waits on a subprocess (or a worker) before calling it hung. A guard against
+#: hangs only, never a speed check: a loaded machine runs the suite many times slower (a
+#: 3-minute suite took an hour on a busy 2-core runner); speed lives in benchmarks/.
+HANG_GUARD_S = 30 * 60
+
+try:  # hypothesis is a dev dependency; the floors job runs without it
+    from hypothesis import settings as _hypothesis_settings
+except ImportError:  # pragma: no cover - depends on the installation
+    pass
+else:
+    # No per-example deadline anywhere (hypothesis's default is 200 ms): under load an
+    # example takes many times longer, and a slow example is not a failure.
+    _hypothesis_settings.register_profile("uasep-default", deadline=None)
+    _hypothesis_settings.load_profile("uasep-default")
+
 
 class _FullDisk:
     """A file whose writes fail with ENOSPC after ``room`` bytes (a disk filling up)."""
@@ -57,7 +72,7 @@ def fill_disk(monkeypatch: pytest.MonkeyPatch, room: int = 0) -> None:
     )
 
 
-def run_in_repo(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+def run_in_repo(*args: str, timeout: float = HANG_GUARD_S) -> subprocess.CompletedProcess:
     """``python *args`` in the repository, headless (Agg), importing this checkout."""
     env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
     return subprocess.run(
@@ -70,7 +85,7 @@ def run_in_repo(*args: str, timeout: float = 120) -> subprocess.CompletedProcess
     )
 
 
-def run_python(code: str, timeout: float = 120) -> subprocess.CompletedProcess:
+def run_python(code: str, timeout: float = HANG_GUARD_S) -> subprocess.CompletedProcess:
     """``python -c code`` (dedented) in the repository, headless."""
     return run_in_repo("-c", textwrap.dedent(code), timeout=timeout)
 

@@ -6,6 +6,7 @@ import os
 
 import numpy as np
 import pytest
+from conftest import HANG_GUARD_S
 
 # Importing the modules registers their twins.
 from uasep_env import _numba, formation, geometry, observation, reachable, rewards  # noqa: F401
@@ -500,7 +501,7 @@ def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel()
     parent = _big_rollout()  # 2,100 agents: the parallel loops
     assert common._parallel(2100)
     with multiprocessing.get_context("fork").Pool(1) as pool:
-        child = pool.apply_async(_big_rollout).get(timeout=120)
+        child = pool.apply_async(_big_rollout).get(timeout=HANG_GUARD_S)
     np.testing.assert_array_equal(child, parent)
 
 
