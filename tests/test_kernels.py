@@ -350,7 +350,16 @@ def test_optional_features_are_named_in_the_config():
     with pytest.raises(ValueError, match=r"observation\.optional_features"):
         make_config(observation={"optional_features": "uav_dist"})
     with pytest.raises(ValueError, match="unknown observation feature"):
-        ObservationLayout(1, 1, 1.0, 1.0, 1.0, 1.0, 1.0, features=("nope",))
+        ObservationLayout(
+            k_uavs=1,
+            k_obstacles=1,
+            pos_scale=1.0,
+            vel_scale=1.0,
+            acc_scale=1.0,
+            clip=1.0,
+            sensing_range=1.0,
+            features=("nope",),
+        )
     for key in OPTIONAL_FEATURES:
         cfg = make_config(observation={"optional_features": [key]})
         assert key in ObservationLayout.from_config(cfg).features

@@ -24,9 +24,10 @@ import sys
 sys.path.insert(0, {baselines!r})
 import tradeoff
 from tradeoff import APF, Method, _scaled
-tradeoff.METHODS = (Method("apf", "APF", "margin scale", tradeoff.SCALES, 1.0,
-    lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
-    lambda v: {{"episode_duration": 10.0 + 4 * v}}),)
+tradeoff.METHODS = (Method(name="apf", label="APF", knob="margin scale",
+    values=tradeoff.SCALES, default=1.0,
+    policy=lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
+    config=lambda v: {{"episode_duration": 10.0 + 4 * v}}),)
 tradeoff.main(["--methods", "apf", "--paper-episodes", "1", "--bank-episodes", "1",
                "--workers", "1", "--out", sys.argv[1]])
 """
