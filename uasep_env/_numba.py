@@ -95,7 +95,7 @@ def kernels() -> Any:
     return _state["kernels"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Twin:
     """A numpy reference and the name of its compiled kernel in :mod:`uasep_env._kernels`.
 
@@ -132,7 +132,7 @@ def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
     """
 
     def wrap(reference: F) -> F:
-        twin = Twin(kernel, reference, dict(constants))
+        twin = Twin(kernel=kernel, reference=reference, constants=dict(constants))
         TWINS[kernel] = twin
 
         @functools.wraps(reference)

@@ -158,7 +158,7 @@ class PIDLagrangian:
         self.updates = int(state["updates"])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CostBudget:
     """The APF's safety on validation encounters, as cost limits (:func:`apf_cost_budget`).
 

@@ -149,7 +149,9 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
     """The assembly of :func:`build_observations`: fills ``out`` in place.
 
     Every feature of the layout is computed here, keyed by its :attr:`Feature.key`, and
-    written where :attr:`ObservationLayout.slices` puts it; the rest are skipped.
+    written where :attr:`ObservationLayout.slices` puts it; the rest are skipped. ``out`` is
+    float32; a float64 ``out`` holds the same numbers before the cast (cast-then-clip and
+    clip-then-cast agree), which the tests compare with the compiled twin's, bit for bit.
     """
     e, n, _ = x.pos.shape
     m = x.region.shape[-1]

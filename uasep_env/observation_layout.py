@@ -149,7 +149,7 @@ Columns = namedtuple(
 )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObservationLayout:
     """Which features, in which order and where, and their scales, for one config.
 

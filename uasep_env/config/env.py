@@ -64,7 +64,7 @@ AS_PUBLISHED: dict[str, dict[str, str]] = {"prediction": {"mode": "terminal", "f
 T = TypeVar("T")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EnvConfig:
     """The whole configuration of a world / environment.
 

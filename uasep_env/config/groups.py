@@ -62,7 +62,7 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class UAVConfig:
     """Physical limits of the cooperative UAVs (paper eqs. 3-4).
 
@@ -116,7 +116,7 @@ class UAVConfig:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class NoiseConfig:
     """Process and measurement noise (paper eqs. 1-2). Zero turns a source off.
 
@@ -151,7 +151,7 @@ class NoiseConfig:
     @classmethod
     def off(cls) -> NoiseConfig:
         """All noise sources switched off (runs are deterministic given the actions)."""
-        return cls(0.0, 0.0, 0.0, 0.0, 0.0)
+        return cls(**{f.name: 0.0 for f in fields(cls)})
 
     @property
     def is_off(self) -> bool:
@@ -159,7 +159,7 @@ class NoiseConfig:
         return all(getattr(self, f.name) == 0.0 for f in fields(self))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObstacleConfig:
     """Motion model of the non-cooperative obstacles (3D Dubins, paper eq. 8, or replay).
 
@@ -237,7 +237,7 @@ class ObstacleConfig:
         object.__setattr__(self, "wind", wind)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class AirspaceConfig:
     """The airspace obstacles fly in: the ground, a placement margin above it and a ceiling.
 
@@ -284,7 +284,7 @@ class AirspaceConfig:
 CALIBRATED_HORIZONS = (5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PredictionConfig:
     """Reachable-set prediction of the obstacles (paper eqs. 9-18, see notes).
 
@@ -324,7 +324,7 @@ class PredictionConfig:
         check(isinstance(self.kalman, bool), "prediction.kalman", self.kalman, "must be a bool")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObservationConfig:
     """What each agent observes (see :mod:`uasep_env.observation`).
 
@@ -376,7 +376,7 @@ class ObservationConfig:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RewardWeights:
     """Weights of the named reward terms (see :mod:`uasep_env.rewards`).
 
@@ -473,7 +473,7 @@ class CostWeights:
 ACTION_MODES = ("direct", "residual_apf")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ActionConfig:
     """What an agent's action means (see :mod:`uasep_env.actions`).
 

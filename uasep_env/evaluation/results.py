@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 __all__ = ["EpisodeResult", "EvaluationResult", "EvaluationSettings", "PolicyResult"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EpisodeResult:
     """One episode of one policy.
 
@@ -49,7 +49,7 @@ class EpisodeResult:
     metrics: EpisodeMetrics
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PolicyResult:
     """The episodes of one policy and their aggregate.
 
@@ -64,7 +64,7 @@ class PolicyResult:
     aggregate: dict[str, dict[str, Any]]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EvaluationSettings:
     """How the evaluation ran and measured (thresholds in m, times in s).
 

@@ -326,7 +326,9 @@ def evaluate(
             entries.extend(chunk_entries)
             if ci == 0:
                 kept[label] = chunk_eps
-        results[label] = PolicyResult(entries, _aggregate_entries(entries, confidence))
+        results[label] = PolicyResult(
+            episodes=entries, aggregate=_aggregate_entries(entries, confidence)
+        )
 
     return EvaluationResult(
         version=__version__,

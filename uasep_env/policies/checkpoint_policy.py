@@ -43,13 +43,13 @@ __all__ = [
     "checkpoint_config",
     "checkpoint_path",
     "dense",
+    "dense_sums",
     "is_policy_checkpoint",
     "load_policy",
     "observed_config",
 ]
 
 
-@compiled_twin("dense")
 def dense(x: np.ndarray, wt: np.ndarray, b: np.ndarray) -> np.ndarray:
     """One layer, ``x @ wt + b``, summed input by input in float64 and rounded to float32.
 
@@ -65,14 +65,29 @@ def dense(x: np.ndarray, wt: np.ndarray, b: np.ndarray) -> np.ndarray:
         b: The bias ``(n_out,)``, float64.
 
     Returns:
-        ``(rows, n_out)`` float32.
+        ``(rows, n_out)`` float32: :func:`dense_sums` rounded once.
+    """
+    return dense_sums(x, wt, b).astype(np.float32)
+
+
+@compiled_twin("dense")
+def dense_sums(x: np.ndarray, wt: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The float64 sums of :func:`dense`, before the rounding (the kernel ``dense``'s too).
+
+    Args:
+        x: Inputs ``(rows, n_in)``, float32.
+        wt: The transposed weights ``(n_in, n_out)``, float64.
+        b: The bias ``(n_out,)``, float64.
+
+    Returns:
+        ``(rows, n_out)`` float64: the bias, then input ``i``'s products in the order of ``i``.
     """
     x = np.asarray(x, dtype=np.float64)
     acc = np.empty((x.shape[0], b.shape[0]), dtype=np.float64)
     acc[...] = b
     for i in range(wt.shape[0]):
         acc += x[:, i, None] * wt[i]
-    return acc.astype(np.float32)
+    return acc
 
 
 _ACTIVATIONS = {

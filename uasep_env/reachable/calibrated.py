@@ -68,7 +68,7 @@ class CalibrationTableError(ValueError):
     """A calibration table that is missing, corrupt, too large or of another version."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CalibrationTable:
     """The calibration coefficients, ready for :func:`calibrated_region`.
 
@@ -188,7 +188,9 @@ def _parse(path: Path, data: dict[str, Any]) -> CalibrationTable:
         arr = np.where(done[..., None, None], arr, worst[None])
         coef[mode] = arr
     meta = {k: v for k, v in data.items() if k != "cells"}
-    return CalibrationTable(path, horizons, coef, inflation, meta)
+    return CalibrationTable(
+        path=path, horizons=horizons, coef=coef, inflation=inflation, meta=meta
+    )
 
 
 @lru_cache(maxsize=4)

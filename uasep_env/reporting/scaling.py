@@ -88,7 +88,7 @@ UAV_COUNTS = (3, 8, 16, 32)
 OBSTACLE_COUNTS = (1, 2, 4)
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class PolicyEntry:
     """One policy of the comparison.
 
@@ -175,22 +175,30 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
             if not name.strip():
                 raise ValueError(f"--policy {item!r}: empty label before '='")
         if spec in POLICIES:
-            entry = PolicyEntry(spec, "builtin", spec)
+            entry = PolicyEntry(label=spec, kind="builtin", spec=spec)
         elif not Path(spec).exists() and (shipped := shipped_policy_path(spec)) is not None:
             trained, layout = checkpoint_layout(shipped)  # a shipped checkpoint, by name
             entry = PolicyEntry(
-                spec, "checkpoint", str(shipped), layout, (trained.n_uavs, trained.n_obstacles)
+                label=spec,
+                kind="checkpoint",
+                spec=str(shipped),
+                layout=layout,
+                trained=(trained.n_uavs, trained.n_obstacles),
             )
         elif Path(spec).is_file():
             if not is_policy_checkpoint(spec):
                 raise ValueError(f"--policy {spec!r}: not a policy checkpoint (.zip)")
             trained, layout = checkpoint_layout(spec)
             entry = PolicyEntry(
-                Path(spec).stem, "checkpoint", spec, layout, (trained.n_uavs, trained.n_obstacles)
+                label=Path(spec).stem,
+                kind="checkpoint",
+                spec=spec,
+                layout=layout,
+                trained=(trained.n_uavs, trained.n_obstacles),
             )
         elif ":" in spec:
             load_factory(spec)
-            entry = PolicyEntry(spec.rpartition(":")[2], "factory", spec)
+            entry = PolicyEntry(label=spec.rpartition(":")[2], kind="factory", spec=spec)
         else:
             raise ValueError(
                 f"--policy {spec!r}: not a built-in policy {sorted(POLICIES)}, a checkpoint "

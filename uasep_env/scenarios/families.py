@@ -84,33 +84,33 @@ _CLIMBING = (
 #: The kinds of encounter; each is also a family of one such encounter (registered below).
 ENCOUNTERS: dict[str, Encounter] = {
     "crossing": Encounter(
-        _from_either_side,
-        _level,
-        "An obstacle crosses the formation's track from either side.",
-        _MEETS + "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
+        horizontal=_from_either_side,
+        vertical=_level,
+        summary="An obstacle crosses the formation's track from either side.",
+        parameters=_MEETS + "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
     ),
     "head_on": Encounter(
-        _from_the_front,
-        _level,
-        "An obstacle comes head-on.",
-        _MEETS + "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
+        horizontal=_from_the_front,
+        vertical=_level,
+        summary="An obstacle comes head-on.",
+        parameters=_MEETS + "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
     ),
     "overtaking": Encounter(
-        _from_behind,
-        _level,
-        "A faster obstacle overtakes the formation from behind.",
-        _MEETS + "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
+        horizontal=_from_behind,
+        vertical=_level,
+        summary="A faster obstacle overtakes the formation from behind.",
+        parameters=_MEETS + "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
     ),
     "climbing": Encounter(
-        _from_either_side,
-        _climbing_or_descending,
-        "An obstacle climbs or descends through the formation's altitude.",
-        _MEETS + "speed 3-12 m/s, 45-135° off the track, " + _CLIMBING,
+        horizontal=_from_either_side,
+        vertical=_climbing_or_descending,
+        summary="An obstacle climbs or descends through the formation's altitude.",
+        parameters=_MEETS + "speed 3-12 m/s, 45-135° off the track, " + _CLIMBING,
     ),
 }
 
 #: The encounter kinds of background traffic (and of every ``multi_obstacle`` slot).
-TRAFFIC_MIX = Mix({"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1})
+TRAFFIC_MIX = Mix(weights={"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1})
 
 
 def _background(rng: np.random.Generator, config: EnvConfig, lay: Layout) -> ObstacleStart:
@@ -132,7 +132,9 @@ def _encounter(kind: str) -> ScenarioFamily:
         )
         return assemble(kind, config, lay, obstacles)
 
-    return ScenarioFamily(kind, encounter.summary, encounter.parameters, generate)
+    return ScenarioFamily(
+        name=kind, summary=encounter.summary, parameters=encounter.parameters, generate=generate
+    )
 
 
 # ---- The paper's encounter (section 4; constants chosen here, the paper gives none) ---------
@@ -256,7 +258,9 @@ def _random(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
 
 
 #: The families the ``random`` scenario draws per episode, with their integer weights.
-RANDOM_MIX = Mix({"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1, "multi_obstacle": 1})
+RANDOM_MIX = Mix(
+    weights={"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1, "multi_obstacle": 1}
+)
 
 # ---- The registry, in the order the names are listed ----------------------------------------
 register(
