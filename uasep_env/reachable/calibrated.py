@@ -188,9 +188,7 @@ def _parse(path: Path, data: dict[str, Any]) -> CalibrationTable:
         arr = np.where(done[..., None, None], arr, worst[None])
         coef[mode] = arr
     meta = {k: v for k, v in data.items() if k != "cells"}
-    return CalibrationTable(
-        path=path, horizons=horizons, coef=coef, inflation=inflation, meta=meta
-    )
+    return CalibrationTable(path=path, horizons=horizons, coef=coef, inflation=inflation, meta=meta)
 
 
 @lru_cache(maxsize=4)
