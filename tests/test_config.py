@@ -227,5 +227,5 @@ def test_the_scripts_frozen_dataclasses_take_keywords_only():
                     seen.append(node.name)
                     if kw.get("kw_only") != "True":
                         positional.append(f"{path.name}:{node.name}")
-    assert {"Method", "PolicyEntry"} <= set(seen)
+    assert "Method" in seen  # scaling.PolicyEntry moved into the package (checked above)
     assert not positional, positional

@@ -3,6 +3,7 @@
 import sys
 
 import pytest
+from conftest import HANG_GUARD_S
 
 from uasep_env import _numba
 from uasep_env.evaluation import main
@@ -120,7 +121,7 @@ def test_the_heartbeat_redraws_between_chunks_and_stops_on_close():
 
     bar = Bar()
     beat = Heartbeat(bar, interval=0.01)
-    deadline = time.monotonic() + 10  # a guard against a hang only
+    deadline = time.monotonic() + HANG_GUARD_S  # a guard against a hang only
     while bar.refreshed < 2 and time.monotonic() < deadline:
         time.sleep(0.01)
     beat.update(3)

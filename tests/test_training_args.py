@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import HANG_GUARD_S
 
 from uasep_env.training import mappo, ppo_shared
 from uasep_env.training.ppo_residual_apf import RESIDUAL_DEFAULTS
@@ -117,7 +118,7 @@ def test_checkpoint_every_minus_five_is_refused_before_the_run_starts(command, t
         text=True,
         cwd=tmp_path,
         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
-        timeout=120,
+        timeout=HANG_GUARD_S,
     )
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1, proc.stderr
