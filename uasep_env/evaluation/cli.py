@@ -15,7 +15,13 @@ from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.report import format_summary
 from uasep_env.evaluation.runner import DEFAULT_HOLD_TIME_S, evaluate
-from uasep_env.policies import POLICIES, check_policy_name, make_policy, shipped_policies
+from uasep_env.policies import (
+    POLICIES,
+    SHIELDS,
+    check_policy_name,
+    make_policy,
+    shipped_policies,
+)
 from uasep_env.policies.checkpoint import ALGORITHMS as SB3_ALGORITHMS
 from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
 from uasep_env.scenarios import scenario_names
@@ -145,6 +151,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME",
         help="policy to evaluate; repeatable or comma-separated, all on the same seeds "
         "(default: apf); a value naming an existing file is one path, commas included",
+    )
+    p.add_argument(
+        "--shield",
+        choices=sorted(SHIELDS),
+        default=None,
+        metavar="NAME",
+        help="filter every listed policy's actions through a safety shield: "
+        f"{', '.join(sorted(SHIELDS))} (the CBF filter); rows are named POLICY+NAME "
+        "(list 'apf,apf+cbf' without --shield to compare one policy with and without)",
     )
     p.add_argument(
         "--scenario",
@@ -277,6 +292,8 @@ def _run(argv: Sequence[str] | None) -> int:
     names = _split_policy_args(args.policy or ["apf"])
     if not names:
         parser.error("argument --policy: no policy given")
+    if args.shield is not None:
+        names = [f"{name}+{args.shield}" for name in names]
     for name in names:
         try:
             check_policy_name(name)

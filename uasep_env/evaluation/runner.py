@@ -27,7 +27,14 @@ from uasep_env.evaluation.results import (
     PolicyResult,
 )
 from uasep_env.metrics import aggregate, episode_metrics
-from uasep_env.policies import POLICIES, Policy, RandomPolicy, check_policy_name, make_policy
+from uasep_env.policies import (
+    POLICIES,
+    Policy,
+    RandomPolicy,
+    check_policy_name,
+    make_policy,
+    split_shield,
+)
 from uasep_env.rollout import (
     DEFAULT_DEVIATION_THRESHOLD_M,
     DEFAULT_SETTLE_TIME_S,
@@ -56,7 +63,9 @@ PolicySpec = str | Policy
 
 def _policy_label(spec: str, taken: Iterable[str]) -> str:
     """A short, unique display label: the name, or a model file's stem."""
-    label = spec if spec in POLICIES else Path(spec).stem or spec
+    base, shield = split_shield(spec)
+    label = base if base in POLICIES else Path(base).stem or base
+    label += f"+{shield}" if shield is not None else ""
     taken = set(taken)
     base, k = label, 2
     while label in taken:
