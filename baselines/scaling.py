@@ -26,7 +26,10 @@ Policies (``--policy``, comma-separated or repeated; ``LABEL=SPEC`` names one):
   it was trained with (its K nearest UAVs and obstacles, :func:`checkpoint_layout`), so a
   checkpoint trained on 3 UAVs flies every size zero-shot;
 * ``module:callable``: a factory called with each cell's :class:`~uasep_env.EnvConfig`
-  and returning a policy (``actions = policy(observations)``).
+  and returning a policy (``actions = policy(observations)``);
+* any of these followed by ``+cbf``: that policy under the CBF shield
+  (:class:`~uasep_env.policies.shield.Shielded`; a checkpoint's shield reads the
+  checkpoint's layout, its K nearest UAVs and obstacles).
 
 Writes ``<out>.md`` (one table per sweep: rates with 95 % Wilson intervals, means with
 95 % Student-t intervals, from :func:`uasep_env.metrics.aggregate`), ``<out>.json`` (every
@@ -53,7 +56,13 @@ from uasep_env.atomic import atomic_write
 from uasep_env.config import EnvConfig
 from uasep_env.evaluation import evaluate
 from uasep_env.jsonio import write_json
-from uasep_env.policies import POLICIES, is_policy_checkpoint, shipped_policy_path
+from uasep_env.policies import (
+    POLICIES,
+    SHIELDS,
+    is_policy_checkpoint,
+    shipped_policy_path,
+    split_shield,
+)
 from uasep_env.policies.learned import load_policy
 from uasep_env.scenarios import HELD_OUT_SEEDS, SCALING_SEEDS
 
@@ -117,7 +126,7 @@ def cell_config(
     if episode_duration is not None:
         extra["episode_duration"] = episode_duration
     if entry is not None and entry.kind == "checkpoint":
-        trained, (k_u, k_o) = checkpoint_layout(entry.spec)
+        trained, (k_u, k_o) = checkpoint_layout(split_shield(entry.spec)[0])
         extra["observation"] = {
             **dataclasses.asdict(trained.observation),
             "k_uavs": k_u,
@@ -156,6 +165,7 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
             name, _, spec = item.partition("=")
             if not name.strip():
                 raise ValueError(f"--policy {item!r}: empty label before '='")
+        spec, shield = split_shield(spec)  # "<policy>+cbf": the policy, shielded
         if spec in POLICIES:
             entry = PolicyEntry(spec, "builtin", spec)
         elif not Path(spec).exists() and (shipped := shipped_policy_path(spec)) is not None:
@@ -177,6 +187,10 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
             raise ValueError(
                 f"--policy {spec!r}: not a built-in policy {sorted(POLICIES)}, a checkpoint "
                 "file or module:callable"
+            )
+        if shield is not None:
+            entry = dataclasses.replace(
+                entry, label=f"{entry.label}+{shield}", spec=f"{entry.spec}+{shield}"
             )
         if name is not None:
             entry = dataclasses.replace(entry, label=name.strip())
@@ -229,7 +243,11 @@ def evaluate_cell(
     for cfg, group in groups:
         specs: dict[str, Any] = {}
         for e in group:
-            specs[e.label] = load_factory(e.spec)(cfg) if e.kind == "factory" else e.spec
+            specs[e.label] = e.spec
+            if e.kind == "factory":
+                spec, shield = split_shield(e.spec)
+                policy = load_factory(spec)(cfg)
+                specs[e.label] = SHIELDS[shield](policy, cfg) if shield else policy
         result = evaluate(specs, cfg, seeds, workers=workers)
         for e in group:
             agg = result.results[e.label].aggregate

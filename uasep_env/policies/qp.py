@@ -9,7 +9,9 @@ For every agent of a batch (leading shape ``B``), with ``u`` the commanded accel
     a_k \cdot u + s \ge b_k \ (k \text{ valid}),\quad l \le u \le h,\quad s \ge 0.
 
 The objective is strictly convex and the problem always feasible (the slack absorbs any
-shortfall), so the minimiser is unique. Its active constraints have linearly independent
+shortfall), so the minimiser is unique. A penalised slack is never exactly zero where a
+constraint binds: the constraint is short by ``1 / (1 + rho)`` of the change it asks for.
+Its active constraints have linearly independent
 gradients and non-negative multipliers, and at most four of them are needed (the problem has
 four unknowns). :func:`solve_filter_qp` therefore enumerates every set of at most four
 constraints (no set holding both bounds of one axis), solves the equality-constrained
