@@ -218,6 +218,7 @@ def test_params_are_validated_naming_the_field():
         ("max_constraints", 2.5),
         ("uav_share", 1.5),
         ("slack_penalty", 0.0),
+        ("deadlock_gain", -1.0),
     ]:
         with pytest.raises(ValueError, match=rf"cbf\.{field}="):
             CBFParams(**{field: bad})
