@@ -89,8 +89,8 @@ def main(argv: list[str] | None = None) -> str:
     ref, source = reference_rows(args.episodes, args.workers)
     rows = {**ref, **new}
     order = ["apf", "cbf-qp"] + [x for n in LEARNED if n in ref for x in (n, f"{n}+cbf")]
-    body = [
-        [name, *(_cell(rows[p], key, stat, fmt) for p in order)]
+    body = [  # an undefined mean (no episode had the event) reads n/a, stored or fresh
+        [name, *(_cell(rows[p], key, stat, fmt).replace("nan", "n/a") for p in order)]
         for name, key, stat, fmt in TABLE_ROWS
     ]
     apf = ref["apf"]

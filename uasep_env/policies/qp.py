@@ -84,6 +84,16 @@ def _constraints(
     return g, h
 
 
+def _dot(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``sum_n p[..., n] q[..., n]`` over the last axis (4), added left to right."""
+    return (
+        p[..., 0] * q[..., 0]
+        + p[..., 1] * q[..., 1]
+        + p[..., 2] * q[..., 2]
+        + p[..., 3] * q[..., 3]
+    )
+
+
 def _cholesky_solve(gram: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``gram lam = rhs`` for a batch of 4x4 Gram matrices, element-wise.
 
@@ -121,17 +131,24 @@ def _enumerate(g: np.ndarray, h: np.ndarray, n_barriers: int) -> np.ndarray:
     sets = _active_sets(m, n_barriers)  # (C, 4)
     g_pad = np.concatenate([g, np.zeros((batch, 1, _N))], axis=1)
     h_pad = np.concatenate([h, np.zeros((batch, 1))], axis=1)
-    full = np.matmul(g_pad, g_pad.transpose(0, 2, 1))  # (B, m+1, m+1): every row pair
+    # Products summed in one fixed order, never by BLAS (whose order depends on the CPU),
+    # so a filtered episode is the same on every machine.
+    full = _dot(g_pad[:, :, None, :], g_pad[:, None, :, :])  # (B, m+1, m+1): row pairs
     gram = full[:, sets[:, :, None], sets[:, None, :]]  # (B, C, 4, 4): the active rows'
     pad = sets == m  # (C, 4)
     gram = gram + np.where(pad[:, :, None] & np.eye(_MAX_ACTIVE, dtype=bool), 1.0, 0.0)
     lam, ok = _cholesky_solve(gram, h_pad[:, sets])  # dependent (or zero) rows: no candidate
     gs = g_pad[:, sets]  # (B, C, 4, 4)
-    x = sum(gs[:, :, i, :] * lam[:, :, i, None] for i in range(_MAX_ACTIVE))  # (B, C, 4)
-    slack = np.matmul(x, g.transpose(0, 2, 1)) - h[:, None, :]  # (B, C, m), >= 0: feasible
+    x = (  # (B, C, 4)
+        gs[:, :, 0, :] * lam[:, :, 0, None]
+        + gs[:, :, 1, :] * lam[:, :, 1, None]
+        + gs[:, :, 2, :] * lam[:, :, 2, None]
+        + gs[:, :, 3, :] * lam[:, :, 3, None]
+    )
+    slack = _dot(x[:, :, None, :], g[:, None, :, :]) - h[:, None, :]  # (B, C, m), >= 0: ok
     tol = 1e-9 * np.maximum(1.0, np.abs(h).max(axis=-1))[:, None]
     worst = slack.min(axis=-1)
-    norm = (x * x).sum(axis=-1)
+    norm = _dot(x, x)
     feasible = ok & (worst >= -tol)
     # The minimiser is a feasible candidate; fall back to the least violated one should
     # round-off reject every candidate (never seen; kept so the answer is always defined).
