@@ -127,8 +127,10 @@ def test_qp_batched_equals_per_agent_bit_for_bit():
 def test_cbf_qp_resolves_collision_courses_under_noise(scenario):
     """CBF-QP keeps separation where plan tracking alone collides on every seed.
 
-    Measured (6 seeds each): closest obstacle 11.6 m head-on and 13.1 m crossing, against
-    the 10 m obstacle separation; closest UAV pair 10.6 m against 8 m.
+    Measured (6 seeds each): closest obstacle 14.0 m head-on and 13.7 m crossing, against
+    the 10 m obstacle separation; closest UAV pair 10.0 m against 8 m. Without the sidestep
+    (``deadlock_gain=0``) one head-on seed is held in front of the obstacle until the UAV
+    is lost (over 300 m off its plan): ``terminated``.
     """
     r = separation_losses(CBFQP, scenario)
     assert not any(r["collision"]) and not any(r["lost"]), r
