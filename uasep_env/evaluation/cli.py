@@ -17,7 +17,13 @@ from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.progress import progress_bar
 from uasep_env.evaluation.report import format_summary
 from uasep_env.evaluation.runner import DEFAULT_HOLD_TIME_S, evaluate, policy_config
-from uasep_env.policies import POLICIES, check_policy_name, make_policy, shipped_policies
+from uasep_env.policies import (
+    POLICIES,
+    SHIELDS,
+    check_policy_name,
+    make_policy,
+    shipped_policies,
+)
 from uasep_env.policies.checkpoint import ALGORITHMS as SB3_ALGORITHMS
 from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
 from uasep_env.scenarios import scenario_names
@@ -149,6 +155,15 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: apf); a value naming an existing file is one path, commas included",
     )
     p.add_argument(
+        "--shield",
+        choices=sorted(SHIELDS),
+        default=None,
+        metavar="NAME",
+        help="filter every listed policy's actions through a safety shield: "
+        f"{', '.join(sorted(SHIELDS))} (the CBF filter); rows are named POLICY+NAME "
+        "(list 'apf,apf+cbf' without --shield to compare one policy with and without)",
+    )
+    p.add_argument(
         "--scenario",
         default="paper",
         choices=scenario_names(),
@@ -273,6 +288,8 @@ def _run(argv: Sequence[str] | None) -> int:
     names = _split_policy_args(args.policy or ["apf"])
     if not names:
         parser.error("argument --policy: no policy given")
+    if args.shield is not None:
+        names = [f"{name}+{args.shield}" for name in names]
     for name in names:
         try:
             check_policy_name(name)

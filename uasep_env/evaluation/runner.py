@@ -38,6 +38,7 @@ from uasep_env.policies import (
     load_policy,
     make_policy,
     observed_config,
+    split_shield,
 )
 from uasep_env.rollout import (
     DEFAULT_DEVIATION_THRESHOLD_M,
@@ -68,7 +69,9 @@ PolicySpec = str | Policy
 
 def _policy_label(spec: str, taken: Iterable[str]) -> str:
     """A short, unique display label: the name, or a model file's stem."""
-    label = spec if spec in POLICIES else Path(spec).stem or spec
+    base, shield = split_shield(spec)
+    label = base if base in POLICIES else Path(base).stem or base
+    label += f"+{shield}" if shield is not None else ""
     taken = set(taken)
     base, k = label, 2
     while label in taken:
@@ -104,9 +107,9 @@ def _normalise_policies(
 def policy_config(spec: PolicySpec, config: EnvConfig) -> EnvConfig:
     """The config a policy observes the comparison's episodes with.
 
-    ``config`` itself, except for a policy checkpoint (a file or a shipped name) that does
-    not fit it as given (another formation size, obstacle count or K nearest): it observes
-    with its training observation (:func:`~uasep_env.policies.observed_config`), as the
+    ``config`` itself, except for a policy checkpoint (a file or a shipped name, shielded or
+    not) that does not fit it as given (another formation size, obstacle count or K
+    nearest): it observes with its training observation (:func:`~uasep_env.policies.observed_config`), as the
     scaling report does. The observation does not move the world, so the episodes are the
     ones every other policy plays.
 
@@ -117,7 +120,8 @@ def policy_config(spec: PolicySpec, config: EnvConfig) -> EnvConfig:
     Returns:
         The config to build and run the policy with.
     """
-    path = checkpoint_path(spec) if isinstance(spec, str) and spec not in POLICIES else None
+    base = split_shield(spec)[0] if isinstance(spec, str) else spec  # a shield reads as it
+    path = checkpoint_path(base) if isinstance(base, str) and base not in POLICIES else None
     if path is None:
         return config
     try:

@@ -31,7 +31,10 @@ Policies (``--policy``, comma-separated or repeated; ``LABEL=SPEC`` names one):
   :func:`uasep_env.policies.observed_config`), so a checkpoint trained on 3 UAVs flies every
   size zero-shot;
 * ``module:callable``: a factory called with each cell's :class:`~uasep_env.EnvConfig`
-  and returning a policy (``actions = policy(observations)``).
+  and returning a policy (``actions = policy(observations)``);
+* any of these followed by ``+cbf``: that policy under the CBF shield
+  (:class:`~uasep_env.policies.shield.Shielded`; a checkpoint's shield reads the
+  checkpoint's layout, its K nearest UAVs and obstacles).
 
 Writes ``<out>.md`` (one table per sweep: rates with 95 % Wilson intervals, means with
 95 % Student-t intervals, from :func:`uasep_env.metrics.aggregate`), ``<out>.json`` (every
@@ -60,10 +63,12 @@ from uasep_env.evaluation import evaluate
 from uasep_env.jsonio import write_json
 from uasep_env.policies import (
     POLICIES,
+    SHIELDS,
     is_policy_checkpoint,
     load_policy,
     observed_config,
     shipped_policy_path,
+    split_shield,
 )
 from uasep_env.reporting.scaling_views import APFS, METRICS, figure, markdown
 from uasep_env.scenarios import HELD_OUT_SEEDS, SCALING_SEEDS
@@ -142,7 +147,7 @@ def cell_config(
         scenario="random", n_uavs=n_uavs, n_obstacles=n_obstacles, formation=pattern, **extra
     )
     if entry is not None and entry.kind == "checkpoint":
-        config = observed_config(entry.spec, config)
+        config = observed_config(split_shield(entry.spec)[0], config)
     return config
 
 
@@ -174,6 +179,7 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
             name, _, spec = item.partition("=")
             if not name.strip():
                 raise ValueError(f"--policy {item!r}: empty label before '='")
+        spec, shield = split_shield(spec)  # "<policy>+cbf": the policy, shielded
         if spec in POLICIES:
             entry = PolicyEntry(label=spec, kind="builtin", spec=spec)
         elif not Path(spec).exists() and (shipped := shipped_policy_path(spec)) is not None:
@@ -203,6 +209,10 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
             raise ValueError(
                 f"--policy {spec!r}: not a built-in policy {sorted(POLICIES)}, a checkpoint "
                 "file or module:callable"
+            )
+        if shield is not None:
+            entry = dataclasses.replace(
+                entry, label=f"{entry.label}+{shield}", spec=f"{entry.spec}+{shield}"
             )
         if name is not None:
             entry = dataclasses.replace(entry, label=name.strip())
@@ -255,7 +265,11 @@ def evaluate_cell(
     for cfg, group in groups:
         specs: dict[str, Any] = {}
         for e in group:
-            specs[e.label] = load_factory(e.spec)(cfg) if e.kind == "factory" else e.spec
+            specs[e.label] = e.spec
+            if e.kind == "factory":
+                spec, shield = split_shield(e.spec)
+                policy = load_factory(spec)(cfg)
+                specs[e.label] = SHIELDS[shield](policy, cfg) if shield else policy
         result = evaluate(specs, cfg, seeds, workers=workers)
         for e in group:
             agg = result.results[e.label].aggregate
