@@ -110,8 +110,9 @@ def policy_config(spec: PolicySpec, config: EnvConfig) -> EnvConfig:
     ``config`` itself, except for a policy checkpoint (a file or a shipped name, shielded or
     not) that does not fit it as given (another formation size, obstacle count or K
     nearest): it observes with its training observation
-    (:func:`~uasep_env.policies.observed_config`), as the scaling report does. The observation does not move the world, so the episodes are the
-    ones every other policy plays.
+    (:func:`~uasep_env.policies.observed_config`), as the scaling report does. The
+    observation does not move the world, so the episodes are the ones every other policy
+    plays.
 
     Args:
         spec: A policy name, path or object.
