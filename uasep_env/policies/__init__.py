@@ -7,7 +7,6 @@ SB3 models.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from pathlib import Path
 
 from uasep_env.config import EnvConfig
@@ -22,17 +21,35 @@ from uasep_env.policies.learned import (
     load_policy,
     load_sb3_policy,
 )
+
+# Every controller registers itself (uasep_env.policies.registry) when its module is
+# imported: a new controller is its module plus its import here (docs/extending.md).
+from uasep_env.policies.mvp import MVP, MVPParams
+from uasep_env.policies.orca import ORCA, ORCAParams
+from uasep_env.policies.registry import (
+    POLICIES,
+    REGISTRY,
+    RegisteredPolicy,
+    reference_controllers,
+    register_policy,
+)
 from uasep_env.policies.shipped import shipped_policies, shipped_policy_path
 
 __all__ = [
     "APF",
+    "MVP",
+    "ORCA",
     "POLICIES",
+    "REGISTRY",
     "APFGains",
     "CheckpointError",
     "LearnedPolicy",
+    "MVPParams",
     "MotionStateAPF",
+    "ORCAParams",
     "Policy",
     "RandomPolicy",
+    "RegisteredPolicy",
     "SB3Policy",
     "TraditionalAPF",
     "ZeroPolicy",
@@ -42,18 +59,11 @@ __all__ = [
     "load_policy",
     "load_sb3_policy",
     "make_policy",
+    "reference_controllers",
+    "register_policy",
     "shipped_policies",
     "shipped_policy_path",
 ]
-
-#: The policy registry: built-in policies by name, each a factory taking the config.
-POLICIES: dict[str, Callable[[EnvConfig], Policy]] = {
-    "apf": APF,
-    "motion-state-apf": MotionStateAPF,
-    "traditional-apf": TraditionalAPF,
-    "zero": ZeroPolicy,
-    "random": RandomPolicy,
-}
 
 
 def _looks_like_path(name: str) -> bool:
