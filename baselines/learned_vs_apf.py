@@ -1,8 +1,10 @@
-"""The learned policies against the three APFs on the held-out bank, with the targets.
+"""The learned policies against the reference controllers on the held-out bank, with targets.
 
     python baselines/learned_vs_apf.py [--workers 2] [--episodes 500] [--paper-episodes 20]
 
-Every controller plays the same encounters: the held-out bank's 500 ``random`` encounters
+Every controller plays the same encounters (the reference controllers are the registry's,
+:func:`uasep_env.policies.reference_controllers`: the three APFs, MVP, ORCA and any
+controller registered since): the held-out bank's 500 ``random`` encounters
 (:data:`uasep_env.scenarios.HELD_OUT_SEEDS`: crossing, head-on, overtaking, climbing,
 multi-obstacle; seeds training never draws) and 20 runs of the ``paper`` scenario
 (:data:`~uasep_env.scenarios.HELD_OUT_PAPER_SEEDS`). The learned policies are the policy
@@ -25,7 +27,7 @@ from uasep_env import make_config
 from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.metrics.statistics import no_worse_rate
-from uasep_env.policies import load_policy
+from uasep_env.policies import load_policy, reference_controllers
 from uasep_env.scenarios import HELD_OUT_PAPER_SEEDS, HELD_OUT_SEEDS
 from uasep_env.tables import render_table
 
@@ -35,7 +37,6 @@ sys.path.insert(0, str(ROOT))
 from paper_experiment import ROWS, table  # noqa: E402
 
 CHECKPOINTS = ROOT / "checkpoints"
-APFS = ("apf", "motion-state-apf", "traditional-apf")
 LEARNED = ("ppo_shared", "ppo_residual_apf", "mappo")
 #: Rows of the tables: the paper's, with the combined loss-of-separation rate first.
 TABLE_ROWS = (
@@ -47,11 +48,13 @@ TRAINING_BUDGET_S = 3600.0
 
 
 def compared_policies() -> dict[str, str]:
-    """The three APFs and the shipped policies present: what every comparison plays.
+    """The registered reference controllers and the shipped policies present.
 
-    Shipped policies go by name, so that results files name no machine's folder.
+    What every comparison plays. Shipped policies go by name, so that results files name no
+    machine's folder.
     """
-    names = [*APFS, *(n for n in LEARNED if (CHECKPOINTS / f"{n}.zip").exists())]
+    shipped = [n for n in LEARNED if (CHECKPOINTS / f"{n}.zip").exists()]
+    names = [*reference_controllers(), *shipped]
     return {name: name for name in names}
 
 

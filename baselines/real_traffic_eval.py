@@ -2,8 +2,9 @@
 
     python baselines/real_traffic_eval.py [--workers 1] [--episodes 300] [--synthetic-episodes 500]
 
-The three APFs and the shipped policies (``baselines/checkpoints/*.zip``, loaded without
-unpickling) play the same encounters twice:
+The registered reference controllers (:func:`uasep_env.policies.reference_controllers`: the
+APFs, MVP, ORCA, ...) and the shipped policies (``baselines/checkpoints/*.zip``, loaded
+without unpickling) play the same encounters twice:
 
 * the real-traffic bank: 300 ``real_traffic`` encounters
   (:data:`uasep_env.scenarios.REAL_TRAFFIC_TEST_SEEDS`, config

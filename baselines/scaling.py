@@ -1,7 +1,6 @@
 r"""Safety and deviation against the number of UAVs and of obstacles, on a held-out bank.
 
-    python baselines/scaling.py --policy apf,motion-state-apf,traditional-apf \\
-        --episodes 50 --out baselines/results/scaling
+    python baselines/scaling.py --episodes 50 --out baselines/results/scaling
     python baselines/scaling.py --policy apf,baselines/checkpoints/ppo_residual_apf.zip \\
         --policy mypackage.policies:make_policy --episodes 100 --out runs/scaling
 
@@ -17,7 +16,8 @@ one pattern for every size). Each obstacle is aimed at a UAV of the formation.
 (:data:`~uasep_env.scenarios.HELD_OUT_SEEDS`, 3 UAVs and 1 obstacle, 200 s): with it, one
 command gives every table a new method is reported with (``docs/protocol.md``).
 
-Policies (``--policy``, comma-separated or repeated; ``LABEL=SPEC`` names one):
+Policies (``--policy``, comma-separated or repeated; ``LABEL=SPEC`` names one; default:
+every registered reference controller, :func:`uasep_env.policies.reference_controllers`):
 
 * a built-in name (``apf``, ``motion-state-apf``, ``traditional-apf``, ``zero``, ...),
   observing the environment's default layout;
@@ -53,13 +53,18 @@ from uasep_env.atomic import atomic_write
 from uasep_env.config import EnvConfig
 from uasep_env.evaluation import evaluate
 from uasep_env.jsonio import write_json
-from uasep_env.policies import POLICIES, is_policy_checkpoint, shipped_policy_path
+from uasep_env.policies import (
+    POLICIES,
+    is_policy_checkpoint,
+    reference_controllers,
+    shipped_policy_path,
+)
 from uasep_env.policies.learned import load_policy
 from uasep_env.scenarios import HELD_OUT_SEEDS, SCALING_SEEDS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from scaling_report import APFS, METRICS, figure, markdown
+from scaling_report import METRICS, figure, markdown
 
 #: The cells' formation sizes and obstacle counts (seeds: ``SCALING_SEEDS``).
 UAV_COUNTS = (3, 8, 16, 32)
@@ -336,7 +341,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.workers < 1:
         p.error(f"argument --workers: must be >= 1, got {args.workers}")
     try:
-        entries = parse_policies(args.policy or list(APFS))
+        entries = parse_policies(args.policy or list(reference_controllers()))
         grid = cells(args.uavs, args.obstacles, args.base_uavs, args.base_obstacles, args.full_grid)
         for n, m in grid:  # validate every cell before the first episode
             cell_config(n, m, args.formation, None, args.episode_duration)

@@ -257,4 +257,6 @@ register_policy(
     reference=True,
     margin=lambda c, s: MVP(c, MVPParams(obstacle_model="region", margin_scale=s)),
     factory=lambda c: MVP(c, MVPParams(obstacle_model="region")),
+    summary="MVP with obstacles resolved on their predicted reachable region "
+    '(`MVP(config, MVPParams(obstacle_model="region"))`)',
 )

@@ -37,6 +37,8 @@ class RegisteredPolicy:
             scaled (``baselines/tradeoff.py`` sweeps it); None: no margin to sweep.
         default_margin: The scale its default parameters correspond to.
         knob: What the sweep's scale is called in the trade-off tables.
+        summary: One line on what it is (the docs' table; default: the class docstring's
+            first line).
     """
 
     name: str
@@ -46,6 +48,7 @@ class RegisteredPolicy:
     margin: Callable[[EnvConfig, float], Any] | None = None
     default_margin: float = 1.0
     knob: str = "margin scale"
+    summary: str = ""
 
 
 #: Every registered entry, by name, in registration order.
@@ -63,6 +66,7 @@ def register_policy(
     default_margin: float = 1.0,
     knob: str = "margin scale",
     factory: Callable[[EnvConfig], Any] | None = None,
+    summary: str | None = None,
 ) -> Callable[[Any], Any]:
     """Register a controller under ``name`` (a class decorator, or called with ``factory``).
 
@@ -75,6 +79,7 @@ def register_policy(
         knob: The sweep's name in the trade-off tables.
         factory: ``config -> policy`` (default: the decorated class itself), for a second
             name of one class (``mvp-region``).
+        summary: One line for the docs' table (default: the docstring's first line).
 
     Returns:
         A decorator returning the class unchanged.
@@ -87,9 +92,11 @@ def register_policy(
         if name in REGISTRY:
             raise ValueError(f"policy {name!r} is already registered")
         make = factory if factory is not None else obj
+        doc = (getattr(obj, "__doc__", None) or "").strip().splitlines()
         REGISTRY[name] = RegisteredPolicy(
-            name, make, label or name, reference, margin, default_margin, knob
-        )
+            name, make, label or name, reference, margin, default_margin, knob,
+            summary if summary is not None else (doc[0] if doc else ""),
+        )  # fmt: skip
         POLICIES[name] = make
         return obj
 
