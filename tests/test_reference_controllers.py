@@ -213,3 +213,35 @@ def test_bad_parameters_name_the_field():
         ORCAParams(horizon=3.0)  # unknown field
     cfg = make_config(n_uavs=3)
     assert MVP(cfg).params == MVPParams() and ORCA(cfg).params == ORCAParams()
+
+
+def test_learned_vs_apf_add_merges_without_touching_other_rows(tmp_path):
+    """``learned_vs_apf.py --add`` plays only the named controller; every other row is kept."""
+    import gzip
+    import json
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "baselines"))
+    import learned_vs_apf
+
+    with gzip.open(root / "baselines/results/learned_vs_apf.json.gz", "rt") as fh:
+        stored = json.load(fh)
+    for scenario in ("random", "paper"):  # two encounters each, to keep the test short
+        stored[scenario]["seeds"] = stored[scenario]["seeds"][:2]
+        stored[scenario]["results"].pop("mvp", None)
+    with gzip.open(tmp_path / "learned_vs_apf.json.gz", "wt") as fh:
+        json.dump(stored, fh)
+    text = learned_vs_apf.main(["--add", "mvp", "--workers", "1", "--out", str(tmp_path)])
+    with gzip.open(tmp_path / "learned_vs_apf.json.gz", "rt") as fh:
+        merged = json.load(fh)
+    for scenario in ("random", "paper"):
+        old, new = stored[scenario]["results"], merged[scenario]["results"]
+        assert set(new) == set(old) | {"mvp"}
+        assert all(json.dumps(new[k]) == json.dumps(old[k]) for k in old)
+        assert len(new["mvp"]["episodes"]) == 2
+        assert merged[scenario]["policies"].index("mvp") < merged[scenario]["policies"].index(
+            "ppo_shared"
+        )
+    assert " mvp " in text and (tmp_path / "learned_vs_apf.md").read_text() == text
