@@ -117,8 +117,23 @@ class _Stored:
 
     def __init__(self, data: dict[str, Any]) -> None:
         self.data = data
-        self.results = {k: SimpleNamespace(aggregate=v["aggregate"])
+        self.results = {k: SimpleNamespace(aggregate=_nan_back(v["aggregate"]))
                         for k, v in data["results"].items()}  # fmt: skip
+
+
+def _nan_back(aggregate: dict[str, Any]) -> dict[str, Any]:
+    """The JSON layout writes a NaN statistic as null; the live aggregate holds NaN."""
+    return {
+        key: {k: float("nan") if v is None and k != "kind" else v for k, v in stats.items()}
+        for key, stats in aggregate.items()
+    }
+
+
+def _read(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise SystemExit(f"{path} does not exist (run without --add or --render first)")
+    with gzip.open(path, "rt") as fh:
+        return json.load(fh)
 
 
 def add_policies(
@@ -132,10 +147,7 @@ def add_policies(
     Raises:
         SystemExit: If there is no such file.
     """
-    if not path.is_file():
-        raise SystemExit(f"--add: {path} does not exist (run without --add first)")
-    with gzip.open(path, "rt") as fh:
-        stored = json.load(fh)
+    stored = _read(path)
     meta = stored.pop("meta")
     order = list(compared_policies())
     for scenario, data in stored.items():
@@ -185,9 +197,19 @@ def main(argv: list[str] | None = None) -> str:
         help="comma-separated controllers to evaluate and merge into the existing results "
         "(the others' rows are kept as they are; the encounters are the file's)",
     )
+    p.add_argument(
+        "--render", action="store_true", help="rewrite the .md from the .json.gz (no episodes)"
+    )
     args = p.parse_args(argv)
     if not 1 <= args.episodes <= len(HELD_OUT_SEEDS):
         p.error(f"argument --episodes: must be in [1, {len(HELD_OUT_SEEDS)}]")
+    if args.render:
+        stored = _read(args.out / "learned_vs_apf.json.gz")
+        meta = stored.pop("meta")
+        text = render({k: _Stored(v) for k, v in stored.items()}, meta)
+        atomic_write(args.out / "learned_vs_apf.md", text)
+        print(text)
+        return text
     if args.add is not None:
         names = [n.strip() for n in args.add.split(",") if n.strip()]
         if bad := [n for n in names if n not in compared_policies()]:
