@@ -1,8 +1,11 @@
-"""The learned policies against the three APFs on the held-out bank, with the targets.
+"""The learned policies against the reference controllers on the held-out bank, with targets.
 
     python baselines/learned_vs_apf.py [--workers 2] [--episodes 500] [--paper-episodes 20]
+    python baselines/learned_vs_apf.py --add mvp,orca  # only these, merged into the results
 
-Every controller plays the same encounters: the held-out bank's 500 ``random`` encounters
+Every controller plays the same encounters (the reference controllers are the registry's,
+:func:`uasep_env.policies.reference_controllers`: the three APFs, MVP, ORCA and any
+controller registered since): the held-out bank's 500 ``random`` encounters
 (:data:`uasep_env.scenarios.HELD_OUT_SEEDS`: crossing, head-on, overtaking, climbing,
 multi-obstacle; seeds training never draws) and 20 runs of the ``paper`` scenario
 (:data:`~uasep_env.scenarios.HELD_OUT_PAPER_SEEDS`). The learned policies are the policy
@@ -17,15 +20,18 @@ Writes ``baselines/results/learned_vs_apf.md`` (the tables the README shows: mea
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import sys
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
 from uasep_env import make_config
 from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.metrics.statistics import no_worse_rate
-from uasep_env.policies import load_policy
+from uasep_env.policies import load_policy, reference_controllers
 from uasep_env.scenarios import HELD_OUT_PAPER_SEEDS, HELD_OUT_SEEDS
 from uasep_env.tables import render_table
 
@@ -35,7 +41,6 @@ sys.path.insert(0, str(ROOT))
 from paper_experiment import ROWS, table  # noqa: E402
 
 CHECKPOINTS = ROOT / "checkpoints"
-APFS = ("apf", "motion-state-apf", "traditional-apf")
 LEARNED = ("ppo_shared", "ppo_residual_apf", "mappo")
 #: Rows of the tables: the paper's, with the combined loss-of-separation rate first.
 TABLE_ROWS = (
@@ -47,11 +52,13 @@ TRAINING_BUDGET_S = 3600.0
 
 
 def compared_policies() -> dict[str, str]:
-    """The three APFs and the shipped policies present: what every comparison plays.
+    """The registered reference controllers and the shipped policies present.
 
-    Shipped policies go by name, so that results files name no machine's folder.
+    What every comparison plays. Shipped policies go by name, so that results files name no
+    machine's folder.
     """
-    names = [*APFS, *(n for n in LEARNED if (CHECKPOINTS / f"{n}.zip").exists())]
+    shipped = [n for n in LEARNED if (CHECKPOINTS / f"{n}.zip").exists()]
+    names = [*reference_controllers(), *shipped]
     return {name: name for name in names}
 
 
@@ -102,34 +109,63 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
     return out
 
 
-def main(argv: list[str] | None = None) -> str:
-    """Evaluate, write the results and print the tables."""
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--episodes", type=int, default=len(HELD_OUT_SEEDS))
-    p.add_argument("--paper-episodes", type=int, default=len(HELD_OUT_PAPER_SEEDS))
-    p.add_argument("--out", type=Path, default=ROOT / "results")
-    args = p.parse_args(argv)
-    if not 1 <= args.episodes <= len(HELD_OUT_SEEDS):
-        p.error(f"argument --episodes: must be in [1, {len(HELD_OUT_SEEDS)}]")
+class _Stored:
+    """A results file's evaluation (plain JSON), read as an :class:`EvaluationResult`.
 
-    policies = compared_policies()
-    meta = {name: load_policy(CHECKPOINTS / f"{name}.zip").meta.info for name in LEARNED
-            if name in policies}  # fmt: skip
-    for name in meta:  # train/reproduce.py --ship-to: what a retrained file reproduces
-        side = CHECKPOINTS / f"{name}_reproduction.json"
-        if side.exists():
-            meta[name] = {**meta[name], "reproduces": json.loads(side.read_text())}
+    :func:`table` and :func:`targets` read only ``results[label].aggregate``.
+    """
+
+    def __init__(self, data: dict[str, Any]) -> None:
+        self.data = data
+        self.results = {k: SimpleNamespace(aggregate=_nan_back(v["aggregate"]))
+                        for k, v in data["results"].items()}  # fmt: skip
+
+
+def _nan_back(aggregate: dict[str, Any]) -> dict[str, Any]:
+    """The JSON layout writes a NaN statistic as null; the live aggregate holds NaN."""
+    return {
+        key: {k: float("nan") if v is None and k != "kind" else v for k, v in stats.items()}
+        for key, stats in aggregate.items()
+    }
+
+
+def _read(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise SystemExit(f"{path} does not exist (run without --add or --render first)")
+    with gzip.open(path, "rt") as fh:
+        return json.load(fh)
+
+
+def add_policies(
+    names: list[str], path: Path, workers: int
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The results file at ``path`` with ``names`` evaluated on its encounters and merged in.
+
+    Only the named controllers play (on the file's seeds and configs, as a full run plays
+    them); every other row is the file's, number for number. Returns ``(meta, scenarios)``.
+
+    Raises:
+        SystemExit: If there is no such file.
+    """
+    stored = _read(path)
+    meta = stored.pop("meta")
+    order = list(compared_policies())
+    for scenario, data in stored.items():
+        result = evaluate({n: n for n in names}, make_config(scenario=scenario), data["seeds"],
+                          workers=workers).to_dict()  # fmt: skip
+        for key in ("results", "policy_specs"):
+            data[key] = {**data[key], **result[key]}
+        data["policies"] = sorted(data["results"], key=lambda n: (
+            order.index(n) if n in order else len(order)))  # fmt: skip
+        data["results"] = {n: data["results"][n] for n in data["policies"]}
+    return meta, stored
+
+
+def render(results: dict[str, Any], meta: dict[str, dict]) -> str:
+    """The markdown of the results (``scenario -> EvaluationResult`` or a stored one)."""
     sections = []
-    results = {}
-    for scenario, seeds in (
-        ("random", list(HELD_OUT_SEEDS)[: args.episodes]),
-        ("paper", list(HELD_OUT_PAPER_SEEDS)[: args.paper_episodes]),
-    ):
-        if not seeds:
-            continue
-        result = evaluate(policies, make_config(scenario=scenario), seeds, workers=args.workers)
-        results[scenario] = result
+    for scenario, result in results.items():
+        seeds = result.data["seeds"] if isinstance(result, _Stored) else result.seeds
         what = "held-out bank" if scenario == "random" else "paper scenario"
         sections += [
             f"### {what.capitalize()}: {len(seeds)} `{scenario}` encounters, seeds "
@@ -145,7 +181,63 @@ def main(argv: list[str] | None = None) -> str:
             "### Targets (held-out bank)",
             render_table(["target", "measured", "met"], body, markdown=True),
         ]
-    text = "\n\n".join(sections) + "\n"
+    return "\n\n".join(sections) + "\n"
+
+
+def main(argv: list[str] | None = None) -> str:
+    """Evaluate, write the results and print the tables."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--episodes", type=int, default=len(HELD_OUT_SEEDS))
+    p.add_argument("--paper-episodes", type=int, default=len(HELD_OUT_PAPER_SEEDS))
+    p.add_argument("--out", type=Path, default=ROOT / "results")
+    p.add_argument(
+        "--add",
+        default=None,
+        help="comma-separated controllers to evaluate and merge into the existing results "
+        "(the others' rows are kept as they are; the encounters are the file's)",
+    )
+    p.add_argument(
+        "--render", action="store_true", help="rewrite the .md from the .json.gz (no episodes)"
+    )
+    args = p.parse_args(argv)
+    if not 1 <= args.episodes <= len(HELD_OUT_SEEDS):
+        p.error(f"argument --episodes: must be in [1, {len(HELD_OUT_SEEDS)}]")
+    if args.render:
+        stored = _read(args.out / "learned_vs_apf.json.gz")
+        meta = stored.pop("meta")
+        text = render({k: _Stored(v) for k, v in stored.items()}, meta)
+        atomic_write(args.out / "learned_vs_apf.md", text)
+        print(text)
+        return text
+    if args.add is not None:
+        names = [n.strip() for n in args.add.split(",") if n.strip()]
+        if bad := [n for n in names if n not in compared_policies()]:
+            p.error(f"argument --add: not a compared policy: {bad} ({list(compared_policies())})")
+        meta, stored = add_policies(names, args.out / "learned_vs_apf.json.gz", args.workers)
+        text = render({k: _Stored(v) for k, v in stored.items()}, meta)
+        atomic_write(args.out / "learned_vs_apf.md", text)
+        write_json({"meta": meta, **stored}, args.out / "learned_vs_apf.json.gz")
+        print(text)
+        return text
+
+    policies = compared_policies()
+    meta = {name: load_policy(CHECKPOINTS / f"{name}.zip").meta.info for name in LEARNED
+            if name in policies}  # fmt: skip
+    for name in meta:  # train/reproduce.py --ship-to: what a retrained file reproduces
+        side = CHECKPOINTS / f"{name}_reproduction.json"
+        if side.exists():
+            meta[name] = {**meta[name], "reproduces": json.loads(side.read_text())}
+    results = {}
+    for scenario, seeds in (
+        ("random", list(HELD_OUT_SEEDS)[: args.episodes]),
+        ("paper", list(HELD_OUT_PAPER_SEEDS)[: args.paper_episodes]),
+    ):
+        if seeds:
+            results[scenario] = evaluate(
+                policies, make_config(scenario=scenario), seeds, workers=args.workers
+            )
+    text = render(results, meta)
     args.out.mkdir(parents=True, exist_ok=True)
     atomic_write(args.out / "learned_vs_apf.md", text)
     write_json({"meta": meta, **results}, args.out / "learned_vs_apf.json.gz")

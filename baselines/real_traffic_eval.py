@@ -3,9 +3,9 @@
     python baselines/real_traffic_eval.py [--workers 1] [--episodes 300] [--synthetic-episodes 500]
     python baselines/real_traffic_eval.py --prediction enclosing,calibrated
 
-Every controller of the policy registry (:data:`uasep_env.policies.POLICIES`, less the
-``zero`` and ``random`` stand-ins) and the shipped policies (``baselines/checkpoints/*.zip``,
-loaded without unpickling) play the same encounters:
+The registered reference controllers (:func:`uasep_env.policies.reference_controllers`: the
+APFs, MVP, ORCA, ...) and the shipped policies (``baselines/checkpoints/*.zip``, loaded
+without unpickling) play the same encounters twice:
 
 * the real-traffic bank: 300 ``real_traffic`` encounters
   (:data:`uasep_env.scenarios.REAL_TRAFFIC_TEST_SEEDS`, config
@@ -53,7 +53,7 @@ from uasep_env import make_config, real_traffic
 from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.metrics.statistics import wilson_interval
-from uasep_env.policies import POLICIES, shipped_policies
+from uasep_env.policies import reference_controllers, shipped_policies
 from uasep_env.scenarios import HELD_OUT_SEEDS, REAL_TRAFFIC_TEST_SEEDS, sample_scenario
 from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK, REAL_TRAFFIC_SLOW_BANK
 from uasep_env.tables import render_table
@@ -72,8 +72,6 @@ SUMMARY = (
 )
 
 
-#: Registered policies that are not controllers (stand-ins for tests and baselines).
-NOT_CONTROLLERS = ("zero", "random")
 #: The predicted regions ``--prediction`` accepts (``prediction.fit``).
 PREDICTIONS = ("enclosing", "calibrated")
 
@@ -86,7 +84,7 @@ def registry_controllers() -> dict[str, str]:
     """
     shipped = shipped_policies()
     learned = [n for n in LEARNED if n in shipped] + sorted(n for n in shipped if n not in LEARNED)
-    names = [n for n in POLICIES if n not in NOT_CONTROLLERS] + learned
+    names = [*reference_controllers(), *learned]
     return {n: n for n in names}
 
 

@@ -26,7 +26,11 @@ The knobs (``scale`` multiplies the gains that set the margin in the reference g
 * ``ppo-shared`` -- the shipped pure policy has no gain; what sets its margin is the region it
   observes, so the prediction horizon is swept (trained at 10 s; other horizons are outside
   its training distribution);
-* ``mappo`` -- the shipped MAPPO actor, swept the same way.
+* ``mappo`` -- the shipped MAPPO actor, swept the same way;
+* every other registered reference controller (:data:`uasep_env.policies.REGISTRY`: ``mvp``,
+  ``mvp-region``, ``orca``, ...) -- its own ``margin_scale`` (the radii of its protected
+  zones), from its registry entry (:func:`registry_methods`): a new controller is swept
+  with no edit here.
 
 Writes ``docs/figures/tradeoff.csv`` (one row per method, setting and scenario: every
 statistic with its interval), ``docs/figures/tradeoff_{paper,bank}.png`` and
@@ -59,6 +63,7 @@ from uasep_env.metrics import t_interval
 from uasep_env.metrics.statistics import no_worse_rate
 from uasep_env.policies import (
     APF,
+    REGISTRY,
     APFGains,
     MotionStateAPF,
     TraditionalAPF,
@@ -181,6 +186,24 @@ METHODS: tuple[Method, ...] = (
         config=lambda h: {"prediction": {"horizon": h}},
     ),
 )
+
+
+
+def registry_methods(taken: Sequence[str]) -> tuple[Method, ...]:
+    """A :class:`Method` for every registered reference controller with a margin to sweep.
+
+    Its knob is its registry entry's ``margin`` (``(config, scale) -> policy``) over
+    :data:`SCALES`; controllers already in ``taken`` (the APFs, swept above) are left out.
+    """
+    return tuple(
+        Method(e.name, e.label, e.knob, SCALES, e.default_margin, e.margin)
+        for e in REGISTRY.values()
+        if e.reference and e.margin is not None and e.name not in taken
+    )
+
+
+#: The hand-written methods above, then every other registered reference controller.
+METHODS = METHODS + registry_methods([m.name for m in METHODS])
 
 #: (column, dotted episode metric or derived name, statistic, axis label, higher is safer)
 SAFETY = (

@@ -17,6 +17,10 @@ The table of scenario families stands between ``<!-- scenarios -->`` and
 ``<!-- /scenarios -->``; it is written from the scenario registry
 (:data:`uasep_env.scenarios.FAMILIES`: each family's summary, parameters and gym id).
 
+The table of registered controllers stands between ``<!-- controllers -->`` and
+``<!-- /controllers -->``; it is written from the policy registry
+(:data:`uasep_env.policies.REGISTRY`).
+
 ``pretty`` writes the controllers as the README names them (``APF (proposed)``, ...) and
 units with superscripts (``m/s²``). The tables are re-laid out by
 :func:`uasep_env.tables.render_table`, so the pages say exactly what the results say.
@@ -33,6 +37,7 @@ import sys
 from pathlib import Path
 
 from uasep_env.atomic import atomic_write
+from uasep_env.policies import REGISTRY
 from uasep_env.registration import ENV_VERSION
 from uasep_env.scenarios import FAMILIES
 from uasep_env.tables import render_table
@@ -47,12 +52,8 @@ def pages() -> list[Path]:
     return [README, *sorted((ROOT / "docs").glob("*.md"))]
 
 
-#: The README's names of the controllers (``pretty`` tables).
-README_LABELS = {
-    "apf": "APF (proposed)",
-    "motion-state-apf": "motion-state APF",
-    "traditional-apf": "traditional APF",
-}
+#: The README's names of the controllers (``pretty`` tables): the registry's labels.
+README_LABELS = {name: e.label for name, e in REGISTRY.items() if e.reference}
 _UNITS = {"m/s^2": "m/s²", "m/s^3": "m/s³"}
 _BLOCK = re.compile(
     r'(?P<open><!-- results (?P<file>\S+) "(?P<heading>[^"]+)"(?P<pretty> pretty)? -->\n)'
@@ -64,6 +65,22 @@ _BLOCK = re.compile(
 _SCENARIOS = re.compile(
     r"(?P<open><!-- scenarios -->\n).*?(?P<close><!-- /scenarios -->)", re.DOTALL
 )
+_CONTROLLERS = re.compile(
+    r"(?P<open><!-- controllers -->\n).*?(?P<close><!-- /controllers -->)", re.DOTALL
+)
+
+
+def controller_table() -> str:
+    """The markdown table of the registered policies (:data:`uasep_env.policies.REGISTRY`)."""
+    rows = []
+    for name, e in REGISTRY.items():
+        target = e.factory if isinstance(e.factory, type) else None
+        cls = f"{{class}}`~{target.__module__}.{target.__qualname__}`" if target else "-"
+        summary = e.summary.replace("``", "`")  # reST literals in docstrings
+        rows.append([f"`{name}`", e.label, cls, "yes" if e.reference else "", summary])
+    header = ["name", "label", "class", "reference", "what it is"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows])
 
 
 def scenario_table() -> str:
@@ -144,7 +161,7 @@ def render_readme(readme: str, results: Path = RESULTS) -> str:
     readme = _SCENARIOS.sub(
         lambda m: m["open"] + scenario_table() + "\n" + m["close"], _BLOCK.sub(block, readme)
     )
-    return readme
+    return _CONTROLLERS.sub(lambda m: m["open"] + controller_table() + "\n" + m["close"], readme)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,7 +7,6 @@ SB3 models.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from pathlib import Path
 
 from uasep_env.config import EnvConfig
@@ -23,6 +22,18 @@ from uasep_env.policies.checkpoint_policy import (
     load_policy,
     observed_config,
 )
+
+# Every controller registers itself (uasep_env.policies.registry) when its module is
+# imported: a new controller is its module plus its import here (docs/extending.md).
+from uasep_env.policies.mvp import MVP, MVPParams
+from uasep_env.policies.orca import ORCA, ORCAParams
+from uasep_env.policies.registry import (
+    POLICIES,
+    REGISTRY,
+    RegisteredPolicy,
+    reference_controllers,
+    register_policy,
+)
 from uasep_env.policies.sb3_policy import SB3Policy, load_sb3_policy
 from uasep_env.policies.shield import SHIELDS, Shielded, split_shield
 from uasep_env.policies.shipped import shipped_policies, shipped_policy_path
@@ -30,16 +41,22 @@ from uasep_env.policies.shipped import shipped_policies, shipped_policy_path
 __all__ = [
     "APF",
     "CBFQP",
+    "MVP",
+    "ORCA",
     "POLICIES",
+    "REGISTRY",
     "SHIELDS",
     "APFGains",
     "CBFFilter",
     "CBFParams",
     "CheckpointError",
     "LearnedPolicy",
+    "MVPParams",
     "MotionStateAPF",
+    "ORCAParams",
     "Policy",
     "RandomPolicy",
+    "RegisteredPolicy",
     "SB3Policy",
     "Shielded",
     "TraditionalAPF",
@@ -52,20 +69,12 @@ __all__ = [
     "load_sb3_policy",
     "make_policy",
     "observed_config",
+    "reference_controllers",
+    "register_policy",
     "shipped_policies",
     "shipped_policy_path",
     "split_shield",
 ]
-
-#: The policy registry: built-in policies by name, each a factory taking the config.
-POLICIES: dict[str, Callable[[EnvConfig], Policy]] = {
-    "apf": APF,
-    "motion-state-apf": MotionStateAPF,
-    "traditional-apf": TraditionalAPF,
-    "zero": ZeroPolicy,
-    "random": RandomPolicy,
-    "cbf-qp": CBFQP,
-}
 
 
 def _looks_like_path(name: str) -> bool:

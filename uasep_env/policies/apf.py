@@ -61,6 +61,8 @@ from uasep_env._deprecation import RenamedAttributes, warn_renamed
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import check_positive
 from uasep_env.observation import ObservationLayout
+from uasep_env.policies.nominal import bounded_action, plan_tracking
+from uasep_env.policies.registry import register_policy
 
 __all__ = ["APF", "APFGains", "MotionStateAPF", "TraditionalAPF"]
 
@@ -204,15 +206,12 @@ class _APFBase(ABC):
 
     # -- pieces --------------------------------------------------------------------
     def attraction(self, o: dict[str, np.ndarray]) -> np.ndarray:
-        """Eqs. 19-22: goal, slot, velocity matching and damping (m/s^2)."""
-        g = self.gains
-        goal = _cap_norm(o["goal_offset"], g.goal_saturation)
-        return (
-            g.k_goal * goal
-            + g.k_slot * o["slot_offset"]
-            + g.k_vel * (o["plan_velocity"] - o["velocity"])
-            - g.k_damp * (o["velocity"] - o["formation_velocity"])
-        )
+        """Eqs. 19-22: goal, slot, velocity matching and damping (m/s^2).
+
+        :func:`~uasep_env.policies.nominal.plan_tracking`, the nominal command every
+        reference controller shares.
+        """
+        return plan_tracking(o, self.gains)
 
     def inner_repulsion(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """Eqs. 26-30: relative-motion repulsion from the other UAVs (m/s^2)."""
@@ -234,12 +233,7 @@ class _APFBase(ABC):
 
     def bound(self, accel: np.ndarray, velocity: np.ndarray) -> np.ndarray:
         """Eq. 4 and the acceleration bound; returns normalised actions."""
-        v_hat, speed = _unit(velocity)
-        along = np.einsum("...i,...i->...", accel, v_hat)
-        limit = (self.max_speed - speed) / self.dt  # most speed gain allowed this step
-        excess = np.maximum(0.0, along - np.maximum(limit, 0.0))
-        accel = accel - excess[..., None] * v_hat
-        return np.clip(accel / self.max_accel, -1.0, 1.0)
+        return bounded_action(accel, velocity, self.max_speed, self.max_accel, self.dt)
 
     def forces(self, observations: np.ndarray) -> dict[str, np.ndarray]:
         """Every force term (m/s^2) for the observations, by name (for analysis/tests)."""
@@ -258,6 +252,14 @@ class _APFBase(ABC):
         return self.bound(total, o["velocity"]).astype(np.float32)
 
 
+def _margin(cls: type[_APFBase]) -> Any:
+    """``(config, scale) -> cls`` with its margin gains scaled from the reference gains."""
+    return lambda config, s: cls(config, APFGains().scaled(cls.margin_gains, s))
+
+
+@register_policy(
+    "apf", label="APF (proposed)", reference=True, margin=lambda c, s: _margin(APF)(c, s)
+)
 class APF(_APFBase):
     """The paper's method: reachable-set repulsion with entry prediction (eqs. 19-32).
 
@@ -311,6 +313,13 @@ class APF(_APFBase):
         return _cap_norm(f, g.max_repulsion).sum(axis=-2)
 
 
+@register_policy(
+    "motion-state-apf",
+    label="motion-state APF",
+    reference=True,
+    margin=lambda c, s: _margin(MotionStateAPF)(c, s),
+    default_margin=1.5,
+)
 class MotionStateAPF(_APFBase):
     """The authors' earlier method [23]: motion-state repulsion, no trajectory prediction.
 
@@ -343,6 +352,14 @@ class MotionStateAPF(_APFBase):
         return _cap_norm(mag[..., None] * away, g.max_repulsion).sum(axis=-2)
 
 
+@register_policy(
+    "traditional-apf",
+    label="traditional APF",
+    reference=True,
+    margin=lambda c, s: _margin(TraditionalAPF)(c, s),
+    default_margin=0.75,
+    knob="range scale",
+)
 class TraditionalAPF(_APFBase):
     """Distance-only APF (Khatib): ``eta (1/rho - 1/rho_0) / rho^2`` away from each source.
 

@@ -13,6 +13,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from uasep_env.config import EnvConfig
+from uasep_env.policies.registry import register_policy
 
 __all__ = ["Policy", "RandomPolicy", "ZeroPolicy"]
 
@@ -30,6 +31,7 @@ class Policy(Protocol):
         ...
 
 
+@register_policy("zero")
 class ZeroPolicy:
     """Commands zero acceleration: the UAVs coast (a lower baseline)."""
 
@@ -47,6 +49,7 @@ class ZeroPolicy:
         """Stateless."""
 
 
+@register_policy("random")
 class RandomPolicy:
     """Uniform random actions from its own seeded generator.
 

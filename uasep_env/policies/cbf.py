@@ -46,8 +46,10 @@ import numpy as np
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import MAX_DIST, check_int_in, check_positive
 from uasep_env.observation import ObservationLayout
-from uasep_env.policies.apf import APF
+from uasep_env.policies.apf import APFGains
+from uasep_env.policies.nominal import bounded_action, plan_tracking
 from uasep_env.policies.qp import solve_filter_qp
+from uasep_env.policies.registry import register_policy
 
 __all__ = ["CBFQP", "CBFFilter", "CBFParams"]
 
@@ -264,12 +266,19 @@ class CBFFilter:
         return np.clip((command - base) / self.residual_scale, -1.0, 1.0).astype(np.float32)
 
 
+@register_policy(
+    "cbf-qp",
+    label="CBF-QP",
+    reference=True,
+    margin=lambda c, s: CBFQP(c, CBFParams(margin_scale=s)),
+)
 class CBFQP:
     """CBF-QP: a nominal plan-tracking command, filtered by :class:`CBFFilter`.
 
-    The nominal command is the APF's attraction (eqs. 19-22: goal, slot and velocity
-    tracking, damping) under its speed bound (eq. 4), with no repulsion: all avoidance
-    comes from the barriers.
+    The nominal command is the shared plan tracking
+    (:func:`~uasep_env.policies.nominal.plan_tracking`: the APF's goal, slot and velocity
+    tracking and damping, eqs. 19-22) under the speed bound (eq. 4), with no repulsion: all
+    avoidance comes from the barriers.
 
     Args:
         config: The environment config.
@@ -282,14 +291,17 @@ class CBFQP:
         self.config = config
         self.cbf = CBFFilter(config, params)
         self.params = self.cbf.params
-        self._apf = APF(config.replace(action={"mode": "direct"}))
+        self.gains = APFGains()  # the tracking gains of every reference controller
+        self.max_speed, self.max_accel = config.uav.max_speed, config.uav.max_accel
+        self.dt = config.step_duration
 
     def reset(self) -> None:
         """Memoryless."""
 
     def nominal(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """The plan-tracking command, normalised ``(..., 3)``."""
-        return self._apf.bound(self._apf.attraction(o), o["velocity"])
+        accel = plan_tracking(o, self.gains)
+        return bounded_action(accel, o["velocity"], self.max_speed, self.max_accel, self.dt)
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         """Normalised accelerations ``(..., 3)`` float32 for observations ``(..., obs_dim)``."""
