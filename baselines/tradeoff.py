@@ -196,7 +196,14 @@ def registry_methods(taken: Sequence[str]) -> tuple[Method, ...]:
     :data:`SCALES`; controllers already in ``taken`` (the APFs, swept above) are left out.
     """
     return tuple(
-        Method(e.name, e.label, e.knob, SCALES, e.default_margin, e.margin)
+        Method(
+            name=e.name,
+            label=e.label,
+            knob=e.knob,
+            values=SCALES,
+            default=e.default_margin,
+            policy=e.margin,
+        )
         for e in REGISTRY.values()
         if e.reference and e.margin is not None and e.name not in taken
     )

@@ -235,6 +235,7 @@ def test_the_builder_rebuilds_the_shipped_cells() -> None:
 
 def test_real_traffic_eval_plays_every_registered_controller(monkeypatch) -> None:
     """The controller list comes from the policy registry (a controller added there appears)."""
+    import dataclasses
     import sys
 
     from uasep_env import policies
@@ -244,7 +245,8 @@ def test_real_traffic_eval_plays_every_registered_controller(monkeypatch) -> Non
     names = rte.registry_controllers()
     assert set(policies.POLICIES) - set(names) == {"zero", "random"}
     assert set(policies.shipped_policies()) <= set(names)
-    monkeypatch.setitem(policies.POLICIES, "new-controller", policies.POLICIES["apf"])
+    entry = dataclasses.replace(policies.REGISTRY["apf"], name="new-controller")
+    monkeypatch.setitem(policies.REGISTRY, "new-controller", entry)
     assert "new-controller" in rte.registry_controllers()
     assert rte.with_fit({"scenario": "random"}, "calibrated")["prediction"] == {"fit": "calibrated"}
     assert rte.with_fit({"scenario": "random"}, "enclosing") == {"scenario": "random"}
