@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from uasep_env.atomic import output_kind
 from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.report import format_summary
@@ -90,6 +91,11 @@ def _output_problem(path: Path, directory: bool) -> str | None:
     not be a folder (a file for ``directory``), its nearest existing parent must be a
     writable folder, and an existing target must be writable.
     """
+    if not directory:
+        try:
+            output_kind(path)  # a block device or a socket is never written
+        except OSError as err:
+            return (err.strerror or str(err)).rpartition(f"{path}: ")[2]
     if path.exists():
         if directory and not path.is_dir():
             return "exists and is not a directory"
