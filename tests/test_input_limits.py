@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -219,3 +220,163 @@ def test_boundary_values_are_still_accepted(tmp_path):
                            _replace_arrays(raw, **{"layer1.bias": w}))  # fmt: skip
         meta, *_ = read_checkpoint(path)
         assert meta.clip_obs == clip
+
+
+# ------------------------------------------------------------- counts that cannot fit (B4)
+
+_HUGE = [10**7, 10**9, 2**63, 2**80]
+
+
+def _views():
+    import gymnasium
+
+    import uasep_env  # noqa: F401  (registers the ids)
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.envs.vector import FormationVectorEnv
+
+    views = {
+        "num_envs": lambda n: FormationVectorEnv(num_envs=n),
+        "make_vec num_envs": lambda n: gymnasium.make_vec("uasep/Formation-v2", num_envs=n),
+        "n_envs": lambda n: EnvCore(None, n_envs=n),
+    }
+    try:
+        from uasep_env.envs.sb3 import UAVSharedVecEnv
+    except ImportError:  # stable-baselines3 is an extra
+        pass
+    else:
+        views["sb3 n_envs"] = lambda n: UAVSharedVecEnv(n_envs=n)
+    return views
+
+
+@pytest.mark.parametrize("n", _HUGE)
+def test_every_view_refuses_a_count_that_cannot_fit_naming_it_and_the_estimate(n):
+    for view, make in _views().items():
+        name = view.split()[-1]
+        with pytest.raises(ValueError, match=rf"^{name}={n:,} needs about .* of memory") as info:
+            make(n)
+        assert "per environment" in str(info.value) and "available" in str(info.value)
+
+
+def test_the_limit_follows_the_memory_available(monkeypatch):
+    from uasep_env import capacity
+    from uasep_env.config import make_config
+    from uasep_env.envs.core import EnvCore
+
+    cfg = make_config()
+    per = capacity.env_bytes(cfg)
+    monkeypatch.setattr(capacity, "available_memory", lambda: 1000 * per)
+    EnvCore(cfg, n_envs=1000)  # fits exactly
+    with pytest.raises(ValueError, match=r"n_envs=1,001 needs about"):
+        EnvCore(cfg, n_envs=1001)
+    big = make_config(n_uavs=32, n_obstacles=8)
+    assert capacity.env_bytes(big) > 10 * per  # the estimate grows with the config
+    with pytest.raises(ValueError, match=r"with 32 UAVs and 8 obstacle"):
+        EnvCore(big, n_envs=200)
+
+
+_PEAK = """
+import sys, tracemalloc
+import numpy as np
+from uasep_env.config import make_config
+from uasep_env.envs.core import EnvCore
+cfg = make_config(**eval(sys.argv[1]))
+def peak(n):  # the most memory held at once while a batch is made, reset and stepped
+    tracemalloc.start()
+    core = EnvCore(cfg, n_envs=n)
+    core.reset(seed=0)
+    core.step(np.zeros((n, cfg.n_uavs, 3), np.float32))
+    core.reset(seed=1)
+    del core
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak
+peak(4)  # compiled kernels, caches
+n = int(sys.argv[2])
+print((peak(n) - peak(n // 5)) / (n - n // 5))
+"""
+
+
+@pytest.mark.parametrize(
+    ("config", "n"),
+    [({}, 2000), ({"n_uavs": 32, "n_obstacles": 8}, 200)],
+)
+def test_the_estimate_is_not_below_what_a_batch_really_takes(config, n):
+    from uasep_env import capacity
+    from uasep_env.config import make_config
+
+    out = subprocess.run(
+        [sys.executable, "-c", _PEAK, repr(config), str(n)],
+        capture_output=True, text=True, timeout=600, cwd=ROOT, check=True,
+    )  # fmt: skip
+    measured = float(out.stdout.split()[-1])
+    estimate = capacity.env_bytes(make_config(**config))
+    print(f"{config}: measured {measured:,.0f} B/env, estimate {estimate:,} B/env")
+    assert estimate >= measured
+
+
+# ------------------------------------------------- config and command-line ranges (B8)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "field"),
+    [
+        ({"dt": 1e-12}, "dt"),
+        ({"dt": 5e-4}, "dt"),
+        ({"uav": {"max_accel": 1e-300}}, "uav.max_accel"),
+        ({"uav": {"max_speed": 1e-300}, "cruise_speed": 1e-300}, "uav.max_speed"),
+        ({"cruise_speed": 1e-5}, "cruise_speed"),
+        ({"episode_duration": 1e6}, "episode_duration"),
+        ({"dt": 0.001, "episode_duration": 2000.0}, "episode_duration"),
+    ],
+)
+def test_config_values_that_describe_nothing_are_refused_naming_the_field(overrides, field):
+    from uasep_env.config import make_config
+
+    with pytest.raises(ValueError, match=rf"invalid config value {field}="):
+        make_config(**overrides)
+
+
+def test_the_new_lower_bounds_accept_their_boundary_and_every_scenario():
+    from uasep_env.config import make_config
+    from uasep_env.scenarios import scenario_names
+
+    make_config(dt=1e-3, episode_duration=1000.0, uav={"max_accel": 0.01, "max_speed": 0.01},
+                cruise_speed=0.01)  # fmt: skip
+    for name in scenario_names():
+        make_config(scenario=name)
+
+
+def _eval(args, capsys):
+    from uasep_env.evaluation import main
+
+    code = main(["--quiet", *args])
+    return code, capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("args", "flag"),
+    [
+        (["--episodes", "1000000000"], "--episodes"),
+        (["--episodes", str(2**70)], "--episodes"),
+        (["--episodes", "100000", "--batch-size", "100000"], "--batch-size"),
+        (["--settle-time", "1e308"], "--settle-time"),
+        (["--settle-time", "200"], "--settle-time"),
+        (["--hold-time", "1e308"], "--hold-time"),
+        (["--config", "dt=1e-12"], "--config"),
+        (["--config", "uav.max_accel=1e-300"], "--config"),
+    ],
+)
+def test_uasep_eval_refuses_sizes_and_times_up_front_in_one_line(args, flag, capsys):
+    code, err = _eval(args, capsys)
+    assert code == 2 and f"argument {flag}" in err and err.count("\n") == 1, err
+
+
+def test_uasep_eval_refuses_a_policy_path_that_is_not_utf8_before_running(tmp_path, capsys):
+    import shutil
+
+    name = os.fsdecode(b"policy-\xff.zip")
+    path = tmp_path / name
+    shutil.copy(SHIPPED, path)
+    code, err = _eval(["--policy", str(path), "--csv", str(tmp_path / "o.csv")], capsys)
+    assert code == 2 and "argument --policy" in err and "not UTF-8" in err, err
+    assert not (tmp_path / "o.csv").exists()

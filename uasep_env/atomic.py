@@ -91,10 +91,8 @@ def output_kind(path: str | Path) -> str:
         return "stream"
     try:
         st = os.stat(p)
-    except FileNotFoundError:
+    except OSError:  # nothing there (or no way there): the writer reports what goes wrong
         return "link" if os.path.islink(p) else "new"  # a dangling link: its target is made
-    except OSError as err:
-        raise _one_line(p, err) from err
     mode = st.st_mode
     if stat.S_ISCHR(mode) or stat.S_ISFIFO(mode):
         return "device"

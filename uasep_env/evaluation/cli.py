@@ -114,6 +114,33 @@ def _output_problem(path: Path, directory: bool) -> str | None:
     return None
 
 
+def _size_problem(args: argparse.Namespace, cfg: Any, n_policies: int) -> str | None:
+    """What in the run's sizes and times cannot work, checked before it starts, or None."""
+    from uasep_env.capacity import EPISODE_RESULT_BYTES, available_memory, check_count, record_bytes
+    from uasep_env.evaluation.runner import default_batch_size
+
+    end = cfg.episode_duration
+    if args.settle_time >= end:
+        return (f"argument --settle-time: {args.settle_time:g} s is not before the episode's "
+                f"end ({end:g} s): no statistics would remain")  # fmt: skip
+    if args.hold_time > end:
+        return f"argument --hold-time: {args.hold_time:g} s is longer than the episode ({end:g} s)"
+    results = args.episodes * n_policies * EPISODE_RESULT_BYTES
+    if results > (free := available_memory()):
+        return (f"argument --episodes: {args.episodes:,} episodes x {n_policies} policies keep "
+                f"about {results / 1e9:,.3g} GB of results in memory, more than the "
+                f"{free / 1e9:,.3g} GB available")  # fmt: skip
+    batch = min(args.batch_size or default_batch_size(args.episodes), args.episodes)
+    chunks = math.ceil(args.episodes / batch) * n_policies
+    held = 1 if args.ray is not None else min(args.workers, chunks)
+    try:
+        check_count("batch_size", batch, cfg, extra_bytes=record_bytes(cfg), copies=held)
+    except ValueError as err:
+        flag = "--batch-size" if args.batch_size else "--episodes"
+        return f"argument {flag}: {_one_line(err)}"
+    return None
+
+
 _positive_int = _bounded(int, 1)
 _non_negative_int = _bounded(int, 0)
 _non_negative_float = _bounded(float, 0.0)
@@ -285,6 +312,13 @@ def _run(argv: Sequence[str] | None) -> int:
         parser.error("argument --policy: no policy given")
     for name in names:
         try:
+            name.encode("utf-8")
+        except UnicodeEncodeError:  # the results, CSV and JSON, are labelled with it
+            parser.error(
+                f"argument --policy: {name!r} is not UTF-8 text; link to the file under a "
+                "UTF-8 name"
+            )
+        try:
             check_policy_name(name)
         except ValueError as err:
             parser.error(f"argument --policy: {_one_line(err)}")
@@ -313,6 +347,9 @@ def _run(argv: Sequence[str] | None) -> int:
         cfg = build_config(args.scenario, args.config)
     except (TypeError, ValueError, RecursionError) as err:
         parser.error(f"argument --config: {_one_line(err)}")
+    problem = _size_problem(args, cfg, len(names))
+    if problem is not None:
+        parser.error(problem)
     for name in names:  # fail early on models that do not load
         try:
             make_policy(name, cfg, args.allow_pickle, args.algorithm)
