@@ -360,7 +360,7 @@ def _eval(args, capsys):
         (["--episodes", str(2**70)], "--episodes"),
         (["--episodes", "100000", "--batch-size", "100000"], "--batch-size"),
         (["--settle-time", "1e308"], "--settle-time"),
-        (["--settle-time", "200"], "--settle-time"),
+        (["--settle-time", "1000001"], "--settle-time"),
         (["--hold-time", "1e308"], "--hold-time"),
         (["--config", "dt=1e-12"], "--config"),
         (["--config", "uav.max_accel=1e-300"], "--config"),

@@ -98,7 +98,7 @@ def output_kind(path: str | Path) -> str:
         return "device"
     if stat.S_ISREG(mode):
         return "link" if os.path.islink(p) else "file"
-    what = {stat.S_IFBLK: "a block device", stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a folder"}
+    what = {stat.S_IFBLK: "a block device", stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a directory"}
     message = f"cannot write {p}: it is {what.get(stat.S_IFMT(mode), 'a special file')}"
     if stat.S_ISDIR(mode):
         raise IsADirectoryError(errno.EISDIR, message)

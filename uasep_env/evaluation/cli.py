@@ -117,14 +117,14 @@ def _output_problem(path: Path, directory: bool) -> str | None:
 def _size_problem(args: argparse.Namespace, cfg: Any, n_policies: int) -> str | None:
     """What in the run's sizes and times cannot work, checked before it starts, or None."""
     from uasep_env.capacity import EPISODE_RESULT_BYTES, available_memory, check_count, record_bytes
+    from uasep_env.config.checks import MAX_TIME
     from uasep_env.evaluation.runner import default_batch_size
 
-    end = cfg.episode_duration
-    if args.settle_time >= end:
-        return (f"argument --settle-time: {args.settle_time:g} s is not before the episode's "
-                f"end ({end:g} s): no statistics would remain")  # fmt: skip
-    if args.hold_time > end:
-        return f"argument --hold-time: {args.hold_time:g} s is longer than the episode ({end:g} s)"
+    for flag, value in (("--settle-time", args.settle_time), ("--hold-time", args.hold_time)):
+        if value > MAX_TIME:  # a time past the episode's end is clipped to it; not 1e308
+            return (
+                f"argument {flag}: must be <= {MAX_TIME:g} s (the longest episode), got {value:g}"
+            )
     results = args.episodes * n_policies * EPISODE_RESULT_BYTES
     if results > (free := available_memory()):
         return (f"argument --episodes: {args.episodes:,} episodes x {n_policies} policies keep "
