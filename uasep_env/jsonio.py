@@ -32,6 +32,7 @@ __all__ = [
     "DuplicateKeyError",
     "dumps",
     "json_depth",
+    "json_shape",
     "loads_unique",
     "to_plain",
     "write_json",
@@ -127,11 +128,26 @@ def json_depth(text: str) -> int:
     Returns:
         The largest number of open brackets at any point.
     """
+    return json_shape(text)[0]
+
+
+def json_shape(text: str) -> tuple[int, int]:
+    """Deepest nesting and number of arrays and objects of JSON text, without parsing it.
+
+    What :func:`json.loads` would build is bounded by them (a list or dict costs at least
+    56 bytes of Python objects, ``[]`` two bytes of text), so a reader can refuse before.
+
+    Args:
+        text: JSON text (need not be valid).
+
+    Returns:
+        ``(deepest nesting, number of [ and { outside strings)``.
+    """
     # One pass over the tokens that matter: linear time, little memory. (A regex that skips
     # whole strings backtracks quadratically on an unterminated string of escaped quotes.)
     # Exact for valid JSON; on invalid JSON exact up to the first backslash outside a string,
     # which is where json.loads stops anyway.
-    depth = deepest = 0
+    depth = deepest = containers = 0
     inside = False
     for match in _TOKENS.finditer(text):
         token = match[0]
@@ -141,10 +157,11 @@ def json_depth(text: str) -> int:
             continue
         elif token in "[{":
             depth += 1
+            containers += 1
             deepest = max(deepest, depth)
         else:
             depth -= 1
-    return deepest
+    return deepest, containers
 
 
 class DuplicateKeyError(ValueError):
