@@ -163,7 +163,7 @@ class RealTrafficDataset:
                     f"{' '.join(str(exc).split())[:120]})"
                 ) from exc
             if len(out[-1].origin) != 3 or not np.isfinite(out[-1].origin).all():
-                raise RealTrafficFileError(f"{self.path}: track {k}: origin must be 3 finite numbers")
+                raise RealTrafficFileError(f"{self.path}: track {k}: origin is not 3 numbers")
             if out[-1].aircraft_class not in CLASSES or out[-1].split not in SPLITS:
                 raise RealTrafficFileError(
                     f"{self.path}: track {k} has class {out[-1].aircraft_class!r} and split "
