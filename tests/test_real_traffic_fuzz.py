@@ -212,3 +212,33 @@ def test_every_mutation_kind_yields_files_the_reader_sees(mutate):
     # The generators themselves: each makes bytes that differ from the shipped file.
     rng = np.random.default_rng(1)
     assert any(mutate(rng, SHIPPED) != SHIPPED for _ in range(5))
+
+
+def test_metadata_is_refused_by_its_shape_before_it_is_parsed(tmp_path, monkeypatch):
+    import json
+
+    from uasep_env.jsonio import json_shape
+    from uasep_env.real_traffic import fileformat
+
+    def parsed(*args, **kwargs):
+        raise AssertionError("the JSON was parsed")
+
+    monkeypatch.setattr(fileformat, "loads_unique", parsed)
+    rng = np.random.default_rng(2)
+    lists = b"".join(b"[]," + b" \n\t\r"[k : k + 1] for k in rng.integers(0, 4, 60_000))
+    for text, match in (
+        (b'{"tracks": [' + lists + b"[]]}", "holds 60,003 arrays and objects"),
+        (b'{"tracks": ' + b"[" * 9 + b"]" * 9 + b"}", "nests 10 levels"),
+    ):
+        members = _members(SHIPPED)
+        buf = io.BytesIO()
+        np.lib.format.write_array(buf, np.frombuffer(text, np.uint8), allow_pickle=False)
+        members["meta.npy"] = buf.getvalue()
+        path = tmp_path / "meta.npz"
+        path.write_bytes(_zip(members))
+        with pytest.raises(rt.RealTrafficFileError, match=match):
+            rt.RealTrafficDataset(path)
+    monkeypatch.undo()
+    depth, containers = json_shape(rt.load().meta and json.dumps(rt.load().meta))
+    assert depth <= fileformat.MAX_META_DEPTH // 2
+    assert containers <= fileformat.MAX_META_CONTAINERS // 50
