@@ -3,9 +3,11 @@
 #   make test   -- ruff + the whole test suite (with the ecosystem's clients: the clients extra)
 # and CI's further jobs (.ci/run):
 #   make test-floors  -- env, vector, convention, real-traffic and checkpoint tests on the floors
-#                        (.ci/floors.txt), without numba or any extra, in a venv of their own
+#                        (.ci/floors.txt), without numba or any extra, in a venv of their own;
+#                        every test file collects there (no import error without the extras)
 #   make test-package -- build wheel + sdist, twine check, install the wheel in a clean venv
 #                        outside the repo and run uasep-eval on a shipped policy by name
+#                        (and uasep-train / uasep-report --help there, without torch)
 #   make test-benchmarl -- BenchMARL's MAPPO on a custom task, in a venv of its own
 #   make docs   -- the documentation site, warnings as errors
 PYTHON ?= python3
@@ -66,12 +68,17 @@ $(FLOORS_VENV)/.floors: .ci/floors.txt pyproject.toml
 FLOORS_TESTS := tests/test_envs.py tests/test_vector.py tests/test_conventions.py \
 	tests/test_config.py tests/test_packaging.py tests/test_replay.py tests/test_real_traffic.py \
 	tests/test_banks.py tests/test_shipped.py tests/test_pinned_numbers.py \
-	tests/test_checkpoint_layout.py tests/test_checkpoint_limits.py
+	tests/test_checkpoint_layout.py tests/test_checkpoint_limits.py tests/test_costs.py
 
+# Then a plain pytest without any extra (what a pip user runs on the sdist) collects every test
+# file: tests needing an extra skip (pytest.importorskip, conftest's hypothesis stand-ins),
+# none fails to import.
 test-floors: $(FLOORS_VENV)/.floors
 	@! $(FLOORS_VENV)/bin/python -c "import numba" 2>/dev/null || (echo "numba in the floors venv" && false)
 	$(FLOORS_VENV)/bin/python -m pip list --format=freeze | grep -iE "^(numpy|gymnasium|pettingzoo|scipy|tabulate)=="
 	cd $(CURDIR) && $(FLOORS_VENV)/bin/python -m pytest -q -p no:cacheprovider $(FLOORS_TESTS)
+	cd $(CURDIR) && $(FLOORS_VENV)/bin/python -m pytest -qq -p no:cacheprovider --collect-only \
+		tests > $(FLOORS_VENV)/collect.log 2>&1 || (tail -30 $(FLOORS_VENV)/collect.log && false)
 
 # sdist, then the wheel built from it (so the sdist is complete); the clean venv takes the
 # wheel's dependencies from pip's cache after the first run.
@@ -85,6 +92,11 @@ test-package: $(VENV)/.all
 	cd $(PKG_DIR) && venv/bin/uasep-eval --policy ppo_residual_apf,apf \
 		--config episode_duration=20 --json run.json
 	cd $(PKG_DIR) && ! venv/bin/python -c "import matplotlib" 2>/dev/null
+	cd $(PKG_DIR) && ! venv/bin/python -c "import torch" 2>/dev/null
+	cd $(PKG_DIR) && for r in "" ppo_shared ppo_residual_apf mappo; do \
+		venv/bin/uasep-train $$r --help > train_help.txt || exit 1; done
+	cd $(PKG_DIR) && grep -q -- "--checkpoint-every CHECKPOINT_EVERY" train_help.txt
+	cd $(PKG_DIR) && venv/bin/uasep-report --help | grep -q -- "--held-out-episodes"
 	cd $(PKG_DIR) && mkdir sdist && tar xzf dist/*.tar.gz -C sdist --strip-components 1
 	cd $(PKG_DIR)/sdist && $(abspath $(BIN))/python -m pytest -q -p no:cacheprovider \
 		--collect-only tests > collect.log || (tail -30 collect.log && false)

@@ -1,9 +1,11 @@
 """Every controller on real traffic: the real-traffic bank beside the synthetic held-out bank.
 
     python baselines/real_traffic_eval.py [--workers 1] [--episodes 300] [--synthetic-episodes 500]
+    python baselines/real_traffic_eval.py --prediction enclosing,calibrated
 
-The three APFs and the shipped policies (``baselines/checkpoints/*.zip``, loaded without
-unpickling) play the same encounters twice:
+Every controller of the policy registry (:data:`uasep_env.policies.POLICIES`, less the
+``zero`` and ``random`` stand-ins) and the shipped policies (``baselines/checkpoints/*.zip``,
+loaded without unpickling) play the same encounters:
 
 * the real-traffic bank: 300 ``real_traffic`` encounters
   (:data:`uasep_env.scenarios.REAL_TRAFFIC_TEST_SEEDS`, config
@@ -23,15 +25,26 @@ rates with 95 % Wilson intervals). Writes ``baselines/results/real_traffic_eval.
 tables; the README shows the first) and ``real_traffic_eval.json.gz`` (every metric of every
 real-traffic episode; the synthetic bank's aggregates, its episodes being those of
 ``learned_vs_apf.json.gz``), and prints the tables.
+
+``--prediction`` chooses the predicted region (``prediction.fit``) of the runs: ``enclosing``
+(the default, the files above) and/or ``calibrated`` (the conformal region per aircraft class,
+:mod:`uasep_env.reachable.calibrated`): the same banks with ``prediction.fit="calibrated"``,
+written to ``real_traffic_eval_calibrated.{md,json.gz}`` beside the enclosing runs' summary
+(beside the enclosing figures: those of this run with ``enclosing,calibrated``, else those
+stored in ``real_traffic_eval.json.gz``).
 """
 
 from __future__ import annotations
 
 import argparse
+import gzip
+import json
 import sys
 import time
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -40,6 +53,7 @@ from uasep_env import make_config, real_traffic
 from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.metrics.statistics import wilson_interval
+from uasep_env.policies import POLICIES, shipped_policies
 from uasep_env.scenarios import HELD_OUT_SEEDS, REAL_TRAFFIC_TEST_SEEDS, sample_scenario
 from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK, REAL_TRAFFIC_SLOW_BANK
 from uasep_env.tables import render_table
@@ -47,7 +61,7 @@ from uasep_env.tables import render_table
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))
 
-from learned_vs_apf import TABLE_ROWS, compared_policies  # noqa: E402
+from learned_vs_apf import LEARNED, TABLE_ROWS  # noqa: E402
 from paper_experiment import table  # noqa: E402
 
 #: The summary's columns: (heading, metric, statistic, format).
@@ -56,6 +70,65 @@ SUMMARY = (
     ("loss of separation (any)", "episode.loss_of_separation", "rate", ".1%"),
     ("min UAV-obstacle distance (m)", "episode.min_obstacle_distance", "mean", ".1f"),
 )
+
+
+#: Registered policies that are not controllers (stand-ins for tests and baselines).
+NOT_CONTROLLERS = ("zero", "random")
+#: The predicted regions ``--prediction`` accepts (``prediction.fit``).
+PREDICTIONS = ("enclosing", "calibrated")
+
+
+def registry_controllers() -> dict[str, str]:
+    """Every registered controller, then the shipped policies (name -> name).
+
+    Read from the policy registry, so a controller registered there is evaluated here too;
+    the shipped policies in :data:`learned_vs_apf.LEARNED`'s order, then any other by name.
+    """
+    shipped = shipped_policies()
+    learned = [n for n in LEARNED if n in shipped] + sorted(n for n in shipped if n not in LEARNED)
+    names = [n for n in POLICIES if n not in NOT_CONTROLLERS] + learned
+    return {n: n for n in names}
+
+
+@dataclass
+class _Aggregates:
+    """A bank's aggregates as a results file stores them (what :func:`summary` reads)."""
+
+    results: dict[str, SimpleNamespace]
+
+
+def stored_enclosing(path: Path) -> dict[str, _Aggregates | None]:
+    """The enclosing runs' aggregates from their results file (``real_traffic_eval.json.gz``).
+
+    Raises:
+        FileNotFoundError: Naming the file and the command that writes it.
+    """
+    if not path.exists():
+        raise FileNotFoundError(
+            f"{path} does not exist: run `python baselines/real_traffic_eval.py` first, or "
+            "--prediction enclosing,calibrated"
+        )
+    data = json.loads(gzip.decompress(path.read_bytes()))
+
+    def bank(key: str) -> _Aggregates | None:
+        if key not in data:
+            return None
+        res = (
+            data[key]["results"]
+            if "results" in data[key]
+            else {k: {"aggregate": v} for k, v in data[key]["aggregate"].items()}
+        )
+        return _Aggregates({k: SimpleNamespace(aggregate=v["aggregate"]) for k, v in res.items()})
+
+    return {"real": bank("real_traffic"), "slow": bank("real_traffic_slow"),
+            "synthetic": bank("random")}  # fmt: skip
+
+
+def with_fit(config: dict, fit: str) -> dict:
+    """``config`` with ``prediction.fit`` set (the enclosing fit: unchanged)."""
+    if fit == "enclosing":
+        return config
+    return {**config, "prediction": {**config.get("prediction", {}), "fit": fit}}
 
 
 def _cell(agg: dict[str, Any], key: str, stat: str, fmt: str) -> str:
@@ -69,12 +142,15 @@ def summary(banks: dict[str, EvaluationResult | None], rows: tuple = SUMMARY) ->
     for name, *_ in rows:
         headers += [f"{name}, {bank}" for bank in banks]
     body = []
-    labels = next(r for r in banks.values() if r is not None).results
+    # Every controller of any bank, in order of first appearance ("-" where a bank lacks it).
+    labels = list(dict.fromkeys(lb for r in banks.values() if r is not None for lb in r.results))
     for label in labels:
         row = [label]
         for _, key, stat, fmt in rows:
             row += [
-                "-" if r is None else _cell(r.results[label].aggregate, key, stat, fmt)
+                "-"
+                if r is None or label not in r.results
+                else _cell(r.results[label].aggregate, key, stat, fmt)
                 for r in banks.values()
             ]
         body.append(row)
@@ -139,6 +215,93 @@ def synthetic_aggregates(result: EvaluationResult) -> dict[str, Any]:
     }
 
 
+def run_banks(
+    policies: dict[str, str],
+    fit: str,
+    real_seeds: list[int],
+    syn_seeds: list[int],
+    slow: bool,
+    workers: int,
+) -> tuple[dict[str, EvaluationResult | None], float, float]:
+    """The three banks with ``prediction.fit=fit``: results, real-bank and total seconds."""
+    t0 = time.perf_counter()
+    real = evaluate(policies, make_config(with_fit(REAL_TRAFFIC_BANK, fit)), real_seeds,
+                    workers=workers)  # fmt: skip
+    t_real = time.perf_counter() - t0
+    slow_res = None
+    if slow:
+        slow_res = evaluate(
+            policies, make_config(with_fit(REAL_TRAFFIC_SLOW_BANK, fit)), real_seeds,
+            workers=workers,
+        )  # fmt: skip
+    synthetic = None
+    if syn_seeds:
+        synthetic = evaluate(
+            policies, make_config(with_fit({"scenario": "random"}, fit)), syn_seeds,
+            workers=workers,
+        )  # fmt: skip
+    return (
+        {"real": real, "slow": slow_res, "synthetic": synthetic},
+        t_real,
+        (time.perf_counter() - t0),
+    )
+
+
+def calibrated_page(
+    enc: dict[str, EvaluationResult | None],
+    cal: dict[str, EvaluationResult | None],
+    classes: dict[int, tuple[str, str, float]],
+    real_what: str,
+    syn_what: str,
+    run_line: str,
+) -> str:
+    """The calibrated runs' page: beside the enclosing ones, then their own tables."""
+    rows = (
+        *SUMMARY,
+        ("max deviation from the plan (m)", "episode.max_deviation", "mean", ".1f"),
+        ("max RMS deviation (m)", "episode.max_rms_deviation", "mean", ".1f"),
+    )
+    pair = {"real, enclosing": enc["real"], "real, calibrated": cal["real"]}
+    sections = [
+        "### Real traffic: enclosing vs calibrated prediction",
+        f"Real: the real-traffic bank ({real_what}); `prediction.fit` enclosing (the default) "
+        "and calibrated (conformal regions per aircraft class, `docs/real_traffic.md`). Rates "
+        "with 95 % Wilson intervals, means with 95 % Student-t intervals.",
+        summary(pair, rows),
+    ]
+    if enc["synthetic"] is not None and cal["synthetic"] is not None:
+        sections += [
+            "### Synthetic held-out bank: enclosing vs calibrated prediction",
+            f"The held-out bank ({syn_what}): Dubins obstacles, the `dubins` class's region.",
+            summary(
+                {"synthetic, enclosing": enc["synthetic"],
+                 "synthetic, calibrated": cal["synthetic"]}, rows,
+            ),
+        ]  # fmt: skip
+    sections += [
+        f"### Real-traffic bank, calibrated prediction: {real_what}",
+        table(cal["real"], TABLE_ROWS),
+        "### Real-traffic bank by aircraft class, calibrated prediction",
+        by_class(cal["real"], classes),
+    ]
+    if cal["slow"] is not None:
+        sections += [
+            "### Real tracks slowed x0.2, calibrated prediction",
+            "The same seeds with `obstacle.replay_speed_scale=0.2`. The calibration is for "
+            "the recorded speeds: slowed tracks are not the calibrated distribution (the "
+            "region scales with the estimated speed, its constant part does not).",
+            summary({"real x0.2, enclosing": enc["slow"], "real x0.2, calibrated": cal["slow"]},
+                    SUMMARY[:2]),
+        ]  # fmt: skip
+    if cal["synthetic"] is not None:
+        sections += [
+            f"### Held-out bank, calibrated prediction: {syn_what}",
+            table(cal["synthetic"], TABLE_ROWS),
+        ]
+    sections.append(run_line)
+    return "\n\n".join(sections) + "\n"
+
+
 def main(argv: list[str] | None = None) -> str:
     """Evaluate both banks, write the results and print the tables."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
@@ -147,6 +310,12 @@ def main(argv: list[str] | None = None) -> str:
     p.add_argument("--synthetic-episodes", type=int, default=len(HELD_OUT_SEEDS))
     p.add_argument("--out", type=Path, default=ROOT / "results")
     p.add_argument("--no-slow", dest="slow", action="store_false", help="skip the x0.2 bank")
+    p.add_argument(
+        "--prediction",
+        default="enclosing",
+        help="comma-separated prediction fits to run: enclosing (real_traffic_eval.*) and/or "
+        "calibrated (real_traffic_eval_calibrated.*)",
+    )
     args = p.parse_args(argv)
     if not 1 <= args.episodes <= len(REAL_TRAFFIC_TEST_SEEDS):
         p.error(f"argument --episodes: must be in [1, {len(REAL_TRAFFIC_TEST_SEEDS)}]")
@@ -155,23 +324,15 @@ def main(argv: list[str] | None = None) -> str:
     if args.workers < 1:
         p.error(f"argument --workers: must be >= 1, got {args.workers}")
 
-    policies = compared_policies()
+    fits = tuple(f for f in args.prediction.split(",") if f)
+    bad = [f for f in fits if f not in PREDICTIONS]
+    if bad or not fits:
+        p.error(f"argument --prediction: {bad or fits!r}; use a comma-separated subset of "
+                f"{list(PREDICTIONS)}")  # fmt: skip
+
+    policies = registry_controllers()
     real_seeds = list(REAL_TRAFFIC_TEST_SEEDS)[: args.episodes]
     syn_seeds = list(HELD_OUT_SEEDS)[: args.synthetic_episodes]
-    t0 = time.perf_counter()
-    real = evaluate(policies, make_config(REAL_TRAFFIC_BANK), real_seeds, workers=args.workers)
-    t_real = time.perf_counter() - t0
-    slow = None
-    if args.slow:
-        slow = evaluate(
-            policies, make_config(REAL_TRAFFIC_SLOW_BANK), real_seeds, workers=args.workers
-        )
-    synthetic = None
-    if syn_seeds:
-        synthetic = evaluate(
-            policies, make_config(scenario="random"), syn_seeds, workers=args.workers
-        )
-    t_all = time.perf_counter() - t0
     classes = bank_classes(real_seeds)
     real_what = (
         f"{len(real_seeds)} `real_traffic` encounters (test flights), seeds "
@@ -182,6 +343,64 @@ def main(argv: list[str] | None = None) -> str:
         if syn_seeds
         else "not run"
     )
+    args.out.mkdir(parents=True, exist_ok=True)
+    text = ""
+    enc: dict[str, Any]
+    if "enclosing" in fits:
+        enc, t_real, t_all = run_banks(policies, "enclosing", real_seeds, syn_seeds, args.slow,
+                                       args.workers)  # fmt: skip
+        real, slow, synthetic = enc["real"], enc["slow"], enc["synthetic"]
+        assert real is not None
+        text = enclosing_page(real, slow, synthetic, classes, real_what, syn_what, t_real,
+                              t_all, args.workers)  # fmt: skip
+        atomic_write(args.out / "real_traffic_eval.md", text.encode("utf-8"))
+        results = {
+            "real_traffic": real,
+            **({"real_traffic_slow": slow} if slow else {}),
+            **({"random": synthetic_aggregates(synthetic)} if synthetic else {}),
+        }
+        write_json(
+            {"meta": {"run_time_s": t_all, "real_traffic_s": t_real, "bank": REAL_TRAFFIC_BANK},
+             **results},
+            args.out / "real_traffic_eval.json.gz",
+        )  # fmt: skip
+    else:  # beside the enclosing figures of the results file
+        enc = stored_enclosing(args.out / "real_traffic_eval.json.gz")
+    if "calibrated" in fits:
+        cal, c_real, c_all = run_banks(policies, "calibrated", real_seeds, syn_seeds, args.slow,
+                                       args.workers)  # fmt: skip
+        run_line = (
+            f"Run time: {c_real:.0f} s for the real-traffic bank with the calibrated prediction, "
+            f"{c_all:.0f} s for its three banks (`python baselines/real_traffic_eval.py "
+            f"{' '.join(sys.argv[1:] if argv is None else argv)}`, 2 shared cores, under load)."
+        )
+        page = calibrated_page(enc, cal, classes, real_what, syn_what, run_line)
+        atomic_write(args.out / "real_traffic_eval_calibrated.md", page.encode("utf-8"))
+        write_json(
+            {"meta": {"run_time_s": c_all, "real_traffic_s": c_real,
+                      "bank": with_fit(REAL_TRAFFIC_BANK, "calibrated")},
+             "real_traffic": cal["real"],
+             **({"real_traffic_slow": cal["slow"]} if cal["slow"] else {}),
+             **({"random": cal["synthetic"]} if cal["synthetic"] else {})},
+            args.out / "real_traffic_eval_calibrated.json.gz",
+        )  # fmt: skip
+        text += page
+    print(text)
+    return text
+
+
+def enclosing_page(
+    real: EvaluationResult,
+    slow: EvaluationResult | None,
+    synthetic: EvaluationResult | None,
+    classes: dict[int, tuple[str, str, float]],
+    real_what: str,
+    syn_what: str,
+    t_real: float,
+    t_all: float,
+    workers: int,
+) -> str:
+    """The enclosing runs' page (``real_traffic_eval.md``)."""
     sections = [
         "### Synthetic vs real traffic",
         f"Synthetic: the held-out bank ({syn_what}). Real: the real-traffic bank ({real_what}). "
@@ -207,23 +426,9 @@ def main(argv: list[str] | None = None) -> str:
         sections += [f"### Held-out bank: {syn_what}", table(synthetic, TABLE_ROWS)]
     sections.append(
         f"Run time: {t_real:.0f} s for the real-traffic bank, {t_all:.0f} s in all "
-        f"(`python baselines/real_traffic_eval.py --workers {args.workers}`, 2 shared cores)."
+        f"(`python baselines/real_traffic_eval.py --workers {workers}`, 2 shared cores)."
     )
-    text = "\n\n".join(sections) + "\n"
-    args.out.mkdir(parents=True, exist_ok=True)
-    atomic_write(args.out / "real_traffic_eval.md", text.encode("utf-8"))
-    results = {
-        "real_traffic": real,
-        **({"real_traffic_slow": slow} if slow else {}),
-        **({"random": synthetic_aggregates(synthetic)} if synthetic else {}),
-    }
-    write_json(
-        {"meta": {"run_time_s": t_all, "real_traffic_s": t_real, "bank": REAL_TRAFFIC_BANK},
-         **results},
-        args.out / "real_traffic_eval.json.gz",
-    )  # fmt: skip
-    print(text)
-    return text
+    return "\n\n".join(sections) + "\n"
 
 
 if __name__ == "__main__":

@@ -45,6 +45,19 @@ napoleon_google_docstring = True
 napoleon_numpy_docstring = False
 napoleon_use_rtype = False
 napoleon_use_ivar = True  # "Attributes:" as fields: properties keep their own entries
+# The env classes' sections (Google style, as Gymnasium's env pages have them): each renders
+# as a rubric with its text. Not "Arguments": napoleon reads that as "Args" (a field list).
+ENV_SECTIONS = (
+    "Action space",
+    "Observation space",
+    "Rewards",
+    "Cost",
+    "Episode end",
+    "Info",
+    "Configuration",
+    "Reset options",
+)
+napoleon_custom_sections = list(ENV_SECTIONS)
 
 
 #: Where links to repository files outside docs/ point on the site.

@@ -150,3 +150,82 @@ def test_any_sequence_is_a_formation_or_vector():
         make_config(formation=omegaconf.OmegaConf.create([[0, 0, 0]]))
     with pytest.raises(ValueError, match="formation"):
         make_config(formation=b"abc")  # bytes are not a sequence of slots
+
+
+# --- keyword-only dataclasses: a field added out of place cannot shift the others -----------
+
+
+def _package_dataclasses() -> list[type]:
+    """Every frozen dataclass defined in ``uasep_env`` (found by importing each module).
+
+    A module that needs an optional dependency this installation lacks is skipped (the
+    floors job has none); the full job imports them all.
+    """
+    import importlib
+    import inspect
+    import pkgutil
+
+    import uasep_env
+
+    found = {}
+    for info in pkgutil.walk_packages(uasep_env.__path__, "uasep_env."):
+        if info.name.endswith("__main__"):
+            continue
+        try:
+            module = importlib.import_module(info.name)
+        except ModuleNotFoundError as err:
+            if (err.name or "").split(".")[0] == "uasep_env":
+                raise
+            continue
+        for obj in vars(module).values():
+            if (
+                inspect.isclass(obj)
+                and dataclasses.is_dataclass(obj)
+                and obj.__module__ == info.name
+                and obj.__dataclass_params__.frozen
+            ):
+                found[f"{obj.__module__}.{obj.__qualname__}"] = obj
+    return [found[k] for k in sorted(found)]
+
+
+def test_the_discovery_finds_the_config_dataclasses():
+    from uasep_env.config import RewardWeights
+    from uasep_env.policies import APFGains
+    from uasep_env.policies.checkpoint_reader import CheckpointLimits
+
+    found = set(_package_dataclasses())
+    assert {EnvConfig, NoiseConfig, RewardWeights, APFGains, CheckpointLimits} <= found
+    groups = {type(v) for v in vars(make_config()).values() if dataclasses.is_dataclass(v)}
+    assert len(groups) >= 7 and groups <= found  # every config group
+
+
+@pytest.mark.parametrize("cls", _package_dataclasses(), ids=lambda c: c.__qualname__)
+def test_every_frozen_dataclass_takes_keywords_only(cls):
+    """``RewardWeights(...)`` with positional values once set a new weight where ``shared``
+    was meant; keyword-only fields make any positional construction a TypeError."""
+    assert all(f.kw_only for f in dataclasses.fields(cls) if f.init), cls
+    with pytest.raises(TypeError, match="takes 1 positional argument but 2 were given"):
+        cls(object())
+
+
+def test_the_scripts_frozen_dataclasses_take_keywords_only():
+    """baselines/ and train/ are scripts (not imported here): their decorators are read."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    seen, positional = [], []
+    for path in sorted([*root.glob("baselines/*.py"), *root.glob("train/*.py")]):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ClassDef):
+                continue
+            for dec in node.decorator_list:
+                if not (isinstance(dec, ast.Call) and ast.unparse(dec.func).endswith("dataclass")):
+                    continue
+                kw = {k.arg: ast.unparse(k.value) for k in dec.keywords}
+                if kw.get("frozen") == "True":
+                    seen.append(node.name)
+                    if kw.get("kw_only") != "True":
+                        positional.append(f"{path.name}:{node.name}")
+    assert "Method" in seen  # scaling.PolicyEntry moved into the package (checked above)
+    assert not positional, positional

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import doctest
 import importlib
+import inspect
 import pkgutil
 import re
 
@@ -96,3 +97,76 @@ def test_the_pages_python_examples_run(page, tmp_path, monkeypatch, capsys):
     for i, block in enumerate(python_blocks(page.read_text())):
         code = compile(block, f"{page.name} (python block {i + 1})", "exec")
         exec(code, namespace)
+
+
+_MARKDOWN_HEADING = re.compile(r"^\s*#{1,6}\s+\S")
+
+
+def documented_objects(module) -> list[tuple[str, object]]:
+    """The module and every class, function and method it defines: what autodoc shows."""
+    found: list[tuple[str, object]] = [(module.__name__, module)]
+    for name, obj in vars(module).items():
+        if getattr(obj, "__module__", None) != module.__name__ or name.startswith("_"):
+            continue
+        if inspect.isclass(obj):
+            found.append((f"{module.__name__}.{name}", obj))
+            for attr, member in vars(obj).items():
+                if not attr.startswith("_") or attr == "__init__":
+                    target = getattr(member, "fget", member)  # a property's getter
+                    if inspect.isfunction(target):
+                        found.append((f"{module.__name__}.{name}.{attr}", target))
+        elif inspect.isfunction(obj):
+            found.append((f"{module.__name__}.{name}", obj))
+    return found
+
+
+def markdown_headings(doc: str) -> list[str]:
+    """The lines of a docstring that read as Markdown headings (``## Action space``)."""
+    return [ln.strip() for ln in doc.splitlines() if _MARKDOWN_HEADING.match(ln)]
+
+
+def split_table_rows(doc: str) -> list[str]:
+    """Rows of a reST simple table whose first column wrapped onto a row of its own.
+
+    In a simple table a line with text in the first column starts a new row, so a first
+    cell too long for its column splits the row: the new row has blank middle columns
+    (``(K_o)`` under ``per nearest obstacle``). Such rows are returned.
+    """
+    lines = doc.splitlines()
+    bad: list[str] = []
+    border = re.compile(r"^\s*=+( +=+)+\s*$")
+    borders = [i for i, ln in enumerate(lines) if border.match(ln)]
+    # A table: border, header, border, rows..., border (three borders in a row of the list).
+    for top, head, bottom in zip(borders, borders[1:], borders[2:], strict=False):
+        if head != top + 2:
+            continue
+        spans = [m.span() for m in re.finditer(r"=+", lines[top])]
+        for ln in lines[head + 1 : bottom]:
+            cells = [
+                ln[a:b].strip() if len(spans) - 1 > k else ln[a:].strip()
+                for k, (a, b) in enumerate(spans)
+            ]
+            if cells[0] and any(not c for c in cells[1:-1]):
+                bad.append(ln.strip())
+    return bad
+
+
+def test_the_checks_of_docstrings_see_their_defects():
+    assert markdown_headings("Summary.\n\n    ## Action space\n    Box.\n") == ["## Action space"]
+    assert markdown_headings("Summary.\n\n    Action space:\n        Box.\n") == []
+    table = (
+        "====  ====  ====\nA     B     C\n====  ====  ====\nx     1     one\n"
+        "      also  two\nlong  2     wraps\n(y)         three\n====  ====  ====\n"
+    )
+    assert split_table_rows(table) == ["(y)         three"]
+
+
+@pytest.mark.parametrize("module", public_modules())
+def test_api_docstrings_are_google_style_not_markdown(module):
+    # Napoleon renders Google-style sections ("Action space:" + indented text); a
+    # Markdown heading would show literally on the API pages, and a first table cell too
+    # long for its column splits the row.
+    for name, obj in documented_objects(import_or_skip(module)):
+        doc = inspect.getdoc(obj) or ""
+        assert not markdown_headings(doc), f"{name}: Markdown headings {markdown_headings(doc)}"
+        assert not split_table_rows(doc), f"{name}: split table rows {split_table_rows(doc)}"

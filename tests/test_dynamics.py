@@ -2,9 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
+from conftest import arrays, given, settings, st
 
 from uasep_env.dynamics import measure, step_double_integrator, transition_matrices
 from uasep_env.estimation import KalmanModel

@@ -7,7 +7,6 @@ from gymnasium.error import ClosedEnvironmentError
 from uasep_env.envs.gym_env import FormationEnv
 from uasep_env.envs.parallel import env as aec_env
 from uasep_env.envs.parallel import parallel_env
-from uasep_env.envs.sb3 import UAVSharedVecEnv
 from uasep_env.envs.vector import FormationVectorEnv
 
 
@@ -44,15 +43,27 @@ def _closed_calls():
     vec = FormationVectorEnv(num_envs=2)
     vec.reset(seed=0)
     yield "vector", vec, [lambda: vec.reset(seed=0), lambda: vec.step(vec.action_space.sample())]
-    sb3 = UAVSharedVecEnv(n_envs=1, seed=0)
-    sb3.reset()
-    yield "sb3", sb3, [sb3.reset, lambda: sb3.step(np.zeros((sb3.num_envs, 3), np.float32))]
+
+
+def _refuses_after_close(env, calls) -> None:
+    env.close()
+    env.close()  # twice is harmless
+    for call in calls:
+        with pytest.raises(ClosedEnvironmentError, match=r"called after close\(\)"):
+            call()
 
 
 def test_every_view_refuses_reset_and_step_after_close():
     for _name, env, calls in _closed_calls():
-        env.close()
-        env.close()  # twice is harmless
-        for call in calls:
-            with pytest.raises(ClosedEnvironmentError, match=r"called after close\(\)"):
-                call()
+        _refuses_after_close(env, calls)
+
+
+def test_the_sb3_adapter_refuses_reset_and_step_after_close():
+    pytest.importorskip("stable_baselines3")  # the train extra
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+
+    sb3 = UAVSharedVecEnv(n_envs=1, seed=0)
+    sb3.reset()
+    _refuses_after_close(
+        sb3, [sb3.reset, lambda: sb3.step(np.zeros((sb3.num_envs, 3), np.float32))]
+    )

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, run_in_repo
+from conftest import HANG_GUARD_S, ROOT, run_in_repo
 
 import uasep_env
 from uasep_env.config import make_config
@@ -335,7 +335,7 @@ def _env():
 
 
 def test_module_help_subprocess():
-    out = run_in_repo("-m", "uasep_env.evaluation", "--help", timeout=60)
+    out = run_in_repo("-m", "uasep_env.evaluation", "--help")
     assert out.returncode == 0, out.stderr
     assert "usage: uasep-eval" in out.stdout
 
@@ -350,7 +350,7 @@ def test_console_script_help():
         env=_env(),
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=HANG_GUARD_S,
     )
     assert out.returncode == 0, out.stderr
     assert "--episodes" in out.stdout
@@ -360,7 +360,7 @@ def test_console_script_help():
         env=_env(),
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=HANG_GUARD_S,
     )
     assert bad.returncode == 2
     assert "nope" in bad.stderr

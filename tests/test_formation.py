@@ -2,9 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
+from conftest import arrays, given, settings, st
 
 from uasep_env.config import FORMATION_PATTERNS
 from uasep_env.formation import (

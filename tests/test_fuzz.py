@@ -16,6 +16,9 @@ import re
 import gymnasium
 import numpy as np
 import pytest
+
+pytest.importorskip("hypothesis")  # every test here is a property test (the dev extra)
+
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp

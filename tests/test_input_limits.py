@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import HANG_GUARD_S
 
 from uasep_env.jsonio import DuplicateKeyError, json_depth, loads_unique
 from uasep_env.policies import CheckpointError
@@ -116,7 +117,7 @@ def test_a_256_kb_unterminated_string_of_escaped_quotes_is_refused_without_hangi
         [sys.executable, "-c", _SCAN, str(tmp_path / "scan.zip"), str(SHIPPED)],
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=HANG_GUARD_S,
         cwd=ROOT,
     )
     assert out.returncode == 0, out.stderr[-2000:]
@@ -306,7 +307,7 @@ def test_the_estimate_is_not_below_what_a_batch_really_takes(config, n):
 
     out = subprocess.run(
         [sys.executable, "-c", _PEAK, repr(config), str(n)],
-        capture_output=True, text=True, timeout=600, cwd=ROOT, check=True,
+        capture_output=True, text=True, timeout=HANG_GUARD_S, cwd=ROOT, check=True,
     )  # fmt: skip
     measured = float(out.stdout.split()[-1])
     estimate = capacity.env_bytes(make_config(**config))

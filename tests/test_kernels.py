@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import HANG_GUARD_S
 
 # Importing the modules registers their twins.
 from uasep_env import _numba, formation, geometry, observation, reachable, rewards  # noqa: F401
@@ -53,17 +56,25 @@ def test_nearest_point_kernel_matches_numpy_bit_for_bit():
     got = _kernel("nearest_on_ellipsoids")(pts, ctr, ax, hd)
     for w, g in zip(want, got, strict=True):
         assert np.all(np.isfinite(g))
-        np.testing.assert_array_equal(g, w)
+        _assert_bits(g, w)
 
 
-def test_parallel_and_serial_loops_agree():
+@pytest.fixture
+def parallel_loops(monkeypatch):
+    """The parallel loops run for big calls, whatever this machine's core count decides."""
+    from uasep_env._kernels import common
+
+    monkeypatch.setattr(common, "_threads", [2])
+
+
+def test_parallel_and_serial_loops_agree(parallel_loops):
     from uasep_env._kernels import common
 
     pts, ctr, ax, hd = _cases(np.random.default_rng(1), 2 * common.PARALLEL_MIN)
     big = _kernel("nearest_on_ellipsoids")(pts, ctr, ax, hd)
     small = [_kernel("nearest_on_ellipsoids")(*(a[:100] for a in (pts, ctr, ax, hd)))]
     for b, s in zip(big, small[0], strict=True):
-        np.testing.assert_array_equal(b[:100], s)
+        _assert_bits(b[:100], s)
 
 
 def _copy(x):
@@ -77,14 +88,31 @@ def _copy(x):
     return x
 
 
+def _assert_bits(got, want, where: str = "") -> None:
+    """Same dtype, shape and bits (``-0.0`` is not ``0.0``, every NaN payload counts)."""
+    assert isinstance(got, np.ndarray), where
+    assert (got.dtype, got.shape) == (want.dtype, want.shape), where
+    if want.dtype.kind != "f":
+        np.testing.assert_array_equal(got, want, err_msg=where)
+        return
+    u = np.dtype(f"u{want.dtype.itemsize}")
+    same = np.ascontiguousarray(got).view(u) == np.ascontiguousarray(want).view(u)
+    if not same.all():
+        bad = np.argwhere(~same)
+        first = tuple(int(k) for k in bad[0])
+        raise AssertionError(
+            f"{where}: {len(bad)} of {same.size} values differ in their bits; the first at "
+            f"{first}: got {got[first]!r}, want {want[first]!r}"
+        )
+
+
 def _assert_same(got, want, where: str) -> None:
     if isinstance(want, tuple):
         assert isinstance(got, tuple) and len(got) == len(want), where
         for k, (g, w) in enumerate(zip(got, want, strict=True)):
             _assert_same(g, w, f"{where}[{k}]")
     elif isinstance(want, np.ndarray):
-        assert isinstance(got, np.ndarray) and got.shape == want.shape, where
-        np.testing.assert_array_equal(got, want, err_msg=where)
+        _assert_bits(got, want, where)
     else:
         assert got == want, where
 
@@ -101,61 +129,175 @@ def _world_case(n_envs: int = 40):
     return core
 
 
+# Each case builder returns a list of argument tuples: random states plus the ones that take
+# every branch of the kernel (ties, zero and infinite distances, absent slots, clipping, ...).
+# The comparison is in float64, before any cast to float32: a float64 sum added in another
+# order differs in the last bits, which a float32 output would round away.
+
+
+def _degenerate_ellipsoids():
+    """Points on, in and beside flat, needle, point-like and extremely thin ellipsoids."""
+    axes_list, offsets = [], []
+    thin = 1e-170  # the axis ratio overflows the level set's value
+    shapes = [
+        (0.0, 0.0, 0.0),
+        (10.0, 0.0, 0.0),
+        (0.0, 10.0, 0.0),
+        (0.0, 0.0, 10.0),
+        (0.0, 8.0, 12.0),
+        (8.0, 0.0, 12.0),
+        (8.0, 12.0, 0.0),
+        (thin, 30.0, 30.0),
+        (30.0, thin, 30.0),
+        (30.0, 30.0, thin),
+        (6.0, 9.0, 14.0),
+        (7.0, 7.0, 7.0),
+    ]
+    for a in shapes:
+        a = np.array(a)
+        on_axes = np.diag(a)  # on the surface at the end of each axis (or at the centre)
+        for off in (np.zeros(3), *on_axes, *(0.5 * on_axes), *(on_axes + 3.0), 0.3 * a,
+                    np.array([2.0, -3.0, 5.0]), 2.0 * a + 1.0):  # fmt: skip
+            axes_list.append(a)
+            offsets.append(off)
+    k = len(axes_list)
+    centers = np.random.default_rng(23).normal(0, 20, size=(k, 3))
+    heading = np.zeros(k)
+    heading[1::2] = np.pi / 2  # a right angle keeps the surface points on it (near enough)
+    return centers + np.array(offsets), centers, np.array(axes_list), heading
+
+
 def _case_nearest():
-    return _cases(np.random.default_rng(20), 500)
+    return [_cases(np.random.default_rng(20), 500), _degenerate_ellipsoids()]
 
 
 def _case_pairwise():
     rng = np.random.default_rng(21)
-    ax = rng.uniform(0, 30, size=(9, 3, 3))
-    ax[0, 0, 1] = 0.0
-    return (
-        rng.normal(0, 40, size=(9, 4, 3)),
-        rng.normal(0, 20, size=(9, 3, 3)),
-        ax,
-        rng.uniform(-np.pi, np.pi, size=(9, 3)),
-    )
+    e, n, m = 20, 4, 3
+    pts, ctr, ax, hd = _cases(rng, e * n * m)  # the degenerate ellipsoids and points
+    ax, hd = ax[: e * m].reshape(e, m, 3), hd[: e * m].reshape(e, m)
+    ctr = ctr[: e * m].reshape(e, m, 3)
+    points = pts.reshape(e, n * m, 3)[:, :n].copy()
+    points[:4, 0] = ctr[:4, 0]  # at a centre
+    points[4:8, 1, 1:] = ctr[4:8, 1, 1:]  # on an axis
+    hd[4:8, 1] = 0.0
+    return [(points, ctr, ax, hd)]
 
 
 def _case_region():
     w = _world_case().world
-    return (w.est_pos, w.pred_center, w.pred_axes, w.pred_heading, w.pred_cos, w.pred_sin,
-            w.obstacles.active)  # fmt: skip
+    est = w.est_pos.copy()
+    est[1::3, 0] = w.pred_center[1::3, 0]  # inside a region (its centre)
+    est[2::5, 2] = w.pred_center[2::5, 2] + 0.5 * w.pred_axes[2::5, 2]
+    return [(est, w.pred_center, w.pred_axes, w.pred_heading, w.pred_cos, w.pred_sin,
+             w.obstacles.active)]  # fmt: skip
 
 
 def _case_separations():
     w = _world_case().world
-    return w.uav_pos, w.obstacles.pos, w.obstacles.active
+    pos, ob, active = w.uav_pos.copy(), w.obstacles.pos.copy(), w.obstacles.active.copy()
+    pos[0, 1] = pos[0, 0]  # two UAVs at one point
+    ob[1, 0] = pos[1, 2]  # an obstacle at a UAV
+    active[2] = False  # no obstacle at all
+    return [(pos, ob, active), (pos, ob[:, :0], active[:, :0])]  # and no obstacle slot
+
+
+def _observation_states():
+    """A world's observation inputs, edited so that every branch of the assembly runs."""
+    core = _world_case()
+    x = observation._gather_inputs(core.world, core.layout)
+    x = type(x)(*(a.copy() for a in x))
+    pos, vel, wp, region = x.pos, x.vel, x.wp_dir, x.region
+    # Env 0: two UAVs at one point; env 1: integer positions, neighbours tied at 10 m.
+    pos[0, 1] = pos[0, 0]
+    pos[1] = [[0.0, 0.0, -50.0], [10.0, 0.0, -50.0], [-10.0, 0.0, -50.0], [0.0, 10.0, -50.0]]
+    pos[2, 3] += 1e4  # beyond the sensing range, and offsets far beyond the clip (+ and -)
+    vel[3, 0] = [1e3, -1e3, 0.0]  # velocities beyond the clip
+    vel[4] = 0.0  # the formation at rest: its frame falls back to the way-point direction
+    vel[5] = [0.0, 0.0, 3.0]  # climbing vertically: no heading
+    vel[6], wp[6] = 0.0, 0.0  # at rest with no direction at all
+    vel[7], wp[7] = 0.0, [0.0, 0.0, 1.0]  # at rest, vertical direction
+    x.active[8] = False  # no obstacle present
+    x.obstacle_pos[9, 0] += 1e4  # an obstacle beyond the sensing range
+    region[10, :, 1] = region[10, :, 0]  # tied region distances
+    x.active[10, :2] = True
+    region[11, 0, 0] = -3.0  # inside a region
+    region[12, :, 2] = np.inf  # an unreachable region
+    pos[13, 3] = 1e200  # so far that the distances overflow to inf
+    # An irregular formation in depth: every slot sums three non-zero terms.
+    x.pattern[14:] += np.random.default_rng(6).normal(0.0, 5.0, size=x.pattern[14:].shape)
+    vel[14:, :, 2] += 1.0  # climbing
+    return core.layout, x
 
 
 def _case_observations():
-    core = _world_case()
-    x = observation._gather_inputs(core.world, core.layout)
-    return x, core.layout, np.full(core._obs.shape, np.nan, dtype=np.float32)
+    import dataclasses
+
+    layout, x = _observation_states()
+    every = dataclasses.replace(layout, features=tuple(f.key for f in observation.FEATURES))
+    n = x.pos.shape[1]
+    wide = dataclasses.replace(layout, k_uavs=n, k_obstacles=x.region.shape[2] + 2)
+    short = dataclasses.replace(every, sensing_range=30.0)
+    # Either half of the features (each has some in every block): the absent ones are skipped.
+    halves = [dataclasses.replace(every, features=every.features[k::2]) for k in (0, 1)]
+    for half in halves:
+        blocks = {f.block for f in observation.FEATURES if f.key in half.features}
+        assert blocks == {"self", "uav", "obstacle"}
+
+    def obstacles(k):  # only the first k obstacle slots of the world
+        cut = {f: getattr(x, f)[:, :k] for f in ("obstacle_pos", "obstacle_vel", "pred_center",
+               "pred_axes", "cos_h", "sin_h", "active")}  # fmt: skip
+        return x._replace(region=x.region[..., :k], **cut)
+
+    cases = []
+    for lay, inputs in ((layout, x), (every, x), (wide, x), (short, x), (halves[0], x),
+                        (halves[1], x), (every, obstacles(1)), (wide, obstacles(0))):  # fmt: skip
+        e, n = inputs.pos.shape[:2]
+        # float64: the numbers before the cast to float32 (NaN: every entry must be written)
+        cases.append((inputs, lay, np.full((e, n, lay.world_dim), np.nan)))
+    return cases
 
 
 def _case_rewards():
     core = _world_case()
     w, cfg = core.world, core.config
     x = rewards._gather_inputs(w)
+    x = type(x)(*(a.copy() for a in x))
+    u = cfg.uav
     weights, constants = rewards._vectors(cfg.reward, cfg.uav, cfg.max_steps)
-    return x, constants, weights
+    x.min_uav_dist[0] = [0.5 * u.collision_distance, 0.5 * u.separation_distance,
+                         2 * u.separation_distance, np.inf]  # fmt: skip
+    x.min_obstacle_dist[1] = [0.5 * u.collision_distance, 0.5 * u.obstacle_separation,
+                              2 * u.obstacle_separation, np.inf]  # fmt: skip
+    x.region[2, 0] = -1e3  # deep inside a region: the capped penalty
+    x.region[3] = np.inf  # no region at all
+    x.uav_pos[4] = x.plan_pos[4]  # on the plan: zero deviation
+    x.cmd[5], x.prev_cmd[5] = 0.0, 0.0  # no command, no change
+    random = np.random.default_rng(5).uniform(-2, 2, size=weights.shape)
+    no_region = x._replace(region=x.region[..., :0])
+    return [(x, constants, weights), (x, constants, random), (no_region, constants, weights)]
 
 
 def _case_plan():
     w = _world_case().world
-    w.time[:] = np.arange(w.n_envs) * 7.3
-    return w.plan, w.time, w._plan_offsets
+    plan = w.plan
+    t = np.arange(w.n_envs) * 7.3
+    t[0], t[1], t[2] = -5.0, 0.0, 1e5  # before the start, at it, long after the end
+    t[3] = plan.length[3] / plan.cruise_speed[3]  # at the end
+    t[4] = plan.cum[4, 1] / plan.cruise_speed[4]  # at a way-point
+    return [(plan, t, w._plan_offsets)]
 
 
 def _case_dense():
     rng = np.random.default_rng(22)
     x = rng.normal(0, 3, size=(37, 61)).astype(np.float32)
+    x[0] = 0.0
+    x[1, ::2] = np.float32(3e38)  # near float32's largest
     w = rng.normal(0, 0.2, size=(61, 128)).astype(np.float32).astype(np.float64)
-    return x, w, rng.normal(0, 0.1, size=128).astype(np.float32).astype(np.float64)
+    return [(x, w, rng.normal(0, 0.1, size=128).astype(np.float32).astype(np.float64))]
 
 
-#: One case per compiled twin; a new twin without a case fails the registry test.
+#: The cases of each compiled twin; a new twin without cases fails the registry test.
 TWIN_CASES = {
     "nearest_on_ellipsoids": _case_nearest,
     "pairwise_distances": _case_pairwise,
@@ -174,14 +316,47 @@ def test_every_compiled_twin_has_a_case():
 
 @pytest.mark.parametrize("name", sorted(TWIN_CASES))
 def test_each_kernel_matches_its_numpy_reference_bit_for_bit(name):
-    """Return values and arrays filled in place, for every registered pair."""
+    """Return values and arrays filled in place, in float64, for every registered pair."""
     twin = _numba.TWINS[name]
-    args = TWIN_CASES[name]()
-    want_args, got_args = _copy(args), _copy(args)
-    want = twin.reference(*want_args)
-    got = twin.compiled()(*got_args)
-    _assert_same(got, want, name)
-    _assert_same(got_args, want_args, f"{name} arguments")
+    for k, args in enumerate(TWIN_CASES[name]()):
+        want_args, got_args = _copy(args), _copy(args)
+        with np.errstate(over="ignore"):  # the extreme cases overflow on purpose
+            want = twin.reference(*want_args)
+            got = twin.compiled()(*got_args)
+        _assert_same(got, want, f"{name} case {k}")
+        _assert_same(got_args, want_args, f"{name} case {k} arguments")
+        outputs = want_args[2:] if name == "assemble_observations" else want  # (in place)
+        for a in outputs if isinstance(outputs, tuple) else (outputs,):
+            assert a.dtype == np.float64, name  # compared before any cast to float32
+            assert not np.isnan(a).any(), name  # every entry written
+
+
+@pytest.mark.skipif(
+    sys.version_info[:2] != (3, 11), reason="reads CPython 3.11's bytecode for the branches"
+)
+def test_the_cases_take_every_branch_of_every_kernel():
+    """Each outcome of each condition in ``uasep_env/_kernels`` runs in some twin case.
+
+    ``tests/kernel_branches.py`` traces the cases through the kernels' Python source
+    (``NUMBA_DISABLE_JIT=1``). The random states alone leave branches untaken (the check
+    sees them); the edited states take every one, so the bit-for-bit comparison covers
+    every path a kernel can take.
+    """
+    import json
+    import subprocess
+
+    env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(Path(__file__).parents[1])}
+    out = subprocess.run(
+        [sys.executable, str(Path(__file__).with_name("kernel_branches.py"))],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=HANG_GUARD_S,
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    untaken = json.loads(out.stdout.strip().splitlines()[-1])
+    assert untaken["first_cases"]  # the check is not blind
+    assert untaken["all_cases"] == [], untaken["all_cases"]
 
 
 def test_public_functions_use_the_kernel_with_broadcasting(monkeypatch):
@@ -198,7 +373,7 @@ def test_public_functions_use_the_kernel_with_broadcasting(monkeypatch):
     near_slow = reachable.nearest_point_on_ellipsoid(pts, ctr, ax, hd)
     assert fast[0].shape == (5, 4, 2) and fast[1].shape == (5, 4, 2, 3)
     for f, s in zip((*fast, *near_fast), (*slow, *near_slow), strict=True):
-        np.testing.assert_array_equal(f, s)
+        _assert_bits(f, s)
 
 
 def test_disabled_by_environment_variable(monkeypatch):
@@ -232,10 +407,10 @@ def test_episodes_are_bit_identical_with_and_without_numba(monkeypatch):
     monkeypatch.setitem(_numba._state, "numba", None)
     slow = rollout()
     for f, s in zip(fast, slow, strict=True):
-        np.testing.assert_array_equal(f, s)
+        _assert_bits(f, s)
 
 
-def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
+def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form(parallel_loops):
     from uasep_env._kernels import common
 
     rng = np.random.default_rng(4)
@@ -248,7 +423,7 @@ def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
         want = _numpy_nearest(pts[:, :, None], ctr[:, None], ax[:, None], hd[:, None])[1]
         got = _kernel("pairwise_distances")(pts, ctr, ax, hd)
         assert got.shape == (e, n, m)
-        np.testing.assert_array_equal(got, want)
+        _assert_bits(got, want)
     assert e * n * m >= common.PARALLEL_MIN
 
 
@@ -266,7 +441,7 @@ def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form():
         {"n_uavs": 4, "n_obstacles": 0},
     ],
 )
-def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
+def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config, parallel_loops):
     from uasep_env import observation
     from uasep_env.envs.core import EnvCore
 
@@ -277,28 +452,47 @@ def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config):
     for _ in range(15):
         core.step(rng.uniform(-1, 1, size=(700, core.n_uavs, 3)))
         x = observation._gather_inputs(core.world, core.layout)
-        want = np.full(core._obs.shape, np.nan, dtype=np.float32)
-        got = want.copy()
-        observation._assemble.reference(x, core.layout, want)
-        _kernel("assemble_observations")(x, core.layout, got)
-        assert not np.isnan(want).any()  # NaN-filled: every entry was written
-        np.testing.assert_array_equal(got, want)
-        small = want[:2].copy()
-        _kernel("assemble_observations")(type(x)(*(a[:2] for a in x)), core.layout, small)
-        np.testing.assert_array_equal(small, want[:2])  # the serial loop
+        # float64: the numbers before the cast; float32: what the environments return.
+        for dtype in (np.float64, np.float32):
+            want = np.full(core._obs.shape, np.nan, dtype=dtype)
+            got = want.copy()
+            observation._assemble.reference(x, core.layout, want)
+            _kernel("assemble_observations")(x, core.layout, got)
+            assert not np.isnan(want).any()  # NaN-filled: every entry was written
+            _assert_bits(got, want, str(dtype))
+            small = want[:2].copy()
+            _kernel("assemble_observations")(type(x)(*(a[:2] for a in x)), core.layout, small)
+            _assert_bits(small, want[:2], f"{dtype} serial")  # the serial loop
         absent += int(np.sum(core.layout.decode(want)["uav_mask"] == 0))
     if "observation" in config:
         assert absent > 0  # the short range did hide some neighbours
 
 
-def _assemble_both(x, layout):
-    """The numpy assembly and the kernel's, into NaN-filled arrays: ``(want, got)``."""
+def _assemble_both(x, layout, dtype=np.float64):
+    """The numpy assembly and the kernel's, into NaN-filled arrays: ``(want, got)``.
+
+    float64 by default: the numbers before the cast to float32.
+    """
     e, n = x.pos.shape[:2]
-    want = np.full((e, n, layout.world_dim), np.nan, dtype=np.float32)
+    want = np.full((e, n, layout.world_dim), np.nan, dtype=dtype)
     got = want.copy()
     observation._assemble.reference(x, layout, want)
     _kernel("assemble_observations")(x, layout, got)
     return want, got
+
+
+def test_float32_observations_are_the_float64_numbers_rounded():
+    """The float64 ``out`` the tests compare holds the numbers the environments round: the
+    float32 observations are them cast, in numpy and in the kernel (the clip bound, 12, is
+    a float32 number, so clipping before or after the cast agrees)."""
+    for args in _case_observations():
+        x, layout, _ = args
+        assert np.float32(layout.clip) == layout.clip
+        with np.errstate(over="ignore"):
+            want64, got64 = _assemble_both(x, layout)
+            want32, got32 = _assemble_both(x, layout, np.float32)
+        _assert_bits(want32, want64.astype(np.float32), "numpy")
+        _assert_bits(got32, got64.astype(np.float32), "kernel")
 
 
 def _columns_of(layout, key):
@@ -330,12 +524,12 @@ def test_every_feature_of_the_table_is_bit_identical_with_and_without_it(key):
     want_off, got_off = _assemble_both(x, off)
     for want, got in ((want_on, got_on), (want_off, got_off)):
         assert not np.isnan(want).any()  # every entry written
-        np.testing.assert_array_equal(got, want)
+        _assert_bits(got, want)
     cols = _columns_of(on, key)
     assert len(cols) == on.dim - off.dim
     assert np.any(want_on[..., cols] != 0.0)  # computed, not left at zero
     rest = np.delete(want_on, cols, axis=-1)
-    np.testing.assert_array_equal(rest, want_off)
+    _assert_bits(rest, want_off)
     if on.features != default.features:  # optional: its vector decodes with it
         assert key in on.decode(want_on)
 
@@ -349,7 +543,16 @@ def test_optional_features_are_named_in_the_config():
     with pytest.raises(ValueError, match=r"observation\.optional_features"):
         make_config(observation={"optional_features": "uav_dist"})
     with pytest.raises(ValueError, match="unknown observation feature"):
-        ObservationLayout(1, 1, 1.0, 1.0, 1.0, 1.0, 1.0, features=("nope",))
+        ObservationLayout(
+            k_uavs=1,
+            k_obstacles=1,
+            pos_scale=1.0,
+            vel_scale=1.0,
+            acc_scale=1.0,
+            clip=1.0,
+            sensing_range=1.0,
+            features=("nope",),
+        )
     for key in OPTIONAL_FEATURES:
         cfg = make_config(observation={"optional_features": [key]})
         assert key in ObservationLayout.from_config(cfg).features
@@ -364,7 +567,7 @@ def test_norm_adds_in_einsum_order():
     d = np.random.default_rng(8).normal(0, 100, size=(5000, 3))
     want = np.sqrt(np.einsum("...i,...i->...", d, d))
     got = np.array([common._dist3(*row) for row in d])
-    np.testing.assert_array_equal(got, want)
+    _assert_bits(got, want)
 
 
 @pytest.mark.parametrize(("n_envs", "n_obstacles"), [(5, 3), (800, 2), (3, 0)])
@@ -379,7 +582,7 @@ def test_separations_kernel_matches_numpy(monkeypatch, n_envs, n_obstacles):
     slow = world.separations()
     for f, s in zip(fast, slow, strict=True):
         assert f.shape == (n_envs, 4)
-        np.testing.assert_array_equal(f, s)
+        _assert_bits(f, s)
     if n_obstacles:
         assert np.isinf(fast[1][::2]).all() and np.isfinite(fast[1][1::2]).all()
 
@@ -402,11 +605,11 @@ def test_formation_frame_kernel_matches_numpy_including_fallbacks():
     for v, f, w in zip(vel, fallback, want, strict=True):
         ct, st, cp, sp = _frame(*v, *f, MIN_FRAME_SPEED)
         got = [[-st, cp * ct, -ct * sp], [ct, cp * st, -st * sp], [0.0, -sp, -cp]]
-        np.testing.assert_array_equal(np.array(got), w)
+        _assert_bits(np.array(got), w)
 
 
 @pytest.mark.parametrize(("n_envs", "shared"), [(3, 0.0), (800, 0.4)])  # serial, parallel
-def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shared):
+def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shared, parallel_loops):
     from uasep_env import make_config, rewards
     from uasep_env.envs.core import EnvCore
 
@@ -424,10 +627,10 @@ def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shar
         monkeypatch.setitem(_numba._state, "numba", None)
         slow = rewards.compute_rewards(w, cfg.reward)
         monkeypatch.undo()
-        np.testing.assert_array_equal(fast[0], slow[0])
+        _assert_bits(fast[0], slow[0])
         assert list(fast[1]) == list(slow[1]) == list(rewards.REWARD_TERMS)
         for name in rewards.REWARD_TERMS:
-            np.testing.assert_array_equal(fast[1][name], slow[1][name], err_msg=name)
+            _assert_bits(fast[1][name], slow[1][name], name)
     assert (fast[1]["collision"] < 0).any() and (fast[1]["separation_region"] < 0).any()
 
 
@@ -444,7 +647,7 @@ def test_reward_terms_agree_between_table_numpy_kernel_and_weights():
     names = rewards.REWARD_TERMS
     assert names == tuple(t.name for t in rewards.TERMS) == rewards._TERM_INDEX._fields
     assert tuple(rewards._TERM_INDEX) == tuple(range(len(names)))
-    x, constants, weights = _case_rewards()
+    x, constants, weights = _case_rewards()[0]
     assert tuple(rewards._term_values(x, constants)) == names
     written = re.findall(r"terms\[ix\.(\w+), e, i\]", inspect.getsource(kernel._reward_agent))
     assert sorted(written) == sorted(names)  # each row once, by name
@@ -477,7 +680,7 @@ def test_plan_kernel_matches_numpy_along_and_past_the_plan(monkeypatch):
         slow = world._plan_arrays()
         monkeypatch.undo()
         for f, s in zip(fast, slow, strict=True):
-            np.testing.assert_array_equal(f, s)
+            _assert_bits(f, s)
     assert len(seen) > 2  # several segments, and the end of the plan (t = 1e5)
 
 
@@ -491,7 +694,7 @@ def _big_rollout(_: int = 0) -> np.ndarray:
     return res.obs
 
 
-def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel():
+def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel(parallel_loops):
     """numba's GNU OpenMP layer would kill the child; forked children use the serial loops."""
     import multiprocessing
 
@@ -500,8 +703,8 @@ def test_a_forked_child_runs_the_kernels_after_the_parent_ran_them_in_parallel()
     parent = _big_rollout()  # 2,100 agents: the parallel loops
     assert common._parallel(2100)
     with multiprocessing.get_context("fork").Pool(1) as pool:
-        child = pool.apply_async(_big_rollout).get(timeout=120)
-    np.testing.assert_array_equal(child, parent)
+        child = pool.apply_async(_big_rollout).get(timeout=HANG_GUARD_S)
+    _assert_bits(child, parent)
 
 
 def test_world_region_distances_from_kept_cosines_match_numpy(monkeypatch):
@@ -520,10 +723,8 @@ def test_world_region_distances_from_kept_cosines_match_numpy(monkeypatch):
         fast = world.region_distances()
         est = world.region_distances(world.est_pos[5:9], rows=np.arange(5, 9))
         monkeypatch.setitem(_numba._state, "numba", None)
-        np.testing.assert_array_equal(fast, world.region_distances())
-        np.testing.assert_array_equal(
-            est, world.region_distances(world.est_pos[5:9], rows=np.arange(5, 9))
-        )
+        _assert_bits(fast, world.region_distances())
+        _assert_bits(est, world.region_distances(world.est_pos[5:9], rows=np.arange(5, 9)))
         monkeypatch.undo()
         assert np.isinf(fast[::4, :, 1]).all() and np.isfinite(fast[1::4]).all()
 
@@ -542,3 +743,44 @@ def test_install_time_warm_up_command_runs_without_numba():
         check=True,
     )
     assert "numba kernels: not in use" in out.stdout
+
+
+def test_threads_are_the_process_share_of_its_cores():
+    """N processes started side by side never ask for more threads than the cores."""
+    from uasep_env._kernels.common import PARALLEL_MIN_THREADS, decide_threads
+
+    assert PARALLEL_MIN_THREADS == 4  # the cases below are written for it
+    assert decide_threads({}, cores=16) == 16
+    assert decide_threads({"UASEP_WORKERS": "4"}, cores=16) == 4
+    assert decide_threads({"UASEP_WORKERS": "8"}, cores=16) == 1  # 2 threads do not pay
+    assert decide_threads({}, cores=2) == 1
+    assert decide_threads({"UASEP_WORKERS": "3"}, cores=2) == 1
+    assert decide_threads({"UASEP_THREADS": "2", "UASEP_WORKERS": "8"}, cores=16) == 2
+    for name, value in (("UASEP_THREADS", "0"), ("UASEP_WORKERS", "two")):
+        with pytest.raises(ValueError, match=f"{name}='{value}'"):
+            decide_threads({name: value}, cores=4)
+
+
+def test_serial_loops_with_one_thread(monkeypatch):
+    from uasep_env._kernels import common
+
+    monkeypatch.setattr(common, "_threads", [1])
+    assert not common._parallel(10 * common.PARALLEL_MIN)
+    monkeypatch.setattr(common, "_threads", [2])
+    assert common._parallel(common.PARALLEL_MIN) and not common._parallel(common.PARALLEL_MIN - 1)
+
+
+def test_noise_threads_take_the_process_share(monkeypatch):
+    """The noise pool never starts more threads than the process's share of the cores."""
+    from uasep_env import cores, noise
+
+    calls = []
+    monkeypatch.setattr(noise, "process_share", lambda: 1)
+    noise._run_chunked(calls.append, np.arange(4 * noise.REFILL_CHUNK))
+    assert len(calls) == 1  # one share: no pool, one call
+    monkeypatch.setattr(noise, "process_share", lambda: 2)
+    monkeypatch.setattr(noise, "_pool", [])
+    noise._run_chunked(calls.append, np.arange(4 * noise.REFILL_CHUNK))
+    assert len(calls) == 3 and noise._pool[0]._max_workers == 2
+    noise._pool[0].shutdown()
+    assert cores.core_share({"UASEP_WORKERS": "2"}, cores=2) == 1

@@ -7,9 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import make_record
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from conftest import given, make_record, settings, st
 
 from uasep_env.metrics import (
     EpisodeMetrics,

@@ -1,8 +1,7 @@
 """Obstacle motion: 3D Dubins bounds."""
 
 import numpy as np
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from conftest import given, settings, st
 
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 

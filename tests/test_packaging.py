@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, run_python
+from conftest import HANG_GUARD_S, ROOT, run_python
 
 import uasep_env
 from uasep_env.config import make_config
@@ -104,7 +104,7 @@ env = FormationEnv()  # render() without a render_mode: Gymnasium's warning, Non
 env.reset(seed=0)
 assert env.render() is None
 """,
-        timeout=300,
+        timeout=HANG_GUARD_S,
     )
     assert out.returncode == 0, out.stderr
     for tag in ("ERR", "VEC", "PAR"):
@@ -185,7 +185,7 @@ def test_build_copies_the_repo_checkpoints_into_the_package(tmp_path):
         cwd=ROOT,
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=HANG_GUARD_S,
     )
     assert build.returncode == 0, build.stderr
     shipped = sorted((tmp_path / "uasep_env" / "checkpoints").glob("*.zip"))
@@ -194,6 +194,7 @@ def test_build_copies_the_repo_checkpoints_into_the_package(tmp_path):
     for a, b in zip(shipped, source, strict=True):
         assert a.read_bytes() == b.read_bytes(), a.name
     assert (tmp_path / "uasep_env" / "data" / "ellipse_table.npz").is_file()
+    assert (tmp_path / "uasep_env" / "data" / "prediction_calibration.json").is_file()
 
 
 # --------------------------------------------------------- item 5: package metadata
@@ -242,7 +243,7 @@ def test_sdist_carries_what_the_tests_need(tmp_path):
         cwd=ROOT,
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=HANG_GUARD_S,
     )
     assert out.returncode == 0, out.stderr[-2000:]
     (sdist,) = tmp_path.glob("*.tar.gz")

@@ -145,7 +145,7 @@ def test_ellipsoid_surface_geometry(heading):
 
 def test_import_does_not_import_matplotlib():
     code = "import sys, uasep_env.plotting; print('matplotlib' in sys.modules)"
-    out = run_python(code, timeout=60)
+    out = run_python(code)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
 

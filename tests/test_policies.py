@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from conftest import given, settings, st
+from safety import COLLISION_COURSES, no_avoidance, separation_losses
 
 from uasep_env import make_config
 from uasep_env.envs.core import EnvCore
@@ -126,8 +126,29 @@ def test_gains_validated():
         make_policy("nope", make_config())
 
 
+@pytest.mark.parametrize("scenario", COLLISION_COURSES)
+def test_collision_courses_collide_without_avoidance(scenario):
+    """The safety tests' encounters can fail: plan tracking alone collides on every seed."""
+    r = separation_losses(no_avoidance, scenario)
+    assert all(r["collision"]), r
+
+
+def test_apf_resolves_collision_courses_under_noise():
+    """The APF avoids a straight-flying obstacle aimed at a UAV at its altitude."""
+    head_on = separation_losses(APF, "collision_head_on")
+    assert not any(head_on["collision"]) and not any(head_on["lost"]), head_on
+    crossing = separation_losses(APF, "collision_crossing")
+    assert not any(crossing["collision"]), crossing
+    # Measured: at right angles the APF comes within 9.9 m of the 10 m obstacle separation on
+    # one seed of six (seed 4); a documented weakness, bounded here so it cannot grow.
+    assert sum(crossing["lost"]) <= 1 and crossing["distance"] > 9.0, crossing
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_apf_keeps_separation_on_paper_scenario_under_noise(seed):
+    # The paper's experiment, reproduced: its obstacle passes 10 m below the formation, so
+    # this cannot show avoidance on its own (plan tracking passes it too); the collision
+    # courses above do.
     cfg = make_config(scenario="paper")
     ep = run_episodes(APF(cfg), cfg, [seed])[0]
     m = episode_metrics(ep.record).episode

@@ -3,8 +3,7 @@ ellipse/ellipsoid (Monte-Carlo enclosure, tightness) and the point-to-ellipsoid 
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from conftest import HealthCheck, given, settings, st
 
 from uasep_env import reachable as R
 from uasep_env.reachable.optimal import optimal_shape

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import HANG_GUARD_S
 
 from uasep_env import real_traffic as rt
 
@@ -190,7 +191,7 @@ def crafted_file(path: Path) -> Path:
 def _peak(path: Path) -> tuple[str, int]:
     out = subprocess.run(
         [sys.executable, "-c", _PEAK, str(path)],
-        capture_output=True, text=True, timeout=300, cwd=ROOT, check=True,
+        capture_output=True, text=True, timeout=HANG_GUARD_S, cwd=ROOT, check=True,
     )  # fmt: skip
     verdict, rss = out.stdout.split()
     return verdict, int(rss)

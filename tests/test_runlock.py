@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import HANG_GUARD_S
 
 pytest.importorskip("fcntl")
 
@@ -64,10 +65,10 @@ def test_two_runs_started_together_into_one_fresh_folder_one_fails_naming_it(tmp
         losers = [line for line in lines if line != "running"]
         for p in procs:
             p.stdin.close()
-            p.wait(timeout=60)
+            p.wait(timeout=HANG_GUARD_S)
         assert len(winners) == 1, lines
         assert len(losers) == 1 and str(out) in losers[0] and "in use by another run" in losers[0]
-        assert "pid " in losers[0] and "\n" not in losers[0]
+        assert "\n" not in losers[0]
         rows = (out / "progress.csv").read_text().splitlines()
         assert rows == ["agent_steps", "1"], rows  # one run's rows only
 
@@ -79,18 +80,18 @@ def test_a_folder_left_by_a_killed_run_resumes(tmp_path):
     assert first.stdout.readline().strip() == "running"
     busy = _start(out, go, resume="checkpoints/latest")
     assert "in use by another run" in busy.stdout.readline()
-    busy.wait(timeout=60)
+    busy.wait(timeout=HANG_GUARD_S)
     first.send_signal(signal.SIGKILL)
-    first.wait(timeout=60)
+    first.wait(timeout=HANG_GUARD_S)
     assert (out / LOCK_NAME).exists()  # the stale lock file stays; its lock died with it
     again = _start(out, go, resume="checkpoints/latest")
     assert again.stdout.readline().strip() == "running"
     again.stdin.close()
-    again.wait(timeout=60)
+    again.wait(timeout=HANG_GUARD_S)
     # A fresh start (no --resume) is still refused: the folder holds a run's files.
     fresh = _start(out, go)
     assert "is not empty" in fresh.stdout.readline()
-    fresh.wait(timeout=60)
+    fresh.wait(timeout=HANG_GUARD_S)
 
 
 def test_the_lock_file_alone_does_not_make_a_folder_used(tmp_path):
@@ -117,6 +118,6 @@ def test_a_claim_held_elsewhere_is_refused_with_its_holder(tmp_path):
     with pytest.raises(RunFolderBusy, match=rf"pid {holder.pid} on "):
         claim_run_folder(tmp_path)
     holder.stdin.close()
-    holder.wait(timeout=60)
+    holder.wait(timeout=HANG_GUARD_S)
     claim_run_folder(tmp_path)  # free once its holder ended
     release_run_folder(tmp_path)

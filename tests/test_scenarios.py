@@ -2,8 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from conftest import given, settings, st
 
 from uasep_env.config import make_config
 from uasep_env.envs.vector import FormationVectorEnv
@@ -70,14 +69,14 @@ def test_a_mix_of_equal_weights_draws_as_integers_did():
     from uasep_env.scenarios import Mix
 
     names = ("a", "b", "c", "d", "e")
-    mix = Mix(dict.fromkeys(names, 1))
+    mix = Mix(weights=dict.fromkeys(names, 1))
     r1, r2 = np.random.default_rng(7), np.random.default_rng(7)
     assert [mix.draw(r1) for _ in range(200)] == [names[int(r2.integers(5))] for _ in range(200)]
-    weighted = Mix({"x": 3, "y": 1})
+    weighted = Mix(weights={"x": 3, "y": 1})
     draws = [weighted.draw(np.random.default_rng(s)) for s in range(4000)]
     assert 0.7 < draws.count("x") / len(draws) < 0.8
     with pytest.raises(ValueError, match="positive integer weights"):
-        Mix({"x": 0})
+        Mix(weights={"x": 0})
 
 
 def test_unknown_or_taken_family_names_are_refused():
@@ -86,7 +85,11 @@ def test_unknown_or_taken_family_names_are_refused():
     with pytest.raises(ValueError, match="scenario='moon'"):
         get_family("moon")
     with pytest.raises(ValueError, match="taken"):
-        register(ScenarioFamily("paper", "x", "y", FAMILIES["paper"].generate))
+        register(
+            ScenarioFamily(
+                name="paper", summary="x", parameters="y", generate=FAMILIES["paper"].generate
+            )
+        )
 
 
 # ---- Obstacles stay in the sky -----------------------------------------------------------------

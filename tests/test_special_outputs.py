@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import HANG_GUARD_S
 
 from uasep_env import atomic
 from uasep_env.atomic import atomic_output, atomic_write, output_kind
@@ -107,7 +108,7 @@ def test_every_writer_writes_through_a_fifo_and_leaves_it_a_fifo(tmp_path, write
     os.mkfifo(fifo)
     t, got = _read_fifo_in_background(fifo)
     WRITERS[writer](fifo)
-    t.join(30)
+    t.join(HANG_GUARD_S)
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode), "the FIFO was replaced by a regular file"
     assert got and len(got[0]) > 0
     assert not [p for p in tmp_path.iterdir() if p != fifo], "a temporary file was left"
@@ -239,7 +240,7 @@ def test_a_stream_is_written_through_its_descriptor_at_its_offset(tmp_path, name
             check=True,
             cwd=ROOT,
             env={**os.environ, "PYTHONPATH": str(ROOT)},
-            timeout=120,
+            timeout=HANG_GUARD_S,
         )
     assert log.read_text() == "head\nbefore\nthrough\nafter\n"
     assert log.stat().st_ino == inode
@@ -251,7 +252,7 @@ def test_uasep_eval_csv_to_stdout_goes_down_the_pipe(tmp_path):
     out = subprocess.run(
         [sys.executable, "-m", "uasep_env.evaluation", "--quiet", "--config",
          "episode_duration=1", "--csv", "/dev/stdout"],
-        capture_output=True, text=True, check=True, cwd=ROOT, timeout=300,
+        capture_output=True, text=True, check=True, cwd=ROOT, timeout=HANG_GUARD_S,
         env={**os.environ, "PYTHONPATH": str(ROOT)},
     )  # fmt: skip
     lines = out.stdout.splitlines()

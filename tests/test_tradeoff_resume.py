@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import fill_disk
+from conftest import HANG_GUARD_S, fill_disk
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "baselines"))
@@ -24,9 +24,10 @@ import sys
 sys.path.insert(0, {baselines!r})
 import tradeoff
 from tradeoff import APF, Method, _scaled
-tradeoff.METHODS = (Method("apf", "APF", "margin scale", tradeoff.SCALES, 1.0,
-    lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
-    lambda v: {{"episode_duration": 10.0 + 4 * v}}),)
+tradeoff.METHODS = (Method(name="apf", label="APF", knob="margin scale",
+    values=tradeoff.SCALES, default=1.0,
+    policy=lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
+    config=lambda v: {{"episode_duration": 10.0 + 4 * v}}),)
 tradeoff.main(["--methods", "apf", "--paper-episodes", "1", "--bank-episodes", "1",
                "--workers", "1", "--out", sys.argv[1]])
 """
@@ -49,7 +50,7 @@ def _n_rows(csv_path):
 def test_a_killed_sweep_resumes_to_the_uninterrupted_files(tmp_path):
     ref = tmp_path / "ref"
     p = _start(ref)
-    assert p.wait(timeout=300) == 0, p.stderr.read()
+    assert p.wait(timeout=HANG_GUARD_S) == 0, p.stderr.read()
     expected = (ref / "tradeoff.csv").read_bytes()
     assert expected.count(b"\n") == 1 + 9 * 2
 
@@ -68,7 +69,7 @@ def test_a_killed_sweep_resumes_to_the_uninterrupted_files(tmp_path):
         text = (out / "tradeoff.csv").read_text()
         assert text.endswith("\n") and _n_rows(out / "tradeoff.csv") == text.count("\n") - 1
     p = _start(out)
-    assert p.wait(timeout=300) == 0, p.stderr.read()
+    assert p.wait(timeout=HANG_GUARD_S) == 0, p.stderr.read()
     assert (out / "tradeoff.csv").read_bytes() == expected
     assert (out / "tradeoff.md").read_text() == (ref / "tradeoff.md").read_text()
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import fill_disk
+from conftest import HANG_GUARD_S, fill_disk
 
 pytest.importorskip("stable_baselines3")
 
@@ -44,7 +44,7 @@ def _rows(out):
 def _run_killed(out, rows_before_kill, delay, *extra):
     """Start a run and SIGKILL it once progress.csv has that many rows (plus ``delay`` s)."""
     p = _start(out, *extra)
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + HANG_GUARD_S
     while p.poll() is None and time.monotonic() < deadline:
         if len(_rows(out)) >= rows_before_kill:
             time.sleep(delay)
@@ -56,7 +56,7 @@ def _run_killed(out, rows_before_kill, delay, *extra):
 
 def _finish(out, *extra):
     p = _start(out, *extra)
-    _, err = p.communicate(timeout=300)
+    _, err = p.communicate(timeout=HANG_GUARD_S)
     return p.returncode, err
 
 

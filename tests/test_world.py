@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import HANG_GUARD_S
 
 from uasep_env import World, make_config
 from uasep_env.config import SCENARIOS
@@ -268,5 +269,5 @@ def test_noise_threads_work_in_a_forked_child(monkeypatch):
     parent = _threaded_rollout()
     assert noise_mod._pool  # the parent's pool exists when the child is forked
     with multiprocessing.get_context("fork").Pool(1) as pool:
-        child = pool.apply_async(_threaded_rollout).get(timeout=120)
+        child = pool.apply_async(_threaded_rollout).get(timeout=HANG_GUARD_S)
     np.testing.assert_array_equal(child, parent)

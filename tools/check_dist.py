@@ -23,6 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SDIST_NEEDS = (
     "LICENSE",
+    "CITATION.cff",
     "setup.py",
     "pyproject.toml",
     "tests/conftest.py",

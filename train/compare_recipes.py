@@ -133,16 +133,24 @@ def _wall_minutes(path: Path) -> np.ndarray:
         raise ValueError(f"{path}: every row needs a numeric wall_s") from None
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """This script's flags (a bad value is one line naming the flag)."""
+    from uasep_env.training.args import HelpFormatter, OneLineParser
+
+    p = OneLineParser(description=__doc__, formatter_class=HelpFormatter)
+    p.add_argument("runs", type=Path, nargs="+", help="train/seeds.py output folders")
+    p.add_argument("--out", type=Path, required=True, help="writes OUT.md and OUT.png")
+    p.add_argument("--force", action="store_true", help="replace existing outputs")
+    p.add_argument("--no-figure", action="store_true", help="write the table only")
+    return p
+
+
 def main(argv: list[str] | None = None) -> str:
     """Write the comparison; return its markdown."""
     import shlex
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("runs", type=Path, nargs="+", help="train/seeds.py output folders")
-    p.add_argument("--out", type=Path, required=True, help="writes OUT.md and OUT.png")
-    p.add_argument("--force", action="store_true", help="replace existing outputs")
-    p.add_argument("--no-figure", action="store_true")
+    p = build_parser()
     args = p.parse_args(argv)
     md, png = args.out.with_suffix(".md"), args.out.with_suffix(".png")
     for q in (md, png):

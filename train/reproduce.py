@@ -36,6 +36,13 @@ sys.path.insert(0, str(HERE))
 
 import seeds as seeds_driver  # noqa: E402
 
+from uasep_env.training.args import (  # noqa: E402
+    HelpFormatter,
+    OneLineParser,
+    non_negative_int,
+    positive_int,
+)
+
 #: The figures of one metric compared with the report (all must be equal).
 FIELDS = ("n", "n_valid", "successes", "sum", "mean", "ci_low", "ci_high")
 
@@ -91,6 +98,19 @@ def compare(now: dict[str, Any], published: dict[str, Any]) -> list[str]:
     return bad
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """This script's flags (validated: a bad value is one line naming the flag)."""
+    p = OneLineParser(description=__doc__, formatter_class=HelpFormatter)
+    p.add_argument("report", type=Path, help="a seeds report (train/seeds.py's seeds.json)")
+    p.add_argument("--seed", type=non_negative_int, default=None,
+                   help="the report's seed to retrain (None: the one it shipped)")  # fmt: skip
+    p.add_argument("--out-dir", type=Path, required=True, help="the retrained run's folder")
+    p.add_argument("--workers", type=positive_int, default=1, help="evaluation processes")
+    p.add_argument("--ship-to", type=Path, default=None, help="copy a reproduced checkpoint here")
+    p.add_argument("--force", action="store_true", help="replace the --ship-to files")
+    return p
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Retrain (unless done), compare, optionally ship; return the comparison."""
     from uasep_env import make_config
@@ -99,13 +119,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     from uasep_env.jsonio import dumps
 
     argv, extra = seeds_driver.split_recipe_args(argv)
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("report", type=Path, help="a seeds report (train/seeds.py's seeds.json)")
-    p.add_argument("--seed", type=int, default=None, help="default: the seed the report shipped")
-    p.add_argument("--out-dir", type=Path, required=True)
-    p.add_argument("--workers", type=int, default=1)
-    p.add_argument("--ship-to", type=Path, default=None)
-    p.add_argument("--force", action="store_true", help="replace the --ship-to files")
+    p = build_parser()
     args = p.parse_args(argv)
     try:
         report = json.loads(args.report.read_text())

@@ -49,6 +49,7 @@ import numpy as np
 from uasep_env.atomic import atomic_output, atomic_write
 from uasep_env.metrics.statistics import no_worse_rate
 from uasep_env.runlock import RunFolderBusy, claim_run_folder
+from uasep_env.training.args import HelpFormatter, OneLineParser, non_negative_int, positive_int
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -119,7 +120,9 @@ def train_all(recipe: str, out: Path, seeds: int, parallel: int, extra: list[str
             # The log lies beside the run folder: a recipe refuses a used --out-dir.
             log = (out / f"seed_{k}.log").open("a")
             print(f"seed {k}: {' '.join(cmd[1:])}", flush=True)
-            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=recipe_env())
+            # The seeds side by side share the cores: each recipe's kernels take its share.
+            env = dict(recipe_env(), UASEP_WORKERS=str(parallel))
+            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)
             running.append((k, proc, log))
         time.sleep(1.0)
         for item in list(running):
@@ -409,8 +412,20 @@ def read_curve(path: Path) -> dict[str, np.ndarray]:
     return {c: np.array([float(r.get(c) or "nan") for r in rows]) for c in cols}
 
 
-def plot_curves(out: Path, seeds: int, title: str) -> Path:
-    """Every seed's learning curves in one figure (``<out>/curves.png``)."""
+def plot_curves(out: Path, seeds: int, title: str) -> Path | None:
+    """Every seed's learning curves in one figure (``<out>/curves.png``).
+
+    None, said on stderr, when no seed has a ``progress.csv`` row to plot (no blank figure).
+    """
+    curves = {}
+    for k in range(seeds):
+        path = seed_dir(out, k) / "progress.csv"
+        c = read_curve(path) if path.exists() else {"agent_steps": ()}
+        if len(c["agent_steps"]):
+            curves[k] = c
+    if not curves:
+        print(f"{out / 'curves.png'} not written: no seed has a progress row", file=sys.stderr)
+        return None
     from matplotlib.figure import Figure  # lazily: only the figure needs matplotlib
 
     fig = Figure(figsize=(12, 7), layout="constrained")
@@ -421,11 +436,7 @@ def plot_curves(out: Path, seeds: int, title: str) -> Path:
         "loss-of-separation rate",
         "max deviation (m)",
     )
-    for k in range(seeds):
-        path = seed_dir(out, k) / "progress.csv"
-        if not path.exists():
-            continue
-        c = read_curve(path)
+    for k, c in curves.items():
         for ax, col in zip(axes, CURVE_COLUMNS, strict=True):
             ax.plot(c["agent_steps"], c[col], label=f"seed {k}", lw=1)
     for ax, name in zip(axes, names, strict=True):
@@ -448,22 +459,19 @@ def split_recipe_args(argv: list[str] | None) -> tuple[list[str], list[str]]:
     return argv[:at], argv[at + 1 :]
 
 
-def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """Run the stages; return the report's JSON data."""
-    import shlex
-
-    from uasep_env.jsonio import write_json
-
-    argv, extra = split_recipe_args(argv)
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--recipe", choices=sorted(RECIPES), required=True)
-    p.add_argument("--seeds", type=int, default=3, help="number of training seeds")
-    p.add_argument("--parallel", type=int, default=1, help="seeds trained side by side")
-    p.add_argument("--out-dir", type=Path, required=True)
-    p.add_argument("--select-episodes", type=int, default=100)
-    p.add_argument("--episodes", type=int, default=500, help="held-out encounters")
-    p.add_argument("--scaling-episodes", type=int, default=0)
-    p.add_argument("--workers", type=int, default=2)
+def build_parser() -> argparse.ArgumentParser:
+    """This driver's flags (validated: a bad value is one line naming the flag)."""
+    p = OneLineParser(description=__doc__, formatter_class=HelpFormatter)
+    p.add_argument("--recipe", choices=sorted(RECIPES), required=True, help="the recipe")
+    p.add_argument("--seeds", type=positive_int, default=3, help="number of training seeds")
+    p.add_argument("--parallel", type=positive_int, default=1, help="seeds trained side by side")
+    p.add_argument("--out-dir", type=Path, required=True, help="the seeds' folders")
+    p.add_argument("--select-episodes", type=positive_int, default=100,
+                   help="validation encounters per checkpoint")  # fmt: skip
+    p.add_argument("--episodes", type=positive_int, default=500, help="held-out encounters")
+    p.add_argument("--scaling-episodes", type=non_negative_int, default=0,
+                   help="episodes per scaling cell (0: no scaling sweep)")  # fmt: skip
+    p.add_argument("--workers", type=positive_int, default=2, help="evaluation processes")
     p.add_argument(
         "--publish",
         type=Path,
@@ -479,10 +487,18 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         default=None,
         help="copy the checkpoint chosen across seeds (on validation only) to this file",
     )
+    return p
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Run the stages; return the report's JSON data."""
+    import shlex
+
+    from uasep_env.jsonio import write_json
+
+    argv, extra = split_recipe_args(argv)
+    p = build_parser()
     args = p.parse_args(argv)
-    for name in ("seeds", "parallel", "select_episodes", "episodes", "workers"):
-        if getattr(args, name) < 1:
-            p.error(f"argument --{name.replace('_', '-')}: must be >= 1")
     if args.seeds > 100:
         p.error("argument --seeds: at most 100 (seed k trains on 1000*k + e)")
     for flag in ("--seed", "--out-dir", "--resume"):

@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-__all__ = ["TWINS", "Twin", "available", "compiled_twin", "kernels"]
+__all__ = ["TWINS", "Twin", "available", "compiled_twin", "kernels", "note_slow_kernels"]
 
 _state: dict[str, Any] = {}
 F = TypeVar("F", bound=Callable[..., Any])
@@ -33,13 +33,47 @@ F = TypeVar("F", bound=Callable[..., Any])
 def _numba() -> Any:
     if "numba" not in _state:
         module = None
-        if os.environ.get("UASEP_NUMBA", "1").strip() not in {"0", "false", "no", "off"}:
+        if not _disabled():
             try:
                 import numba as module
             except ImportError:  # pragma: no cover - depends on the installation
                 module = None
         _state["numba"] = module
     return _state["numba"]
+
+
+def _disabled() -> bool:
+    return os.environ.get("UASEP_NUMBA", "1").strip() in {"0", "false", "no", "off"}
+
+
+#: What :func:`note_slow_kernels` says when numba is not installed.
+SLOW_NOTE = (
+    "note: numba is not installed, so the environment runs its numpy reference code: the "
+    "same numbers, slower (an evaluation takes about twice as long); "
+    'pip install "uasep-env[fast]" for the compiled kernels, or set UASEP_NUMBA=0 to '
+    "silence this note"
+)
+
+
+def note_slow_kernels(stream: Any = None) -> bool:
+    """Say once per process, on stderr, that compiled kernels are missing (a slow run).
+
+    Silent when the kernels are in use, and when the user turned them off (``UASEP_NUMBA=0``:
+    their explicit choice needs no note). Command-line tools call it before long work.
+
+    Args:
+        stream: Where to write (default ``sys.stderr``).
+
+    Returns:
+        Whether the note was written now.
+    """
+    import sys
+
+    if _state.get("noted") or available() or _disabled():
+        return False
+    _state["noted"] = True
+    print(SLOW_NOTE, file=stream if stream is not None else sys.stderr)
+    return True
 
 
 def available() -> bool:
@@ -61,7 +95,7 @@ def kernels() -> Any:
     return _state["kernels"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Twin:
     """A numpy reference and the name of its compiled kernel in :mod:`uasep_env._kernels`.
 
@@ -98,7 +132,7 @@ def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
     """
 
     def wrap(reference: F) -> F:
-        twin = Twin(kernel, reference, dict(constants))
+        twin = Twin(kernel=kernel, reference=reference, constants=dict(constants))
         TWINS[kernel] = twin
 
         @functools.wraps(reference)

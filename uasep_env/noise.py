@@ -17,6 +17,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from uasep_env.cores import process_share
+
 __all__ = ["REFILL_CHUNK", "NoiseStreams"]
 
 #: Environments refilled per task when noise is drawn on several threads; below twice
@@ -34,12 +36,13 @@ def _run_chunked(fn: Callable[[np.ndarray], None], envs: np.ndarray) -> None:
     while they draw. Each environment's generator is used by one task only, in order, so
     the numbers are the same as one thread's, bit for bit.
     """
-    workers = min(os.cpu_count() or 1, len(envs) // REFILL_CHUNK)
+    share = process_share()  # never more threads than this process's share of the cores
+    workers = min(share, len(envs) // REFILL_CHUNK)
     if workers < 2:
         fn(envs)
         return
     if not _pool:
-        _pool.append(ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="uasep-noise"))
+        _pool.append(ThreadPoolExecutor(share, thread_name_prefix="uasep-noise"))
     for future in [_pool[0].submit(fn, part) for part in np.array_split(envs, workers)]:
         future.result()
 

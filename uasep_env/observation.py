@@ -18,6 +18,7 @@ from uasep_env._numba import compiled_twin
 from uasep_env.config import EnvConfig
 from uasep_env.formation import MIN_FRAME_SPEED, formation_center, slot_positions
 from uasep_env.observation_layout import FEATURES, Feature, ObservationLayout
+from uasep_env.obstacles import AIRCRAFT_CLASSES
 from uasep_env.world import World
 
 __all__ = [
@@ -56,6 +57,7 @@ class _Inputs(NamedTuple):
     cos_h: np.ndarray  # (E, M) cosine of the ellipsoid heading
     sin_h: np.ndarray  # (E, M) sine of the ellipsoid heading
     active: np.ndarray  # (E, M) bool, obstacle present
+    aircraft_class: np.ndarray  # (E, M) int64 class code (uasep_env.obstacles.AIRCRAFT_CLASSES)
 
 
 def build_observations(
@@ -119,6 +121,7 @@ def _gather_inputs(
         cos_h=world.pred_cos[r, :m],
         sin_h=world.pred_sin[r, :m],
         active=world.obstacles.active[r, :m],
+        aircraft_class=world.obstacles.aircraft_class[r, :m],
     )
 
 
@@ -146,7 +149,9 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
     """The assembly of :func:`build_observations`: fills ``out`` in place.
 
     Every feature of the layout is computed here, keyed by its :attr:`Feature.key`, and
-    written where :attr:`ObservationLayout.slices` puts it; the rest are skipped.
+    written where :attr:`ObservationLayout.slices` puts it; the rest are skipped. ``out`` is
+    float32; a float64 ``out`` holds the same numbers before the cast (cast-then-clip and
+    clip-then-cast agree), which the tests compare with the compiled twin's, bit for bit.
     """
     e, n, _ = x.pos.shape
     m = x.region.shape[-1]
@@ -226,6 +231,9 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
             "obstacle_rel_vel": (x.obstacle_vel.reshape(-1, 3)[ob] - vel[:, :, None, :]) / vs,
             "obstacle_region_dist": (np.where(np.isfinite(reg), reg, 0.0) / ps)[..., None],
         }
+        if "obstacle_class" in cols:  # one-hot of the class code (optional feature)
+            code = x.aircraft_class.reshape(-1)[ob]
+            feats["obstacle_class"] = code[..., None] == np.arange(len(AIRCRAFT_CLASSES))
         feats = {k: np.where(present, v, 0.0) for k, v in feats.items()}
         feats["obstacle_mask"] = present
         _write(block[:, :, :kk], cols, feats)

@@ -7,36 +7,40 @@ Every agent gets one flat ``float32`` vector; the layout (which features of
 into SI quantities and names its entries (checkpoints record the names). The reference APF
 controllers act on decoded observations, so they and learned policies see exactly the same
 information. Optional features (``Feature.default`` false) are added by naming them in
-``observation.optional_features``; there are none yet (``docs/extending.md`` shows how to
-add one).
+``observation.optional_features``: ``obstacle_class`` (below; ``docs/extending.md`` shows how
+to add one).
 
 All vectors are expressed along the NED axes (x north, y east, z down), relative to the
 observing UAV. Positions are divided by ``observation.position_scale`` (m), velocities by
 ``uav.max_speed`` (m/s), accelerations by ``uav.max_accel`` (m/s^2); every entry is then
 clipped to ``[-clip, clip]``.
 
-======================  ====  ==========================================================
-Feature                 Size  Meaning (before scaling)
-======================  ====  ==========================================================
-``slot_offset``         3     desired slot (eq. 7, from estimates) minus own position (m)
-``plan_offset``         3     own planned position minus own position (m)
-``velocity``            3     own estimated velocity (m/s)
-``plan_velocity``       3     planned velocity of the formation (m/s)
-``formation_velocity``  3     formation mean velocity ``v_o`` (eq. 5) (m/s)
-``goal_offset``         3     planned formation centre minus the estimated centre (m)
-``waypoint_dir``        3     unit direction of the planned path now
-``waypoint_dist``       1     distance from the centre to the final way-point (m)
-``last_accel``          3     own last commanded acceleration (m/s^2)
-``progress``            1     elapsed fraction of the episode
-per nearest UAV (K_u)   8     relative position (3, m), relative velocity (3, m/s),
-                              distance (1, m), presence mask (1)
-per nearest obstacle    16    reachable-ellipsoid centre relative to the UAV (3, m),
-(K_o)                         semi-axes (longitudinal, lateral, vertical) (3, m),
-                              heading (cos, sin) (2), obstacle position relative to the
-                              UAV (3, m), obstacle velocity relative to the UAV (3, m/s),
-                              signed distance from the UAV to the ellipsoid (1, m),
-                              presence mask (1)
-======================  ====  ==========================================================
+==========================  ====  ======================================================
+Feature                     Size  Meaning (before scaling)
+==========================  ====  ======================================================
+``slot_offset``             3     desired slot (eq. 7, from estimates) minus own position (m)
+``plan_offset``             3     own planned position minus own position (m)
+``velocity``                3     own estimated velocity (m/s)
+``plan_velocity``           3     planned velocity of the formation (m/s)
+``formation_velocity``      3     formation mean velocity ``v_o`` (eq. 5) (m/s)
+``goal_offset``             3     planned formation centre minus the estimated centre (m)
+``waypoint_dir``            3     unit direction of the planned path now
+``waypoint_dist``           1     distance from the centre to the final way-point (m)
+``last_accel``              3     own last commanded acceleration (m/s^2)
+``progress``                1     elapsed fraction of the episode
+per nearest UAV (K_u)       8     relative position (3, m), relative velocity (3, m/s),
+                                  distance (1, m), presence mask (1)
+per nearest obstacle (K_o)  16    reachable-ellipsoid centre relative to the UAV (3, m),
+                                  semi-axes (longitudinal, lateral, vertical) (3, m),
+                                  heading (cos, sin) (2), obstacle position relative to the
+                                  UAV (3, m), obstacle velocity relative to the UAV (3, m/s),
+                                  signed distance from the UAV to the ellipsoid (1, m),
+                                  presence mask (1)
+``obstacle_class``          5     optional, per nearest obstacle: its aircraft class,
+                                  one-hot over :data:`uasep_env.obstacles.AIRCRAFT_CLASSES`
+                                  (unknown, dubins, glider, helicopter, fixed_wing), like
+                                  ADS-B's emitter category
+==========================  ====  ======================================================
 
 UAVs are sorted by estimated distance, obstacles by distance to their reachable region;
 absent entries (fewer than K, or beyond ``sensing_range``) are zero with mask 0.
@@ -120,6 +124,7 @@ FEATURES: tuple[Feature, ...] = (
     Feature("obstacle", "rel_vel", 3, "vel"),
     Feature("obstacle", "region_dist", 1, "pos"),
     Feature("obstacle", "mask", 1, "unit"),
+    Feature("obstacle", "class", 5, "unit", default=False),
 )
 _BY_KEY = {f.key: f for f in FEATURES}
 _BLOCKS = ("self", "uav", "obstacle")
@@ -144,7 +149,7 @@ Columns = namedtuple(
 )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObservationLayout:
     """Which features, in which order and where, and their scales, for one config.
 

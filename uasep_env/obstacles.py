@@ -31,10 +31,30 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["N_UNIFORMS", "ObstacleState", "obstacle_velocity", "step_obstacles"]
+__all__ = [
+    "AIRCRAFT_CLASSES",
+    "DUBINS_CLASS",
+    "N_UNIFORMS",
+    "UNKNOWN_CLASS",
+    "ObstacleState",
+    "aircraft_class_code",
+    "obstacle_velocity",
+    "step_obstacles",
+]
 
 #: Uniform draws each obstacle consumes per physics step (switch?, straight?, turn, climb).
 N_UNIFORMS = 4
+#: Aircraft classes an obstacle can carry (its code is the index), like ADS-B's emitter
+#: category: ``"dubins"`` for the synthetic model, the real-traffic dataset's classes for
+#: replayed tracks, ``"unknown"`` (code 0) for anything else.
+AIRCRAFT_CLASSES = ("unknown", "dubins", "glider", "helicopter", "fixed_wing")
+UNKNOWN_CLASS = 0
+DUBINS_CLASS = 1
+
+
+def aircraft_class_code(name: str) -> int:
+    """The code of an aircraft class name; unknown names get :data:`UNKNOWN_CLASS`."""
+    return AIRCRAFT_CLASSES.index(name) if name in AIRCRAFT_CLASSES else UNKNOWN_CLASS
 
 
 class ObstacleState:
@@ -56,6 +76,8 @@ class ObstacleState:
         hold_until: Time before which the pilot keeps the initial commands (s).
         ground: Altitude of the ground, never flown below (m, positive up).
         wind: ``(E, 3)`` steady wind (m/s, NED).
+        aircraft_class: Class code (:data:`AIRCRAFT_CLASSES`): ``"dubins"`` for the
+            synthetic model, the recorded class for a replayed track.
     """
 
     def __init__(self, n_envs: int, n_obstacles: int) -> None:
@@ -76,6 +98,7 @@ class ObstacleState:
         self.hold_until = np.zeros(shape)
         self.ground = np.zeros(shape)
         self.wind = np.zeros((n_envs, 3))
+        self.aircraft_class = np.full(shape, DUBINS_CLASS, dtype=np.int64)
 
 
 _EPS = float(np.finfo(float).eps)  # np.sinc's guard against 0 / 0

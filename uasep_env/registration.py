@@ -10,10 +10,35 @@ import gymnasium
 
 from uasep_env.scenarios import FAMILIES
 
-__all__ = ["ENV_IDS", "ENV_VERSION", "register_envs"]
+__all__ = ["ENV_IDS", "ENV_VERSION", "ENV_VERSIONS", "FIRST_VERSION", "register_envs"]
 
 #: The env ids' version: bumped whenever episodes or rewards change (see CHANGELOG.md).
 ENV_VERSION = 2
+
+#: Each env version, newest first: ``(version, package release, what changed)``. Bumping
+#: :data:`ENV_VERSION` needs a row here (tested); the env cards' version history is this
+#: table (``docs/envs/``, ``tools/build_env_cards.py``), CHANGELOG.md has the detail.
+ENV_VERSIONS: tuple[tuple[int, str, str], ...] = (
+    (
+        2,
+        "0.3.0",
+        "Obstacles stay in the sky (the `airspace` group): climbing obstacles no longer "
+        "start underground and no obstacle flies below the ground; only episodes with a "
+        "climbing obstacle changed. `uasep/RealTraffic-v2` (recorded aircraft) added.",
+    ),
+    (
+        1,
+        "0.2.0",
+        "The reward made learnable (+1 a step alive, penalties summing to at most 1, a "
+        "collision costs the whole episode to every UAV); a UAV farther than "
+        "`uav.lost_distance` from its plan ends the episode; `observation.clip` 12; encounter "
+        "timing independent of `episode_duration`; `spec.max_episode_steps` declared.",
+    ),
+    (0, "0.1.0", "The first ids."),
+)
+
+#: The first env version of ids added after ``-v0``, by the family's ``gym_name``.
+FIRST_VERSION: dict[str, int] = {"RealTraffic": 2}
 
 #: id -> default config overrides.
 ENV_IDS: dict[str, dict] = {

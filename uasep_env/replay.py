@@ -97,6 +97,9 @@ class ReplayTracks:
                 )
             self.on[i] = spec.obstacle_replay
             self.pos[i] = track
+            classes = getattr(spec, "obstacle_aircraft_class", None)
+            if classes is not None:  # the recorded class, like ADS-B's emitter category
+                obs.aircraft_class[i] = np.where(self.on[i], classes, obs.aircraft_class[i])
         self._write(obs, mask, np.zeros(len(idx), dtype=np.int64))
 
     def step(self, obs: ObstacleState, time: np.ndarray) -> None:

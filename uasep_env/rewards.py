@@ -52,6 +52,14 @@ never collide).
 * The deviation term saturates (``(-1, 0]``) so a policy far off the plan is not paid to
   end the episode, but keeps a slope at any distance, so a policy that has drifted still
   sees which way the plan is. Its scale, 20 m, is that of the APF's manoeuvres.
+
+The task reward of constrained training, ``make_config(reward="task")``
+(:meth:`RewardWeights.task() <uasep_env.config.RewardWeights.task>`), keeps only the task:
+the default weights of ``deviation``, ``control``, ``smoothness`` and ``progress``, and no
+separation, region or collision term; safety is the cost channel's
+(:mod:`uasep_env.costs`), bounded as a constraint (:mod:`uasep_env.lagrangian`). From the
+term table (:func:`step_reward_bounds`) a step alive earns between 0.75 and 1 (the default
+weights: between 0 and 1), so ending an episode early never pays there either.
 """
 
 from __future__ import annotations
@@ -74,6 +82,7 @@ __all__ = [
     "RewardTerm",
     "collisions",
     "compute_rewards",
+    "step_reward_bounds",
     "team_mean",
     "term_bounds",
 ]
@@ -127,6 +136,30 @@ def term_bounds(max_steps: int) -> dict[str, tuple[float, float]]:
         t.name: (t.low * max_steps, t.high * max_steps) if t.per_episode else (t.low, t.high)
         for t in TERMS
     }
+
+
+def step_reward_bounds(weights: RewardWeights) -> tuple[float, float]:
+    """Least and greatest reward of a step without a collision, from the term table.
+
+    Every per-step term (not the per-episode collision term) at the end of its bounds that
+    minimises (maximises) its weighted value, summed: an agent's own reward, and so (a mean
+    of such rewards) also its shared one.
+
+    Args:
+        weights: The term weights.
+
+    Returns:
+        ``(low, high)``: ``(0, 1)`` for the default weights, ``(0.75, 1)`` for
+        :meth:`RewardWeights.task() <uasep_env.config.RewardWeights.task>`.
+    """
+    low = high = 0.0
+    for t in TERMS:
+        if t.per_episode:
+            continue
+        w = getattr(weights, t.name)
+        low += min(w * t.low, w * t.high)
+        high += max(w * t.low, w * t.high)
+    return low, high
 
 
 def team_mean(x: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import datetime
 import os
 import socket
+import time
 from pathlib import Path
 
 try:
@@ -63,8 +64,14 @@ def claim_run_folder(folder: str | Path) -> Path:
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
-        holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "another process"
+        holder = ""
+        for _ in range(20):  # the holder writes who it is just after it takes the lock
+            holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip()
+            if holder:
+                break
+            time.sleep(0.01)
         os.close(fd)
+        holder = holder or "another process"
         raise RunFolderBusy(
             f"{folder} is in use by another run ({holder}); wait for it to end or choose "
             "another folder"

@@ -17,7 +17,8 @@ One environment step (``decision_interval`` physics steps of ``dt``) does, per p
    collision inside a long decision interval is not missed;
 
 and then predicts each obstacle's reachable ellipsoid over the horizon from its estimate
-(:mod:`uasep_env.reachable`, eqs. 8-18).
+(:mod:`uasep_env.reachable`, eqs. 8-18; or, with ``prediction.fit="calibrated"``, the
+conformal region of its aircraft class, :mod:`uasep_env.reachable.calibrated`).
 
 Randomness: each environment owns a :class:`numpy.random.Generator`, seeded at reset
 (``seed + i`` for environment ``i`` when one seed is given for the batch, the Gymnasium
@@ -44,6 +45,7 @@ from uasep_env.formation import PlannedTrajectory, planned_state, segment_offset
 from uasep_env.geometry import nearest_separations, obstacle_distances, uav_distances
 from uasep_env.noise import NoiseStreams
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
+from uasep_env.reachable import calibrated
 from uasep_env.replay import ReplayTracks
 from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, place_obstacles, sample_scenario
 from uasep_env.scenarios.real_traffic import check_replay_tracks, replay_samples
@@ -134,6 +136,9 @@ class World(RenamedAttributes):
         self.obstacle_est_pos = np.zeros((e, m, 3))
         self.obstacle_est_vel = np.zeros((e, m, 3))
         self.pred_offset = np.zeros((e, m))
+        self._pred_inflation = np.zeros((e, m))
+        if cfg.prediction.fit == "calibrated":
+            calibrated.load_table()  # a missing or corrupt table: say so now, not at reset
         self.pred_center = np.zeros((e, m, 3))
         self.pred_axes = np.ones((e, m, 3))
         self.pred_heading = np.zeros((e, m))
@@ -227,17 +232,21 @@ class World(RenamedAttributes):
             pred = cfg.prediction
             wind_speed = np.linalg.norm(ob.wind[mask], axis=-1)[:, None]
             track_err = 3.0 * self._obstacle_kf.steady_state_position_std()
-            offset, axes = reachable.ellipsoid(
-                ob.speed[mask],
-                ob.max_turn_rate[mask],
-                ob.max_climb_rate[mask],
-                pred.horizon,
-                ob.radius[mask] + wind_speed * pred.horizon + track_err,
-                mode=pred.mode,
-                fit=pred.fit,
-            )
-            self.pred_offset[mask] = offset
-            self.pred_axes[mask] = axes
+            inflation = ob.radius[mask] + wind_speed * pred.horizon + track_err
+            if pred.fit == "calibrated":  # sized per step from the estimate (_predict_regions)
+                self._pred_inflation[mask] = inflation
+            else:
+                offset, axes = reachable.ellipsoid(
+                    ob.speed[mask],
+                    ob.max_turn_rate[mask],
+                    ob.max_climb_rate[mask],
+                    pred.horizon,
+                    inflation,
+                    mode=pred.mode,
+                    fit=pred.fit,
+                )
+                self.pred_offset[mask] = offset
+                self.pred_axes[mask] = axes
             if self.replay is not None:  # after the ellipsoid: it uses the median speed
                 self.replay.start(ob, mask, specs)
         # First measurements start the tracks.
@@ -345,6 +354,7 @@ class World(RenamedAttributes):
         "obstacle_est_pos",
         "obstacle_est_vel",
         "pred_center",
+        "pred_axes",
         "pred_heading",
         "pred_cos",
         "pred_sin",
@@ -436,6 +446,23 @@ class World(RenamedAttributes):
         if not self.n_obstacles:
             return
         r = slice(None) if mask is None else mask
+        pred = self.config.prediction
+        if pred.fit == "calibrated":
+            # Conformal region per aircraft class: centre along the estimated ground velocity,
+            # semi-axes affine in the estimated speed (:mod:`uasep_env.reachable.calibrated`).
+            center, axes, heading = calibrated.calibrated_region(
+                self.obstacles.aircraft_class[r],
+                self.obstacle_est_pos[r],
+                self.obstacle_est_vel[r],
+                pred.horizon,
+                pred.mode,
+                self._pred_inflation[r],
+            )
+            self.pred_heading[r] = heading
+            self.pred_cos[r], self.pred_sin[r] = np.cos(heading), np.sin(heading)
+            self.pred_center[r] = center
+            self.pred_axes[r] = axes
+            return
         est_pos, offset = self.obstacle_est_pos[r], self.pred_offset[r]
         air = self.obstacle_est_vel[r] - self.obstacles.wind[r, None, :]  # heading: airspeed's
         heading = np.arctan2(air[..., 1], air[..., 0])

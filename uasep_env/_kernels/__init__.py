@@ -17,7 +17,8 @@ kernel receives as keyword arguments. These modules import nothing else of the p
 * :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
 * :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`;
 * :func:`plan_now` -- :func:`uasep_env.formation.planned_state`;
-* :func:`dense` -- :func:`uasep_env.policies.learned.dense` (a policy network's layer).
+* :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
+  network's layer, in float64 before the rounding).
 """
 
 from __future__ import annotations

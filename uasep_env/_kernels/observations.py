@@ -9,16 +9,25 @@ import numpy as np
 
 from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel
 
+#: Entries of the optional ``obstacle_class`` feature: one per code of
+#: ``uasep_env.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
+#: ``tests/test_calibrated_prediction.py`` checks the count).
+_N_CLASSES = 5
+
 
 @numba.njit(inline="always", **_JIT)
 def _put(out, e, i, col, value, clip):  # noqa: ANN001, ANN202
-    """Store as float32, then clip in float32 (the numpy form's cast-then-``np.clip``)."""
-    v = np.float32(value)
+    """Store in ``out``'s dtype, then clip in it (the numpy form's cast-then-``np.clip``).
+
+    ``clip`` has ``out``'s dtype: float32 for the observations, float64 when a test reads
+    the numbers before the cast.
+    """
+    out[e, i, col] = value
+    v = out[e, i, col]
     if v < -clip:
-        v = -clip
+        out[e, i, col] = -clip
     elif v > clip:
-        v = clip
-    out[e, i, col] = v
+        out[e, i, col] = clip
 
 
 @numba.njit(inline="always", **_JIT)
@@ -50,22 +59,23 @@ def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_env(e, x, scales, cols, out):  # noqa: ANN001, ANN202
+def _observe_env(e, x, scales, limit, cols, out):  # noqa: ANN001, ANN202
     """Environment ``e`` of :func:`uasep_env.observation._assemble`, every agent.
 
     ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays, ``cols`` the
     layout's :class:`uasep_env.observation_layout.Columns`: where each feature goes (-1 when
-    the layout lacks it), the neighbour counts and the block widths.
+    the layout lacks it), the neighbour counts and the block widths; ``limit[0]`` is the
+    clip bound in ``out``'s dtype.
     """
     pos, vel = x.pos, x.vel
     # The estimated formation (eqs. 5-7): centre, mean velocity and frame, once per env.
     c0, c1, c2 = _mean(pos, e, 0), _mean(pos, e, 1), _mean(pos, e, 2)
     mv0, mv1, mv2 = _mean(vel, e, 0), _mean(vel, e, 1), _mean(vel, e, 2)
     d = x.wp_dir
-    ct, st, cp, sp = _frame(mv0, mv1, mv2, d[e, 0], d[e, 1], d[e, 2], scales[5])
+    ct, st, cp, sp = _frame(mv0, mv1, mv2, d[e, 0], d[e, 1], d[e, 2], scales[4])
     frame = (c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp)
     for i in range(pos.shape[1]):
-        _observe_agent(e, i, frame, x, scales, cols, out)
+        _observe_agent(e, i, frame, x, scales, limit[0], cols, out)
 
 
 @numba.njit(inline="always", **_JIT)
@@ -85,7 +95,7 @@ def _put1(out, e, i, col, v, clip):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_agent(e, i, frame, x, scales, cols, out):  # noqa: ANN001, ANN202
+def _observe_agent(e, i, frame, x, scales, clip, cols, out):  # noqa: ANN001, ANN202
     """UAV ``i`` of environment ``e``; ``frame`` is the formation's, from :func:`_observe_env`.
 
     Every feature is written at its column of ``cols`` relative to its block, and skipped
@@ -94,7 +104,7 @@ def _observe_agent(e, i, frame, x, scales, cols, out):  # noqa: ANN001, ANN202
     pos, vel = x.pos, x.vel
     n = pos.shape[1]
     m = x.region.shape[2]
-    ps, vs, acs, sensing, clip = scales[0], scales[1], scales[2], scales[3], np.float32(scales[4])
+    ps, vs, acs, sensing = scales[0], scales[1], scales[2], scales[3]
     c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp = frame
     p0, p1, p2 = pos[e, i, 0], pos[e, i, 1], pos[e, i, 2]
     # This UAV's slot (eq. 7).
@@ -217,18 +227,22 @@ def _obstacle_features(out, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001,
         _put(out, e, i, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
     if cols.obstacle_mask >= 0:
         _put(out, e, i, c + cols.obstacle_mask, 1.0, clip)
+    if cols.obstacle_class >= 0:  # one-hot of the aircraft class code
+        code = x.aircraft_class[e, j]
+        for a in range(_N_CLASSES):
+            _put(out, e, i, c + cols.obstacle_class + a, 1.0 if code == a else 0.0, clip)
 
 
 @numba.njit(**_JIT)
-def _observe_serial(x, scales, cols, out):  # noqa: ANN001, ANN202
+def _observe_serial(x, scales, limit, cols, out):  # noqa: ANN001, ANN202
     for e in range(out.shape[0]):
-        _observe_env(e, x, scales, cols, out)
+        _observe_env(e, x, scales, limit, cols, out)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _observe_parallel(x, scales, cols, out):  # noqa: ANN001, ANN202
+def _observe_parallel(x, scales, limit, cols, out):  # noqa: ANN001, ANN202
     for e in numba.prange(out.shape[0]):
-        _observe_env(e, x, scales, cols, out)
+        _observe_env(e, x, scales, limit, cols, out)
 
 
 def assemble_observations(
@@ -240,7 +254,8 @@ def assemble_observations(
         inputs: The :class:`uasep_env.observation._Inputs` of one call.
         layout: Its :class:`uasep_env.observation_layout.ObservationLayout`; its
             ``columns`` say where each feature goes (data, not compiled in).
-        out: ``(E, N, dim)`` float32, C-contiguous.
+        out: ``(E, N, dim)`` float32, C-contiguous (float64: the same numbers before the
+            cast to float32, for the tests).
         min_frame_speed: :data:`uasep_env.formation.MIN_FRAME_SPEED`.
     """
     scales = np.array(
@@ -249,11 +264,11 @@ def assemble_observations(
             layout.vel_scale,
             layout.acc_scale,
             layout.sensing_range,
-            layout.clip,
             min_frame_speed,
         ]
     )
     # Contiguous arrays only: one compiled signature, whatever views the caller passes.
     x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
     fn = _observe_parallel if _parallel(out.shape[0] * out.shape[1]) else _observe_serial
-    fn(x, scales, layout.columns, out)
+    limit = np.full(1, layout.clip, dtype=out.dtype)  # the clip bound in out's dtype
+    fn(x, scales, limit, layout.columns, out)

@@ -34,6 +34,7 @@ from uasep_env.config.checks import (
 from uasep_env.config.groups import (
     ActionConfig,
     AirspaceConfig,
+    CostWeights,
     NoiseConfig,
     ObservationConfig,
     ObstacleConfig,
@@ -66,7 +67,7 @@ AS_PUBLISHED: dict[str, dict[str, str]] = {"prediction": {"mode": "terminal", "f
 T = TypeVar("T")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EnvConfig:
     """The whole configuration of a world / environment.
 
@@ -89,7 +90,8 @@ class EnvConfig:
         airspace: The ground, the obstacles' placement margin above it and the ceiling.
         prediction: Reachable-set prediction and filtering.
         observation: Observation options.
-        reward: Reward weights.
+        reward: Reward weights (or a preset's name: ``"default"``, ``"task"``).
+        cost: Cost weights (the cost channel of constrained training; changes no reward).
         action: What an action means (direct command or residual on the APF) and how
             out-of-box actions are treated.
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
@@ -111,6 +113,7 @@ class EnvConfig:
     prediction: PredictionConfig = field(default_factory=PredictionConfig)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     reward: RewardWeights = field(default_factory=RewardWeights)
+    cost: CostWeights = field(default_factory=CostWeights)
     action: ActionConfig = field(default_factory=ActionConfig)
     render_mode: str | None = None
 
@@ -216,6 +219,7 @@ _NESTED: dict[str, type] = {
     "prediction": PredictionConfig,
     "observation": ObservationConfig,
     "reward": RewardWeights,
+    "cost": CostWeights,
     "action": ActionConfig,
 }
 
@@ -246,6 +250,8 @@ def _build(cls: type[T], base: T | None, values: Mapping[str, Any], prefix: str)
                 value = NoiseConfig.off()
             elif value is True and sub is NoiseConfig:
                 value = NoiseConfig()
+            elif isinstance(value, str) and sub is RewardWeights:
+                value = RewardWeights.preset(value)
             elif isinstance(value, Mapping):
                 value = _build(sub, current.get(key, sub()), value, prefix + key + ".")
             elif not isinstance(value, sub):

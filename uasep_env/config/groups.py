@@ -2,10 +2,10 @@
 
 :class:`UAVConfig` (limits of the cooperative UAVs), :class:`NoiseConfig`,
 :class:`ObstacleConfig`, :class:`PredictionConfig`, :class:`ObservationConfig`,
-:class:`RewardWeights` and :class:`ActionConfig`; :class:`~uasep_env.config.EnvConfig` holds
-one of each. Every numeric field is bounded to a physically meaningful range
-(:mod:`uasep_env.config.checks`); an invalid value raises a :class:`ValueError` naming the
-dotted field.
+:class:`RewardWeights`, :class:`CostWeights` and :class:`ActionConfig`;
+:class:`~uasep_env.config.EnvConfig` holds one of each. Every numeric field is bounded to a
+physically meaningful range (:mod:`uasep_env.config.checks`); an invalid value raises a
+:class:`ValueError` naming the dotted field.
 
 Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 """
@@ -51,8 +51,10 @@ __all__ = [
     "OBSTACLE_MODELS",
     "REPLAY_SPEED_SCALE_RANGE",
     "REPLAY_SPLITS",
+    "REWARD_PRESETS",
     "ActionConfig",
     "AirspaceConfig",
+    "CostWeights",
     "NoiseConfig",
     "ObservationConfig",
     "ObstacleConfig",
@@ -62,7 +64,7 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class UAVConfig:
     """Physical limits of the cooperative UAVs (paper eqs. 3-4).
 
@@ -116,7 +118,7 @@ class UAVConfig:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class NoiseConfig:
     """Process and measurement noise (paper eqs. 1-2). Zero turns a source off.
 
@@ -151,7 +153,7 @@ class NoiseConfig:
     @classmethod
     def off(cls) -> NoiseConfig:
         """All noise sources switched off (runs are deterministic given the actions)."""
-        return cls(0.0, 0.0, 0.0, 0.0, 0.0)
+        return cls(**{f.name: 0.0 for f in fields(cls)})
 
     @property
     def is_off(self) -> bool:
@@ -159,7 +161,7 @@ class NoiseConfig:
         return all(getattr(self, f.name) == 0.0 for f in fields(self))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObstacleConfig:
     """Motion model of the non-cooperative obstacles (3D Dubins, paper eq. 8, or replay).
 
@@ -237,7 +239,7 @@ class ObstacleConfig:
         object.__setattr__(self, "wind", wind)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class AirspaceConfig:
     """The airspace obstacles fly in: the ground, a placement margin above it and a ceiling.
 
@@ -280,7 +282,11 @@ class AirspaceConfig:
         )
 
 
-@dataclass(frozen=True)
+#: Horizons (s) at which ``prediction.fit="calibrated"`` is calibrated (its shipped table).
+CALIBRATED_HORIZONS = (5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
+
+
+@dataclass(frozen=True, kw_only=True)
 class PredictionConfig:
     """Reachable-set prediction of the obstacles (paper eqs. 9-18, see notes).
 
@@ -288,11 +294,14 @@ class PredictionConfig:
         horizon: Prediction horizon ``t`` (s); the paper uses 10 s.
         mode: ``"swept"`` (every point reachable within the horizon, the default used for
             separation) or ``"terminal"`` (reachable at exactly the horizon, the paper's S1..S5).
-        fit: ``"enclosing"`` (an ellipsoid that provably encloses the set, the default) or
+        fit: ``"enclosing"`` (an ellipsoid that provably encloses the set, the default),
             ``"paper"`` (eqs. 17-18 as published: axes from the set's extents, a circular
-            section across the heading; it does not enclose the set). With
+            section across the heading; it does not enclose the set; with
             ``mode="terminal"`` this is the paper's prediction as published, see
-            :data:`AS_PUBLISHED`.
+            :data:`AS_PUBLISHED`) or ``"calibrated"`` (a constant-velocity region sized by
+            split conformal prediction per aircraft class on recorded flights,
+            :mod:`uasep_env.reachable.calibrated`; horizons of
+            :data:`CALIBRATED_HORIZONS` only).
         kalman: Whether UAVs and obstacle tracks are Kalman filtered; off, the raw noisy
             measurements are used as estimates.
     """
@@ -305,11 +314,19 @@ class PredictionConfig:
     def __post_init__(self) -> None:
         check_positive("prediction.horizon", self.horizon, hi=600.0)
         check_one_of("prediction.mode", self.mode, ("swept", "terminal"))
-        check_one_of("prediction.fit", self.fit, ("enclosing", "paper"))
+        check_one_of("prediction.fit", self.fit, ("enclosing", "paper", "calibrated"))
+        if self.fit == "calibrated":
+            check(
+                any(abs(self.horizon - h) < 1e-9 for h in CALIBRATED_HORIZONS),
+                "prediction.horizon",
+                self.horizon,
+                f"must be one of {list(CALIBRATED_HORIZONS)} s with prediction.fit="
+                "'calibrated' (the horizons its shipped table calibrates)",
+            )
         check(isinstance(self.kalman, bool), "prediction.kalman", self.kalman, "must be a bool")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObservationConfig:
     """What each agent observes (see :mod:`uasep_env.observation`).
 
@@ -361,7 +378,7 @@ class ObservationConfig:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RewardWeights:
     """Weights of the named reward terms (see :mod:`uasep_env.rewards`).
 
@@ -397,12 +414,68 @@ class RewardWeights:
             check_finite(f"reward.{f.name}", getattr(self, f.name), MAX_WEIGHT)
         check(0.0 <= self.shared <= 1.0, "reward.shared", self.shared, "must be in [0, 1]")
 
+    @classmethod
+    def task(cls) -> RewardWeights:
+        """The task reward for constrained training: no separation or collision terms.
+
+        The default weights of ``deviation``, ``control``, ``smoothness`` and ``progress``,
+        every separation term and the collision term at 0: safety is left to the cost
+        channel (:mod:`uasep_env.costs`) and its constraint. A step alive still earns
+        between 0.75 and 1 (``uasep_env.rewards.reward_bounds``), so ending an episode
+        early (a collision, a lost UAV) never pays. ``make_config(reward="task")``.
+        """
+        return cls(separation_inner=0.0, separation_obstacle=0.0, separation_region=0.0,
+                   collision=0.0)  # fmt: skip
+
+    @classmethod
+    def preset(cls, name: str) -> RewardWeights:
+        """The named weights of :data:`REWARD_PRESETS` (``make_config(reward=name)``).
+
+        Raises:
+            ValueError: An unknown name, named with the presets.
+        """
+        check(name in REWARD_PRESETS, "reward", name, f"must be one of {REWARD_PRESETS} or a dict")
+        return cls() if name == "default" else cls.task()
+
+
+#: Names ``reward=`` accepts in place of a dict (:meth:`RewardWeights.preset`): the default
+#: weights, or the task reward of constrained training (:meth:`RewardWeights.task`).
+REWARD_PRESETS = ("default", "task")
+
+
+@dataclass(frozen=True, kw_only=True)
+class CostWeights:
+    """Weights of the named cost terms (see :mod:`uasep_env.costs`).
+
+    Each agent's cost in a step is ``sum_k w_k * term_k``, each term an indicator (1 in a
+    step in which the condition holds, else 0), so a weight is a cost per environment step
+    (dimensionless). The cost changes no reward and no episode; constrained training
+    (:mod:`uasep_env.lagrangian`) bounds its expected sum over an episode.
+
+    Attributes:
+        separation_uav: Cost per step in loss of separation with another UAV (closer than
+            ``uav.separation_distance`` during the step).
+        separation_obstacle: Cost per step in loss of separation with an obstacle (closer
+            than ``uav.obstacle_separation`` during the step).
+        region: Cost per step inside an obstacle's predicted reachable region (0 by
+            default: the region is a prediction, not a loss of separation; with a weight,
+            the cost is also positive inside it).
+    """
+
+    separation_uav: float = 1.0  # cost per step
+    separation_obstacle: float = 1.0  # cost per step
+    region: float = 0.0  # cost per step
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            check_positive(f"cost.{f.name}", getattr(self, f.name), allow_zero=True, hi=MAX_WEIGHT)
+
 
 #: Names accepted for ``ActionConfig.mode`` (see :mod:`uasep_env.actions`).
 ACTION_MODES = ("direct", "residual_apf")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ActionConfig:
     """What an agent's action means (see :mod:`uasep_env.actions`).
 

@@ -3,7 +3,8 @@
 :class:`EnvCore` wraps a :class:`~uasep_env.world.World` and adds what an RL environment
 needs on top of the physics: action validation and scaling, observations, named rewards,
 termination (a collision, or a UAV lost: farther than ``uav.lost_distance`` from its
-plan), truncation (time limit / end of the plan) and the per-step safety figures. The
+plan), truncation (time limit / end of the plan), the per-step safety figures and the
+cost channel of constrained RL (:mod:`uasep_env.costs`). The
 PettingZoo env, the Gymnasium env, the vector env and the SB3 adapter are thin views of
 it; none of them steps the world another way.
 """
@@ -20,6 +21,7 @@ from uasep_env.actions import ResidualAPF
 from uasep_env.capacity import check_count
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import is_real
+from uasep_env.costs import COST_TERMS, compute_costs
 from uasep_env.observation import ObservationLayout, build_observations, global_state
 from uasep_env.rewards import REWARD_TERMS, collisions, compute_rewards
 from uasep_env.world import World
@@ -216,6 +218,8 @@ class StepResult:
             ``uav.lost_distance`` from its planned position).
         truncated: ``(E,)`` an episode ended by the time limit or the end of the plan.
         safety: Per-step safety figures, name -> ``(E, N)``.
+        cost: ``(E, N)`` costs (>= 0; :mod:`uasep_env.costs`), in no reward.
+        cost_terms: Unweighted cost terms, name -> ``(E, N)``.
     """
 
     obs: np.ndarray
@@ -224,6 +228,8 @@ class StepResult:
     terminated: np.ndarray
     truncated: np.ndarray
     safety: dict[str, np.ndarray]
+    cost: np.ndarray
+    cost_terms: dict[str, np.ndarray]
 
 
 class EnvCore:
@@ -344,21 +350,27 @@ class EnvCore:
             "collision": collided,
             "lost": lost,
         }
+        cost, cost_terms = compute_costs(safety, self.config.cost)
         obs = self._observe()
-        return StepResult(obs, rewards, terms, terminated, truncated, safety)
+        return StepResult(obs, rewards, terms, terminated, truncated, safety, cost, cost_terms)
 
     @staticmethod
     def env_infos(result: StepResult, env: int) -> list[dict]:
         """The ``info`` dicts of every agent of environment ``env``, in agent order.
 
-        Reward terms as floats, safety figures as Python floats and bools.
+        Reward terms as floats, safety figures as Python floats and bools, the ``cost`` and
+        its ``cost_terms`` as floats.
         """
         terms = {k: result.terms[k][env].tolist() for k in REWARD_TERMS}
         safety = {k: v[env].tolist() for k, v in result.safety.items()}
+        cost = result.cost[env].tolist()
+        cost_terms = {k: result.cost_terms[k][env].tolist() for k in COST_TERMS}
         return [
             {
                 "reward_terms": {k: v[i] for k, v in terms.items()},
                 **{k: v[i] for k, v in safety.items()},
+                "cost": cost[i],
+                "cost_terms": {k: v[i] for k, v in cost_terms.items()},
             }
             for i in range(result.rewards.shape[1])
         ]

@@ -9,6 +9,7 @@ import numpy as np
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_seed
+from uasep_env.costs import COST_TERMS
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS
@@ -21,31 +22,42 @@ class FormationEnv(ViewMixin, gymnasium.Env):
     """All UAVs of the formation controlled by one (centralised) agent.
 
     The same world, observations and rewards as
-    :class:`~uasep_env.envs.parallel.UAVSeparationParallelEnv`, seen jointly.
+    :class:`~uasep_env.envs.parallel.UAVSeparationParallelEnv`, seen jointly. Each
+    registered id has a card in the documentation (``docs/envs/``).
 
-    ## Action space
-    ``Box(-1, 1, (3 N,), float32)``: the UAVs' normalised accelerations, UAV-major. Only
-    real numbers are actions (:class:`~uasep_env.envs.core.ActionTypeError` otherwise);
-    finite values outside the box are clipped and counted per UAV in
-    ``info["clipped_actions"]``, or raise ``ValueError`` with ``action={"strict": True}``.
+    Action space:
+        ``Box(-1, 1, (3 N,), float32)``: the UAVs' normalised accelerations, UAV-major.
+        Only real numbers are actions (:class:`~uasep_env.envs.core.ActionTypeError`
+        otherwise); finite values outside the box are clipped and counted per UAV in
+        ``info["clipped_actions"]``, or raise ``ValueError`` with ``action={"strict": True}``.
 
-    ## Observation space
-    ``Box(-clip, clip, (N D,), float32)``: the agents' observations concatenated.
+    Observation space:
+        ``Box(-clip, clip, (N D,), float32)``: the agents' observations concatenated.
 
-    ## Rewards
-    The mean of the agents' rewards; ``info["rewards"]`` has each agent's reward and
-    ``info["reward_<term>"]`` the mean of each named term (flat keys, so that vector
-    wrappers and TorchRL batch them; the PettingZoo view nests them in ``reward_terms``).
+    Rewards:
+        The mean of the agents' rewards; ``info["rewards"]`` has each agent's reward and
+        ``info["reward_<term>"]`` the mean of each named term (flat keys, so that vector
+        wrappers and TorchRL batch them; the PettingZoo view nests them in
+        ``reward_terms``).
 
-    ## Episode end
-    Terminated on a collision, truncated at the time limit ``episode_duration``. The
-    registered ids declare it as ``spec.max_episode_steps`` (1000 steps at the default
-    200 s), so ``gymnasium.make`` adds a ``TimeLimit`` at the same step; for longer
-    episodes pass ``max_episode_steps`` to ``gymnasium.make`` as well (the earlier limit
-    wins). Stepping a finished episode raises ``RuntimeError`` until :meth:`reset`.
+    Cost:
+        ``info["cost"]``: the mean of the agents' costs (:mod:`uasep_env.costs`; > 0
+        exactly when a UAV has lost separation, with the default ``cost`` weights),
+        ``info["costs"]`` each agent's and ``info["cost_<term>"]`` the mean of each named
+        term. In no reward.
 
-    ## Arguments
-    Any :class:`~uasep_env.config.EnvConfig` field as a keyword, validated.
+    Episode end:
+        Terminated on a collision (within ``uav.collision_distance``) or when a UAV is
+        lost, farther than ``uav.lost_distance`` (300 m) from its planned position
+        (``info["lost"]``; uniformly random actions end most episodes so). Truncated at the
+        time limit ``episode_duration`` or the end of the plan. The registered ids declare it
+        as ``spec.max_episode_steps`` (1000 steps at the default 200 s), so
+        ``gymnasium.make`` adds a ``TimeLimit`` at the same step; for longer episodes pass
+        ``max_episode_steps`` to ``gymnasium.make`` as well (the earlier limit wins).
+        Stepping a finished episode raises ``RuntimeError`` until :meth:`reset`.
+
+    Configuration:
+        Any :class:`~uasep_env.config.EnvConfig` field as a keyword, validated.
     """
 
     # The render modes this installation can draw (none without matplotlib, the viz extra).
@@ -101,6 +113,9 @@ class FormationEnv(ViewMixin, gymnasium.Env):
             "rewards": res.rewards[0].copy(),
             **{"reward_" + k: float(res.terms[k][0].mean()) for k in REWARD_TERMS},
             **{k: v[0].copy() for k, v in res.safety.items()},
+            "cost": float(res.cost[0].mean()),
+            "costs": res.cost[0].copy(),
+            **{"cost_" + k: float(res.cost_terms[k][0].mean()) for k in COST_TERMS},
             "clipped_actions": clipped_counts(outside, (n,)),
         }
         terminated, truncated = bool(res.terminated[0]), bool(res.truncated[0])

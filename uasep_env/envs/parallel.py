@@ -34,7 +34,6 @@ _SPACE_KEYS = ("n_uavs", "n_obstacles", "observation")
 class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
     """A formation of UAVs keeping separation from each other and non-cooperative obstacles.
 
-    ## Description
     ``N`` cooperative UAVs (agents ``uav_0 ... uav_{N-1}``) fly a planned trajectory in a
     formation (the behaviour method, paper eqs. 5-7) through airspace with ``M``
     non-cooperative obstacles that fly a 3D Dubins model and change course at random.
@@ -42,58 +41,65 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
     predicted reachable ellipsoid over the horizon (eqs. 8-18). The agents must keep
     separation from each other and from the obstacles while deviating as little as possible
     from their planned trajectories. The reference policy is the paper's APF
-    (:class:`uasep_env.policies.APF`).
+    (:class:`uasep_env.policies.APF`). Each registered id has a card in the documentation
+    (``docs/envs/``) with its spaces, shapes and an episode.
 
-    ## Action space
-    ``Box(-1, 1, (3,), float32)`` per agent: the commanded acceleration along north, east
-    and down as a fraction of ``uav.max_accel`` (m/s^2). Only real numbers are actions
-    (integer or floating arrays, Python numbers): other types raise
-    :class:`~uasep_env.envs.core.ActionTypeError` (a ``TypeError`` and a ``ValueError``);
-    the wrong shape, non-finite values, missing agents or unknown agents raise
-    ``ValueError``. Finite values outside ``[-1, 1]`` are clipped to it and counted in
-    ``infos[agent]["clipped_actions"]``; with ``action={"strict": True}`` they raise
-    ``ValueError`` instead.
+    Action space:
+        ``Box(-1, 1, (3,), float32)`` per agent: the commanded acceleration along north,
+        east and down as a fraction of ``uav.max_accel`` (m/s^2). Only real numbers are
+        actions (integer or floating arrays, Python numbers): other types raise
+        :class:`~uasep_env.envs.core.ActionTypeError` (a ``TypeError`` and a
+        ``ValueError``); the wrong shape, non-finite values, missing agents or unknown
+        agents raise ``ValueError``. Finite values outside ``[-1, 1]`` are clipped to it and
+        counted in ``infos[agent]["clipped_actions"]``; with ``action={"strict": True}`` they
+        raise ``ValueError`` instead.
 
-    ## Observation space
-    ``Box(-clip, clip, (D,), float32)`` per agent, normalised; the features are listed in
-    :mod:`uasep_env.observation` (own slot/plan offsets and velocities, formation goal, the
-    nearest UAVs, and the nearest obstacles' reachable ellipsoids with presence masks).
-    :meth:`state` returns the global true state.
+    Observation space:
+        ``Box(-clip, clip, (D,), float32)`` per agent, normalised; the features are listed
+        in :mod:`uasep_env.observation_layout` (own slot/plan offsets and velocities,
+        formation goal, the nearest UAVs, and the nearest obstacles' reachable ellipsoids
+        with presence masks). :meth:`state` returns the global true state.
 
-    ## Rewards
-    Named terms per agent (:mod:`uasep_env.rewards`): separation between UAVs, from the
-    obstacles and from their reachable regions, deviation from the plan, control effort,
-    smoothness, collision and an alive bonus, combined by ``reward`` weights. Each agent's
-    unweighted terms are in ``infos[agent]["reward_terms"]``.
+    Rewards:
+        Named terms per agent (:mod:`uasep_env.rewards`): separation between UAVs, from the
+        obstacles and from their reachable regions, deviation from the plan, control effort,
+        smoothness, collision and an alive bonus, combined by ``reward`` weights. Each
+        agent's unweighted terms are in ``infos[agent]["reward_terms"]``.
 
-    ## Episode end
-    Termination: any UAV comes within ``uav.collision_distance`` of another UAV or an
-    obstacle (the formation's mission fails, so every agent terminates). Truncation: the
-    time limit ``episode_duration`` (the end of the planned trajectory).
+    Episode end:
+        Termination, for every agent at once (the formation's mission fails): any UAV comes
+        within ``uav.collision_distance`` of another UAV or an obstacle, or a UAV is lost,
+        farther than ``uav.lost_distance`` (300 m) from its planned position
+        (``infos[agent]["lost"]``; uniformly random actions end most episodes so). Truncation: the
+        time limit ``episode_duration``, or the end of the planned trajectory.
 
-    ## Info
-    ``reward_terms``, ``min_uav_distance``, ``min_obstacle_distance``,
-    ``min_region_distance`` (m), the flags ``loss_of_separation_uav``,
-    ``loss_of_separation_obstacle``, ``in_reachable_region``, ``collision``, and
-    ``clipped_actions``: how many components of the agent's action were clipped to the box.
+    Info:
+        ``reward_terms``, ``min_uav_distance``, ``min_obstacle_distance``,
+        ``min_region_distance`` (m), the flags ``loss_of_separation_uav``,
+        ``loss_of_separation_obstacle``, ``in_reachable_region``, ``collision``, ``lost``,
+        ``clipped_actions``: how many components of the agent's action were clipped to the
+        box, and the cost channel: ``cost`` and its unweighted ``cost_terms``
+        (:mod:`uasep_env.costs`; > 0 exactly when the UAV has lost separation, with the
+        default ``cost`` weights; in no reward).
 
-    ## Arguments
-    Any :class:`~uasep_env.config.EnvConfig` field as a keyword (nested dicts for the
-    sub-configs), e.g. ``parallel_env(n_uavs=5, scenario="crossing", noise=False)``.
-    Unknown keys raise ``TypeError``. ``max_cycles`` (PettingZoo's convention) sets the
-    episode length in steps (``episode_duration = max_cycles * step_duration``).
-    ``reset(options={"config": {...}})`` changes the config for the next episodes, except
-    what would change the spaces (``n_uavs``, ``n_obstacles``, ``observation``, or an
-    ``action.mode`` that changes the observation width): spaces are fixed for an
-    environment's life, as Gymnasium and PettingZoo code assumes, so such a change is a
-    ``ValueError`` naming the widths (create a new environment instead). After
-    :meth:`close`, ``reset`` and ``step`` raise ``gymnasium.error.ClosedEnvironmentError``.
+    Configuration:
+        Any :class:`~uasep_env.config.EnvConfig` field as a keyword (nested dicts for the
+        sub-configs), e.g. ``parallel_env(n_uavs=5, scenario="crossing", noise=False)``.
+        Unknown keys raise ``TypeError``. ``max_cycles`` (PettingZoo's convention) sets the
+        episode length in steps (``episode_duration = max_cycles * step_duration``).
+        ``reset(options={"config": {...}})`` changes the config for the next episodes,
+        except what would change the spaces (``n_uavs``, ``n_obstacles``, ``observation``,
+        or an ``action.mode`` that changes the observation width): spaces are fixed for an
+        environment's life, as Gymnasium and PettingZoo code assumes, so such a change is a
+        ``ValueError`` naming the widths (create a new environment instead). After
+        :meth:`close`, ``reset`` and ``step`` raise
+        ``gymnasium.error.ClosedEnvironmentError``.
 
-    ## Reset options
-    ``"config"`` is the one documented option. Other keys are ignored with a
-    ``UserWarning`` naming them, not an error as in the Gymnasium views: PettingZoo's own
-    ``parallel_api_test`` / ``api_test`` call ``reset(options={"options": 1})`` and expect
-    it to work.
+    Reset options:
+        ``"config"`` is the one documented option. Other keys are ignored with a
+        ``UserWarning`` naming them, not an error as in the Gymnasium views: PettingZoo's
+        own ``parallel_api_test`` / ``api_test`` call ``reset(options={"options": 1})`` and
+        expect it to work.
     """
 
     metadata = {  # noqa: RUF012 - PettingZoo reads it as a class attribute

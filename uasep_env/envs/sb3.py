@@ -11,7 +11,8 @@ largest true distance of a UAV from its planned position once the formation has 
 up, as in :mod:`uasep_env.metrics`), which training scripts report as they go. Every
 agent's info has ``clipped_actions``: how many components of its action were clipped to
 ``[-1, 1]`` (with ``action={"strict": True}``, out-of-box actions raise ``ValueError``
-instead).
+instead), ``cost`` (float, the agent's cost of the step, :mod:`uasep_env.costs`; in no
+reward) and ``cost_terms`` (its named terms, floats).
 
 This module imports stable-baselines3; the rest of the package does not.
 """
@@ -27,6 +28,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_seed
+from uasep_env.costs import COST_TERMS
 from uasep_env.envs.core import EnvCore, prepare_actions
 from uasep_env.rollout import DEFAULT_SETTLE_TIME_S
 
@@ -127,8 +129,16 @@ class UAVSharedVecEnv(VecEnv):
         done_env = res.terminated | res.truncated
         dones = np.repeat(done_env, self.n_uavs)
         self._track(res.safety)
-        infos: list[dict] = [{} for _ in range(self.num_envs)]
-        infos: list[dict] = [{"clipped_actions": int(c)} for c in self._clipped]
+        costs = res.cost.reshape(-1).tolist()
+        terms = [res.cost_terms[k].reshape(-1).tolist() for k in COST_TERMS]
+        infos: list[dict] = [
+            {
+                "clipped_actions": int(c),
+                "cost": cost,
+                "cost_terms": dict(zip(COST_TERMS, t, strict=True)),
+            }
+            for c, cost, *t in zip(self._clipped, costs, *terms, strict=True)
+        ]
         if done_env.any():
             for e in np.flatnonzero(done_env):
                 trunc = bool(res.truncated[e] and not res.terminated[e])

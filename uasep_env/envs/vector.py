@@ -18,6 +18,7 @@ from gymnasium.vector.utils import batch_space
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_positive_int, check_seed
+from uasep_env.costs import COST_TERMS
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
 from uasep_env.rewards import REWARD_TERMS, team_mean
@@ -78,7 +79,9 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
 
     Infos are dicts of arrays with Gymnasium's ``_key`` masks: ``rewards`` (per UAV),
     ``reward_<term>`` (team mean of each term of :data:`~uasep_env.rewards.REWARD_TERMS`),
-    the safety figures per UAV and ``clipped_actions`` (per UAV, the action components
+    the safety figures per UAV, ``cost`` (the team mean of the agents' costs,
+    :mod:`uasep_env.costs`), ``costs`` (per UAV) and ``cost_<term>`` (team mean of each cost
+    term), and ``clipped_actions`` (per UAV, the action components
     clipped to ``[-1, 1]``; with ``action={"strict": True}`` out-of-box actions raise
     ``ValueError`` instead). In every autoreset mode they are exactly what
     ``gymnasium.vector.SyncVectorEnv`` over :class:`~uasep_env.envs.gym_env.FormationEnv`
@@ -238,6 +241,11 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         for k, mean in zip(REWARD_TERMS, means, strict=True):
             values["reward_" + k] = mean
         values.update(res.safety)
+        values["cost"] = team_mean(res.cost)
+        values["costs"] = res.cost
+        means = team_mean(np.stack([res.cost_terms[k] for k in COST_TERMS]))
+        for k, mean in zip(COST_TERMS, means, strict=True):
+            values["cost_" + k] = mean
         return values
 
     def render(self) -> tuple[np.ndarray, ...] | None:

@@ -11,12 +11,20 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from uasep_env._numba import note_slow_kernels
 from uasep_env.atomic import output_kind
 from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
+from uasep_env.evaluation.progress import progress_bar
 from uasep_env.evaluation.report import format_summary
-from uasep_env.evaluation.runner import DEFAULT_HOLD_TIME_S, evaluate
-from uasep_env.policies import POLICIES, check_policy_name, make_policy, shipped_policies
+from uasep_env.evaluation.runner import DEFAULT_HOLD_TIME_S, evaluate, policy_config
+from uasep_env.policies import (
+    POLICIES,
+    SHIELDS,
+    check_policy_name,
+    make_policy,
+    shipped_policies,
+)
 from uasep_env.policies.checkpoint import ALGORITHMS as SB3_ALGORITHMS
 from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
 from uasep_env.scenarios import scenario_names
@@ -180,6 +188,15 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: apf); a value naming an existing file is one path, commas included",
     )
     p.add_argument(
+        "--shield",
+        choices=sorted(SHIELDS),
+        default=None,
+        metavar="NAME",
+        help="filter every listed policy's actions through a safety shield: "
+        f"{', '.join(sorted(SHIELDS))} (the CBF filter); rows are named POLICY+NAME "
+        "(list 'apf,apf+cbf' without --shield to compare one policy with and without)",
+    )
+    p.add_argument(
         "--scenario",
         default="paper",
         choices=scenario_names(),
@@ -275,6 +292,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="no progress bar and no summary on stdout (errors still go to stderr)",
     )
     p.add_argument(
+        "--progress",
+        action="store_true",
+        help="show progress on stderr even when it is not a terminal (a log); never on stdout",
+    )
+    p.add_argument(
         "--allow-pickle",
         action="store_true",
         help="let a stable-baselines3 model file be unpickled, which runs code from it; "
@@ -292,17 +314,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _progress_bar(total: int, quiet: bool) -> Any:
-    """A tqdm bar on stderr, or None when quiet, not a terminal, or tqdm is missing."""
-    if quiet or not sys.stderr.isatty():
-        return None
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover - tqdm is optional
-        return None
-    return tqdm(total=total, unit="ep", desc="uasep-eval", file=sys.stderr, leave=False)
-
-
 def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -310,6 +321,8 @@ def _run(argv: Sequence[str] | None) -> int:
     names = _split_policy_args(args.policy or ["apf"])
     if not names:
         parser.error("argument --policy: no policy given")
+    if args.shield is not None:
+        names = [f"{name}+{args.shield}" for name in names]
     for name in names:
         try:
             name.encode("utf-8")
@@ -352,12 +365,20 @@ def _run(argv: Sequence[str] | None) -> int:
         parser.error(problem)
     for name in names:  # fail early on models that do not load
         try:
-            make_policy(name, cfg, args.allow_pickle, args.algorithm)
+            observed = policy_config(name, cfg)  # a checkpoint's own layout where it must
+            make_policy(name, observed, args.allow_pickle, args.algorithm)
         except Exception as err:
             parser.error(f"argument --policy: cannot load {name!r}: {_one_line(err)}")
+        if observed != cfg and not args.quiet:
+            o = observed.observation
+            note = f"k_uavs={o.k_uavs}, k_obstacles={o.k_obstacles}"
+            print(f"uasep-eval: {name} observes with its training observation ({note}); "
+                  "same episodes", file=sys.stderr)  # fmt: skip
 
     seeds = list(range(args.seed, args.seed + args.episodes))
-    bar = _progress_bar(len(names) * len(seeds), args.quiet)
+    if not args.quiet:
+        note_slow_kernels()
+    bar = progress_bar(len(names) * len(seeds), args.quiet, args.progress)
     try:
         result = evaluate(
             names,

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 __all__ = ["EpisodeResult", "EvaluationResult", "EvaluationSettings", "PolicyResult"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EpisodeResult:
     """One episode of one policy.
 
@@ -49,7 +49,7 @@ class EpisodeResult:
     metrics: EpisodeMetrics
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PolicyResult:
     """The episodes of one policy and their aggregate.
 
@@ -64,7 +64,7 @@ class PolicyResult:
     aggregate: dict[str, dict[str, Any]]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EvaluationSettings:
     """How the evaluation ran and measured (thresholds in m, times in s).
 
@@ -101,6 +101,9 @@ class EvaluationResult:
         results: Label -> the policy's episodes and aggregate.
         elapsed_s: Wall time of the evaluation (s).
         command: The command line (set by ``uasep-eval``; not written when None).
+        observations: Label -> the observation group a policy observed when it is not
+            ``config``'s: a checkpoint that does not fit ``config`` as given observes with
+            its training observation (same episodes; not written when None).
         episodes: Label -> the leading episodes kept whole (``keep_episodes``); not written.
     """
 
@@ -113,6 +116,7 @@ class EvaluationResult:
     results: dict[str, PolicyResult]
     elapsed_s: float
     command: list[str] | None = field(default=None, metadata={OMIT: None})
+    observations: dict[str, dict[str, Any]] | None = field(default=None, metadata={OMIT: None})
     episodes: dict[str, list[Episode]] = field(default_factory=dict, metadata={OMIT: True})
 
     def to_dict(self) -> dict[str, Any]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
@@ -27,7 +28,18 @@ from uasep_env.evaluation.results import (
     PolicyResult,
 )
 from uasep_env.metrics import aggregate, episode_metrics
-from uasep_env.policies import POLICIES, Policy, RandomPolicy, check_policy_name, make_policy
+from uasep_env.policies import (
+    POLICIES,
+    CheckpointError,
+    Policy,
+    RandomPolicy,
+    check_policy_name,
+    checkpoint_path,
+    load_policy,
+    make_policy,
+    observed_config,
+    split_shield,
+)
 from uasep_env.rollout import (
     DEFAULT_DEVIATION_THRESHOLD_M,
     DEFAULT_SETTLE_TIME_S,
@@ -42,6 +54,7 @@ __all__ = [
     "PolicySpec",
     "default_batch_size",
     "evaluate",
+    "policy_config",
 ]
 
 #: Largest number of episodes simulated together in one batched simulator (by default).
@@ -56,7 +69,9 @@ PolicySpec = str | Policy
 
 def _policy_label(spec: str, taken: Iterable[str]) -> str:
     """A short, unique display label: the name, or a model file's stem."""
-    label = spec if spec in POLICIES else Path(spec).stem or spec
+    base, shield = split_shield(spec)
+    label = base if base in POLICIES else Path(base).stem or base
+    label += f"+{shield}" if shield is not None else ""
     taken = set(taken)
     base, k = label, 2
     while label in taken:
@@ -87,6 +102,34 @@ def _normalise_policies(
         elif not isinstance(spec, Policy):
             raise ValueError(f"policy {label!r}: expected a name, a path or a Policy, got {spec!r}")
     return out
+
+
+def policy_config(spec: PolicySpec, config: EnvConfig) -> EnvConfig:
+    """The config a policy observes the comparison's episodes with.
+
+    ``config`` itself, except for a policy checkpoint (a file or a shipped name, shielded or
+    not) that does not fit it as given (another formation size, obstacle count or K
+    nearest): it observes with its training observation
+    (:func:`~uasep_env.policies.observed_config`), as the scaling report does. The
+    observation does not move the world, so the episodes are the ones every other policy
+    plays.
+
+    Args:
+        spec: A policy name, path or object.
+        config: The comparison's environment.
+
+    Returns:
+        The config to build and run the policy with.
+    """
+    base = split_shield(spec)[0] if isinstance(spec, str) else spec  # a shield reads as it
+    path = checkpoint_path(base) if isinstance(base, str) and base not in POLICIES else None
+    if path is None:
+        return config
+    try:
+        load_policy(path, config)
+    except CheckpointError:
+        return observed_config(path, config)
+    return config
 
 
 def default_batch_size(n_episodes: int) -> int:
@@ -206,7 +249,9 @@ def evaluate(
             or a mapping ``label -> name / path / Policy object``. Names are rebuilt fresh for
             every chunk (reproducible for any ``workers``); a policy object is reused as is
             (with ``workers > 1`` it is pickled to the workers).
-        config: Environment config (or dict for :func:`make_config`, None for defaults).
+        config: Environment config (or dict for :func:`make_config`, None for defaults). A
+            policy checkpoint that does not fit it (another size or K nearest) observes it
+            with its training observation (:func:`policy_config`; the same episodes).
         seeds: One seed per episode; every policy plays the same seeds.
         workers: Processes (``1``: in-process; more: a ``spawn`` process pool).
         batch_size: Episodes per batched simulator (a chunk); None:
@@ -255,13 +300,14 @@ def evaluate(
     if int(batch_size) < 1:
         raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
     chunks = _chunks(seed_list, int(batch_size))
+    observed = {label: policy_config(spec, cfg) for label, spec in specs.items()}
     tasks = [
         (
             label,
             ci,
             (
                 spec,
-                cfg,
+                observed[label],
                 chunk,
                 deviation_threshold,
                 settle_time,
@@ -285,7 +331,9 @@ def evaluate(
             entries.extend(chunk_entries)
             if ci == 0:
                 kept[label] = chunk_eps
-        results[label] = PolicyResult(entries, _aggregate_entries(entries, confidence))
+        results[label] = PolicyResult(
+            episodes=entries, aggregate=_aggregate_entries(entries, confidence)
+        )
 
     return EvaluationResult(
         version=__version__,
@@ -307,6 +355,10 @@ def evaluate(
         ),
         results=results,
         elapsed_s=time.perf_counter() - t0,
+        observations={
+            label: c.to_dict()["observation"] for label, c in observed.items() if c != cfg
+        }
+        or None,
         episodes=kept if keep_episodes > 0 else {},
     )
 
@@ -336,7 +388,10 @@ def _run_tasks(
                 progress(sizes[ci])
         return done
     ctx = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx)
+    n = min(workers, len(tasks))
+    pool = ProcessPoolExecutor(
+        max_workers=n, mp_context=ctx, initializer=_share_cores, initargs=(n,)
+    )
     try:
         futures: dict[Future[Any], tuple[str, int]] = {
             pool.submit(_run_chunk, *args): (label, ci) for label, ci, args in tasks
@@ -351,6 +406,11 @@ def _run_tasks(
         raise
     pool.shutdown()
     return done
+
+
+def _share_cores(workers: int) -> None:
+    """In a worker: its compiled kernels take its share of the cores (``UASEP_WORKERS``)."""
+    os.environ.setdefault("UASEP_WORKERS", str(workers))
 
 
 def _run_on_ray(

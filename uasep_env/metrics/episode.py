@@ -58,7 +58,7 @@ def _time_at(t: np.ndarray, k: int) -> float:
     return float(t[k]) if k >= 0 else math.nan
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _Pairs:
     """Per-sample UAV-UAV and UAV-obstacle quantities of one episode (the safety metrics).
 

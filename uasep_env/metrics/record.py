@@ -44,7 +44,7 @@ def check_scalar(name: str, value: float, *, positive: bool = False) -> float:
     return out
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class EpisodeRecord:
     """One recorded episode of a formation flight among obstacles (NED frame, SI units).
 

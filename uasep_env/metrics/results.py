@@ -47,7 +47,7 @@ class _Plain:
         return to_plain(self)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DeviationStats(_Plain):
     """Deviation from the planned trajectory of one UAV after ``settle_time`` (m, s).
 
@@ -68,7 +68,7 @@ class DeviationStats(_Plain):
     max_norm_time: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ConflictTimeline(_Plain):
     """Conflict-resolution timeline of one UAV (s); see the module docstring for definitions.
 
@@ -105,7 +105,7 @@ class ConflictTimeline(_Plain):
     hold_time: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FluctuationStats(_Plain):
     """Velocity and acceleration fluctuation of one UAV after ``settle_time``, per axis.
 
@@ -126,7 +126,7 @@ class FluctuationStats(_Plain):
     speed_max: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class UAVMetrics(_Plain):
     """Metrics of one UAV in one episode.
 
@@ -187,7 +187,7 @@ class UAVMetrics(_Plain):
     path_length_ratio: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EpisodeSummary(_Plain):
     """Whole-episode summary (minima over UAVs, totals, any-flags).
 
@@ -275,7 +275,7 @@ class EpisodeSummary(_Plain):
     max_path_length_ratio: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EpisodeMetrics(_Plain):
     """All metrics of one episode.
 

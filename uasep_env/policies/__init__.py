@@ -13,37 +13,48 @@ from pathlib import Path
 from uasep_env.config import EnvConfig
 from uasep_env.policies.apf import APF, APFGains, MotionStateAPF, TraditionalAPF
 from uasep_env.policies.base import Policy, RandomPolicy, ZeroPolicy
-from uasep_env.policies.learned import (
-    CheckpointError,
+from uasep_env.policies.cbf import CBFQP, CBFFilter, CBFParams
+from uasep_env.policies.checkpoint import CheckpointError
+from uasep_env.policies.checkpoint_policy import (
     LearnedPolicy,
-    SB3Policy,
     checkpoint_config,
+    checkpoint_path,
     is_policy_checkpoint,
     load_policy,
-    load_sb3_policy,
+    observed_config,
 )
+from uasep_env.policies.sb3_policy import SB3Policy, load_sb3_policy
+from uasep_env.policies.shield import SHIELDS, Shielded, split_shield
 from uasep_env.policies.shipped import shipped_policies, shipped_policy_path
 
 __all__ = [
     "APF",
+    "CBFQP",
     "POLICIES",
+    "SHIELDS",
     "APFGains",
+    "CBFFilter",
+    "CBFParams",
     "CheckpointError",
     "LearnedPolicy",
     "MotionStateAPF",
     "Policy",
     "RandomPolicy",
     "SB3Policy",
+    "Shielded",
     "TraditionalAPF",
     "ZeroPolicy",
     "check_policy_name",
     "checkpoint_config",
+    "checkpoint_path",
     "is_policy_checkpoint",
     "load_policy",
     "load_sb3_policy",
     "make_policy",
+    "observed_config",
     "shipped_policies",
     "shipped_policy_path",
+    "split_shield",
 ]
 
 #: The policy registry: built-in policies by name, each a factory taking the config.
@@ -53,6 +64,7 @@ POLICIES: dict[str, Callable[[EnvConfig], Policy]] = {
     "traditional-apf": TraditionalAPF,
     "zero": ZeroPolicy,
     "random": RandomPolicy,
+    "cbf-qp": CBFQP,
 }
 
 
@@ -93,6 +105,10 @@ def check_policy_name(name: str) -> str:
     """
     if name in POLICIES or Path(name).exists() or shipped_policy_path(name) is not None:
         return name
+    base, shield = split_shield(name)
+    if shield is not None:
+        check_policy_name(base)
+        return name
     raise _unknown_policy(name)
 
 
@@ -118,6 +134,9 @@ def make_policy(
     if name in POLICIES:
         return POLICIES[name](config)
     check_policy_name(name)
+    base, shield = split_shield(name)
+    if shield is not None and not Path(name).exists():  # "<policy>+cbf": shielded
+        return SHIELDS[shield](make_policy(base, config, allow_pickle, algorithm), config)
     if Path(name).is_file():
         if is_policy_checkpoint(name):
             return load_policy(name, config)

@@ -95,7 +95,7 @@ def _new_gain_names(names: dict[str, Any] | Sequence[str], stacklevel: int) -> A
     return out if isinstance(names, dict) else tuple(out)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class APFGains(RenamedAttributes):
     """Gains of the APF controllers (units in brackets; accelerations in m/s^2).
 

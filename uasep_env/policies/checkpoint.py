@@ -56,7 +56,7 @@ class CheckpointError(ValueError):
     """A file that is not a usable policy checkpoint, or one that does not fit the env."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class StoredLayout:
     """The observation layout a network reads: K nearest UAVs and obstacles, features in order.
 
@@ -81,7 +81,11 @@ class StoredLayout:
                 features[-1][1] += 1
             else:
                 features.append([name, 1])
-        return cls(layout.k_uavs, layout.k_obstacles, tuple((n, w) for n, w in features))
+        return cls(
+            k_uavs=layout.k_uavs,
+            k_obstacles=layout.k_obstacles,
+            features=tuple((n, w) for n, w in features),
+        )
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> StoredLayout:
@@ -133,7 +137,7 @@ class StoredLayout:
         return None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PolicyCheckpoint:
     """What a policy checkpoint holds besides its weights.
 

@@ -40,7 +40,7 @@ from uasep_env.policies.checkpoint import (
 __all__ = ["LIMITS", "CheckpointLimits", "read_checkpoint"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CheckpointLimits:
     """Hard bounds applied while reading a checkpoint (a file beyond them is refused).
 
@@ -150,7 +150,7 @@ def _layout(p: Path, value: Any, limits: CheckpointLimits) -> StoredLayout:
                 <= 64):  # fmt: skip
             raise _fail(p, f"layout.features[{k}] must be [name, width], got {_short(f)}")
         out.append((f[0], _integer(p, f"layout.features[{k}] width", f[1], 1, limits.obs_dim)))
-    return StoredLayout(k_u, k_o, tuple(out))
+    return StoredLayout(k_uavs=k_u, k_obstacles=k_o, features=tuple(out))
 
 
 _FIELDS = {

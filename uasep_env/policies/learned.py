@@ -1,41 +1,14 @@
-"""Learned policies: the project's checkpoints, and stable-baselines3 models.
+"""Learned policies, importable from one place (the names of the modules that hold them).
 
-A **policy checkpoint** (``.zip``) is what training ships (``baselines/checkpoints/``): a zip
-holding ``uasep_policy.json`` (format, the environment config it was trained in, its action
-mode, observation layout, network shape and training facts) and ``weights.npz`` (the actor's
-layers and the observation normalisation statistics, plain float arrays). The file format
-and its reader with hard limits live in :mod:`uasep_env.policies.checkpoint` and
-:mod:`~uasep_env.policies.checkpoint_reader` (their names are importable from here too):
-nothing from the file is unpickled and no code from it runs. The actor runs in numpy, so
-evaluating a checkpoint needs neither torch nor stable-baselines3.
-
-A checkpoint fits any environment that gives its network the observation layout it reads
-(the K nearest UAVs and obstacles, the same features in the same order): a policy trained on
-3 UAVs flies 8 or 32 when ``observation.k_uavs`` / ``k_obstacles`` are fixed to its own
-(:func:`checkpoint_config` builds such a config).
-
-A stable-baselines3 ``.zip`` is different: SB3's loader unpickles (runs) objects stored in
-the file. :func:`load_sb3_policy` therefore refuses it unless the caller opts in with
-``allow_pickle=True`` (``uasep-eval --allow-pickle``), for files they trust.
+The project's checkpoints as policies live in :mod:`~uasep_env.policies.checkpoint_policy`,
+stable-baselines3 models in :mod:`~uasep_env.policies.sb3_policy`, the checkpoint format in
+:mod:`~uasep_env.policies.checkpoint` and :mod:`~uasep_env.policies.checkpoint_reader`.
 
 Importing this module does not import stable-baselines3 or torch.
 """
 
 from __future__ import annotations
 
-import functools
-import zipfile
-from collections.abc import Sequence
-from dataclasses import asdict
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
-
-from uasep_env._numba import compiled_twin
-from uasep_env.actions import ResidualAPF
-from uasep_env.config import EnvConfig
-from uasep_env.observation import ObservationLayout
 from uasep_env.policies.checkpoint import (
     ALGORITHMS,
     CHECKPOINT_FORMAT,
@@ -45,14 +18,24 @@ from uasep_env.policies.checkpoint import (
     StoredLayout,
     save_policy,
 )
+from uasep_env.policies.checkpoint_policy import (
+    LearnedPolicy,
+    checkpoint_config,
+    checkpoint_path,
+    dense,
+    dense_sums,
+    is_policy_checkpoint,
+    load_policy,
+    observed_config,
+)
 from uasep_env.policies.checkpoint_reader import LIMITS, CheckpointLimits, read_checkpoint
-
-if TYPE_CHECKING:
-    from uasep_env.policies.apf import APFGains
+from uasep_env.policies.sb3_policy import SB3Policy, load_sb3_policy
 
 __all__ = [
+    "ALGORITHMS",
     "CHECKPOINT_FORMAT",
     "LIMITS",
+    "META",
     "CheckpointError",
     "CheckpointLimits",
     "LearnedPolicy",
@@ -60,348 +43,13 @@ __all__ = [
     "SB3Policy",
     "StoredLayout",
     "checkpoint_config",
+    "checkpoint_path",
+    "dense",
+    "dense_sums",
     "is_policy_checkpoint",
     "load_policy",
     "load_sb3_policy",
+    "observed_config",
+    "read_checkpoint",
     "save_policy",
 ]
-
-
-@compiled_twin("dense")
-def dense(x: np.ndarray, wt: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """One layer, ``x @ wt + b``, summed input by input in float64 and rounded to float32.
-
-    A BLAS kernel sums in an order that depends on the CPU it dispatches to (OpenBLAS's
-    Haswell and SkylakeX kernels differ in the last bits), and a closed loop grows a last bit
-    into another episode. The products of float32 numbers are exact in float64 and the sum
-    runs in one fixed order of elementwise IEEE operations, so every CPU and numpy version
-    computes the same bits (with numba, the kernel ``dense``, the same operations).
-
-    Args:
-        x: Inputs ``(rows, n_in)``, float32.
-        wt: The transposed weights ``(n_in, n_out)``, float64.
-        b: The bias ``(n_out,)``, float64.
-
-    Returns:
-        ``(rows, n_out)`` float32.
-    """
-    x = np.asarray(x, dtype=np.float64)
-    acc = np.empty((x.shape[0], b.shape[0]), dtype=np.float64)
-    acc[...] = b
-    for i in range(wt.shape[0]):
-        acc += x[:, i, None] * wt[i]
-    return acc.astype(np.float32)
-
-
-_ACTIVATIONS = {
-    "tanh": np.tanh,
-    "relu": lambda x: np.maximum(x, 0.0),
-}
-
-
-class LearnedPolicy:
-    """A checkpoint's actor (an MLP in numpy) behind the common policy interface.
-
-    The policy acts in an environment whose config is ``config``. A ``residual_apf``
-    policy in a ``direct`` environment computes the APF's command itself and returns the
-    corrected command (:class:`~uasep_env.actions.ResidualAPF`, the same numbers as the
-    ``residual_apf`` environment), so it is evaluated beside the APFs on the same seeds;
-    in a ``residual_apf`` environment it returns its correction. (The corrected command is
-    returned in float64, the precision the residual environment adds it in.)
-
-    Args:
-        meta: The checkpoint's description.
-        weights: ``[(W, b), ...]`` float32 layers, the last one the action head.
-        obs_mean: Observation mean (``obs_dim``) when ``meta.obs_norm``.
-        obs_var: Observation variance when ``meta.obs_norm``.
-        config: The environment config it will act in (default: its training config in
-            ``direct`` mode).
-        name: Label in reports.
-        base_gains: For a ``residual_apf`` policy acting in a ``direct`` environment, the
-            gains of the APF it corrects (default: the environments' default gains, which
-            it was trained on). Anywhere else it is an error (nothing would use it).
-
-    Raises:
-        CheckpointError: When the environment does not fit the checkpoint (observation
-            layout: K nearest UAVs/obstacles, features and widths; action mode), naming the
-            first difference.
-    """
-
-    def __init__(
-        self,
-        meta: PolicyCheckpoint,
-        weights: Sequence[tuple[np.ndarray, np.ndarray]],
-        obs_mean: np.ndarray | None = None,
-        obs_var: np.ndarray | None = None,
-        config: EnvConfig | None = None,
-        name: str = "learned",
-        base_gains: APFGains | None = None,
-    ) -> None:
-        trained = meta.env_config
-        if config is None:
-            config = trained.replace(action={"mode": "direct"})
-        self.meta = meta
-        self.config = config
-        self.name = name
-        self.mode = trained.action.mode
-        _check_fits(meta, trained, config)
-        # The base APF flies this env (its size), with the trained action settings.
-        self._residual = (
-            ResidualAPF(config.replace(action=asdict(trained.action)), base_gains)
-            if self.mode == "residual_apf" and config.action.mode == "direct"
-            else None
-        )
-        if base_gains is not None and self._residual is None:
-            raise ValueError(
-                f"base_gains={base_gains!r}: only a residual_apf policy acting in a direct "
-                f"environment computes its base APF (this is a {self.mode} policy in a "
-                f"{config.action.mode} environment)"
-            )
-        # float32 as stored, kept transposed in float64 for :func:`dense`.
-        self._layers = [
-            (np.ascontiguousarray(np.asarray(w, np.float32).T, dtype=np.float64),
-             np.asarray(b, np.float32).astype(np.float64))
-            for w, b in weights
-        ]  # fmt: skip
-        self._act = _ACTIVATIONS[meta.activation]
-        if meta.obs_norm:
-            self._mean = np.asarray(obs_mean, dtype=np.float64)
-            self._std = np.sqrt(np.asarray(obs_var, dtype=np.float64) + meta.obs_epsilon)
-
-    def network(self, obs: np.ndarray) -> np.ndarray:
-        """The deterministic action (the Gaussian's mean) for the network's own input."""
-        x = np.asarray(obs, dtype=np.float32)
-        if self.meta.obs_norm:
-            x = np.clip((x - self._mean) / self._std, -self.meta.clip_obs, self.meta.clip_obs)
-            x = x.astype(np.float32)
-        shape = x.shape[:-1]
-        x = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
-        for wt, b in self._layers[:-1]:
-            x = self._act(dense(x, wt, b))
-        x = dense(x, *self._layers[-1])
-        return x.reshape(*shape, x.shape[-1])
-
-    def __call__(self, observations: np.ndarray) -> np.ndarray:
-        """Actions ``(..., 3)`` in ``[-1, 1]`` for observations ``(..., obs_dim)``."""
-        obs = np.asarray(observations, dtype=np.float32)
-        if self._residual is None:
-            return np.clip(self.network(obs), -1.0, 1.0).astype(np.float32)
-        base = self._residual.base(obs)
-        residual = np.clip(self.network(self._residual.observe(obs, base)), -1.0, 1.0)
-        # As the residual env would take it: a float32 action, then float64 arithmetic.
-        residual = residual.astype(np.float32).astype(np.float64)
-        return self._residual.command(base, residual)
-
-    def reset(self) -> None:
-        """MLP policies are memoryless."""
-
-
-def _check_fits(meta: PolicyCheckpoint, trained: EnvConfig, config: EnvConfig) -> None:
-    """The env must give the network the layout it reads (any number of UAVs/obstacles)."""
-    problems = []
-    if trained.action.mode == "direct" and config.action.mode != "direct":
-        problems.append(f"action.mode: trained with 'direct', this env uses {config.action.mode!r}")
-    env_layout = StoredLayout.from_config(config.replace(action=asdict(trained.action)))
-    difference = meta.observation_layout.difference(env_layout)
-    if difference is not None:
-        problems.append(difference)
-    if problems:
-        raise CheckpointError("checkpoint does not fit this environment: " + "; ".join(problems))
-
-
-def is_policy_checkpoint(path: str | Path) -> bool:
-    """Whether ``path`` is a zip in this project's checkpoint format (by its member names)."""
-    try:
-        with zipfile.ZipFile(path) as z:
-            return META in z.namelist()
-    except (OSError, zipfile.BadZipFile, ValueError, EOFError):
-        return False
-
-
-@functools.lru_cache(maxsize=16)
-def _cached_read(path: str, mtime_ns: int, size: int) -> tuple:
-    return read_checkpoint(Path(path))
-
-
-def _read(path: str | Path) -> tuple:
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"no policy checkpoint at {p}")
-    st = p.stat()
-    return _cached_read(str(p.resolve()), st.st_mtime_ns, st.st_size)
-
-
-def checkpoint_config(
-    path: str | Path,
-    n_uavs: int | None = None,
-    n_obstacles: int | None = None,
-    **overrides: Any,
-) -> EnvConfig:
-    """The env config a checkpoint's policy can act in, at another formation size.
-
-    The training config (``direct`` action mode, the mode policies are evaluated in) with
-    ``n_uavs`` / ``n_obstacles`` replaced and the observation's K nearest UAVs and obstacles
-    fixed to the checkpoint's, so the observation has the layout the network reads.
-
-    Args:
-        path: The checkpoint.
-        n_uavs: Formation size (default: the training one).
-        n_obstacles: Number of obstacles (default: the training one).
-        **overrides: More config fields (e.g. ``scenario="random"``).
-
-    Returns:
-        The validated config (``load_policy(path, config)`` accepts it).
-
-    Raises:
-        CheckpointError: If no such config gives the checkpoint's layout (e.g. ``n_uavs``
-            not above its ``k_uavs``), naming the difference.
-    """
-    meta = _read(path)[0]
-    trained = meta.env_config
-    layout = meta.observation_layout
-    values: dict[str, Any] = {
-        "n_uavs": trained.n_uavs if n_uavs is None else n_uavs,
-        "n_obstacles": trained.n_obstacles if n_obstacles is None else n_obstacles,
-        **overrides,
-    }
-    observation = {**dict(overrides.get("observation") or {})}
-    observation.update(k_uavs=layout.k_uavs, k_obstacles=layout.k_obstacles)
-    values["observation"] = observation
-    values.setdefault("action", {"mode": "direct"})
-    config = trained.replace(**values)
-    _check_fits(meta, trained, config)
-    return config
-
-
-def load_policy(
-    path: str | Path,
-    config: EnvConfig | None = None,
-    name: str | None = None,
-    base_gains: APFGains | None = None,
-) -> LearnedPolicy:
-    """Load a policy checkpoint (read once per process while the file is unchanged).
-
-    Args:
-        path: The checkpoint (``.zip``), or the name of a shipped policy (``"ppo_shared"``,
-            :func:`~uasep_env.policies.shipped.shipped_policies`) when no such file exists.
-        config: The environment config it will act in (default: its own, ``direct`` mode).
-        name: Label in reports (default: the file's stem).
-        base_gains: The gains of the APF a residual policy corrects (see
-            :class:`LearnedPolicy`).
-
-    Returns:
-        The policy.
-
-    Raises:
-        FileNotFoundError: If ``path`` does not exist.
-        CheckpointError: For a file that is not a valid checkpoint, or one that does not fit
-            ``config`` (the mismatch is named).
-    """
-    p = Path(path)
-    if not p.exists() and isinstance(path, str):
-        from uasep_env.policies.shipped import shipped_policy_path
-
-        p = shipped_policy_path(path) or p
-    if not p.is_file():
-        raise FileNotFoundError(f"no policy checkpoint at {p} (and no shipped policy {path!r})")
-    meta, weights, mean, var = _read(p)
-    return LearnedPolicy(
-        meta, weights, mean, var, config=config, name=name or p.stem, base_gains=base_gains
-    )
-
-
-class SB3Policy:
-    """A shared-parameter SB3 policy acting on per-agent observations.
-
-    Args:
-        model: A loaded SB3 algorithm whose observation space is one agent's observation.
-        config: The environment config (checks the observation width).
-        deterministic: Use the deterministic action.
-        obs_normalizer: Optional ``obs -> normalised obs`` (e.g. ``VecNormalize.normalize_obs``).
-    """
-
-    def __init__(
-        self,
-        model: Any,
-        config: EnvConfig,
-        deterministic: bool = True,
-        obs_normalizer: Any = None,
-    ) -> None:
-        width = ObservationLayout.from_config(config).dim
-        shape = getattr(model.observation_space, "shape", None)
-        if shape != (width,):
-            raise CheckpointError(
-                f"model observation shape {shape} does not match this config's ({width},)"
-            )
-        self.model = model
-        self.config = config
-        self.deterministic = deterministic
-        self.obs_normalizer = obs_normalizer
-        self.name = f"sb3:{type(model).__name__}"
-
-    def __call__(self, observations: np.ndarray) -> np.ndarray:
-        """Actions ``(..., 3)`` in ``[-1, 1]`` for observations ``(..., obs_dim)``."""
-        obs = np.asarray(observations, dtype=np.float32)
-        flat = obs.reshape(-1, obs.shape[-1])
-        if self.obs_normalizer is not None:
-            flat = self.obs_normalizer(flat)
-        actions, _ = self.model.predict(flat, deterministic=self.deterministic)
-        return np.clip(actions, -1.0, 1.0).reshape(*obs.shape[:-1], 3).astype(np.float32)
-
-    def reset(self) -> None:
-        """MLP policies are memoryless."""
-
-
-def load_sb3_policy(
-    path: str | Path,
-    config: EnvConfig,
-    algorithm: str | None = None,
-    allow_pickle: bool = False,
-) -> SB3Policy:
-    """Load a saved stable-baselines3 model (``.zip``) as a policy.
-
-    SB3's loader unpickles objects stored in the file, which runs code from it; it is
-    only called with ``allow_pickle=True``. Prefer this project's checkpoints
-    (:func:`load_policy`), which load without unpickling.
-
-    Args:
-        path: The saved model.
-        config: The environment config it will act in.
-        algorithm: ``"PPO"``, ``"SAC"``, ... (default: ``PPO``).
-        allow_pickle: Opt in to unpickling the file (only for files you trust).
-
-    Returns:
-        The policy.
-
-    Raises:
-        FileNotFoundError: If ``path`` does not exist.
-        CheckpointError: Without ``allow_pickle``, if the file cannot be loaded or the
-            spaces do not match.
-    """
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"no saved model at {p}")
-    if not allow_pickle:
-        raise CheckpointError(
-            f"{p} is not a uasep policy checkpoint; loading it as a stable-baselines3 model "
-            "would unpickle (run) code from the file: pass allow_pickle=True "
-            "(uasep-eval --allow-pickle) only for a file you trust"
-        )
-    name = algorithm or "PPO"
-    if name not in ALGORITHMS:
-        raise CheckpointError(f"unknown SB3 algorithm {name!r}; choose from {ALGORITHMS}")
-    model = _load_sb3(str(p.resolve()), p.stat().st_mtime_ns, name)
-    return SB3Policy(model, config)
-
-
-@functools.lru_cache(maxsize=4)
-def _load_sb3(path: str, mtime_ns: int, algorithm: str) -> Any:
-    import stable_baselines3 as sb3  # lazy: heavy, optional dependency
-
-    try:
-        return getattr(sb3, algorithm).load(path, device="cpu")
-    except Exception as err:  # SB3 raises many types for a bad file
-        raise CheckpointError(
-            f"could not load {path} as {algorithm} (saved by another algorithm? choose it with "
-            f"algorithm= / uasep-eval --algorithm, one of {ALGORITHMS}): {err}"
-        ) from err

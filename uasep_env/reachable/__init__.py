@@ -12,6 +12,9 @@ support functions, the enclosure certificate, the distance solver) is in
   (``tools/build_reachable_table.py`` rebuilds the table);
 * :mod:`~uasep_env.reachable.distance` -- signed point-to-ellipsoid distances, nearest points
   and normals (compiled with numba when available).
+* :mod:`~uasep_env.reachable.calibrated` -- ``prediction.fit="calibrated"``: regions of the
+  same form sized by split conformal prediction per aircraft class, read from a shipped table
+  (``tools/build_prediction_calibration.py`` rebuilds it).
 
 Frames for ellipsoids: world NED (x north, y east, z down); heading ``psi`` from north towards
 east; the body frame has axis 0 along the heading, axis 1 to the right (``psi + pi/2``) and

@@ -53,7 +53,7 @@ def _frozen(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Track:
     """One recorded track, with its provenance.
 
@@ -99,7 +99,7 @@ class Track:
         return float(self.times[-1])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Segments:
     """A batch of resampled track segments (:meth:`RealTrafficDataset.draw_segments`).
 

@@ -95,7 +95,7 @@ class ObstacleStart:
     hold_until: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Encounter:
     """A kind of encounter: how an obstacle approaches the UAV it is aimed at.
 

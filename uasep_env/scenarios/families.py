@@ -84,33 +84,33 @@ _CLIMBING = (
 #: The kinds of encounter; each is also a family of one such encounter (registered below).
 ENCOUNTERS: dict[str, Encounter] = {
     "crossing": Encounter(
-        _from_either_side,
-        _level,
-        "An obstacle crosses the formation's track from either side.",
-        _MEETS + "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
+        horizontal=_from_either_side,
+        vertical=_level,
+        summary="An obstacle crosses the formation's track from either side.",
+        parameters=_MEETS + "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
     ),
     "head_on": Encounter(
-        _from_the_front,
-        _level,
-        "An obstacle comes head-on.",
-        _MEETS + "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
+        horizontal=_from_the_front,
+        vertical=_level,
+        summary="An obstacle comes head-on.",
+        parameters=_MEETS + "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
     ),
     "overtaking": Encounter(
-        _from_behind,
-        _level,
-        "A faster obstacle overtakes the formation from behind.",
-        _MEETS + "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
+        horizontal=_from_behind,
+        vertical=_level,
+        summary="A faster obstacle overtakes the formation from behind.",
+        parameters=_MEETS + "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
     ),
     "climbing": Encounter(
-        _from_either_side,
-        _climbing_or_descending,
-        "An obstacle climbs or descends through the formation's altitude.",
-        _MEETS + "speed 3-12 m/s, 45-135° off the track, " + _CLIMBING,
+        horizontal=_from_either_side,
+        vertical=_climbing_or_descending,
+        summary="An obstacle climbs or descends through the formation's altitude.",
+        parameters=_MEETS + "speed 3-12 m/s, 45-135° off the track, " + _CLIMBING,
     ),
 }
 
 #: The encounter kinds of background traffic (and of every ``multi_obstacle`` slot).
-TRAFFIC_MIX = Mix({"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1})
+TRAFFIC_MIX = Mix(weights={"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1})
 
 
 def _background(rng: np.random.Generator, config: EnvConfig, lay: Layout) -> ObstacleStart:
@@ -132,7 +132,9 @@ def _encounter(kind: str) -> ScenarioFamily:
         )
         return assemble(kind, config, lay, obstacles)
 
-    return ScenarioFamily(kind, encounter.summary, encounter.parameters, generate)
+    return ScenarioFamily(
+        name=kind, summary=encounter.summary, parameters=encounter.parameters, generate=generate
+    )
 
 
 # ---- The paper's encounter (section 4; constants chosen here, the paper gives none) ---------
@@ -191,12 +193,74 @@ def _large_formation(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpe
     return assemble("large_formation", config, lay, obstacles)
 
 
+# ---- Collision courses: encounters that end in a collision unless the formation avoids ------
+_COLLISION_MEET_RANGE = (0.45, 0.6)  # fraction of the episode (at most the 200 s timeline)
+_COLLISION_MIN_MEET_S = 20.0  # so that no short episode starts inside the separation
+_COLLISION_HEADINGS = {  # the obstacle's heading relative to the plan's (rad), by kind
+    "head_on": lambda rng: math.pi,
+    "crossing": lambda rng: (1.0 if rng.random() < 0.5 else -1.0) * math.pi / 2,
+}
+
+
+def _collision_course(kind: str) -> ScenarioFamily:
+    """A non-manoeuvring obstacle aimed exactly at a UAV's planned position, at its altitude.
+
+    Safety tests need encounters that plan tracking alone does not survive: the paper's
+    obstacle passes 10 m below the formation, and every drawn family's obstacle has an
+    altitude offset and a pilot who may turn away. Here nothing but the controller separates
+    the aircraft.
+    """
+
+    def generate(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
+        n, ob = config.n_uavs, config.obstacle
+        lay = layout(  # in formation, at cruise speed along the plan
+            config,
+            straight_plan(config),
+            start=lambda slots, d: (slots.copy(), np.tile(d * config.cruise_speed, (n, 1))),
+        )
+        timeline = min(config.episode_duration, TIMELINE_S)
+        meet = max(rng.uniform(*_COLLISION_MEET_RANGE) * timeline, _COLLISION_MIN_MEET_S)
+        who = int(rng.integers(n))
+        target = planned_position(lay.plan, meet, lay.slots)[who]
+        heading = _COLLISION_HEADINGS[kind](rng)  # the plan heads north (0 rad)
+        speed = rng.uniform(*SPEED_RANGE_MPS)
+        pos = target.copy()
+        pos[:2] -= speed * meet * np.array([math.cos(heading), math.sin(heading)])
+        hold = 2.0 * config.episode_duration  # the pilot never reacts
+        first = ObstacleStart(
+            pos=pos,
+            heading=heading,
+            speed=speed,
+            max_turn_rate=ob.max_turn_rate,
+            max_climb_rate=ob.max_climb_rate,
+            climb_rate=0.0,
+            hold_until=hold,
+        )
+        obstacles = obstacle_slots(config, lambda: first, lambda: _background(rng, config, lay))
+        return assemble(f"collision_{kind}", config, lay, obstacles)
+
+    what = "head-on" if kind == "head_on" else "at right angles, from either side"
+    return ScenarioFamily(
+        name=f"collision_{kind}",
+        summary=f"A collision course: a straight-flying obstacle meets a UAV {what}.",
+        parameters=(
+            "The paper's straight plan and pattern; the obstacle flies straight at 3-12 m/s, "
+            "never manoeuvres, at the altitude of a random UAV's plan, and reaches that UAV's "
+            "planned position at 45-60 % of the episode (at most of 200 s; at least 20 s "
+            "in). Without avoidance it collides; a safety test's encounter."
+        ),
+        generate=generate,
+    )
+
+
 def _random(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
     return FAMILIES[RANDOM_MIX.draw(rng)].generate(rng, config)
 
 
 #: The families the ``random`` scenario draws per episode, with their integer weights.
-RANDOM_MIX = Mix({"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1, "multi_obstacle": 1})
+RANDOM_MIX = Mix(
+    weights={"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1, "multi_obstacle": 1}
+)
 
 # ---- The registry, in the order the names are listed ----------------------------------------
 register(
@@ -245,6 +309,10 @@ register(
         defaults={"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
     )
 )
+
+# Collision courses: not in RANDOM_MIX, so no existing bank moves.
+for _kind in _COLLISION_HEADINGS:
+    register(_collision_course(_kind))
 
 # Recorded aircraft (issue 20): not in RANDOM_MIX, so no existing bank moves.
 register(

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from uasep_env.formation import PlannedTrajectory
+from uasep_env.obstacles import aircraft_class_code
 from uasep_env.scenarios.building import (
     MEET_TIME_RANGE,
     TIMELINE_S,
@@ -101,6 +102,9 @@ class ReplaySpec(ScenarioSpec):
         obstacle_target: ``(M,)`` the UAV each is aimed at.
         obstacle_meet_time: ``(M,)`` the time of its closest approach to the target's plan (s).
         obstacle_miss_distance: ``(M,)`` the distance then (m).
+
+    :attr:`obstacle_aircraft_class` gives the recorded tracks' class codes
+    (:data:`uasep_env.obstacles.AIRCRAFT_CLASSES`).
     """
 
     obstacle_track: np.ndarray
@@ -111,6 +115,15 @@ class ReplaySpec(ScenarioSpec):
     obstacle_target: np.ndarray
     obstacle_meet_time: np.ndarray
     obstacle_miss_distance: np.ndarray
+
+    @property
+    def obstacle_aircraft_class(self) -> np.ndarray:
+        """``(M,)`` the recorded tracks' class codes (from the dataset, not a drawn field)."""
+        tracks = _dataset().tracks
+        return np.array(
+            [aircraft_class_code(tracks[int(i)].aircraft_class) for i in self.obstacle_track_index],
+            dtype=np.int64,
+        )
 
 
 def _dataset():  # noqa: ANN202 -- the dataset, loaded on first use (cached by the loader)

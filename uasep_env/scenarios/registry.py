@@ -31,7 +31,7 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Mix:
     """Named entries drawn with integer weights: ``k`` with probability ``w_k / sum(w)``.
 
@@ -68,7 +68,7 @@ class Mix:
         return ", ".join(f"`{n}` ({w})" for n, w in self.weights.items())
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ScenarioFamily:
     """One family of scenarios.
 

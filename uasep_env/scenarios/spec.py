@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from uasep_env.obstacles import ObstacleState
+from uasep_env.obstacles import DUBINS_CLASS, ObstacleState
 
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
@@ -116,3 +116,5 @@ def place_obstacles(
     obstacles.straight_prob[mask] = config.obstacle.straight_probability
     obstacles.wind[mask] = np.stack([s.wind for s in specs])
     obstacles.ground[mask] = config.airspace.ground_altitude
+    # Synthetic obstacles fly the Dubins model; a replayed track's class is set by the replay.
+    obstacles.aircraft_class[mask] = DUBINS_CLASS

@@ -1,0 +1,229 @@
+"""The PID Lagrange multiplier (uasep_env.lagrangian) and its SB3 callback."""
+
+import itertools
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uasep_env.lagrangian import PIDLagrangian
+
+# --------------------------------------------------------------------- the multiplier
+
+
+def _run(pid: PIDLagrangian, costs) -> list[float]:
+    return [pid.update(c) for c in costs]
+
+
+def test_multiplier_rises_above_the_limit_and_falls_below():
+    for gains in ({"ki": 0.1}, {"kp": 0.5, "ki": 0.1, "kd": 0.2, "ema_p": 0.5, "ema_d": 0.5}):
+        pid = PIDLagrangian(cost_limit=2.0, **gains)
+        up = _run(pid, [5.0] * 20)  # above the limit: rises
+        assert up[0] > 0.0
+        assert all(b > a for a, b in itertools.pairwise(up[2:])), (gains, up)
+        down = _run(pid, [0.0] * 200)  # below: falls, to 0 and no lower
+        assert all(b <= a for a, b in itertools.pairwise(down[3:])), (gains, down)
+        assert down[-1] == 0.0 and min(down) >= 0.0
+        assert _run(pid, [2.0] * 5) == [0.0] * 5  # at the limit from 0: stays
+
+
+def test_plain_gradient_ascent_is_the_special_case():
+    rng = np.random.default_rng(0)
+    costs = rng.uniform(0.0, 6.0, 50)
+    pid = PIDLagrangian(cost_limit=3.0, ki=0.05, init=0.4)
+    lam = 0.4
+    for c, got in zip(costs, _run(pid, costs), strict=True):
+        lam = max(0.0, lam + 0.05 * (c - 3.0))
+        assert got == pytest.approx(lam, abs=1e-12)
+
+
+def test_proportional_and_derivative_terms():
+    # P alone: the multiplier is Kp times the excess, at once, and 0 below the limit.
+    pid = PIDLagrangian(cost_limit=1.0, kp=2.0, ki=0.0)
+    assert _run(pid, [3.0, 1.5, 0.5]) == pytest.approx([4.0, 1.0, 0.0])
+    # D alone reacts to a rising cost only (its positive part), not to a high steady one.
+    pid = PIDLagrangian(cost_limit=100.0, ki=0.0, kd=1.0)
+    assert _run(pid, [1.0, 4.0, 4.0, 2.0]) == pytest.approx([0.0, 3.0, 0.0, 0.0])
+    # The bound.
+    pid = PIDLagrangian(cost_limit=0.0, ki=10.0, max_multiplier=5.0)
+    assert _run(pid, [1.0, 1.0]) == [5.0, 5.0]
+
+
+def test_state_round_trips():
+    a = PIDLagrangian(cost_limit=1.0, kp=0.3, ki=0.2, kd=0.1, ema_p=0.5, ema_d=0.5, delay=3)
+    _run(a, [2.0, 5.0, 0.5, 3.0])
+    b = PIDLagrangian(cost_limit=1.0, kp=0.3, ki=0.2, kd=0.1, ema_p=0.5, ema_d=0.5, delay=3)
+    b.load_state_dict(a.state_dict())
+    assert _run(a, [4.0, 0.0, 2.0]) == _run(b, [4.0, 0.0, 2.0])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"cost_limit": -1.0}, r"cost_limit=-1\.0: must be >= 0"),
+        ({"cost_limit": math.nan}, r"cost_limit=nan"),
+        ({"cost_limit": 1.0, "ki": -0.1}, r"ki=-0\.1"),
+        ({"cost_limit": 1.0, "ema_p": 1.0}, r"ema_p=1\.0"),
+        ({"cost_limit": 1.0, "delay": 0}, r"delay=0"),
+        ({"cost_limit": 1.0, "max_multiplier": 0.0}, r"max_multiplier=0\.0"),
+    ],
+)
+def test_bad_values_are_named(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        PIDLagrangian(**kwargs)
+
+
+def test_bad_cost_measurement_is_named():
+    pid = PIDLagrangian(cost_limit=1.0)
+    with pytest.raises(ValueError, match=r"episode_cost=-2"):
+        pid.update(-2)
+
+
+# --------------------------------------------------------------------- SB3
+
+
+def _ppo(venv, seed=0):
+    from stable_baselines3 import PPO
+
+    batch = 16 * venv.num_envs
+    return PPO("MlpPolicy", venv, n_steps=16, batch_size=batch, n_epochs=1, seed=seed,
+               device="cpu", policy_kwargs={"net_arch": [8]})  # fmt: skip
+
+
+# Three UAVs 5 m apart (inside the 8 m separation): every step costs each of them.
+CLOSE = {"scenario": "crossing", "noise": False, "episode_duration": 4.0,
+         "formation": ((0.0, 0.0, 0.0), (5.0, 0.0, 0.0), (10.0, 0.0, 0.0))}  # fmt: skip
+
+
+@pytest.mark.parametrize(("limit", "init"), [(0.5, 0.0), (1e6, 5.0)])
+def test_sb3_callback_moves_the_multiplier_from_the_env_cost(tmp_path, limit, init):
+    pytest.importorskip("stable_baselines3")
+    import csv
+
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+    from uasep_env.sb3_lagrangian import LagrangianCallback
+
+    class EpisodeCosts(BaseCallback):  # the env's costs summed per episode, independently
+        def _on_training_start(self):
+            self.running, self.done = np.zeros(3), []
+
+        def _on_step(self):
+            self.running += [i["cost"] for i in self.locals["infos"]]
+            for k in np.flatnonzero(self.locals["dones"]):
+                self.done.append(self.running[k])
+                self.running[k] = 0.0
+            return True
+
+    venv = UAVSharedVecEnv(n_envs=1, seed=0, **{**CLOSE, "episode_duration": 2.0})  # 10 steps
+    pid = PIDLagrangian(cost_limit=limit, ki=0.05, init=init)
+    cb, ref = LagrangianCallback(pid, csv_path=tmp_path / "cost.csv"), EpisodeCosts()
+    _ppo(venv).learn(total_timesteps=48 * 4, callback=CallbackList([cb, ref]))  # 4 rollouts
+    assert list(cb.window) == ref.done and cb.episodes == len(ref.done) >= 6
+    with (tmp_path / "cost.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 4 and pid.updates == 4  # an episode ended in every rollout
+    lam = init
+    for row in rows:  # gradient ascent on the rollouts' mean episode cost
+        cost = float(row["episode_cost_mean"])
+        assert cost >= 1.0  # the first step of an episode is inside the separation
+        lam = max(0.0, lam + 0.05 * (cost - limit))
+        assert float(row["multiplier"]) == pytest.approx(lam, rel=1e-12)
+        assert float(row["cost_limit"]) == limit
+    if limit < 1.0:
+        assert pid.multiplier > 4 * 0.05 * (1.0 - limit)  # rose at every update
+    else:
+        assert pid.multiplier < init - 1.0  # fell at every update
+
+
+def test_sb3_callback_shapes_the_stored_reward():
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+    from uasep_env.sb3_lagrangian import LagrangianCallback
+
+    class Record(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.rows = []
+
+        def _on_step(self):
+            self.rows.append(self.locals["rewards"].copy())
+            return True
+
+    before, after = Record(), Record()
+    lam = 1.5
+    pid = PIDLagrangian(cost_limit=0.0, ki=0.0, init=lam)  # a constant multiplier
+    cost = Record()
+    cost._on_step = lambda: cost.rows.append([i["cost"] for i in cost.locals["infos"]]) or True
+    venv = UAVSharedVecEnv(n_envs=1, seed=0, **CLOSE)
+    model = _ppo(venv)
+    model.learn(16 * 3, callback=CallbackList([before, cost, LagrangianCallback(pid), after]))
+    r, c, shaped = (np.array(x.rows) for x in (before, cost, after))
+    assert (c > 0).mean() > 0.5  # mostly inside the separation: the shaping matters
+    np.testing.assert_allclose(shaped, (r - lam * c) / (1 + lam), rtol=1e-6)
+    # What PPO stored is the shaped reward (the last step of the last rollout, no timeout).
+    np.testing.assert_array_equal(model.rollout_buffer.rewards[-1], shaped[-1])
+
+
+def test_a_cost_the_env_does_not_report_is_named():
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from uasep_env.envs.gym_env import FormationEnv
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+    from uasep_env.sb3_lagrangian import LagrangianCallback
+
+    with pytest.raises(ValueError, match="'colision'"):
+        LagrangianCallback(PIDLagrangian(cost_limit=1.0), cost="colision")
+    # The Gymnasium view reports flat cost_<term> keys, not cost_terms: named, not a KeyError.
+    venv = DummyVecEnv([lambda: FormationEnv(**CLOSE)])
+    cb = LagrangianCallback(PIDLagrangian(cost_limit=1.0), cost="separation_uav")
+    with pytest.raises(ValueError, match=r"does not report the cost 'separation_uav'"):
+        _ppo(venv).learn(32, callback=cb)
+    norm = VecNormalize(UAVSharedVecEnv(n_envs=1, **CLOSE), norm_reward=True)
+    with pytest.raises(ValueError, match="norm_reward"):
+        _ppo(norm).learn(32, callback=LagrangianCallback(PIDLagrangian(cost_limit=1.0)))
+
+
+# --------------------------------------------------------------------- the recipe
+
+
+@pytest.fixture
+def recipe():
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "train"))
+    import ppo_lagrangian
+
+    return ppo_lagrangian
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--cost-limit", "-1"], r"--cost-limit=-1\.0: must be >= 0"),
+        (["--cost-limit", "lots"], r"--cost-limit 'lots'"),
+        (["--cost", "colision"], r"cost 'colision' is not reported"),
+        (["--pid-ki", "-0.5"], r"ki=-0\.5"),
+        (["--norm-reward"], "--norm-reward"),
+    ],
+)
+def test_recipe_bad_options_are_named(recipe, argv, match):
+    with pytest.raises(SystemExit, match=match):
+        recipe.parse_args(argv)
+
+
+def test_recipe_defaults(recipe, capsys):
+    args = recipe.parse_args([])
+    assert args.cost == "cost" and args.cost_limit == "apf"
+    import ppo_shared
+
+    cfg = ppo_shared.make_env_config(args)
+    assert cfg.reward == cfg.reward.task()
+    # The shared training parser checks --config values up front, in one line.
+    with pytest.raises(SystemExit):
+        recipe.parse_args(["--config", "cost.separation_obstacle=-2"])
+    assert "cost.separation_obstacle=-2: must be >= 0" in capsys.readouterr().err

@@ -1,0 +1,79 @@
+"""The share of the machine's cores this process may use, decided once per process.
+
+The compiled kernels' loops and the noise-drawing threads size themselves from it, so that
+``N`` processes started side by side (``uasep-eval --workers N``, ``train/seeds.py
+--parallel N``, a user's own pool) never ask for more threads than there are cores: each
+takes its affinity mask's cores divided by ``UASEP_WORKERS``. ``UASEP_THREADS`` sets it
+outright. This module imports nothing of the package (the kernels read it too).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Mapping
+
+__all__ = [
+    "THREADS_VARIABLE",
+    "WORKERS_VARIABLE",
+    "core_share",
+    "explicit_threads",
+    "process_share",
+]
+
+#: ``UASEP_THREADS=N``: the threads of this process (the user's choice wins).
+THREADS_VARIABLE = "UASEP_THREADS"
+#: ``UASEP_WORKERS=N``: set by the project's tools in the ``N`` processes they start side by
+#: side, which share the cores the machine gives them.
+WORKERS_VARIABLE = "UASEP_WORKERS"
+
+
+def _positive_int(name: str, value: str) -> int:
+    try:
+        n = int(value)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"{name}={value!r}: must be a whole number >= 1")
+    return n
+
+
+def explicit_threads(environ: Mapping[str, str] | None = None) -> int | None:
+    """``UASEP_THREADS`` as a number, or None where it is unset or empty.
+
+    Raises:
+        ValueError: For a value that is not a whole number >= 1, naming the variable.
+    """
+    env = os.environ if environ is None else environ
+    value = env.get(THREADS_VARIABLE, "").strip()
+    return _positive_int(THREADS_VARIABLE, value) if value else None
+
+
+def core_share(environ: Mapping[str, str] | None = None, cores: int | None = None) -> int:
+    """The threads this process may use: ``UASEP_THREADS``, else its share of the cores.
+
+    Args:
+        environ: The environment variables (default ``os.environ``).
+        cores: The cores this process may run on (default: its affinity mask).
+
+    Returns:
+        ``UASEP_THREADS`` if set; else the cores divided among the ``UASEP_WORKERS``
+        processes started side by side (1 if unset), at least 1.
+
+    Raises:
+        ValueError: For a variable that is not a whole number >= 1, naming it.
+    """
+    env = os.environ if environ is None else environ
+    explicit = explicit_threads(env)
+    if explicit is not None:
+        return explicit
+    if cores is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+    workers = env.get(WORKERS_VARIABLE, "").strip()
+    return max(1, cores // _positive_int(WORKERS_VARIABLE, workers) if workers else cores)
+
+
+@functools.cache
+def process_share() -> int:
+    """:func:`core_share` of this process, decided on first use."""
+    return core_share()

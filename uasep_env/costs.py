@@ -1,0 +1,101 @@
+"""The cost channel of constrained RL: named safety costs, beside the reward, never in it.
+
+Every view reports, per agent and per step, a cost ``>= 0`` and its named terms, combined by
+typed weights (:class:`uasep_env.config.CostWeights`): ``cost_i = sum_k weight_k * term_k``.
+Each term is an indicator of a safety condition in the step, read from the step's safety
+figures (the same distances and strict "closer than" thresholds as the metrics,
+:mod:`uasep_env.metrics`), so with the default weights **the cost is > 0 exactly when the
+UAV has lost separation** (tested in every view), and an agent's episode cost is the number
+of steps it spent in loss of separation (two when it is too close to a UAV and an obstacle
+at once).
+
+=========================  ===========================================================
+Term                       Value per agent (1 when the condition holds in the step)
+=========================  ===========================================================
+``separation_uav``         another UAV closer than ``uav.separation_distance`` (m) during
+                           the step (``infos["loss_of_separation_uav"]``); weight 1
+``separation_obstacle``    an active obstacle's centre closer than
+                           ``uav.obstacle_separation`` (m) during the step
+                           (``infos["loss_of_separation_obstacle"]``); weight 1
+``region``                 inside a predicted reachable region at the end of the step
+                           (``infos["in_reachable_region"]``); weight 0 by default: the
+                           region is a prediction, not a loss of separation
+=========================  ===========================================================
+
+Units: a term is 1 per environment step (dimensionless), a weight a cost per step, an
+episode's cost a (weighted) number of steps: times ``step_duration`` it is the time in loss
+of separation (s) that :func:`uasep_env.metrics.episode_metrics` reports per UAV
+(``uav_los_time + obstacle_los_time``; with ``decision_interval > 1`` the cost also counts
+a step whose loss lies between two recorded samples).
+
+Where each view reports it (the reward, the episode and its random stream are unchanged:
+the cost is computed from figures the core already has, whether or not anyone reads it):
+
+* PettingZoo: ``infos[agent]["cost"]`` (float) and ``infos[agent]["cost_terms"]`` (dict);
+* Gymnasium (centralised): ``info["cost"]``, the mean of the agents' costs (as the reward is
+  the mean of theirs), ``info["costs"]`` per UAV and ``info["cost_<term>"]``, the mean of
+  each term (flat keys, as the reward terms);
+* vector: the same keys as arrays over the environments (``infos["cost"]`` is
+  ``(num_envs,)``);
+* SB3 (:class:`~uasep_env.envs.sb3.UAVSharedVecEnv`, one sub-environment per agent):
+  ``infos[k]["cost"]`` and ``infos[k]["cost_terms"]``.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from uasep_env.config import CostWeights
+
+__all__ = ["COST_TERMS", "TERMS", "CostTerm", "compute_costs"]
+
+
+class CostTerm(NamedTuple):
+    """One row of the cost table.
+
+    Attributes:
+        name: The term's name (a field of :class:`~uasep_env.config.CostWeights` too).
+        safety: The step's safety flag it is 1 on (a key of the step's safety figures).
+        low: Least value of the unweighted term in one step.
+        high: Greatest value of the unweighted term in one step.
+    """
+
+    name: str
+    safety: str
+    low: float = 0.0
+    high: float = 1.0
+
+
+#: The cost terms, in reporting order: the one list the costs, the weights and the tests read.
+TERMS: tuple[CostTerm, ...] = (
+    CostTerm("separation_uav", "loss_of_separation_uav"),
+    CostTerm("separation_obstacle", "loss_of_separation_obstacle"),
+    CostTerm("region", "in_reachable_region"),
+)
+#: Names of the cost terms, in reporting order.
+COST_TERMS: tuple[str, ...] = tuple(t.name for t in TERMS)
+
+
+def compute_costs(
+    safety: dict[str, np.ndarray], weights: CostWeights
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The step's costs and their named terms, from its safety flags.
+
+    Args:
+        safety: The step's safety figures (``EnvCore.step``), name -> ``(E, N)``; the
+            flags of :data:`TERMS` are read.
+        weights: One weight per term (>= 0, validated by the config).
+
+    Returns:
+        ``(cost, terms)``: ``(E, N)`` float64 costs and a dict of ``(E, N)`` float64 terms
+        (0 or 1).
+    """
+    terms = {t.name: safety[t.safety].astype(np.float64) for t in TERMS}
+    cost = np.zeros(next(iter(terms.values())).shape)
+    for name, term in terms.items():
+        w = getattr(weights, name)
+        if w:  # a zero weight adds nothing (and keeps -0.0 and NaN out)
+            cost += w * term
+    return cost, terms

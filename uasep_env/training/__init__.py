@@ -1,0 +1,27 @@
+"""Training recipes for the shared policies (``uasep-train RECIPE``): PPO, residual PPO, MAPPO.
+
+One module per recipe, the flags they share in :mod:`~uasep_env.training.args` and the run
+folder's rules in :mod:`~uasep_env.training.rundir`:
+
+* ``ppo_shared`` (:mod:`~uasep_env.training.ppo_shared`): one PPO policy shared by every UAV;
+* ``ppo_residual_apf`` (:mod:`~uasep_env.training.ppo_residual_apf`): the same, learning
+  corrections to the APF's command;
+* ``mappo`` (:mod:`~uasep_env.training.mappo`): skrl's MAPPO, a centralised critic.
+
+torch, stable-baselines3 and skrl (the ``train`` extra) are imported when a recipe runs,
+never on import, so ``uasep-train --help`` works on a core install.
+"""
+
+from __future__ import annotations
+
+__all__ = ["RECIPES"]
+
+#: ``uasep-train`` recipe name -> (module, one-line description).
+RECIPES: dict[str, tuple[str, str]] = {
+    "ppo_shared": ("uasep_env.training.ppo_shared", "PPO, one policy shared by every UAV"),
+    "ppo_residual_apf": (
+        "uasep_env.training.ppo_residual_apf",
+        "PPO residual on the APF (a zero action flies the APF)",
+    ),
+    "mappo": ("uasep_env.training.mappo", "skrl's MAPPO (centralised critic, shared actor)"),
+}

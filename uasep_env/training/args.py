@@ -1,0 +1,336 @@
+"""The training recipes' flags: one dataclass, one validated argument parser.
+
+Every recipe (:mod:`~uasep_env.training.ppo_shared`, :mod:`~uasep_env.training.ppo_residual_apf`,
+:mod:`~uasep_env.training.mappo`) reads its options from :class:`Args` (one ``--kebab-case``
+flag per field) through :func:`parse_args`; the drivers of ``train/`` (``seeds.py``,
+``reproduce.py``, ``compare_recipes.py``) use the same validators for the flags they share.
+A bad value is refused before anything runs with one line that names the flag
+(``uasep-train: error: argument --checkpoint-every: must be an integer >= 1, got '-5'``),
+never a traceback, and ``--help`` lists every flag with its default.
+
+This module imports neither torch nor stable-baselines3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NoReturn
+
+__all__ = [
+    "FIELDS",
+    "Args",
+    "HelpFormatter",
+    "OneLineParser",
+    "build_parser",
+    "choice",
+    "finite_float",
+    "hidden_sizes",
+    "non_negative_float",
+    "non_negative_int",
+    "out_path",
+    "parse_args",
+    "positive_float",
+    "positive_int",
+    "unit_interval",
+]
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (not the whole usage)."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``prog: error: message`` and a pointer to ``--help``; exit with status 2."""
+        message = " ".join(message.split())
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """``--help`` with every flag's default and the description as written."""
+
+
+def _number(kind: type, text: str) -> Any:
+    try:
+        value = kind(text)
+    except (TypeError, ValueError):
+        noun = "an integer" if kind is int else "a number"
+        raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
+    if kind is float and not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def _bounded(kind: type, low: float, high: float | None = None, strict: bool = False) -> Any:
+    """An argparse type: ``kind`` from text, finite, ``>= low`` (``> low``: strict), ``<= high``."""
+    noun = "an integer" if kind is int else "a number"
+    bound = f"> {low:g}" if strict else f">= {low:g}"
+    if high is not None:
+        bound = f"in {'(' if strict else '['}{low:g}, {high:g}]"
+
+    def parse(text: str) -> Any:
+        value = _number(kind, text)
+        if (value <= low if strict else value < low) or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"must be {noun} {bound}, got {text!r}")
+        return value
+
+    parse.__name__ = f"{kind.__name__} {bound}"  # argparse names the type in some errors
+    return parse
+
+
+positive_int = _bounded(int, 1)
+non_negative_int = _bounded(int, 0)
+positive_float = _bounded(float, 0.0, strict=True)
+non_negative_float = _bounded(float, 0.0)
+unit_interval = _bounded(float, 0.0, 1.0)
+
+
+def _int(text: str) -> int:
+    return int(_number(int, text))
+
+
+def finite_float(text: str) -> float:
+    """An argparse type: any finite number."""
+    return float(_number(float, text))
+
+
+def choice(*names: str) -> Callable[[str], str]:
+    """An argparse type: one of ``names`` (the error lists them)."""
+
+    def parse(text: str) -> str:
+        if text not in names:
+            raise argparse.ArgumentTypeError(f"must be one of {', '.join(names)}, got {text!r}")
+        return text
+
+    return parse
+
+
+def hidden_sizes(text: str) -> str:
+    """An argparse type: comma-separated layer widths, each >= 1 (``"128,128"``)."""
+    try:
+        sizes = [int(h) for h in text.split(",") if h.strip()]
+    except ValueError:
+        sizes = []
+    if not sizes or min(sizes) < 1:
+        raise argparse.ArgumentTypeError(f"comma-separated layer widths >= 1, got {text!r}")
+    return text
+
+
+def out_path(text: str) -> str:
+    """An argparse type: a folder to write to (not empty, not an existing file)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must be a folder path, got ''")
+    if Path(text).exists() and not Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} exists and is not a folder")
+    return text
+
+
+def config_overrides(text: str) -> str:
+    """An argparse type: space-separated ``KEY=VALUE`` env overrides (checked for syntax)."""
+    from uasep_env.evaluation.overrides import parse_config_overrides
+
+    try:
+        parse_config_overrides(text.split())
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    return text
+
+
+@dataclass
+class Args:
+    """Command-line options (``--total-timesteps``, ``--n-envs``, ...)."""
+
+    action_mode: str = "direct"  # "direct" (pure policy) or "residual_apf"
+    residual_scale: float = 0.5  # residual_apf: largest correction, fraction of max_accel
+    scenario: str = "random"
+    n_uavs: int = 3
+    n_obstacles: int = 1
+    # Fixed K (observation.k_uavs / k_obstacles): the observation's width does not depend on
+    # n_uavs or n_obstacles, so the policy flies any formation size / obstacle count.
+    k_uavs: int = 2  # nearest other UAVs observed (all of them at 3 UAVs)
+    k_obstacles: int = 1  # nearest obstacles observed (by distance to its predicted region)
+    episode_duration: float = 200.0  # s
+    config: str = ""  # more env overrides, space-separated KEY=VALUE ("reward.collision=0.5")
+    total_timesteps: int = 150_000_000  # agent-steps (the wall budget usually ends a run first)
+    max_minutes: float = 55.0  # wall-clock budget; training stops when it is spent
+    n_envs: int = 32
+    n_steps: int = 256  # rollout length per sub-environment
+    batch_size: int = 8192
+    n_epochs: int = 5
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    target_kl: float = 0.0  # stop an update's epochs past this KL (0: no limit)
+    critic_warmup: int = 0  # first PPO iterations that train the critic only
+    log_std_init: float = -0.5
+    hidden: str = "128,128"
+    activation: str = "tanh"
+    norm_obs: bool = True
+    norm_reward: bool = False  # on, the rare -max_steps collisions swamp the scale
+    seed: int = 0
+    checkpoint_every: int = 2_000_000  # agent-steps
+    eval_episodes: int = 50
+    out_dir: str = "runs/ppo_shared"
+    resume: str = ""  # a checkpoint directory to continue from (its progress, exactly)
+    overwrite: bool = False  # replace a previous run's files in out_dir (else: refused)
+    tensorboard: bool = False
+    torch_threads: int = 1
+    progress: bool = True
+
+
+def _scenario(text: str) -> str:
+    from uasep_env.scenarios import scenario_names
+
+    return choice(*scenario_names())(text)
+
+
+#: Each field's validator (argparse ``type=``; None for an on/off flag) and help text.
+FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
+    "action_mode": (choice("direct", "residual_apf"), "direct (pure policy) or residual_apf"),
+    "residual_scale": (positive_float, "residual_apf: largest correction, fraction of max_accel"),
+    "scenario": (_scenario, "scenario family of the training encounters"),
+    "n_uavs": (positive_int, "formation size"),
+    "n_obstacles": (non_negative_int, "obstacles per encounter"),
+    "k_uavs": (positive_int, "nearest other UAVs observed (observation.k_uavs)"),
+    "k_obstacles": (positive_int, "nearest obstacles observed (observation.k_obstacles)"),
+    "episode_duration": (positive_float, "seconds per episode"),
+    "config": (config_overrides, "more env overrides, space-separated KEY=VALUE"),
+    "total_timesteps": (positive_int, "agent-steps (the wall budget usually ends a run first)"),
+    "max_minutes": (positive_float, "wall-clock budget in minutes"),
+    "n_envs": (positive_int, "batched environments"),
+    "n_steps": (positive_int, "rollout length per sub-environment"),
+    "batch_size": (positive_int, "minibatch size (agent-steps)"),
+    "n_epochs": (positive_int, "epochs per update"),
+    "learning_rate": (positive_float, "Adam step size"),
+    "gamma": (unit_interval, "discount factor"),
+    "gae_lambda": (unit_interval, "GAE lambda"),
+    "clip_range": (positive_float, "PPO ratio clip"),
+    "ent_coef": (non_negative_float, "entropy bonus weight"),
+    "target_kl": (non_negative_float, "stop an update's epochs past this KL (0: no limit)"),
+    "critic_warmup": (non_negative_int, "first PPO iterations that train the critic only"),
+    "log_std_init": (finite_float, "initial log standard deviation of the actions"),
+    "hidden": (hidden_sizes, "hidden layer widths, comma-separated"),
+    "activation": (choice("tanh", "relu"), "hidden layers' activation"),
+    "norm_obs": (None, "normalise observations (running mean and variance)"),
+    "norm_reward": (None, "normalise returns"),
+    "seed": (non_negative_int, "training seed (environments: seed + e)"),
+    "checkpoint_every": (positive_int, "agent-steps between checkpoints"),
+    "eval_episodes": (non_negative_int, "validation encounters at the end"),
+    "out_dir": (out_path, "the run's folder"),
+    # Checked when the run starts (rundir.check_checkpoint: one line, status 1, naming what
+    # the folder lacks), as it always was.
+    "resume": (str, "a checkpoint folder to continue from"),
+    "overwrite": (None, "replace a previous run's files in --out-dir"),
+    "tensorboard": (None, "also write TensorBoard logs (out_dir/tb)"),
+    "torch_threads": (positive_int, "torch CPU threads"),
+    "progress": (None, "progress bar on stderr"),
+    # MAPPO's own (uasep_env.training.mappo.Args).
+    "value_loss_scale": (non_negative_float, "weight of the critic's loss"),
+    "grad_norm_clip": (non_negative_float, "gradient norm clip (0: none)"),
+}
+
+#: Fields of the env config: an invalid environment is reported against these flags.
+_ENV_FLAGS = ("n_uavs", "n_obstacles", "k_uavs", "k_obstacles", "episode_duration",
+              "residual_scale", "scenario")  # fmt: skip
+
+
+def build_parser(
+    defaults: Args | None = None, prog: str | None = None, description: str | None = None
+) -> OneLineParser:
+    """The parser of a recipe: one validated ``--kebab-case`` flag per field of ``defaults``.
+
+    A field listed in :data:`FIELDS` gets its validator and help; a subclass's other fields
+    are parsed by their annotation (``int``, a finite ``float``, ``bool`` on/off, ``str``).
+
+    Args:
+        defaults: The recipe's defaults (an :class:`Args` or a subclass's instance).
+        prog: The program name in messages (default: the script's).
+        description: ``--help``'s text.
+
+    Returns:
+        The parser (its ``parse_args`` gives a namespace of the fields).
+    """
+    base = defaults or Args()
+    parser = OneLineParser(prog=prog, description=description, formatter_class=HelpFormatter)
+    for f in dataclasses.fields(base):
+        flag = "--" + f.name.replace("_", "-")
+        default = getattr(base, f.name)
+        # A recipe's own field without an entry in FIELDS is typed by its annotation.
+        kind = getattr(f.type, "__name__", f.type)  # a type, or its name under PEP 563
+        fallback = {"bool": None, "int": _int, "float": finite_float}.get(str(kind), str)
+        validator, text = FIELDS.get(f.name, (fallback, f.name.replace("_", " ")))
+        if validator is None:
+            parser.add_argument(
+                flag, action=argparse.BooleanOptionalAction, default=default, help=text
+            )
+        else:
+            parser.add_argument(flag, type=validator, default=default, help=text)
+    return parser
+
+
+def parse_args(
+    argv: list[str] | None = None,
+    defaults: Args | None = None,
+    prog: str | None = None,
+    description: str | None = None,
+    check: Callable[[Any], str | None] | None = None,
+) -> Any:
+    """Build the recipe's :class:`Args` from the command line, or exit with one line.
+
+    Besides each flag's own range, the training seeds must lie in
+    :data:`~uasep_env.scenarios.TRAINING_SEEDS` and the flags must give a valid environment.
+
+    Args:
+        argv: The arguments (default ``sys.argv[1:]``).
+        defaults: The recipe's defaults; the result has their class.
+        prog: The program name in messages.
+        description: ``--help``'s text.
+        check: The recipe's own check: an error message naming the flag, or None.
+
+    Returns:
+        The options.
+    """
+    from uasep_env.scenarios import check_training_seeds
+
+    base = defaults or Args()
+    parser = build_parser(base, prog, description)
+    args = type(base)(**vars(parser.parse_args(argv)))
+    try:
+        check_training_seeds(args.seed, args.n_envs)
+    except ValueError as err:
+        parser.error(f"argument --seed: {err}")
+    try:
+        make_env_config(args)
+    except (TypeError, ValueError) as err:
+        names = [n for n in _ENV_FLAGS if n in str(err)] or ["config"]
+        parser.error(f"argument --{names[0].replace('_', '-')}: {err}")
+    problem = check(args) if check is not None else None
+    if problem:
+        parser.error(problem)
+    return args
+
+
+def make_env_config(args: Args) -> Any:
+    """The environment config of a run (reward weights at their defaults unless overridden)."""
+    from uasep_env import make_config
+    from uasep_env.evaluation import parse_config_overrides
+
+    base = make_config(
+        scenario=args.scenario,
+        n_uavs=args.n_uavs,
+        n_obstacles=args.n_obstacles,
+        episode_duration=args.episode_duration,
+        action={"mode": args.action_mode, "residual_scale": args.residual_scale},
+        observation={"k_uavs": args.k_uavs, "k_obstacles": args.k_obstacles},
+    )
+    return base.replace(**parse_config_overrides(args.config.split()))
+
+
+def hidden(args: Args) -> list[int]:
+    """The hidden layer widths of ``args.hidden``."""
+    return [int(h) for h in args.hidden.split(",") if h.strip()]

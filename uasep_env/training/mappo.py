@@ -1,0 +1,503 @@
+"""Train MAPPO: decentralised actors (one shared MLP), a centralised critic on ``state()``.
+
+The algorithm is skrl's :class:`skrl.multi_agents.torch.mappo.MAPPO` (Yu et al. 2022); this
+recipe only supplies the environment, the two networks and the run's bookkeeping, with the
+conventions of ``uasep-train ppo_shared`` (every flag of it applies where it means something):
+
+    uasep-train mappo                                       # 55 min budget, runs/mappo
+    uasep-train mappo --max-minutes 1 --out-dir /tmp/mappo
+    uasep-train mappo --resume runs/mappo/checkpoints/latest
+
+(``python train/mappo.py`` in a checkout is the same command.)
+
+* Environment: ``n_envs`` batched environments (:class:`uasep_env.envs.sb3.UAVSharedVecEnv`
+  under SB3's ``VecMonitor`` and ``VecNormalize``: the same observation normalisation as the
+  PPO recipes), seen by skrl as one multi-agent environment with ``num_envs = n_envs``:
+  agent ``uav_i`` observes its own K-nearest observation; its critic reads the
+  agent-specific global state: the global true state
+  (:func:`uasep_env.observation.global_state`) and the agent's own observation, normalised
+  by skrl's ``RunningStandardScaler``.
+* Networks: the actor is an MLP (``--hidden``, ``--activation``) giving the Gaussian's mean,
+  with a state-independent log-std, **shared by every UAV** (parameter sharing; skrl updates
+  it once per agent and iteration, each agent with its own Adam state). The critic is an MLP
+  of the same widths on the state. The actor exports to the project's policy checkpoint
+  (``policy.zip``: numpy MLP, observation normalisation stored), so ``uasep-eval --policy
+  policy.zip`` and ``train/select_checkpoint.py`` run it like the PPO policies.
+* Budget and outputs as ``ppo_shared.py``: ``--max-minutes`` (55) or ``--total-timesteps``
+  agent-steps; ``progress.csv`` and ``curves.png``; ``checkpoints/step_N/`` (``state.pt``
+  loaded weights-only, ``normalization.npz``, ``state.json``, ``policy.zip``) and
+  ``checkpoints/latest`` for ``--resume``; ``validation.json``. The run folder follows
+  :mod:`uasep_env.training.rundir`: a used ``--out-dir`` is refused unless ``--resume`` or
+  ``--overwrite``, files are written atomically, and ``--resume`` rewinds ``progress.csv``
+  to the checkpoint and continues its episode window.
+
+Options of ``ppo_shared.py`` MAPPO does not have (``--critic-warmup``, ``--norm-reward``,
+``--tensorboard``) are refused. ``--batch-size`` sets skrl's mini-batches per agent
+(``n_envs * n_steps / batch_size``). Requires the ``train`` extra and skrl.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import io
+import json
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uasep_env.training import ppo_shared
+from uasep_env.training.args import parse_args as _parse_args
+
+__all__ = ["Args", "SkrlView", "build", "export_policy", "load_checkpoint", "main",
+           "parse_args", "ppo_shared", "run", "save_checkpoint", "train"]  # fmt: skip
+
+
+@dataclass
+class Args(ppo_shared.Args):
+    """``ppo_shared.Args`` with MAPPO's own options and defaults."""
+
+    out_dir: str = "runs/mappo"
+    value_loss_scale: float = 1.0
+    grad_norm_clip: float = 0.5
+
+
+def _hidden(args: Args) -> list[int]:
+    return ppo_shared._hidden(args)
+
+
+def _check(args: Args) -> str | None:
+    """What MAPPO refuses of the shared flags (one message naming the flag), or None."""
+    for name, default in (("critic_warmup", 0), ("norm_reward", False), ("tensorboard", False)):
+        if getattr(args, name) != default:
+            return f"argument --{name.replace('_', '-')}: not supported by the MAPPO recipe"
+    if (args.n_envs * args.n_steps) % args.batch_size:
+        return (
+            f"argument --batch-size: {args.batch_size} must divide n_envs * n_steps = "
+            f"{args.n_envs * args.n_steps}"
+        )
+    return None
+
+
+def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:
+    """MAPPO's :class:`Args` from the command line, or exit with one line naming the flag."""
+    return _parse_args(
+        argv, defaults or Args(), prog=ppo_shared._prog(), description=__doc__, check=_check
+    )
+
+
+def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
+    """The normalised SB3 vector env, its skrl multi-agent view, and the MAPPO agent."""
+    import gymnasium
+    import torch
+    from skrl.memories.torch import RandomMemory
+    from skrl.models.torch import DeterministicMixin, GaussianMixin, Model
+    from skrl.multi_agents.torch.base import ExperimentCfg
+    from skrl.multi_agents.torch.mappo import MAPPO
+    from skrl.resources.preprocessors.torch import RunningStandardScaler
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+    from uasep_env.scenarios import check_training_seeds
+
+    check_training_seeds(args.seed, args.n_envs)
+    torch.manual_seed(args.seed)
+    base = UAVSharedVecEnv(n_envs=args.n_envs, config=config, seed=args.seed)
+    venv = VecNormalize(
+        VecMonitor(base), norm_obs=args.norm_obs, norm_reward=False, gamma=args.gamma
+    )
+    env = SkrlView(venv, base)
+    act = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[args.activation]
+
+    def mlp(n_in: int, n_out: int) -> torch.nn.Sequential:
+        layers: list[torch.nn.Module] = []
+        for width in _hidden(args):
+            layers += [torch.nn.Linear(n_in, width), act()]
+            n_in = width
+        return torch.nn.Sequential(*layers, torch.nn.Linear(n_in, n_out))
+
+    class Actor(GaussianMixin, Model):
+        def __init__(self, obs_space: Any, act_space: Any) -> None:
+            Model.__init__(self, observation_space=obs_space, action_space=act_space, device="cpu")
+            # Unclipped samples: skrl would take the log-probability of the clipped action
+            # (a biased gradient); the environment clips to its box itself, as for SB3's PPO.
+            GaussianMixin.__init__(self, clip_actions=False, role="policy")
+            self.net = mlp(self.num_observations, self.num_actions)
+            self.log_std = torch.nn.Parameter(torch.full((self.num_actions,), args.log_std_init))
+
+        def compute(self, inputs: dict, role: str = "") -> tuple:
+            return self.net(inputs["observations"]), {"log_std": self.log_std}
+
+    class Critic(DeterministicMixin, Model):
+        def __init__(self, state_space: Any) -> None:
+            Model.__init__(self, state_space=state_space, device="cpu")
+            DeterministicMixin.__init__(self, role="value")
+            self.net = mlp(self.num_states, 1)
+
+        def compute(self, inputs: dict, role: str = "") -> tuple:
+            return self.net(inputs["states"]), {}
+
+    uid0 = env.possible_agents[0]
+    actor = Actor(env.observation_spaces[uid0], env.action_spaces[uid0])
+    critic = Critic(env.state_spaces[uid0])
+    models = {uid: {"policy": actor, "value": critic} for uid in env.possible_agents}
+    memories = {
+        uid: RandomMemory(memory_size=args.n_steps, num_envs=args.n_envs, device="cpu")
+        for uid in env.possible_agents
+    }
+    cfg = {
+        "rollouts": args.n_steps,
+        "learning_epochs": args.n_epochs,
+        "mini_batches": args.n_envs * args.n_steps // args.batch_size,
+        "discount_factor": args.gamma,
+        "gae_lambda": args.gae_lambda,
+        "learning_rate": args.learning_rate,
+        "ratio_clip": args.clip_range,
+        # No value clipping, as the PPO recipes (SB3's clip_range_vf=None): skrl's clipped
+        # value loss gives no gradient to a prediction that moved more than the clip.
+        "value_clip": 0.0,
+        "entropy_loss_scale": args.ent_coef,
+        "value_loss_scale": args.value_loss_scale,
+        "grad_norm_clip": args.grad_norm_clip,
+        "kl_threshold": args.target_kl,
+        "state_preprocessor": RunningStandardScaler,
+        # Per-agent dicts: skrl 2.1 reads any dict here as one entry per agent (even its own
+        # empty defaults, which it then refuses), so every kwargs field is given per agent.
+        "learning_rate_scheduler_kwargs": {uid: {} for uid in env.possible_agents},
+        "observation_preprocessor_kwargs": {uid: {} for uid in env.possible_agents},
+        "state_preprocessor_kwargs": {
+            uid: {"size": env.state_spaces[uid], "device": "cpu"} for uid in env.possible_agents
+        },
+        "value_preprocessor": RunningStandardScaler,
+        "value_preprocessor_kwargs": {
+            uid: {"size": 1, "device": "cpu"} for uid in env.possible_agents
+        },
+        # No TensorBoard files or skrl checkpoints: this script keeps its own.
+        "experiment": ExperimentCfg(
+            directory=args.out_dir, write_interval=0, checkpoint_interval=0
+        ),
+    }
+    agent = MAPPO(
+        possible_agents=env.possible_agents,
+        models=models,
+        memories=memories,
+        observation_spaces=env.observation_spaces,
+        state_spaces=env.state_spaces,
+        action_spaces=env.action_spaces,
+        device="cpu",
+        cfg=cfg,
+    )
+    agent.init()
+    # skrl's own trainers switch training on; this loop is ours, so it must: without it skrl
+    # stores no transition and never updates (the agent starts in evaluation mode).
+    agent.enable_training_mode(True)
+    assert isinstance(env.state_spaces[uid0], gymnasium.spaces.Box)
+    return venv, env, agent
+
+
+class SkrlView:
+    """``n_envs`` batched environments as skrl sees a vectorised multi-agent environment.
+
+    Steps the normalised SB3 vector env (whose agents are ``(env, uav)`` pairs, auto-reset)
+    and regroups its arrays per agent, as torch tensors ``(n_envs, ...)``.
+    """
+
+    def __init__(self, venv: Any, base: Any) -> None:
+        import gymnasium
+
+        self.venv, self.base = venv, base
+        self.num_envs, self.n = base.n_envs, base.n_uavs
+        self.possible_agents = [f"uav_{i}" for i in range(self.n)]
+        self.agents = list(self.possible_agents)
+        self.num_agents = self.max_num_agents = self.n
+        self.observation_spaces = {a: venv.observation_space for a in self.possible_agents}
+        self.action_spaces = {a: venv.action_space for a in self.possible_agents}
+        clip = base.config.observation.clip
+        # The agent-specific global state of MAPPO (Yu et al. 2022): the global state and the
+        # agent's own (normalised) observation, so the shared critic knows whose return it
+        # predicts. (A one-hot agent id would not do: each agent's state normaliser would
+        # centre its constant column to zero.)
+        width = base.core.state().shape[-1] + int(np.prod(venv.observation_space.shape))
+        space = gymnasium.spaces.Box(-np.inf, np.inf, (width,), np.float32)
+        self.clip = clip
+        self.state_spaces = {a: space for a in self.possible_agents}
+        self.infos: list[dict] = []
+        self._obs: dict = {}
+
+    def _split(self, flat: np.ndarray) -> dict:
+        import torch
+
+        per = np.asarray(flat, dtype=np.float32).reshape(self.num_envs, self.n, -1)
+        return {a: torch.from_numpy(per[:, i].copy()) for i, a in enumerate(self.possible_agents)}
+
+    def reset(self) -> tuple[dict, dict]:
+        """Reset every environment; per-agent observations."""
+        self._obs = self._split(self.venv.reset())
+        return self._obs, {}
+
+    def state(self) -> dict:
+        """Every agent's critic input: its environment's global state and its observation."""
+        import torch
+
+        s = torch.from_numpy(np.asarray(self.base.core.state(), dtype=np.float32))
+        return {a: torch.cat([s, self._obs[a]], dim=-1) for a in self.possible_agents}
+
+    def step(self, actions: dict) -> tuple:
+        """Step with per-agent actions ``(n_envs, 3)``; finished environments auto-reset."""
+        import torch
+
+        stacked = np.stack([actions[a].numpy() for a in self.possible_agents], axis=1)
+        obs, rew, dones, infos = self.venv.step(stacked.reshape(-1, 3))
+        self.infos = infos
+        done = dones.reshape(self.num_envs, self.n)[:, :1]
+        # The time limit counts as an end: the global state holds the episode's progress, so
+        # a state at the limit is terminal, and skrl's GAE (time_limit_bootstrap off) would
+        # otherwise run on into the next episode, which the auto-reset has already begun.
+        term = torch.from_numpy(done.copy())
+        trunc = torch.zeros_like(term)
+        r = rew.reshape(self.num_envs, self.n)
+        rewards = {
+            a: torch.from_numpy(r[:, i : i + 1].copy()) for i, a in enumerate(self.possible_agents)
+        }
+        self._obs = self._split(obs)
+        return (
+            self._obs,
+            rewards,
+            {a: term for a in self.possible_agents},
+            {a: trunc for a in self.possible_agents},
+            {},
+        )
+
+
+def export_policy(agent: Any, venv: Any, config: Any, args: Args, path: Path, info: dict) -> Path:
+    """Write the shared actor and the observation normalisation as a policy checkpoint."""
+    import torch
+
+    actor = agent.policies[agent.possible_agents[0]]
+    linears = [m for m in actor.net if isinstance(m, torch.nn.Linear)]
+    info = {**info, "implementation": "skrl MAPPO"}
+    return ppo_shared.export_actor(linears, venv, config, args, path, "MAPPO", info)
+
+
+def _modules(agent: Any) -> dict:
+    return {
+        uid: {k: v.state_dict() for k, v in mods.items() if v is not None}
+        for uid, mods in agent.checkpoint_modules.items()
+    }
+
+
+def save_checkpoint(
+    agent: Any, venv: Any, config: Any, args: Args, directory: Path, info: dict
+) -> None:
+    """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
+
+    As ``ppo_shared.save_checkpoint``: written under a temporary name and renamed into place
+    when complete (:func:`uasep_env.training.rundir.publish_dir`), ``state.json`` last.
+    """
+    import torch
+
+    from uasep_env.atomic import atomic_write
+    from uasep_env.jsonio import dumps
+    from uasep_env.training.rundir import publish_dir
+
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        buf = io.BytesIO()
+        torch.save({"agent": _modules(agent), "torch_rng": torch.get_rng_state()}, buf)
+        atomic_write(tmp / "state.pt", buf.getvalue())
+        o = venv.obs_rms
+        buf = io.BytesIO()
+        np.savez(buf, obs_mean=o.mean, obs_var=o.var, obs_count=o.count)
+        atomic_write(tmp / "normalization.npz", buf.getvalue())
+        export_policy(agent, venv, config, args, tmp / "policy.zip", info)
+        atomic_write(
+            tmp / "state.json", dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+        )
+        publish_dir(tmp, directory)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)  # the previous checkpoint stays as it was
+        raise
+
+
+def load_checkpoint(agent: Any, venv: Any, directory: Path) -> dict:
+    """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling)."""
+    import torch
+
+    from uasep_env.training.rundir import check_checkpoint
+
+    directory = check_checkpoint(directory)
+    state = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
+    for uid, mods in agent.checkpoint_modules.items():
+        for k, v in mods.items():
+            if v is not None:
+                v.load_state_dict(state["agent"][uid][k])
+    torch.set_rng_state(state["torch_rng"])
+    with np.load(directory / "normalization.npz", allow_pickle=False) as z:
+        venv.obs_rms.mean, venv.obs_rms.var = z["obs_mean"], z["obs_var"]
+        venv.obs_rms.count = float(z["obs_count"])
+    return json.loads((directory / "state.json").read_text())
+
+
+def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
+    """The training loop (skrl's trainer loop, with the recipes' bookkeeping)."""
+    import torch
+
+    from uasep_env.atomic import atomic_symlink
+    from uasep_env.training.rundir import ProgressLog, check_checkpoint, rewind
+
+    venv, env, agent = build(args, config)
+    resumed: dict = {}
+    if args.resume:
+        resumed = load_checkpoint(agent, venv, check_checkpoint(Path(args.resume)))
+        rewind(out, ppo_shared.CSV_FIELDS, int(resumed["agent_steps"]))
+        print(f"resumed from {args.resume} at {int(resumed['agent_steps']):,} agent-steps")
+    steps, wall_offset = int(resumed.get("agent_steps", 0)), float(resumed.get("wall_s", 0.0))
+    per_step = args.n_envs * env.n
+    t0 = time.perf_counter() - wall_offset
+    window: collections.deque = collections.deque(
+        (tuple(e) for e in resumed.get("window", ())), maxlen=200
+    )
+    episodes = int(resumed.get("episodes", 0))
+    log = ProgressLog(out / "progress.csv", ppo_shared.CSV_FIELDS)
+    next_ckpt = (steps // args.checkpoint_every + 1) * args.checkpoint_every
+    bar = None
+    if args.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=args.total_timesteps,
+            initial=steps,
+            unit="step",
+            unit_scale=True,
+            desc="mappo",
+            dynamic_ncols=True,
+        )
+
+    def summary() -> dict:
+        if not window:
+            return {}
+        w = np.array(window, dtype=float)
+        names = (
+            "return_mean",
+            "collision_rate",
+            "loss_of_separation_rate",
+            "max_deviation_mean",
+            "episode_length_mean",
+        )
+        return {k: float(np.mean(w[:, i])) for i, k in enumerate(names)}
+
+    def facts() -> dict:
+        return {
+            "agent_steps": steps,
+            "wall_s": time.perf_counter() - t0,
+            "episodes": episodes,
+            **summary(),
+        }
+
+    def checkpoint() -> None:
+        d = out / "checkpoints" / f"step_{steps}"
+        window_rows = [[float(x) for x in e] for e in window]
+        save_checkpoint(agent, venv, config, args, d, {**facts(), "window": window_rows})
+        atomic_symlink(d.name, out / "checkpoints" / "latest")
+
+    obs, _ = env.reset()
+    states = env.state()
+    t, horizon = 0, max(1, args.total_timesteps // per_step)
+    while steps < args.total_timesteps and time.perf_counter() - t0 < args.max_minutes * 60:
+        for _ in range(args.n_steps):  # one rollout, then skrl's update
+            agent.pre_interaction(timestep=t, timesteps=horizon)
+            with torch.no_grad():
+                actions, _ = agent.act(obs, states, timestep=t, timesteps=horizon)
+                next_obs, rewards, term, trunc, infos = env.step(actions)
+                next_states = env.state()
+                agent.record_transition(
+                    observations=obs,
+                    states=states,
+                    actions=actions,
+                    rewards=rewards,
+                    next_observations=next_obs,
+                    next_states=next_states,
+                    terminated=term,
+                    truncated=trunc,
+                    infos=infos,
+                    timestep=t,
+                    timesteps=horizon,
+                )
+            agent.post_interaction(timestep=t, timesteps=horizon)
+            obs, states, t, steps = next_obs, next_states, t + 1, steps + per_step
+            for k, info in enumerate(env.infos):
+                if k % env.n == 0 and "episode_safety" in info:
+                    s, ep = info["episode_safety"], info.get("episode", {"r": np.nan, "l": np.nan})
+                    window.append(
+                        (
+                            ep["r"],
+                            s["collision"],
+                            s["loss_of_separation"],
+                            s["max_deviation"],
+                            ep["l"],
+                        )
+                    )
+                    episodes += 1
+            if steps >= next_ckpt:
+                checkpoint()
+                next_ckpt += args.checkpoint_every
+        s = summary()
+        log.write(
+            {
+                "agent_steps": steps,
+                "wall_s": round(time.perf_counter() - t0, 2),
+                "episodes": episodes,
+                **s,
+            }
+        )
+        if bar is not None:
+            bar.update(steps - bar.n)
+            if s:
+                bar.set_postfix(
+                    ret=f"{s['return_mean']:.0f}",
+                    coll=f"{s['collision_rate']:.1%}",
+                    dev=f"{s['max_deviation_mean']:.1f}m",
+                )
+    checkpoint()
+    log.close()
+    if bar is not None:
+        bar.close()
+    return agent, venv, facts()
+
+
+def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
+    """Train (or resume), export the actor, validate against the APF; returns the summary."""
+    args = parse_args(argv, defaults)
+    import torch  # lazy: the training extra
+
+    torch.set_num_threads(args.torch_threads)
+    from uasep_env.training.rundir import check_checkpoint, plot_curves, prepare_out_dir
+
+    config = ppo_shared.make_env_config(args)
+    out = Path(args.out_dir)
+    if args.resume:
+        check_checkpoint(Path(args.resume))
+    prepare_out_dir(out, args.resume, args.overwrite)
+    agent, venv, info = train(args, config, out)
+    policy_path = export_policy(agent, venv, config, args, out / "policy.zip", info)
+    plot_curves(out / "progress.csv", out / "curves.png", ppo_shared.CSV_FIELDS, "MAPPO (skrl)")
+    return ppo_shared.write_validation(out, config, policy_path, info, args.eval_episodes)
+
+
+def cli(argv: list[str] | None = None) -> None:
+    """Run :func:`main`; a file that cannot be written (a full disk) is one line, status 1."""
+    try:
+        main(argv)
+    except OSError as err:
+        sys.exit(f"{ppo_shared._prog() or Path(sys.argv[0]).name}: error: {err}")
+
+
+run = cli  # ``uasep-train mappo``

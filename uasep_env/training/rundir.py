@@ -1,0 +1,240 @@
+"""A training run's folder: never mixed with another run, checkpoints that resume exactly.
+
+Shared by the recipes (:mod:`~uasep_env.training.ppo_shared`, its residual variant and
+:mod:`~uasep_env.training.mappo`): :func:`prepare_out_dir` is where a run's folder is
+claimed and created. The rules:
+
+* A run claims its ``--out-dir`` for its whole life (:mod:`uasep_env.runlock`): a second
+  run started into the same folder fails at once, naming it.
+* A fresh run refuses a non-empty ``--out-dir`` (a previous run's files would be mixed with
+  its own); ``--overwrite`` first deletes the files a run writes there (``progress.csv``,
+  ``curves.png``, ``policy.zip``, ``validation.json``, ``checkpoints/``, ``tb/``; nothing
+  else), ``--resume CHECKPOINT`` continues the run.
+* Every file is written atomically (:mod:`uasep_env.atomic`); a checkpoint folder's
+  ``state.json`` is written last, so a folder without it (a kill while saving) is incomplete,
+  and ``checkpoints/latest`` is swapped to a folder only once it is complete.
+* ``progress.csv`` is appended (one row per PPO iteration, flushed and ``fsync``-ed); a kill
+  can tear its last line, which the reader drops. ``--resume`` first rewrites it (atomically)
+  to the rows up to the checkpoint, and deletes the checkpoints saved after it: the resumed
+  run continues from exactly the checkpoint's progress (agent-steps, episodes, the window of
+  the last 200 episodes, wall time), not from where the killed process happened to stop.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import shutil
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write, fsync_dir
+from uasep_env.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder
+
+#: What a run writes in its folder (``--overwrite`` deletes these, and only these).
+RUN_FILES = ("progress.csv", "curves.png", "policy.zip", "validation.json")
+RUN_DIRS = ("checkpoints", "tb")
+#: The files of a complete checkpoint folder (``state.json`` last).
+CHECKPOINT_FILES = ("state.pt", "normalization.npz", "policy.zip", "state.json")
+
+
+class RunError(SystemExit):
+    """A run that cannot start: one line for the user (exit status 1)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(f"{Path(sys.argv[0]).name}: error: {message}")
+
+
+def prepare_out_dir(out: Path, resume: str, overwrite: bool) -> None:
+    """Refuse to mix runs: check (or clear, with ``overwrite``) the output folder.
+
+    Raises:
+        RunError: ``out`` holds files and neither ``resume`` nor ``overwrite`` is given, or
+            both are given, or another live run has claimed ``out``.
+    """
+    if resume and overwrite:
+        raise RunError("--resume and --overwrite: choose one")
+    if out.exists() and not out.is_dir():
+        raise RunError(f"--out-dir {out} exists and is not a folder")
+    try:
+        claim_run_folder(out)  # first: two runs started together must not both see it empty
+    except RunFolderBusy as err:
+        raise RunError(f"--out-dir {err}") from None
+    used = any(p.name != LOCK_NAME for p in out.iterdir())
+    if used and overwrite:
+        for name in RUN_FILES:
+            (out / name).unlink(missing_ok=True)
+        for name in RUN_DIRS:
+            shutil.rmtree(out / name, ignore_errors=True)
+    elif used and not resume:
+        raise RunError(
+            f"--out-dir {out} is not empty (a previous run?); continue it with --resume "
+            f"{out / 'checkpoints' / 'latest'}, replace it with --overwrite, or choose another "
+            "--out-dir"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def check_checkpoint(directory: Path) -> Path:
+    """The resolved checkpoint folder, or a one-line error naming what is missing.
+
+    Raises:
+        RunError: The folder does not exist or lacks one of :data:`CHECKPOINT_FILES`.
+    """
+    if not directory.is_dir():
+        raise RunError(f"--resume {directory}: no such checkpoint folder")
+    missing = [f for f in CHECKPOINT_FILES if not (directory / f).is_file()]
+    if missing:
+        raise RunError(
+            f"--resume {directory}: incomplete checkpoint (missing {', '.join(missing)}; "
+            "a kill while it was saved?); resume from an earlier checkpoints/step_N"
+        )
+    return directory.resolve()
+
+
+def read_progress(path: Path) -> list[dict[str, str]]:
+    """The rows of ``progress.csv``; a torn last line (a kill mid-write) is dropped."""
+    if not path.exists():
+        return []
+    text = path.read_text(encoding="utf-8", errors="replace")
+    if text and not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]  # the torn last row
+    rows = list(csv.DictReader(io.StringIO(text)))
+    return [r for r in rows if None not in r.values() and None not in r]
+
+
+def write_rows(path: Path, fields: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
+    """Write ``rows`` as a whole CSV file, atomically."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: r.get(k, "") for k in fields})
+    atomic_write(path, buf.getvalue())
+
+
+def rewind(out: Path, fields: tuple[str, ...], agent_steps: int) -> None:
+    """Make ``out`` what it was when the checkpoint at ``agent_steps`` was saved.
+
+    ``progress.csv`` keeps the rows up to ``agent_steps`` (rewritten atomically: there is no
+    moment when a kill would leave it truncated), and checkpoints saved after it are deleted
+    (they belong to the abandoned continuation).
+    """
+    for tmp in [*out.glob(".*.tmp*"), *out.glob("checkpoints/.*")]:  # a killed process's
+        if tmp.is_dir() and not tmp.is_symlink():  # unfinished writes
+            shutil.rmtree(tmp)
+        else:
+            tmp.unlink()
+    progress = out / "progress.csv"
+    if progress.exists():
+        rows = [r for r in read_progress(progress) if int(r["agent_steps"]) <= agent_steps]
+        write_rows(progress, fields, rows)
+    for d in (out / "checkpoints").glob("step_*"):
+        step = d.name.removeprefix("step_")
+        if step.isdigit() and int(step) > agent_steps and not d.is_symlink():
+            shutil.rmtree(d)
+    resumed = out / "checkpoints" / f"step_{agent_steps}"
+    if resumed.is_dir():
+        atomic_symlink(resumed.name, out / "checkpoints" / "latest")
+
+
+def publish_dir(tmp: Path, final: Path) -> None:
+    """Move the complete folder ``tmp`` to ``final`` (replacing an older one of that name).
+
+    A new name is one atomic rename. Replacing takes two (the old folder aside, the new one
+    in): a kill between them leaves no ``final``, which ``--resume`` reports as missing
+    (never a mix of old and new files).
+    """
+    fsync_dir(tmp)
+    if final.exists():
+        old = final.with_name(f".{final.name}.old-{os.getpid()}")
+        os.rename(final, old)
+        os.rename(tmp, final)
+        shutil.rmtree(old)
+    else:
+        os.rename(tmp, final)
+    fsync_dir(final.parent)
+
+
+class ProgressLog:
+    """``progress.csv`` opened for appending: a header when new, each row flushed and synced."""
+
+    def __init__(self, path: Path, fields: tuple[str, ...]) -> None:
+        new = not path.exists() or path.stat().st_size == 0
+        if new:
+            write_rows(path, fields, [])
+        self._fh = path.open("a", newline="", encoding="utf-8")
+        self._csv = csv.DictWriter(self._fh, fieldnames=fields, lineterminator="\n")
+
+    def write(self, row: dict[str, Any]) -> None:
+        """Append one row, durably."""
+        self._csv.writerow(row)
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        """Close the file."""
+        self._fh.close()
+
+
+#: Episodes a progress row's window must hold to be plotted (the run's first rows are noise).
+MIN_PLOTTED_EPISODES = 20
+
+
+def plot_curves(
+    csv_path: Path, png_path: Path, fields: tuple[str, ...], title: str = ""
+) -> Path | None:
+    """Learning curves (return, collision and loss-of-separation rates, deviation) as PNG.
+
+    Returns:
+        The figure's path, or None when nothing was written: no row of ``progress.csv``
+        holds :data:`MIN_PLOTTED_EPISODES` finished episodes yet (a short run), or
+        matplotlib is missing; either is said in one line on stderr, never a blank figure.
+    """
+    rows = [
+        r
+        for r in read_progress(csv_path)
+        if r.get("return_mean") and int(r["episodes"]) >= MIN_PLOTTED_EPISODES
+    ]
+    if not rows:
+        print(
+            f"{png_path.name} not written: no row of {csv_path.name} has "
+            f"{MIN_PLOTTED_EPISODES} finished episodes yet (a longer run has curves)",
+            file=sys.stderr,
+        )
+        return None
+    try:
+        import matplotlib
+    except ImportError:
+        print(f"{png_path.name} not written: it needs matplotlib (the viz extra)", file=sys.stderr)
+        return None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = {k: np.array([float(r[k]) for r in rows]) for k in fields}
+    fig, axes = plt.subplots(2, 4, figsize=(16, 6.5), sharey="col")
+    panels = (
+        ("return_mean", "mean return per agent"),
+        ("collision_rate", "collision rate"),
+        ("loss_of_separation_rate", "loss-of-separation rate"),
+        ("max_deviation_mean", "mean max deviation (m)"),
+    )
+    for row, (x_key, x_label, scale) in enumerate(
+        (("agent_steps", "agent-steps (millions)", 1e-6), ("wall_s", "wall time (min)", 1 / 60))
+    ):
+        for col, (key, label) in enumerate(panels):
+            ax = axes[row, col]
+            ax.plot(data[x_key] * scale, data[key], lw=1.2)
+            ax.set_xlabel(x_label)
+            ax.set_title(label, fontsize=10)
+            ax.grid(alpha=0.3)
+    fig.suptitle(title or csv_path.parent.name)
+    fig.tight_layout()
+    with atomic_output(png_path) as fh:
+        fig.savefig(fh, format="png", dpi=90)
+    plt.close(fig)
+    return png_path
