@@ -34,7 +34,7 @@ import numpy as np
 from scipy.stats import binomtest
 
 from uasep_env import make_config, reachable, real_traffic
-from uasep_env.atomic import atomic_write
+from uasep_env.atomic import atomic_output, atomic_write
 from uasep_env.jsonio import write_json
 from uasep_env.obstacles import AIRCRAFT_CLASSES
 from uasep_env.reachable.calibrated import calibrated_region, load_table
@@ -323,8 +323,8 @@ def plot(res: dict[str, Any], path: Path) -> None:
         ax.set_ylim(0, 1.02)
     axs[0][0].legend(fontsize=6, ncol=1)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    with atomic_output(path) as fh:  # all or nothing, like every output
+        fig.savefig(fh, format=path.suffix[1:] or "png", dpi=110)
     plt.close(fig)
 
 

@@ -140,7 +140,7 @@ def _fields(tmp_path):
     dim = desc["obs_dim"]
     cases = {
         "clip_nan": ({**desc, "clip_obs": float("nan")}, raw, r"clip_obs must be a finite number"),
-        "clip_negative": ({**desc, "clip_obs": -1.0}, raw, r"clip_obs .* in \(0, .*got -1.0"),
+        "clip_negative": ({**desc, "clip_obs": -1.0}, raw, r"clip_obs .* in \[0.001, .*got -1.0"),
         "eps_nan": ({**desc, "obs_epsilon": float("nan")}, raw, "obs_epsilon must be"),
         "eps_huge": (
             json.dumps(desc).replace('"obs_epsilon": 1e-08', '"obs_epsilon": 1e400'),

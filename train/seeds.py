@@ -48,6 +48,7 @@ import numpy as np
 
 from uasep_env.atomic import atomic_output, atomic_write
 from uasep_env.metrics.statistics import no_worse_rate
+from uasep_env.runlock import RunFolderBusy, claim_run_folder
 from uasep_env.training.args import HelpFormatter, OneLineParser, non_negative_int, positive_int
 
 HERE = Path(__file__).resolve().parent
@@ -512,7 +513,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     taken = [q for q in targets if q.exists()]
     if taken and not args.force:
         p.error(f"{taken[0]} exists (pass --force to replace it)")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        claim_run_folder(out)  # one driver per folder (each seed's run claims its own)
+    except RunFolderBusy as err:
+        p.error(f"argument --out-dir: {err}")
     command = "python train/seeds.py " + shlex.join(argv + (["--", *extra] if extra else []))
 
     t0 = time.perf_counter()

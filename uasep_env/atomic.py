@@ -8,22 +8,101 @@ POSIX), and the folder is ``fsync``-ed so the rename itself survives a power cut
 point leaves the old file or the new one, never a mix; an error (a full disk) removes the
 temporary file, leaves the old file as it was, and raises an :class:`OSError` whose message is
 one line naming the target. :func:`atomic_symlink` swaps a symbolic link the same way.
+
+What the target already is decides how it is written (:func:`output_kind`):
+
+* a regular file, or nothing: replaced atomically as above; an existing file keeps its
+  permission bits (and, where allowed, its owner), and one the user may not write is refused
+  as :func:`open` would refuse it;
+* a symbolic link: the file it points to is replaced, the link stays a link;
+* a standard stream (``/dev/stdout``, ``/dev/stderr``, ``/dev/fd/N``, ``/proc/self/fd/N``):
+  written through that open descriptor, at its current offset (``--csv /dev/stdout > f``
+  fills ``f`` like any program's output);
+* a character device or a FIFO (``/dev/null``, a named pipe): written through, in place;
+* anything else (a block device, a socket, a folder): refused, nothing written.
+
+Written-through outputs are not atomic (a stream cannot be rolled back): that is what the
+user asked for by naming one. A special file is never replaced by a regular one.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import re
 import secrets
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_output", "atomic_symlink", "atomic_write", "fsync_dir"]
+__all__ = ["atomic_output", "atomic_symlink", "atomic_write", "fsync_dir", "output_kind"]
 
 # Indirection so that tests can simulate a full disk (``monkeypatch.setattr(atomic, "_open",
 # ...)``) for every writer at once.
 _open = open
+
+
+#: ``/dev/stdout`` and friends: the paths that name one of the process's descriptors.
+_STREAM = re.compile(
+    r"/dev/(?:std(?P<std>in|out|err)|fd/(?P<fd>\d+))|/proc/(?P<pid>self|\d+)/fd/(?P<pfd>\d+)"
+)
+_STD_FDS = {"in": 0, "out": 1, "err": 2}
+
+
+def _stream_fd(path: Path) -> int | None:
+    """The descriptor of this process that ``path`` names, directly or through links, or None.
+
+    Links are followed one at a time (``/dev/stdout`` -> ``/proc/self/fd/1``): resolving
+    them all at once would go through the descriptor to the file behind it, and that file
+    would then be replaced instead of written through.
+    """
+    current = os.path.abspath(path)
+    for _ in range(40):  # the kernel's own limit on a chain of links
+        m = _STREAM.fullmatch(current)
+        if m is not None and m["pid"] in (None, "self", str(os.getpid())):
+            return _STD_FDS[m["std"]] if m["std"] else int(m["fd"] or m["pfd"])
+        head, name = os.path.split(current)
+        real_head = os.path.realpath(head)
+        if real_head != head:  # a link among the folders: look at the real folder
+            current = os.path.join(real_head, name)
+        elif os.path.islink(current):
+            current = os.path.normpath(os.path.join(head, os.readlink(current)))
+        else:
+            return None
+    return None
+
+
+def output_kind(path: str | Path) -> str:
+    """How :func:`atomic_output` would write ``path``; nothing is opened or written.
+
+    Returns:
+        ``"stream"`` (a descriptor of this process: written through), ``"device"`` (a
+        character device or FIFO: written through), ``"link"`` (a symbolic link: the file it
+        points to is replaced), ``"file"`` (an existing regular file: replaced) or ``"new"``.
+
+    Raises:
+        OSError: A target that is never written (a block device, a socket, a folder): one
+            line naming the path and what it is.
+    """
+    p = Path(path)
+    if _stream_fd(p) is not None:
+        return "stream"
+    try:
+        st = os.stat(p)
+    except OSError:  # nothing there (or no way there): the writer reports what goes wrong
+        return "link" if os.path.islink(p) else "new"  # a dangling link: its target is made
+    mode = st.st_mode
+    if stat.S_ISCHR(mode) or stat.S_ISFIFO(mode):
+        return "device"
+    if stat.S_ISREG(mode):
+        return "link" if os.path.islink(p) else "file"
+    what = {stat.S_IFBLK: "a block device", stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a directory"}
+    message = f"cannot write {p}: it is {what.get(stat.S_IFMT(mode), 'a special file')}"
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(errno.EISDIR, message)
+    raise OSError(f"{message}; refusing to write to it or replace it")
 
 
 def _temp_name(path: Path) -> Path:
@@ -45,9 +124,12 @@ def fsync_dir(directory: str | Path) -> None:
         os.close(fd)
 
 
-def _one_line(path: Path, err: OSError) -> OSError:
+def _one_line(path: Path, err: OSError, *, kept: bool = True) -> OSError:
+    if (err.strerror or str(err)).startswith(f"cannot write {path}"):  # already one line
+        return err
     reason = err.strerror or str(err) or type(err).__name__
-    message = f"cannot write {path}: {reason}; the previous file, if any, is unchanged"
+    after = "; the previous file, if any, is unchanged" if kept else ""
+    message = f"cannot write {path}: {reason}{after}"
     return type(err)(err.errno, message) if err.errno else OSError(message)
 
 
@@ -73,6 +155,19 @@ def atomic_output(path: str | Path, mode: str = "wb", **kwargs: Any) -> Iterator
     target = Path(path)
     if mode == "w":
         kwargs.setdefault("encoding", "utf-8")
+    kind = output_kind(target)
+    if kind in ("stream", "device"):
+        with _through(target, kind, mode, kwargs) as fh:
+            yield fh
+        return
+    if kind == "link":
+        target = Path(os.path.realpath(target))  # replace what it points to, keep the link
+    old = os.stat(target) if kind != "new" and target.exists() else None
+    if old is not None and not os.access(target, os.W_OK):
+        raise PermissionError(
+            errno.EACCES,
+            f"cannot write {target}: permission denied (mode {stat.filemode(old.st_mode)})",
+        )
     tmp = _temp_name(target)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -81,6 +176,8 @@ def atomic_output(path: str | Path, mode: str = "wb", **kwargs: Any) -> Iterator
         raise _one_line(target, err) from err
     try:
         try:
+            if old is not None:
+                _keep_identity(fh.fileno(), old)
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
@@ -94,6 +191,34 @@ def atomic_output(path: str | Path, mode: str = "wb", **kwargs: Any) -> Iterator
             raise _one_line(target, err) from err
         raise
     fsync_dir(target.parent)
+
+
+def _keep_identity(fd: int, old: os.stat_result) -> None:
+    """Give the new file the old one's permission bits and, where allowed, its owner."""
+    os.fchmod(fd, stat.S_IMODE(old.st_mode))
+    if (old.st_uid, old.st_gid) != (os.geteuid(), os.getegid()):
+        with contextlib.suppress(OSError):  # only root may give a file away
+            os.fchown(fd, old.st_uid, old.st_gid)
+
+
+@contextlib.contextmanager
+def _through(target: Path, kind: str, mode: str, kwargs: dict[str, Any]) -> Iterator[IO[Any]]:
+    """Write straight into a stream or a device (not atomic: it cannot be rolled back)."""
+    try:
+        if kind == "stream":
+            fd = _stream_fd(target)
+            assert fd is not None
+            # A duplicate shares the descriptor's offset: a redirected stdout is appended to.
+            fh = os.fdopen(os.dup(fd), mode, **kwargs)
+        else:
+            fh = _open(target, mode, **kwargs)
+    except OSError as err:
+        raise _one_line(target, err, kept=False) from err
+    try:
+        with fh:
+            yield fh
+    except OSError as err:
+        raise _one_line(target, err, kept=False) from err
 
 
 def atomic_write(path: str | Path, data: bytes | str) -> Path:

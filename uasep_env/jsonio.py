@@ -26,7 +26,17 @@ import numpy as np
 
 from uasep_env.atomic import atomic_write
 
-__all__ = ["OMIT", "PLAIN", "dumps", "json_depth", "to_plain", "write_json"]
+__all__ = [
+    "OMIT",
+    "PLAIN",
+    "DuplicateKeyError",
+    "dumps",
+    "json_depth",
+    "json_shape",
+    "loads_unique",
+    "to_plain",
+    "write_json",
+]
 
 #: Field-metadata key: a function applied to the field's value before conversion.
 PLAIN = "uasep_plain"
@@ -103,6 +113,10 @@ def write_json(value: Any, path: str | Path) -> Path:
     return atomic_write(path, data)
 
 
+#: What :func:`json_depth` looks at: an escape pair, a quote, a bracket.
+_TOKENS = re.compile(r'\\.|["\[\]{}]', re.DOTALL)
+
+
 def json_depth(text: str) -> int:
     """Deepest ``[``/``{`` nesting of JSON text, found without parsing it (strings skipped).
 
@@ -114,9 +128,64 @@ def json_depth(text: str) -> int:
     Returns:
         The largest number of open brackets at any point.
     """
-    # The unrolled form keeps the regex engine from stacking one frame per character.
-    bare = re.sub(r'"[^"\\]*(?:\\.[^"\\]*)*"', '""', text)
-    codes = np.frombuffer(bare.encode("utf-8"), np.uint8)
-    opens = (codes == ord("[")) | (codes == ord("{"))
-    closes = (codes == ord("]")) | (codes == ord("}"))
-    return int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))
+    return json_shape(text)[0]
+
+
+def json_shape(text: str) -> tuple[int, int]:
+    """Deepest nesting and number of arrays and objects of JSON text, without parsing it.
+
+    What :func:`json.loads` would build is bounded by them (a list or dict costs at least
+    56 bytes of Python objects, ``[]`` two bytes of text), so a reader can refuse before.
+
+    Args:
+        text: JSON text (need not be valid).
+
+    Returns:
+        ``(deepest nesting, number of [ and { outside strings)``.
+    """
+    # One pass over the tokens that matter: linear time, little memory. (A regex that skips
+    # whole strings backtracks quadratically on an unterminated string of escaped quotes.)
+    # Exact for valid JSON; on invalid JSON exact up to the first backslash outside a string,
+    # which is where json.loads stops anyway.
+    depth = deepest = containers = 0
+    inside = False
+    for match in _TOKENS.finditer(text):
+        token = match[0]
+        if token == '"':
+            inside = not inside
+        elif inside or len(token) == 2:  # in a string, or an escape pair
+            continue
+        elif token in "[{":
+            depth += 1
+            containers += 1
+            deepest = max(deepest, depth)
+        else:
+            depth -= 1
+    return deepest, containers
+
+
+class DuplicateKeyError(ValueError):
+    """A JSON object names one key twice (:func:`json.loads` would silently keep the last)."""
+
+
+def _unique_pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            shown = repr(key) if len(key) <= 60 else repr(key[:57]) + "..."
+            raise DuplicateKeyError(f"duplicate key {shown}")
+        out[key] = value
+    return out
+
+
+def loads_unique(text: str | bytes) -> Any:
+    """:func:`json.loads`, refusing an object that names a key twice.
+
+    Files from elsewhere are read with it: with two ``clip_obs`` fields, which one a reader
+    obeys should not be decided silently.
+
+    Raises:
+        DuplicateKeyError: An object with a repeated key (a :class:`ValueError`, named).
+        json.JSONDecodeError: Not JSON.
+    """
+    return json.loads(text, object_pairs_hook=_unique_pairs)

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from uasep_env.capacity import check_count, record_bytes
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.envs.core import EnvCore
 from uasep_env.metrics import EpisodeRecord
@@ -99,6 +100,7 @@ def _run_batch(
     settle_time: float,
 ) -> list[Episode]:
     e = len(seeds)
+    check_count("batch_size", e, cfg, extra_bytes=record_bytes(cfg))  # with the records
     core = EnvCore(cfg, n_envs=e)
     w = core.world
     obs = core.reset(seed=list(seeds))

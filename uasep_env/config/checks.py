@@ -25,6 +25,14 @@ MAX_TURN_RATE = 2.0 * math.pi  # rad/s (a full turn per second)
 MAX_TIME = 1.0e6  # s (episode duration, switch times)
 MAX_WEIGHT = 1.0e6  # reward weights
 MAX_OBS = 1.0e6  # observation scales, clip bound and sensing range
+# Lower bounds where a tiny positive value is accepted by "> 0" but describes nothing
+# (an aircraft that cannot accelerate, a step of a picosecond: 10^14 steps per episode).
+MIN_DT = 1.0e-3  # s
+MIN_ACCEL = 1.0e-2  # m/s^2
+MIN_SPEED = 1.0e-2  # m/s
+#: Most environment steps in one episode (episode_duration / (dt * decision_interval)):
+#: every step is simulated and, in an evaluation, recorded.
+MAX_STEPS = 1_000_000
 
 
 def check(cond: bool, name: str, value: object, what: str) -> None:
@@ -87,8 +95,12 @@ def check_finite(name: str, value: float, bound: float | None = None) -> None:
         check(abs(value) <= bound, name, value, f"must be in [-{bound:g}, {bound:g}]")
 
 
-def check_positive(name: str, value: float, *, allow_zero: bool = False, hi: float) -> None:
-    """Check that ``value`` is a finite real in ``(0, hi]`` (``[0, hi]`` with ``allow_zero``).
+def check_positive(
+    name: str, value: float, *, allow_zero: bool = False, hi: float, lo: float | None = None
+) -> None:
+    """Check that ``value`` is a finite real in ``(0, hi]``, or ``[0, hi]``, or ``[lo, hi]``.
+
+    ``[0, hi]`` with ``allow_zero``; ``[lo, hi]`` with ``lo``.
 
     Raises:
         ValueError: Naming ``name`` and the value.
@@ -98,6 +110,8 @@ def check_positive(name: str, value: float, *, allow_zero: bool = False, hi: flo
         check(value >= 0, name, value, "must be >= 0")
     else:
         check(value > 0, name, value, "must be > 0")
+    if lo is not None:
+        check(value >= lo, name, value, f"must be >= {lo:g}")
     check(value <= hi, name, value, f"must be <= {hi:g}")
 
 

@@ -20,7 +20,10 @@ from typing import Any, TypeVar
 from uasep_env.config.checks import (
     MAX_DIST,
     MAX_SPEED,
+    MAX_STEPS,
     MAX_TIME,
+    MIN_DT,
+    MIN_SPEED,
     check,
     check_int_in,
     check_one_of,
@@ -138,14 +141,14 @@ class EnvConfig:
             )
             object.__setattr__(self, "formation", slots)
         check_positive("formation_spacing", self.formation_spacing, hi=MAX_DIST)
-        check_positive("cruise_speed", self.cruise_speed, hi=MAX_SPEED)
+        check_positive("cruise_speed", self.cruise_speed, lo=MIN_SPEED, hi=MAX_SPEED)
         check(
             self.cruise_speed <= self.uav.max_speed,
             "cruise_speed",
             self.cruise_speed,
             f"must be <= uav.max_speed ({self.uav.max_speed})",
         )
-        check_positive("dt", self.dt, hi=5.0)
+        check_positive("dt", self.dt, lo=MIN_DT, hi=5.0)
         check_int_in("decision_interval", self.decision_interval, 1, 1000)
         check_positive("episode_duration", self.episode_duration, hi=MAX_TIME)
         check(
@@ -153,6 +156,14 @@ class EnvConfig:
             "episode_duration",
             self.episode_duration,
             "must be at least one environment step",
+        )
+        steps = self.episode_duration / (self.dt * self.decision_interval)
+        check(
+            steps <= MAX_STEPS,
+            "episode_duration",
+            self.episode_duration,
+            f"is {steps:.3g} steps of dt * decision_interval = {self.dt * self.decision_interval:g}"
+            f" s; at most {MAX_STEPS:,} steps per episode",
         )
         check_one_of("render_mode", self.render_mode, (None, "human", "rgb_array"))
         for name, cls in _NESTED.items():

@@ -22,6 +22,8 @@ from uasep_env.config.checks import (
     MAX_TIME,
     MAX_TURN_RATE,
     MAX_WEIGHT,
+    MIN_ACCEL,
+    MIN_SPEED,
     check,
     check_finite,
     check_int_in,
@@ -90,8 +92,8 @@ class UAVConfig:
     lost_distance: float = 300.0  # m
 
     def __post_init__(self) -> None:
-        check_positive("uav.max_speed", self.max_speed, hi=MAX_SPEED)
-        check_positive("uav.max_accel", self.max_accel, hi=MAX_ACCEL)
+        check_positive("uav.max_speed", self.max_speed, lo=MIN_SPEED, hi=MAX_SPEED)
+        check_positive("uav.max_accel", self.max_accel, lo=MIN_ACCEL, hi=MAX_ACCEL)
         check_positive("uav.collision_distance", self.collision_distance, hi=MAX_DIST)
         check_positive("uav.separation_distance", self.separation_distance, hi=MAX_DIST)
         check_positive("uav.obstacle_separation", self.obstacle_separation, hi=MAX_DIST)

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.actions import ResidualAPF
+from uasep_env.capacity import check_count
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import is_real
 from uasep_env.costs import COST_TERMS, compute_costs
@@ -237,10 +238,19 @@ class EnvCore:
     Args:
         config: The validated config (or a dict).
         n_envs: Number of environments in the batch.
+        count_name: The name ``n_envs`` has in the view that makes this core (``num_envs``),
+            for the error when that many environments would not fit in memory.
+
+    Raises:
+        ValueError: ``n_envs`` is not a positive integer or would not fit in memory
+            (:func:`uasep_env.capacity.check_count`).
     """
 
-    def __init__(self, config: EnvConfig | dict | None = None, n_envs: int = 1) -> None:
+    def __init__(
+        self, config: EnvConfig | dict | None = None, n_envs: int = 1, *, count_name: str = "n_envs"
+    ) -> None:
         self.config = config if isinstance(config, EnvConfig) else make_config(config)
+        check_count(count_name, n_envs, self.config)  # before anything is allocated
         self.world = World(self.config, n_envs)
         self.layout = ObservationLayout.from_config(self.config)
         self.n_envs = n_envs

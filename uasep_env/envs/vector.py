@@ -119,7 +119,7 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         }
         self.render_mode = checked_render_mode(self.config.render_mode)
         self.num_envs = int(num_envs)
-        self.core = EnvCore(self.config, n_envs=self.num_envs)
+        self.core = EnvCore(self.config, n_envs=self.num_envs, count_name="num_envs")
         n, d = self.config.n_uavs, self.core.obs_dim
         clip = self.config.observation.clip
         self.single_observation_space = gymnasium.spaces.Box(-clip, clip, (n * d,), np.float32)

@@ -9,9 +9,10 @@ import sys
 import textwrap
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from uasep_env._numba import note_slow_kernels
+from uasep_env.atomic import output_kind
 from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.progress import progress_bar
@@ -98,6 +99,11 @@ def _output_problem(path: Path, directory: bool) -> str | None:
     not be a folder (a file for ``directory``), its nearest existing parent must be a
     writable folder, and an existing target must be writable.
     """
+    if not directory:
+        try:
+            output_kind(path)  # a block device or a socket is never written
+        except OSError as err:
+            return (err.strerror or str(err)).rpartition(f"{path}: ")[2]
     if path.exists():
         if directory and not path.is_dir():
             return "exists and is not a directory"
@@ -113,6 +119,33 @@ def _output_problem(path: Path, directory: bool) -> str | None:
         return f"{parent} is not a directory"
     if not os.access(parent, os.W_OK | os.X_OK):
         return f"{parent} is not writable"
+    return None
+
+
+def _size_problem(args: argparse.Namespace, cfg: Any, n_policies: int) -> str | None:
+    """What in the run's sizes and times cannot work, checked before it starts, or None."""
+    from uasep_env.capacity import EPISODE_RESULT_BYTES, available_memory, check_count, record_bytes
+    from uasep_env.config.checks import MAX_TIME
+    from uasep_env.evaluation.runner import default_batch_size
+
+    for flag, value in (("--settle-time", args.settle_time), ("--hold-time", args.hold_time)):
+        if value > MAX_TIME:  # a time past the episode's end is clipped to it; not 1e308
+            return (
+                f"argument {flag}: must be <= {MAX_TIME:g} s (the longest episode), got {value:g}"
+            )
+    results = args.episodes * n_policies * EPISODE_RESULT_BYTES
+    if results > (free := available_memory()):
+        return (f"argument --episodes: {args.episodes:,} episodes x {n_policies} policies keep "
+                f"about {results / 1e9:,.3g} GB of results in memory, more than the "
+                f"{free / 1e9:,.3g} GB available")  # fmt: skip
+    batch = min(args.batch_size or default_batch_size(args.episodes), args.episodes)
+    chunks = math.ceil(args.episodes / batch) * n_policies
+    held = 1 if args.ray is not None else min(args.workers, chunks)
+    try:
+        check_count("batch_size", batch, cfg, extra_bytes=record_bytes(cfg), copies=held)
+    except ValueError as err:
+        flag = "--batch-size" if args.batch_size else "--episodes"
+        return f"argument {flag}: {_one_line(err)}"
     return None
 
 
@@ -292,6 +325,13 @@ def _run(argv: Sequence[str] | None) -> int:
         names = [f"{name}+{args.shield}" for name in names]
     for name in names:
         try:
+            name.encode("utf-8")
+        except UnicodeEncodeError:  # the results, CSV and JSON, are labelled with it
+            parser.error(
+                f"argument --policy: {name!r} is not UTF-8 text; link to the file under a "
+                "UTF-8 name"
+            )
+        try:
             check_policy_name(name)
         except ValueError as err:
             parser.error(f"argument --policy: {_one_line(err)}")
@@ -320,6 +360,9 @@ def _run(argv: Sequence[str] | None) -> int:
         cfg = build_config(args.scenario, args.config)
     except (TypeError, ValueError, RecursionError) as err:
         parser.error(f"argument --config: {_one_line(err)}")
+    problem = _size_problem(args, cfg, len(names))
+    if problem is not None:
+        parser.error(problem)
     for name in names:  # fail early on models that do not load
         try:
             observed = policy_config(name, cfg)  # a checkpoint's own layout where it must

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.boundedzip import check_members, read_member
-from uasep_env.jsonio import json_depth
+from uasep_env.jsonio import DuplicateKeyError, json_depth, loads_unique
 from uasep_env.policies.checkpoint import (
     ACTIVATIONS,
     CHECKPOINT_ALGORITHMS,
@@ -54,6 +54,8 @@ class CheckpointLimits:
         width: Widest hidden layer.
         layers: Most hidden layers.
         parameters: Most network parameters (weights and biases).
+        clip_obs: Range of ``clip_obs`` (a normalised observation clipped to 1e-300 is the
+            same for every state: a constant policy).
     """
 
     meta_bytes: int = 256 * 1024
@@ -65,6 +67,7 @@ class CheckpointLimits:
     width: int = 4096
     layers: int = 8
     parameters: int = 4_000_000
+    clip_obs: tuple[float, float] = (1e-3, 1e6)
 
 
 #: The limits :func:`read_checkpoint` applies.
@@ -91,6 +94,9 @@ _FAILURES = (
     UnicodeDecodeError,
     OSError,
 )
+
+
+_F32_MAX = float(np.finfo(np.float32).max)
 
 
 def _fail(p: Path, message: str) -> CheckpointError:
@@ -159,7 +165,10 @@ def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyC
     depth = json_depth(text)
     if depth > limits.json_depth:
         raise _fail(p, f"{META} nests {depth} levels deep, limit {limits.json_depth}")
-    desc = json.loads(text)
+    try:
+        desc = loads_unique(text)
+    except DuplicateKeyError as err:
+        raise _fail(p, f"{META}: {err} (which one would be obeyed?)") from None
     if not isinstance(desc, dict):
         raise _fail(p, f"{META} must hold an object, got {type(desc).__name__}")
     fmt = desc.get("format")
@@ -205,7 +214,7 @@ def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyC
         activation=desc["activation"],
         hidden=hidden,
         obs_norm=desc["obs_norm"],
-        clip_obs=_real(p, "clip_obs", desc.get("clip_obs", 10.0), 0.0, 1e6, True),
+        clip_obs=_real(p, "clip_obs", desc.get("clip_obs", 10.0), *limits.clip_obs, False),
         obs_epsilon=_real(p, "obs_epsilon", desc.get("obs_epsilon", 1e-8), 0.0, 1e-2, True),
         algorithm=algorithm,
         info=info,
@@ -244,6 +253,9 @@ def _array(p: Path, z: zipfile.ZipFile, info: zipfile.ZipInfo, shape: tuple[int,
     a = np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
     if not np.isfinite(a).all():
         raise _fail(p, f"{info.filename}: non-finite values")
+    # The policy computes in float32: a finite float64 beyond its range would become inf.
+    if a.size and (big := float(np.abs(a).max())) > _F32_MAX:
+        raise _fail(p, f"{info.filename}: value {big:.3g} beyond the float32 range")
     return a.astype(dtype.newbyteorder("="))
 
 

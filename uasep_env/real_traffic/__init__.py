@@ -157,10 +157,13 @@ class RealTrafficDataset:
                         index=k,
                     )
                 )
-            except (KeyError, TypeError, ValueError) as exc:
+            except (KeyError, TypeError, ValueError, OverflowError, IndexError) as exc:
                 raise RealTrafficFileError(
-                    f"{self.path}: track record {k} is malformed ({exc!r})"
+                    f"{self.path}: track record {k} is malformed ({type(exc).__name__}: "
+                    f"{' '.join(str(exc).split())[:120]})"
                 ) from exc
+            if len(out[-1].origin) != 3 or not np.isfinite(out[-1].origin).all():
+                raise RealTrafficFileError(f"{self.path}: track {k}: origin is not 3 numbers")
             if out[-1].aircraft_class not in CLASSES or out[-1].split not in SPLITS:
                 raise RealTrafficFileError(
                     f"{self.path}: track {k} has class {out[-1].aircraft_class!r} and split "

@@ -13,9 +13,12 @@ Members (all ``.npy``, no object arrays, so nothing is unpickled):
 
 Integers (cm, ms) make the file independent of the last bits of the platform's maths; the
 zip entries carry a fixed date, so rebuilding gives the same bytes. Reading is bounded: the
-file, each member and the JSON have size limits and the members a compression-ratio limit,
-checked on the zip's directory before anything is inflated (:mod:`uasep_env.boundedzip`,
-shared with the policy checkpoints).
+file, each member, all members together and the JSON have size limits and the members a
+compression-ratio limit, checked on the zip's directory before anything is inflated
+(:mod:`uasep_env.boundedzip`, shared with the policy checkpoints); each array's header is
+checked (dtype, dimensions, a size that matches its data) before its data is used; the
+JSON's nesting, its number of arrays and objects and its keys are checked before it is
+parsed. Whatever the bytes, the one error is a :class:`RealTrafficFileError` of one line.
 """
 
 from __future__ import annotations
@@ -23,7 +26,9 @@ from __future__ import annotations
 import io
 import json
 import os
+import struct
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -31,16 +36,23 @@ import numpy as np
 
 from uasep_env.atomic import atomic_write
 from uasep_env.boundedzip import check_member, check_members, read_member
+from uasep_env.jsonio import DuplicateKeyError, json_shape, loads_unique
 
 __all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz", "write_npz"]
 
 #: Version of the layout above; a reader refuses any other.
 FORMAT_VERSION = 1
-#: Limits on what a reader accepts (bytes): the file, one member once inflated, the JSON
-#: (the shipped file is 0.42 MB, its largest member 0.27 MB inflated).
+#: Limits on what a reader accepts (bytes): the file, one member once inflated, all members
+#: inflated, the JSON (the shipped file is 0.42 MB, its members 0.82 MB inflated, the
+#: largest 0.27 MB, the JSON 0.1 MB).
 MAX_FILE_BYTES = 32 * 2**20
-MAX_MEMBER_BYTES = 32 * 2**20
-MAX_META_BYTES = 16 * 2**20
+MAX_MEMBER_BYTES = 16 * 2**20
+MAX_TOTAL_BYTES = 32 * 2**20
+MAX_META_BYTES = 4 * 2**20
+#: The JSON's deepest nesting (the shipped file's is 4) and most arrays and objects (617):
+#: each costs Python objects many times its two bytes of text.
+MAX_META_DEPTH = 8
+MAX_META_CONTAINERS = 50_000
 #: Largest compression ratio of a member over 64 KiB (the shipped file's largest is 10.6,
 #: the JSON metadata; a zip bomb's is in the hundreds).
 MAX_RATIO = 50.0
@@ -57,6 +69,36 @@ _FIXED_DATE = (1980, 1, 1, 0, 0, 0)
 
 class RealTrafficFileError(ValueError):
     """A real-traffic file is corrupt, too large or of another format version."""
+
+
+# What a hostile file can make the standard library and numpy raise on the way (as for the
+# policy checkpoints, uasep_env.policies.checkpoint_reader).
+_FAILURES = (
+    zipfile.BadZipFile,
+    zipfile.LargeZipFile,
+    zlib.error,
+    struct.error,
+    EOFError,
+    MemoryError,
+    RecursionError,
+    OverflowError,
+    NotImplementedError,
+    RuntimeError,
+    ValueError,
+    TypeError,
+    KeyError,
+    IndexError,
+    AttributeError,
+    UnicodeDecodeError,
+    OSError,
+)
+
+
+def _one_line(path: Path, err: BaseException) -> RealTrafficFileError:
+    detail = " ".join(str(err).split())[:200] or "no detail"
+    return RealTrafficFileError(
+        f"{path}: not a valid real-traffic file ({type(err).__name__}: {detail})"
+    )
 
 
 def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta: Any) -> None:
@@ -90,18 +132,56 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
 def _member_array(
     zf: zipfile.ZipFile, infos: dict[str, zipfile.ZipInfo], name: str, path: Path
 ) -> np.ndarray:
+    """One ``.npy`` member: its header checked against the format before its data is used."""
     raw = read_member(zf, infos[f"{name}.npy"], _limits()[name])
-    try:
-        arr = np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise RealTrafficFileError(f"{path}: member {name!r} is not a plain array: {exc}") from exc
     dtype, ndim = _MEMBERS[name]
-    if arr.dtype != np.dtype(dtype) or arr.ndim != ndim:
+    fh = io.BytesIO(raw)
+    try:
+        version = np.lib.format.read_magic(fh)
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f".npy version {version}")
+        read_header = (
+            np.lib.format.read_array_header_1_0
+            if version == (1, 0)
+            else np.lib.format.read_array_header_2_0
+        )
+        shape, fortran, got = read_header(fh, max_header_size=1024)
+    except (ValueError, OSError, EOFError, SyntaxError, TypeError) as exc:
+        raise RealTrafficFileError(f"{path}: member {name!r} is not a plain array: {exc}") from exc
+    if got != np.dtype(dtype) or len(shape) != ndim:
         raise RealTrafficFileError(
-            f"{path}: member {name!r} has dtype {arr.dtype} and {arr.ndim} dimensions, "
+            f"{path}: member {name!r} has dtype {got} and {len(shape)} dimensions, "
             f"expected {np.dtype(dtype)} and {ndim}"
         )
-    return arr
+    data = raw[fh.tell() :]
+    count = int(np.prod(shape, dtype=object)) if shape else 1
+    if any(d < 0 for d in shape) or count * got.itemsize != len(data):
+        raise RealTrafficFileError(
+            f"{path}: member {name!r} has shape {tuple(shape)} but {len(data):,} data bytes"
+        )
+    return np.frombuffer(data, dtype=got).reshape(shape, order="F" if fortran else "C")
+
+
+def _meta(raw: bytes, path: Path) -> Any:
+    """The JSON metadata, its nesting, size and keys checked before it is parsed."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise RealTrafficFileError(f"{path}: metadata is not UTF-8 ({exc})") from None
+    depth, containers = json_shape(text)
+    if depth > MAX_META_DEPTH:
+        raise RealTrafficFileError(f"{path}: metadata nests {depth} levels, limit {MAX_META_DEPTH}")
+    if containers > MAX_META_CONTAINERS:
+        raise RealTrafficFileError(
+            f"{path}: metadata holds {containers:,} arrays and objects, limit "
+            f"{MAX_META_CONTAINERS:,}"
+        )
+    try:
+        return loads_unique(text)
+    except DuplicateKeyError as exc:
+        raise RealTrafficFileError(f"{path}: metadata: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise RealTrafficFileError(f"{path}: metadata is not JSON ({exc})") from None
 
 
 def _limits() -> dict[str, int]:
@@ -131,6 +211,15 @@ def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
     if size > MAX_FILE_BYTES:
         raise RealTrafficFileError(f"{path}: {size} bytes, over the {MAX_FILE_BYTES} limit")
     try:
+        return _read(path)
+    except RealTrafficFileError:
+        raise
+    except _FAILURES as exc:
+        raise _one_line(path, exc) from exc
+
+
+def _read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    try:
         zf = zipfile.ZipFile(path)
     except (zipfile.BadZipFile, OSError) as exc:
         raise RealTrafficFileError(f"{path}: not a real-traffic .npz file ({exc})") from exc
@@ -148,6 +237,9 @@ def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
                     )
             expected = {f"{name}.npy": limit for name, limit in _limits().items()}
             infos = check_members(zf, expected, MAX_RATIO)
+            total = sum(i.file_size for i in infos.values())
+            if total > MAX_TOTAL_BYTES:
+                raise ValueError(f"members of {total:,} bytes declared, limit {MAX_TOTAL_BYTES:,}")
         except RealTrafficFileError:
             raise
         except ValueError as exc:
@@ -164,10 +256,7 @@ def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
             raise
         except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError) as exc:
             raise RealTrafficFileError(f"{path}: corrupt zip member ({exc})") from exc
-    try:
-        meta = json.loads(raw_meta.tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise RealTrafficFileError(f"{path}: metadata is not UTF-8 JSON ({exc})") from exc
+    meta = _meta(raw_meta.tobytes(), path)
     _check_consistent(arrays, meta, path)
     return arrays, meta
 

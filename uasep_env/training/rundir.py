@@ -4,6 +4,8 @@ Shared by the recipes (:mod:`~uasep_env.training.ppo_shared`, its residual varia
 :mod:`~uasep_env.training.mappo`): :func:`prepare_out_dir` is where a run's folder is
 claimed and created. The rules:
 
+* A run claims its ``--out-dir`` for its whole life (:mod:`uasep_env.runlock`): a second
+  run started into the same folder fails at once, naming it.
 * A fresh run refuses a non-empty ``--out-dir`` (a previous run's files would be mixed with
   its own); ``--overwrite`` first deletes the files a run writes there (``progress.csv``,
   ``curves.png``, ``policy.zip``, ``validation.json``, ``checkpoints/``, ``tb/``; nothing
@@ -31,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write, fsync_dir
+from uasep_env.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder
 
 #: What a run writes in its folder (``--overwrite`` deletes these, and only these).
 RUN_FILES = ("progress.csv", "curves.png", "policy.zip", "validation.json")
@@ -51,13 +54,17 @@ def prepare_out_dir(out: Path, resume: str, overwrite: bool) -> None:
 
     Raises:
         RunError: ``out`` holds files and neither ``resume`` nor ``overwrite`` is given, or
-            both are given.
+            both are given, or another live run has claimed ``out``.
     """
     if resume and overwrite:
         raise RunError("--resume and --overwrite: choose one")
     if out.exists() and not out.is_dir():
         raise RunError(f"--out-dir {out} exists and is not a folder")
-    used = out.is_dir() and any(out.iterdir())
+    try:
+        claim_run_folder(out)  # first: two runs started together must not both see it empty
+    except RunFolderBusy as err:
+        raise RunError(f"--out-dir {err}") from None
+    used = any(p.name != LOCK_NAME for p in out.iterdir())
     if used and overwrite:
         for name in RUN_FILES:
             (out / name).unlink(missing_ok=True)
