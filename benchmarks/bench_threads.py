@@ -39,7 +39,7 @@ def _worker(envs: int, seconds: float, actions: str) -> None:
 
     import uasep_env  # noqa: F401  (registers the ids)
     from uasep_env import _numba
-    from uasep_env._kernels import common
+    from uasep_env.cores import kernel_threads
 
     vec = gymnasium.make_vec("uasep/Formation-v2", num_envs=envs)
     vec.reset(seed=0)
@@ -57,7 +57,7 @@ def _worker(envs: int, seconds: float, actions: str) -> None:
         vec.step(act())
         steps += 1
     n_uavs = shape[1]
-    threads = common.threads() if _numba.available() else 0
+    threads = kernel_threads() if _numba.available() else 0
     print(json.dumps({"rate": steps * envs * n_uavs / elapsed, "threads": threads}))
 
 

@@ -64,7 +64,7 @@ def parallel_loops(monkeypatch):
     """The parallel loops run for big calls, whatever this machine's core count decides."""
     from uasep_env._kernels import common
 
-    monkeypatch.setattr(common, "_threads", [2])
+    monkeypatch.setattr(common, "kernel_threads", lambda: 2)
 
 
 def test_parallel_and_serial_loops_agree(parallel_loops):
@@ -747,7 +747,7 @@ def test_install_time_warm_up_command_runs_without_numba():
 
 def test_threads_are_the_process_share_of_its_cores():
     """N processes started side by side never ask for more threads than the cores."""
-    from uasep_env._kernels.common import PARALLEL_MIN_THREADS, decide_threads
+    from uasep_env.cores import PARALLEL_MIN_THREADS, decide_threads
 
     assert PARALLEL_MIN_THREADS == 4  # the cases below are written for it
     assert decide_threads({}, cores=16) == 16
@@ -764,9 +764,9 @@ def test_threads_are_the_process_share_of_its_cores():
 def test_serial_loops_with_one_thread(monkeypatch):
     from uasep_env._kernels import common
 
-    monkeypatch.setattr(common, "_threads", [1])
+    monkeypatch.setattr(common, "kernel_threads", lambda: 1)
     assert not common._parallel(10 * common.PARALLEL_MIN)
-    monkeypatch.setattr(common, "_threads", [2])
+    monkeypatch.setattr(common, "kernel_threads", lambda: 2)
     assert common._parallel(common.PARALLEL_MIN) and not common._parallel(common.PARALLEL_MIN - 1)
 
 

@@ -90,7 +90,13 @@ def kernels() -> Any:
         return None
     if "kernels" not in _state:
         from uasep_env import _kernels
+        from uasep_env.cores import kernel_threads
 
+        # numba's pool starts with every core: this process takes its share (uasep_env.cores).
+        numba = _state["numba"]
+        threads = min(kernel_threads(), numba.config.NUMBA_NUM_THREADS)
+        if threads > 1:
+            numba.set_num_threads(threads)
         _state["kernels"] = _kernels
     return _state["kernels"]
 

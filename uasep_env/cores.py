@@ -14,13 +14,21 @@ import os
 from collections.abc import Mapping
 
 __all__ = [
+    "PARALLEL_MIN_THREADS",
     "THREADS_VARIABLE",
     "WORKERS_VARIABLE",
     "core_share",
+    "decide_threads",
     "explicit_threads",
+    "kernel_threads",
     "process_share",
 ]
 
+#: The fewest threads the compiled loops run in parallel on by default: on the project's
+#: 2-core machine two threads gained nothing at 4096 environments and lost most of the
+#: throughput under load, where a loop waits for its slowest thread
+#: (``benchmarks/bench_threads.py``, ``docs/speed.md``).
+PARALLEL_MIN_THREADS = 4
 #: ``UASEP_THREADS=N``: the threads of this process (the user's choice wins).
 THREADS_VARIABLE = "UASEP_THREADS"
 #: ``UASEP_WORKERS=N``: set by the project's tools in the ``N`` processes they start side by
@@ -77,3 +85,24 @@ def core_share(environ: Mapping[str, str] | None = None, cores: int | None = Non
 def process_share() -> int:
     """:func:`core_share` of this process, decided on first use."""
     return core_share()
+
+
+def decide_threads(environ: Mapping[str, str] | None = None, cores: int | None = None) -> int:
+    """The threads of this process's compiled loops (1: the serial loops).
+
+    ``UASEP_THREADS`` if set (the user's choice); else this process's share of the cores
+    (:func:`core_share`), or 1 where that share is under :data:`PARALLEL_MIN_THREADS`.
+
+    Args:
+        environ: The environment variables (default ``os.environ``).
+        cores: The cores this process may run on (default: its affinity mask).
+    """
+    share = core_share(environ, cores)
+    chosen = explicit_threads(environ) is not None
+    return share if chosen or share >= PARALLEL_MIN_THREADS else 1
+
+
+@functools.cache
+def kernel_threads() -> int:
+    """:func:`decide_threads` of this process, decided on first use."""
+    return decide_threads()

@@ -4,57 +4,24 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping
 
 import numba
 
-from uasep_env.cores import core_share, explicit_threads
+from uasep_env.cores import kernel_threads
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 #: Points per call above which the loop is spread over the cores (thread start-up costs).
 PARALLEL_MIN = 2048
-#: The fewest threads the parallel loops are chosen with by default: on the project's
-#: 2-core machine two threads gained nothing at 4096 environments (0.406M against 0.404M
-#: agent-steps/s) and lost most of the throughput under load, where a loop waits for its
-#: slowest thread.
-PARALLEL_MIN_THREADS = 4
 # numba's OpenMP layer (GNU) kills a forked child that runs a parallel loop after its
 # parent has run one; forked children (multiprocessing workers) use the serial loops.
 _forked = [False]
 os.register_at_fork(after_in_child=lambda: _forked.__setitem__(0, True))
-_threads: list[int] = []
-
-
-def decide_threads(environ: Mapping[str, str] | None = None, cores: int | None = None) -> int:
-    """The threads of this process's compiled loops (1: the serial loops).
-
-    ``UASEP_THREADS`` if set (the user's choice); else this process's share of the cores
-    (:func:`uasep_env.cores.core_share`), or 1 where that share is under
-    :data:`PARALLEL_MIN_THREADS`.
-
-    Args:
-        environ: The environment variables (default ``os.environ``).
-        cores: The cores this process may run on (default: its affinity mask).
-    """
-    share = core_share(environ, cores)
-    chosen = explicit_threads(environ) is not None
-    return share if chosen or share >= PARALLEL_MIN_THREADS else 1
-
-
-def threads() -> int:
-    """:func:`decide_threads`, once per process; numba's pool is set to it."""
-    if not _threads:
-        n = min(decide_threads(), numba.config.NUMBA_NUM_THREADS)
-        if n > 1:
-            numba.set_num_threads(n)
-        _threads.append(n)
-    return _threads[0]
 
 
 def _parallel(size: int) -> bool:
     """Whether a loop over ``size`` items is spread over the cores."""
-    return size >= PARALLEL_MIN and not _forked[0] and threads() > 1
+    return size >= PARALLEL_MIN and not _forked[0] and kernel_threads() > 1
 
 
 @numba.njit(inline="always", **_JIT)
