@@ -207,7 +207,7 @@ def test_metadata_license_version_build_requires():
     assert not any(r.startswith("wheel") for r in requires)
     assert "version" in project["dynamic"]
     released = re.findall(r"^## (\d+\.\d+\.\d+)", (ROOT / "CHANGELOG.md").read_text(), re.M)
-    assert uasep_env.__version__ == released[0] == "0.3.0"
+    assert uasep_env.__version__ == released[0] == "0.4.0"
 
 
 def test_readme_for_the_package_index_has_absolute_links():

@@ -15,7 +15,7 @@ from uasep_env.envs.parallel import UAVSeparationParallelEnv, env, parallel_env
 from uasep_env.registration import register_envs
 from uasep_env.world import World
 
-__version__ = "0.3.0"
+__version__ = "0.4.0"
 
 __all__ = [
     "EnvConfig",
