@@ -102,11 +102,11 @@ def main() -> None:
         for a in args[1:]:
             run(name, a)
     common.PARALLEL_MIN = 0  # the parallel loops (and the wrappers' choice of them)
-    common.kernel_threads = lambda: 2  # whatever this machine's share of its cores
+    common.THREADS[0] = 2  # whatever this machine's share of its cores
     for name, args in cases.items():
         run(name, args[0])
     sys.settrace(tracer)
-    common.kernel_threads = lambda: 1  # one thread: serial loops whatever the size
+    common.THREADS[0] = 1  # one thread: serial loops whatever the size
     common._parallel(common.PARALLEL_MIN + 1)
     common._forked[0] = True  # a forked child: serial loops whatever the size
     common._parallel(common.PARALLEL_MIN + 1)

@@ -64,7 +64,7 @@ def parallel_loops(monkeypatch):
     """The parallel loops run for big calls, whatever this machine's core count decides."""
     from uasep_env._kernels import common
 
-    monkeypatch.setattr(common, "kernel_threads", lambda: 2)
+    monkeypatch.setattr(common, "THREADS", [2])
 
 
 def test_parallel_and_serial_loops_agree(parallel_loops):
@@ -761,12 +761,21 @@ def test_threads_are_the_process_share_of_its_cores():
             decide_threads({name: value}, cores=4)
 
 
+def test_the_kernels_take_the_process_share_of_the_cores():
+    import numba
+
+    from uasep_env.cores import kernel_threads
+
+    common = _numba.kernels().common
+    assert common.THREADS[0] == min(kernel_threads(), numba.config.NUMBA_NUM_THREADS)
+
+
 def test_serial_loops_with_one_thread(monkeypatch):
     from uasep_env._kernels import common
 
-    monkeypatch.setattr(common, "kernel_threads", lambda: 1)
+    monkeypatch.setattr(common, "THREADS", [1])
     assert not common._parallel(10 * common.PARALLEL_MIN)
-    monkeypatch.setattr(common, "kernel_threads", lambda: 2)
+    monkeypatch.setattr(common, "THREADS", [2])
     assert common._parallel(common.PARALLEL_MIN) and not common._parallel(common.PARALLEL_MIN - 1)
 
 

@@ -97,6 +97,7 @@ def kernels() -> Any:
         threads = min(kernel_threads(), numba.config.NUMBA_NUM_THREADS)
         if threads > 1:
             numba.set_num_threads(threads)
+        _kernels.common.THREADS[0] = threads
         _state["kernels"] = _kernels
     return _state["kernels"]
 

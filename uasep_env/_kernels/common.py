@@ -7,8 +7,6 @@ import os
 
 import numba
 
-from uasep_env.cores import kernel_threads
-
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 #: Points per call above which the loop is spread over the cores (thread start-up costs).
@@ -17,11 +15,15 @@ PARALLEL_MIN = 2048
 # parent has run one; forked children (multiprocessing workers) use the serial loops.
 _forked = [False]
 os.register_at_fork(after_in_child=lambda: _forked.__setitem__(0, True))
+#: The parallel loops' threads, set by :func:`uasep_env._numba.kernels` when it loads
+#: the kernels (the process's share of the cores, :func:`uasep_env.cores.kernel_threads`);
+#: 1: the serial loops. A list, so that the value is read at call time.
+THREADS = [1]
 
 
 def _parallel(size: int) -> bool:
     """Whether a loop over ``size`` items is spread over the cores."""
-    return size >= PARALLEL_MIN and not _forked[0] and kernel_threads() > 1
+    return size >= PARALLEL_MIN and not _forked[0] and THREADS[0] > 1
 
 
 @numba.njit(inline="always", **_JIT)
