@@ -10,11 +10,41 @@ reader adds its path and raises its own error class.
 
 from __future__ import annotations
 
+import struct
 import zipfile
+import zlib
 from collections import Counter
 from collections.abc import Mapping
 
-__all__ = ["RATIO_FREE_BYTES", "check_member", "check_members", "read_member"]
+__all__ = [
+    "HOSTILE_FILE_ERRORS",
+    "RATIO_FREE_BYTES",
+    "check_member",
+    "check_members",
+    "read_member",
+]
+
+#: What a hostile file can make the standard library and numpy raise on the way through a
+#: reader (the checkpoint and real-traffic readers turn each into their own one-line error).
+HOSTILE_FILE_ERRORS = (
+    zipfile.BadZipFile,
+    zipfile.LargeZipFile,
+    zlib.error,
+    struct.error,
+    EOFError,
+    MemoryError,
+    RecursionError,
+    OverflowError,
+    NotImplementedError,
+    RuntimeError,
+    ValueError,
+    TypeError,  # numpy's UFuncTypeError is one
+    KeyError,
+    IndexError,
+    AttributeError,
+    UnicodeDecodeError,
+    OSError,
+)
 
 #: Members up to this size may compress well (JSON deflates about 5:1): no ratio check.
 RATIO_FREE_BYTES = 64 * 1024

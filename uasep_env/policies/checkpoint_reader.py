@@ -13,9 +13,7 @@ import io
 import itertools
 import json
 import math
-import struct
 import zipfile
-import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.boundedzip import check_members, read_member
+from uasep_env.boundedzip import HOSTILE_FILE_ERRORS, check_members, read_member
 from uasep_env.jsonio import DuplicateKeyError, json_depth, loads_unique
 from uasep_env.policies.checkpoint import (
     ACTIVATIONS,
@@ -72,28 +70,6 @@ class CheckpointLimits:
 
 #: The limits :func:`read_checkpoint` applies.
 LIMITS = CheckpointLimits()
-
-
-# What a hostile file can make the standard library and numpy raise on the way.
-_FAILURES = (
-    zipfile.BadZipFile,
-    zipfile.LargeZipFile,
-    zlib.error,
-    struct.error,
-    EOFError,
-    MemoryError,
-    RecursionError,
-    OverflowError,
-    NotImplementedError,
-    RuntimeError,
-    ValueError,
-    TypeError,  # numpy's UFuncTypeError is one
-    KeyError,
-    IndexError,
-    AttributeError,
-    UnicodeDecodeError,
-    OSError,
-)
 
 
 _F32_MAX = float(np.finfo(np.float32).max)
@@ -313,7 +289,7 @@ def read_checkpoint(
         raise
     except FileNotFoundError as err:
         raise CheckpointError(f"no policy checkpoint at {p}") from err
-    except _FAILURES as err:
+    except HOSTILE_FILE_ERRORS as err:
         detail = " ".join(str(err).split())[:200] or "no detail"
         raise CheckpointError(
             f"{p} is not a valid uasep policy checkpoint ({type(err).__name__}: {detail})"

@@ -26,16 +26,14 @@ from __future__ import annotations
 import io
 import json
 import os
-import struct
 import zipfile
-import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from uasep_env.atomic import atomic_write
-from uasep_env.boundedzip import check_member, check_members, read_member
+from uasep_env.boundedzip import HOSTILE_FILE_ERRORS, check_member, check_members, read_member
 from uasep_env.jsonio import DuplicateKeyError, json_shape, loads_unique
 
 __all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz", "write_npz"]
@@ -69,29 +67,6 @@ _FIXED_DATE = (1980, 1, 1, 0, 0, 0)
 
 class RealTrafficFileError(ValueError):
     """A real-traffic file is corrupt, too large or of another format version."""
-
-
-# What a hostile file can make the standard library and numpy raise on the way (as for the
-# policy checkpoints, uasep_env.policies.checkpoint_reader).
-_FAILURES = (
-    zipfile.BadZipFile,
-    zipfile.LargeZipFile,
-    zlib.error,
-    struct.error,
-    EOFError,
-    MemoryError,
-    RecursionError,
-    OverflowError,
-    NotImplementedError,
-    RuntimeError,
-    ValueError,
-    TypeError,
-    KeyError,
-    IndexError,
-    AttributeError,
-    UnicodeDecodeError,
-    OSError,
-)
 
 
 def _one_line(path: Path, err: BaseException) -> RealTrafficFileError:
@@ -214,7 +189,7 @@ def read_npz(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
         return _read(path)
     except RealTrafficFileError:
         raise
-    except _FAILURES as exc:
+    except HOSTILE_FILE_ERRORS as exc:
         raise _one_line(path, exc) from exc
 
 
