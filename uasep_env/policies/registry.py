@@ -5,7 +5,7 @@ registry is what ``uasep-eval --policy``, :func:`~uasep_env.policies.make_policy
 benchmark scripts (``baselines/tradeoff.py``, ``scaling.py``, ``real_traffic_eval.py``,
 ``learned_vs_apf.py``) and the tests parametrised over :data:`POLICIES` read, so a new
 controller is its module plus the import of that module in ``uasep_env/policies/__init__.py``
-(``docs/extending.md``).
+(``docs/extending.md``), for example::
 
     @register_policy("mine", label="my method", reference=True,
                      margin=lambda config, s: Mine(config, MineParams(margin_scale=s)))
