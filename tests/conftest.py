@@ -7,6 +7,7 @@ helpers need them too; fixtures for what tests take as arguments.
 from __future__ import annotations
 
 import errno
+import io
 import os
 import subprocess
 import sys
@@ -171,3 +172,13 @@ def make_record(
 def repo_root() -> Path:
     """The repository root."""
     return ROOT
+
+
+def replace_npz_arrays(raw: bytes, **arrays: Any) -> bytes:
+    """An ``.npz`` file's bytes ``raw`` with some of its arrays replaced (or added)."""
+    with np.load(io.BytesIO(raw)) as z:
+        data = {k: z[k] for k in z.files}
+    data.update(arrays)
+    buf = io.BytesIO()
+    np.savez(buf, **data)
+    return buf.getvalue()

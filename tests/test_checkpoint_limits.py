@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import replace_npz_arrays
 
 from uasep_env.evaluation import main as eval_main
 from uasep_env.policies import CheckpointError, load_policy, make_policy
@@ -48,16 +49,6 @@ def _npz_with(raw, extra):
             with z.open(name, "w", force_zip64=True) as fh:
                 for _ in range(size // MiB):
                     fh.write(bytes(MiB))
-    return buf.getvalue()
-
-
-def _with_weights(desc, raw, **arrays):
-    """``raw`` with some arrays replaced."""
-    with np.load(io.BytesIO(raw)) as z:
-        data = {k: z[k] for k in z.files}
-    data.update(arrays)
-    buf = io.BytesIO()
-    np.savez(buf, **data)
     return buf.getvalue()
 
 
@@ -151,7 +142,7 @@ def _fields(tmp_path):
         "norm_string": ({**desc, "obs_norm": "false"}, raw, "obs_norm must be true or false"),
         "bool_mean": (
             desc,
-            _with_weights(desc, raw, obs_mean=np.ones(dim, bool)),
+            replace_npz_arrays(raw, obs_mean=np.ones(dim, bool)),
             "obs_mean.npy: bool data, expected float",
         ),
         "int_dim": ({**desc, "obs_dim": 58.0}, raw, "obs_dim must be an integer"),
@@ -166,12 +157,12 @@ def _fields(tmp_path):
         ),
         "nan_weight": (
             desc,
-            _with_weights(desc, raw, **{"layer0.bias": np.full(128, np.nan, np.float32)}),
+            replace_npz_arrays(raw, **{"layer0.bias": np.full(128, np.nan, np.float32)}),
             "layer0.bias.npy: non-finite values",
         ),
         "wrong_shape": (
             desc,
-            _with_weights(desc, raw, **{"layer1.weight": np.zeros((3, 3), np.float32)}),
+            replace_npz_arrays(raw, **{"layer1.weight": np.zeros((3, 3), np.float32)}),
             r"layer1.weight.npy: shape \(3, 3\), expected",
         ),
         "not_json": ("{", raw, "JSONDecodeError"),

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import HANG_GUARD_S
+from conftest import HANG_GUARD_S, replace_npz_arrays
 
 from uasep_env.jsonio import DuplicateKeyError, json_depth, loads_unique
 from uasep_env.policies import CheckpointError
@@ -151,15 +151,6 @@ def _parts():
         return json.loads(z.read("uasep_policy.json")), z.read("weights.npz")
 
 
-def _replace_arrays(raw: bytes, **arrays) -> bytes:
-    with np.load(io.BytesIO(raw)) as z:
-        data = {k: z[k] for k in z.files}
-    data.update(arrays)
-    buf = io.BytesIO()
-    np.savez(buf, **data)
-    return buf.getvalue()
-
-
 def _checkpoint(path: Path, text: str | bytes, raw: bytes) -> Path:
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("uasep_policy.json", text)
@@ -176,13 +167,13 @@ def _value_cases(tmp_path):
     big[3, 5] = 1e39  # finite in float64, inf in float32
     text = json.dumps(desc)
     cases = {
-        "weight_beyond_f32": (text, _replace_arrays(raw, **{"layer0.weight": big}),
+        "weight_beyond_f32": (text, replace_npz_arrays(raw, **{"layer0.weight": big}),
                               r"layer0.weight.npy: value 1e\+39 beyond the float32 range"),
-        "bias_beyond_f32": (text, _replace_arrays(raw, **{"layer2.bias": np.full(3, -1e300)}),
+        "bias_beyond_f32": (text, replace_npz_arrays(raw, **{"layer2.bias": np.full(3, -1e300)}),
                             "layer2.bias.npy: value 1e\\+300 beyond the float32 range"),
-        "mean_beyond_f32": (text, _replace_arrays(raw, obs_mean=np.full(dim, 4e38)),
+        "mean_beyond_f32": (text, replace_npz_arrays(raw, obs_mean=np.full(dim, 4e38)),
                             "obs_mean.npy: value 4e\\+38 beyond the float32 range"),
-        "var_beyond_f32": (text, _replace_arrays(raw, obs_var=np.full(dim, 1e200)),
+        "var_beyond_f32": (text, replace_npz_arrays(raw, obs_var=np.full(dim, 1e200)),
                            "obs_var.npy: value 1e\\+200 beyond the float32 range"),
         "clip_tiny": (json.dumps({**desc, "clip_obs": 1e-300}), raw,
                       r"clip_obs must be a finite number in \[0.001, 1e\+06\], got 1e-300"),
@@ -218,7 +209,7 @@ def test_boundary_values_are_still_accepted(tmp_path):
     w[0] = float(np.finfo(np.float32).max)
     for clip in (1e-3, 1e6):
         path = _checkpoint(tmp_path / f"ok{clip}.zip", json.dumps({**desc, "clip_obs": clip}),
-                           _replace_arrays(raw, **{"layer1.bias": w}))  # fmt: skip
+                           replace_npz_arrays(raw, **{"layer1.bias": w}))  # fmt: skip
         meta, *_ = read_checkpoint(path)
         assert meta.clip_obs == clip
 
