@@ -1,9 +1,10 @@
 """The PID Lagrange multiplier (uasep_env.lagrangian) and its SB3 callback."""
 
+import csv
 import itertools
+import json
 import math
-import sys
-from pathlib import Path
+import re
 
 import numpy as np
 import pytest
@@ -195,8 +196,7 @@ def test_a_cost_the_env_does_not_report_is_named():
 
 @pytest.fixture
 def recipe():
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "train"))
-    import ppo_lagrangian
+    from uasep_env.training import ppo_lagrangian
 
     return ppo_lagrangian
 
@@ -209,21 +209,79 @@ def recipe():
         (["--cost", "colision"], r"cost 'colision' is not reported"),
         (["--pid-ki", "-0.5"], r"ki=-0\.5"),
         (["--norm-reward"], "--norm-reward"),
+        (["--budget-episodes", "0"], "--budget-episodes"),
     ],
 )
-def test_recipe_bad_options_are_named(recipe, argv, match):
-    with pytest.raises(SystemExit, match=match):
+def test_recipe_bad_options_are_named(recipe, argv, match, capsys):
+    with pytest.raises(SystemExit) as exc:
         recipe.parse_args(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert re.search(match, err) and len(err.strip().splitlines()) == 1, err
 
 
 def test_recipe_defaults(recipe, capsys):
+    from uasep_env.training import ppo_shared
+
     args = recipe.parse_args([])
     assert args.cost == "cost" and args.cost_limit == "apf"
-    import ppo_shared
-
+    assert args.action_mode == "direct"
     cfg = ppo_shared.make_env_config(args)
     assert cfg.reward == cfg.reward.task()
+    residual = recipe.parse_args([], recipe.RESIDUAL_LAGRANGIAN_DEFAULTS)
+    assert residual.action_mode == "residual_apf" and residual.critic_warmup > 0
+    assert ppo_shared.make_env_config(residual).reward == cfg.reward.task()
     # The shared training parser checks --config values up front, in one line.
     with pytest.raises(SystemExit):
         recipe.parse_args(["--config", "cost.separation_obstacle=-2"])
     assert "cost.separation_obstacle=-2: must be >= 0" in capsys.readouterr().err
+
+
+TINY = [
+    "--scenario", "collision_head_on", "--n-uavs", "2", "--episode-duration", "20",
+    "--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1", "--hidden", "16",
+    "--checkpoint-every", "256", "--eval-episodes", "1", "--no-progress", "--cost-limit", "0.5",
+    "--pid-ki", "0.5", "--multiplier-init", "0.25",
+]  # fmt: skip
+
+
+def _cost_rows(out):
+    with (out / "cost_progress.csv").open() as f:
+        return list(csv.DictReader(f))
+
+
+def test_recipe_resumes_the_multiplier_and_its_cost_log(recipe, tmp_path):
+    """A resumed run continues the multiplier of its checkpoint, not --multiplier-init."""
+    out = tmp_path / "run"
+    recipe.main([*TINY, "--total-timesteps", "768", "--out-dir", str(out)])
+    rows = _cost_rows(out)
+    assert [int(r["agent_steps"]) for r in rows] == [128 * k for k in range(1, 7)]
+    # On a collision course the cost exceeds the limit: the multiplier moved off its start.
+    assert any(float(r["multiplier"]) != 0.25 for r in rows)
+    ckpt = out / "checkpoints" / "step_256"
+    saved = json.loads((ckpt / "state.json").read_text())["lagrangian"]["state"]
+    from uasep_env.sb3_lagrangian import LagrangianCallback
+
+    expect = LagrangianCallback(recipe.make_lagrangian(recipe.parse_args(TINY), 0.5))
+    expect.load_state_dict(saved)
+    seen = {}
+    real = LagrangianCallback.load_state_dict
+
+    def spy(self, state):
+        real(self, state)
+        seen.update(self.state_dict())
+
+    LagrangianCallback.load_state_dict = spy
+    try:
+        summary = recipe.main([*TINY, "--total-timesteps", "512", "--out-dir", str(out),
+                               "--resume", str(ckpt), "--multiplier-init", "7"])  # fmt: skip
+    finally:
+        LagrangianCallback.load_state_dict = real
+    assert seen == expect.state_dict() and seen["pid"]["multiplier"] != 7.0
+    rows = _cost_rows(out)
+    # The rows of the abandoned continuation are gone; the resumed run's follow on.
+    steps = [int(r["agent_steps"]) for r in rows]
+    assert steps[:2] == [128, 256] and steps == sorted(steps) and len(steps) == 4
+    lag = summary["training"]["lagrangian"]
+    assert lag["cost_limit"] == 0.5 and lag["multiplier"] == float(rows[-1]["multiplier"])
+    assert (out / "budget.json").exists() and (out / "cost_curves.png").exists()

@@ -53,7 +53,13 @@ from uasep_env.training.args import HelpFormatter, OneLineParser, non_negative_i
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-RECIPES = {"shared": "ppo_shared.py", "residual_apf": "ppo_residual_apf.py", "mappo": "mappo.py"}
+RECIPES = {
+    "shared": "ppo_shared.py",
+    "residual_apf": "ppo_residual_apf.py",
+    "mappo": "mappo.py",
+    "lagrangian": "ppo_lagrangian.py",
+    "lagrangian_residual": "ppo_lagrangian_residual.py",
+}
 #: Training seed of run ``k`` is ``SEED_STRIDE * k`` (its environments ``+ e``, e < stride).
 SEED_STRIDE = 1000
 #: (dotted aggregate key, label, kind) reported per seed and across seeds.
@@ -258,7 +264,7 @@ def targets(
     apf = result.results["apf"].aggregate
     labels = [lab for lab in result.policies if lab != "apf"]
     out = []
-    if recipe == "residual_apf":
+    if recipe in ("residual_apf", "lagrangian", "lagrangian_residual"):
         for key in ("episode.collision", "episode.loss_of_separation"):
             # Every seed on its own (Wilson intervals over the same encounters as the APF's):
             # stricter than the IQM, which trims the families where a seed does worst.

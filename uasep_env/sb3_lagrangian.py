@@ -122,6 +122,25 @@ class LagrangianCallback(BaseCallback):
         """The current multiplier ``lambda``."""
         return self.lagrangian.multiplier
 
+    def state_dict(self) -> dict[str, Any]:
+        """What a resumed run needs (JSON-friendly).
+
+        The multiplier's state, the episodes counted and the cost window. The rollout in
+        progress is not kept (a resumed run drops it, as the recipes do).
+        """
+        return {
+            "pid": self.lagrangian.state_dict(),
+            "episodes": self.episodes,
+            "window": list(self.window),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict` (the limit and gains are the constructor's)."""
+        self.lagrangian.load_state_dict(state["pid"])
+        self.episodes = int(state["episodes"])
+        self.window.clear()
+        self.window.extend(float(c) for c in state["window"])
+
     def _on_training_start(self) -> None:
         env = self.training_env
         while env is not None:  # VecNormalize anywhere in the stack rescales the reward

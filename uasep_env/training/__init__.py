@@ -6,7 +6,10 @@ folder's rules in :mod:`~uasep_env.training.rundir`:
 * ``ppo_shared`` (:mod:`~uasep_env.training.ppo_shared`): one PPO policy shared by every UAV;
 * ``ppo_residual_apf`` (:mod:`~uasep_env.training.ppo_residual_apf`): the same, learning
   corrections to the APF's command;
-* ``mappo`` (:mod:`~uasep_env.training.mappo`): skrl's MAPPO, a centralised critic.
+* ``mappo`` (:mod:`~uasep_env.training.mappo`): skrl's MAPPO, a centralised critic;
+* ``ppo_lagrangian`` and ``ppo_lagrangian_residual``
+  (:mod:`~uasep_env.training.ppo_lagrangian`): PPO (pure, residual) on the task reward with
+  loss of separation as a constraint (a PID Lagrange multiplier).
 
 torch, stable-baselines3 and skrl (the ``train`` extra) are imported when a recipe runs,
 never on import, so ``uasep-train --help`` works on a core install.
@@ -24,4 +27,12 @@ RECIPES: dict[str, tuple[str, str]] = {
         "PPO residual on the APF (a zero action flies the APF)",
     ),
     "mappo": ("uasep_env.training.mappo", "skrl's MAPPO (centralised critic, shared actor)"),
+    "ppo_lagrangian": (
+        "uasep_env.training.ppo_lagrangian",
+        "PPO on the task reward, loss of separation as a cost constraint (PID Lagrangian)",
+    ),
+    "ppo_lagrangian_residual": (
+        "uasep_env.training.ppo_lagrangian_residual",
+        "the same, residual on the APF",
+    ),
 }

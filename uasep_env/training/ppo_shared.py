@@ -75,6 +75,7 @@ __all__ = [
     "parse_args",
     "run",
     "save_checkpoint",
+    "train",
     "write_validation",
 ]
 
@@ -265,12 +266,19 @@ CSV_FIELDS = (
 
 
 def make_callback(
-    args: Args, config: Any, venv: Any, wall_offset: float, total: int, resumed: dict | None = None
+    args: Args,
+    config: Any,
+    venv: Any,
+    wall_offset: float,
+    total: int,
+    resumed: dict | None = None,
+    extra: Any = None,
 ) -> Any:
     """The SB3 callback: progress bar, learning curve rows, checkpoints, wall budget.
 
     ``resumed``: the ``state.json`` of the checkpoint a run resumes from (its episode count
-    and 200-episode window continue).
+    and 200-episode window continue). ``extra``: a function returning more facts for
+    :meth:`info` and every checkpoint's ``state.json`` (a recipe's own state to resume).
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -364,8 +372,9 @@ def make_callback(
                     self.logger.record(f"uasep/{k}", v)
 
         def info(self) -> dict:
+            more = extra() if extra is not None else {}
             return {"agent_steps": int(self.num_timesteps), "wall_s": self.wall(),
-                    "episodes": self.episodes, **self.summary()}  # fmt: skip
+                    "episodes": self.episodes, **self.summary(), **more}  # fmt: skip
 
         def checkpoint(self) -> None:
             info = self.info()
@@ -385,8 +394,22 @@ def make_callback(
 
 def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     """Train (or resume), export the policy, validate against the APF; returns the summary."""
-    args = parse_args(argv, defaults)
+    return train(parse_args(argv, defaults))
+
+
+def train(args: Args, plugin: Any = None) -> dict:
+    """Train (or resume) with ``args``, export the policy, validate; returns the summary.
+
+    Args:
+        args: The recipe's options.
+        plugin: A recipe's addition to the loop (the Lagrangian recipe's constraint), or
+            None. It has ``start(out, config, resumed) -> list`` (SB3 callbacks run before
+            the progress callback; ``resumed`` is the resumed checkpoint's ``state.json``,
+            ``{}`` for a fresh run), ``facts() -> dict`` (saved in every checkpoint and in
+            ``validation.json``), ``finish(out)`` and ``title``.
+    """
     import torch  # lazy: the training extra
+    from stable_baselines3.common.callbacks import CallbackList
 
     from uasep_env.training.rundir import check_checkpoint, plot_curves, prepare_out_dir, rewind
 
@@ -401,14 +424,16 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
         resumed = load_checkpoint(model, venv, resume)
         rewind(out, CSV_FIELDS, model.num_timesteps)
         print(f"resumed from {resume} at {model.num_timesteps:,} agent-steps")
+    before = plugin.start(out, config, resumed) if plugin is not None else []
     remaining = max(0, args.total_timesteps - model.num_timesteps)
     if remaining or resume is None:
         callback = make_callback(
-            args, config, venv, float(resumed.get("wall_s", 0.0)), args.total_timesteps, resumed
-        )
+            args, config, venv, float(resumed.get("wall_s", 0.0)), args.total_timesteps, resumed,
+            extra=plugin.facts if plugin is not None else None,
+        )  # fmt: skip
         model.learn(
             total_timesteps=remaining,
-            callback=callback,
+            callback=CallbackList([*before, callback]),
             reset_num_timesteps=resume is None,
             tb_log_name=args.action_mode,
         )
@@ -416,8 +441,11 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     else:  # resumed at the end: only the final outputs are (re)written
         info = {k: v for k, v in resumed.items() if k not in ("window", "args")}
     policy_path = export_policy(model, venv, config, args, out / "policy.zip", info)
-    plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS, f"PPO ({args.action_mode})")
-
+    title = plugin.title if plugin is not None else "PPO"
+    plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS,
+                f"{title} ({args.action_mode})")  # fmt: skip
+    if plugin is not None:
+        plugin.finish(out)
     return write_validation(out, config, policy_path, info, args.eval_episodes)
 
 

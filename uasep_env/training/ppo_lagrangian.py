@@ -1,0 +1,237 @@
+"""Train the shared PPO policy under a safety constraint (PID Lagrangian, issue 29).
+
+The recipe of :mod:`~uasep_env.training.ppo_shared` (every flag applies), with the task
+reward (``--config reward=task``: deviation, control, smoothness and the alive bonus, no
+separation or collision term) and the separation kept as a constraint on the cost channel
+instead: the expected episode cost per agent (:mod:`uasep_env.costs`: steps in loss of
+separation) must stay at most ``--cost-limit``. The multiplier is the PID Lagrangian of
+Stooke et al. (2020) (:mod:`uasep_env.lagrangian`; ``--pid-kp 0 --pid-kd 0`` is plain
+gradient ascent), applied to PPO's rollouts by
+:class:`uasep_env.sb3_lagrangian.LagrangianCallback`.
+
+    uasep-train ppo_lagrangian                               # pure policy, limit: the APF's
+    uasep-train ppo_lagrangian_residual                      # residual on the APF
+    uasep-train ppo_lagrangian --cost-limit 0.5              # a limit of your own
+    uasep-train ppo_lagrangian --cost-limit apf-rate         # the loss-rate bound
+    uasep-train ppo_lagrangian --resume runs/ppo_lagrangian/checkpoints/latest
+
+(``python train/ppo_lagrangian.py`` in a checkout is the same command.)
+
+``--cost-limit``: a number >= 0 (steps in loss of separation per agent and episode),
+``apf`` (the APF's mean episode cost on ``--budget-episodes`` validation encounters: as
+many steps in loss of separation as the APF on average) or ``apf-rate`` (the APF's
+loss-of-separation rate ``r`` over the formation size ``N``: meeting it bounds the policy's
+loss rate by ``r``; see :class:`uasep_env.lagrangian.CostBudget`). The budget is measured
+at the start with the project's evaluation code and written to ``budget.json`` (a resumed
+run reads it back).
+
+Beside ``ppo_shared``'s outputs a run writes ``cost_progress.csv`` (one row per PPO
+iteration: the mean episode cost of the rollout and of the last 200 episodes, the limit
+and the multiplier), ``cost_curves.png`` drawn from it, and the multiplier's state in every
+checkpoint's ``state.json`` and in ``validation.json`` (``training.lagrangian``), so that
+``--resume`` continues the multiplier, its cost window and ``cost_progress.csv``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from uasep_env.training import ppo_shared
+from uasep_env.training.args import parse_args as _parse_args
+from uasep_env.training.ppo_residual_apf import RESIDUAL_DEFAULTS
+
+__all__ = ["COST_FILES", "Args", "Constraint", "cost_limit", "main", "parse_args", "run"]
+
+#: What this recipe writes beside ``ppo_shared``'s run files (``--overwrite`` deletes them).
+COST_FILES = ("cost_progress.csv", "cost_curves.png", "budget.json")
+
+
+@dataclass
+class Args(ppo_shared.Args):
+    """``ppo_shared.Args`` with the constraint's options."""
+
+    # env overrides; keep reward=task in them for the task reward (this default)
+    config: str = "reward=task"
+    cost: str = "cost"  # the constrained cost: "cost" or one of uasep_env.costs.COST_TERMS
+    cost_limit: str = "apf"  # a number >= 0, "apf" or "apf-rate" (module docstring)
+    budget_episodes: int = 1000  # validation encounters the APF's budget is measured on
+    pid_kp: float = 1.0  # proportional gain (0 with --pid-kd 0: gradient ascent)
+    pid_ki: float = 0.2  # integral gain: the multiplier's learning rate
+    pid_kd: float = 0.0  # derivative gain
+    pid_ema: float = 0.9  # smoothing of the proportional and derivative terms
+    multiplier_init: float = 1.0  # a LoS step outweighs a step of deviation from the start
+    multiplier_max: float = 100.0  # 0: no bound
+    out_dir: str = "runs/ppo_lagrangian"
+
+
+#: The residual variant's defaults: the residual recipe's, with the constraint's options.
+_RESIDUAL_FIELDS = ("action_mode", "residual_scale", "log_std_init", "learning_rate",
+                    "target_kl", "critic_warmup")  # fmt: skip
+RESIDUAL_LAGRANGIAN_DEFAULTS = Args(
+    **{k: getattr(RESIDUAL_DEFAULTS, k) for k in _RESIDUAL_FIELDS},
+    out_dir="runs/ppo_lagrangian_residual",
+)
+
+
+def _check(args: Args) -> str | None:
+    """The constraint's options checked (one message naming the value), or None."""
+    from uasep_env.sb3_lagrangian import cost_reader
+
+    try:
+        cost_reader(args.cost)
+        cost_limit(args)
+        make_lagrangian(args, 0.0)
+    except ValueError as err:
+        return str(err)
+    if args.budget_episodes < 1:
+        return f"argument --budget-episodes: must be an integer >= 1, got {args.budget_episodes}"
+    if args.norm_reward:
+        return "argument --norm-reward: rescales the reward but not the cost; not supported"
+    return None
+
+
+def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:
+    """:class:`Args` from the command line, or exit (status 2) with one line naming the value."""
+    return _parse_args(
+        argv, defaults or Args(), prog=ppo_shared._prog(), description=__doc__, check=_check
+    )
+
+
+def cost_limit(args: Args) -> float | str:
+    """``--cost-limit`` as a number, or ``"apf"`` / ``"apf-rate"`` (measured later).
+
+    Raises:
+        ValueError: Anything else, or a negative or non-finite number, named.
+    """
+    from uasep_env.lagrangian import check_cost_limit
+
+    if args.cost_limit in ("apf", "apf-rate"):
+        return args.cost_limit
+    try:
+        value = float(args.cost_limit)
+    except ValueError:
+        raise ValueError(
+            f"--cost-limit {args.cost_limit!r}: a number >= 0, 'apf' or 'apf-rate'"
+        ) from None
+    return check_cost_limit(value, "--cost-limit")
+
+
+def make_lagrangian(args: Args, limit: float) -> Any:
+    """The multiplier's controller for ``args`` and the limit ``limit``."""
+    from uasep_env.lagrangian import PIDLagrangian
+
+    return PIDLagrangian(
+        limit,
+        kp=args.pid_kp,
+        ki=args.pid_ki,
+        kd=args.pid_kd,
+        ema_p=args.pid_ema,
+        ema_d=args.pid_ema,
+        init=args.multiplier_init,
+        max_multiplier=args.multiplier_max if args.multiplier_max > 0 else math.inf,
+    )
+
+
+def measure_budget(args: Args, config: Any, out: Path) -> float:
+    """The cost limit of ``args`` (the APF's budget measured if asked); ``budget.json``.
+
+    A resumed run reads ``budget.json`` back instead of measuring again.
+    """
+    import dataclasses
+
+    from uasep_env.atomic import atomic_write
+    from uasep_env.lagrangian import apf_cost_budget
+    from uasep_env.scenarios import VALIDATION_SEEDS
+
+    path = out / "budget.json"
+    if args.resume and path.exists():
+        record = json.loads(path.read_text())
+        if record.get("cost_limit_option") == args.cost_limit:
+            return float(record["cost_limit"])
+    limit = cost_limit(args)
+    record = {"cost_limit_option": args.cost_limit}
+    if isinstance(limit, str):
+        seeds = list(VALIDATION_SEEDS)[: args.budget_episodes]
+        budget = apf_cost_budget(config, seeds)
+        record.update(dataclasses.asdict(budget), parity_limit=budget.parity_limit,
+                      rate_limit=budget.rate_limit)  # fmt: skip
+        limit = budget.parity_limit if limit == "apf" else budget.rate_limit
+    record["cost_limit"] = limit
+    atomic_write(path, json.dumps(record, indent=2) + "\n")
+    print(f"cost limit {limit:.4g} per agent and episode ({args.cost_limit})")
+    return float(limit)
+
+
+class Constraint:
+    """The Lagrangian's part of :func:`uasep_env.training.ppo_shared.train` (its plugin)."""
+
+    title = "PPO-Lagrangian"
+
+    def __init__(self, args: Args) -> None:
+        self.args = args
+        self.callback: Any = None
+
+    def start(self, out: Path, config: Any, resumed: dict) -> list:
+        """The multiplier's callback, its state restored from ``resumed`` if any."""
+        from uasep_env.sb3_lagrangian import COST_FIELDS, LagrangianCallback
+        from uasep_env.training.rundir import read_progress, write_rows
+
+        task = config.reward == config.reward.task()
+        print(f"reward: {'the task reward' if task else config.reward} "
+              f"(--config {self.args.config!r})")  # fmt: skip
+        if not resumed:
+            for name in COST_FILES:  # --overwrite: ppo_shared's files are gone, ours too
+                (out / name).unlink(missing_ok=True)
+        lagrangian = make_lagrangian(self.args, measure_budget(self.args, config, out))
+        path = out / "cost_progress.csv"
+        self.callback = LagrangianCallback(lagrangian, self.args.cost, path)
+        if resumed:
+            self.callback.load_state_dict(resumed["lagrangian"]["state"])
+            steps = int(resumed["agent_steps"])
+            if path.exists():  # rows of the abandoned continuation go, as progress.csv's
+                rows = [r for r in read_progress(path) if int(r["agent_steps"]) <= steps]
+                write_rows(path, COST_FIELDS, rows)
+        return [self.callback]
+
+    def facts(self) -> dict:
+        """The constraint's state, saved in every checkpoint and in ``validation.json``."""
+        lag = self.callback.lagrangian
+        return {"lagrangian": {"cost": self.args.cost, "cost_limit": lag.cost_limit,
+                               "multiplier": lag.multiplier,
+                               "state": self.callback.state_dict()}}  # fmt: skip
+
+    def finish(self, out: Path) -> None:
+        """Draw ``cost_curves.png`` from ``cost_progress.csv``."""
+        from uasep_env.sb3_lagrangian import plot_cost_curves
+
+        if (out / "cost_progress.csv").exists():
+            plot_cost_curves(out / "cost_progress.csv", out / "cost_curves.png", self.title)
+
+
+def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
+    """Train (or resume) under the constraint, export the policy, validate; the summary."""
+    args = parse_args(argv, defaults)
+    return ppo_shared.train(args, Constraint(args))
+
+
+def _cli(defaults: Args | None, argv: list[str] | None) -> None:
+    import sys
+
+    try:
+        main(argv, defaults)
+    except OSError as err:
+        sys.exit(f"{ppo_shared._prog() or Path(sys.argv[0]).name}: error: {err}")
+
+
+def run(argv: list[str] | None = None) -> None:
+    """``uasep-train ppo_lagrangian``: the pure policy under the constraint."""
+    _cli(None, argv)
+
+
+def run_residual(argv: list[str] | None = None) -> None:
+    """``uasep-train ppo_lagrangian_residual``: the residual policy under the constraint."""
+    _cli(RESIDUAL_LAGRANGIAN_DEFAULTS, argv)
