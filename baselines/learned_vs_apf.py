@@ -41,7 +41,9 @@ sys.path.insert(0, str(ROOT))
 from paper_experiment import ROWS, table  # noqa: E402
 
 CHECKPOINTS = ROOT / "checkpoints"
-LEARNED = ("ppo_shared", "ppo_residual_apf", "mappo")
+LEARNED = ("ppo_shared", "ppo_residual_apf", "mappo", "ppo_lagrangian", "mappo_lagrangian")
+#: Shipped only if it earns its place (issue 29): no "missing" row when absent.
+OPTIONAL = ("mappo_lagrangian",)
 #: Rows of the tables: the paper's, with the combined loss-of-separation rate first.
 TABLE_ROWS = (
     ("episodes with loss of separation (any)", "episode.loss_of_separation", "rate", ".1%"),
@@ -69,7 +71,8 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
     out: list[tuple[str, str, bool | None]] = []
     for name in LEARNED:
         if name not in meta:
-            out.append((f"{name}: trained and shipped", "missing", None))
+            if name not in OPTIONAL:
+                out.append((f"{name}: trained and shipped", "missing", None))
             continue
         facts, note = meta[name], ""
         if "reproduces" in facts:  # retrained to a report's checkpoint: the original run's
@@ -84,21 +87,11 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
             (f"{name}: trains in <= 60 min", f"{wall / 60:.1f} min, {steps:,} agent-steps{note}",
              wall <= TRAINING_BUDGET_S)
         )  # fmt: skip
-    if "ppo_residual_apf" in res:
-        r = res["ppo_residual_apf"]
-        for key, what in (("episode.collision", "collision"), ("episode.loss_of_separation",
-                                                                "loss-of-separation")):  # fmt: skip
-            out.append(
-                (f"residual: {what} rate no worse than the APF's",
-                 f"{r[key]['rate']:.1%} [{r[key]['ci_low']:.1%}, {r[key]['ci_high']:.1%}] vs "
-                 f"{apf[key]['rate']:.1%} [{apf[key]['ci_low']:.1%}, {apf[key]['ci_high']:.1%}]",
-                 no_worse_rate(r[key], apf[key]))
-            )  # fmt: skip
-        d, da = r["episode.max_deviation"]["mean"], apf["episode.max_deviation"]["mean"]
-        out.append(
-            ("residual: mean max deviation >= 25 % below the APF's",
-             f"{d:.1f} m vs {da:.1f} m ({(1 - d / da):+.0%} lower)", d <= 0.75 * da)
-        )  # fmt: skip
+    for name, what in (("ppo_residual_apf", "residual"), ("ppo_lagrangian", "PPO-Lagrangian")):
+        if name in res:
+            out += _as_safe_and_closer(what, res[name], apf, cut=0.25)
+    if "mappo_lagrangian" in res:
+        out += _as_safe_and_closer("MAPPO-Lagrangian", res["mappo_lagrangian"], apf, cut=0.0)
     for name, what in (("ppo_shared", "pure"), ("mappo", "MAPPO")):
         if name in res:
             c = res[name]["episode.collision"]
@@ -106,6 +99,32 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
                 (f"{what}: collision rate <= 5 %",
                  f"{c['rate']:.1%} [{c['ci_low']:.1%}, {c['ci_high']:.1%}]", c["rate"] <= 0.05)
             )  # fmt: skip
+    return out
+
+
+def _as_safe_and_closer(
+    what: str, r: dict[str, Any], apf: dict[str, Any], cut: float
+) -> list[tuple[str, str, bool]]:
+    """The targets of a policy held to the APF's safety.
+
+    Collision and loss-of-separation rates no worse than the APF's (Wilson intervals
+    overlapping or lower), and mean max deviation at least ``cut`` below the APF's.
+    """
+    out = []
+    for key, name in (("episode.collision", "collision"),
+                      ("episode.loss_of_separation", "loss-of-separation")):  # fmt: skip
+        out.append(
+            (f"{what}: {name} rate no worse than the APF's",
+             f"{r[key]['rate']:.1%} [{r[key]['ci_low']:.1%}, {r[key]['ci_high']:.1%}] vs "
+             f"{apf[key]['rate']:.1%} [{apf[key]['ci_low']:.1%}, {apf[key]['ci_high']:.1%}]",
+             no_worse_rate(r[key], apf[key]))
+        )  # fmt: skip
+    d, da = r["episode.max_deviation"]["mean"], apf["episode.max_deviation"]["mean"]
+    goal = f">= {cut * 100:.0f} % below the APF's" if cut else "no larger than the APF's"
+    out.append(
+        (f"{what}: mean max deviation {goal}",
+         f"{d:.1f} m vs {da:.1f} m ({(1 - d / da):+.0%} lower)", d <= (1.0 - cut) * da)
+    )  # fmt: skip
     return out
 
 
