@@ -1,0 +1,290 @@
+"""Time to a policy: train a recipe until its validation figures reach the shipped checkpoint's.
+
+Usage::
+
+    python benchmarks/time_to_policy.py --recipe residual_apf [--max-minutes 60]
+        [--episodes 100] [--check-every 2000000] [--out FILE] [--force] [-- recipe flags]
+
+The shipped checkpoint of the recipe (``baselines/checkpoints/<name>.zip``) plays the first
+``--episodes`` validation encounters (:data:`uasep_env.scenarios.VALIDATION_SEEDS`; never
+the held-out bank) and sets the bar: **no collision**, a loss-of-separation rate no higher
+than the upper end of the shipped policy's 95 % Wilson interval, and a mean max deviation
+no higher than the upper end of its 95 % Student-t interval. The recipe then trains from
+scratch (its own defaults; flags after ``--`` go to it, ``uasep-train RECIPE --help``), and
+every ``--check-every`` agent-steps its current actor plays the same encounters; the run
+stops as soon as the figures clear the bar, or when ``--max-minutes`` of training time are
+spent.
+
+Printed, and written to ``--out`` (JSON, atomically; an existing file is kept unless
+``--force``): whether the bar was reached, the training wall minutes and agent-steps when it
+was (evaluation time excluded and reported apart), every check's figures, and where the
+training time went: the environment (the vector env's step), the rest of the rollout
+(policy inference, normalisation, the buffer) and the learner (PPO's update epochs).
+The run folder (``--run-dir``, default ``runs/time_to_policy/<recipe>``) keeps the recipe's
+usual files (``progress.csv``, checkpoints).
+
+Recipes: ``residual_apf`` (shipped ``ppo_residual_apf.zip``) and ``shared``
+(``ppo_shared.zip``), the SB3 recipes of :mod:`uasep_env.training`. Needs the ``train``
+extra. Speed figures are machine-dependent: the file records the machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+CHECKPOINTS = ROOT / "baselines" / "checkpoints"
+
+#: ``--recipe`` -> (shipped checkpoint name, the recipe's defaults, by module and attribute).
+RECIPES = {
+    "residual_apf": (
+        "ppo_residual_apf", "uasep_env.training.ppo_residual_apf", "RESIDUAL_DEFAULTS",
+    ),
+    "shared": ("ppo_shared", "uasep_env.training.args", "Args"),
+}  # fmt: skip
+
+
+@dataclass(frozen=True, kw_only=True)
+class Bar:
+    """The figures a trained policy must reach (from the shipped checkpoint's).
+
+    Attributes:
+        episodes: Validation encounters played.
+        loss_of_separation: Highest loss-of-separation rate (the shipped policy's Wilson
+            interval's upper end).
+        max_deviation: Highest mean max deviation, m (its Student-t interval's upper end).
+        shipped: The shipped policy's own figures.
+    """
+
+    episodes: int
+    loss_of_separation: float
+    max_deviation: float
+    shipped: dict[str, float]
+
+
+def figures(aggregate: dict[str, Any]) -> dict[str, float]:
+    """Collision and loss-of-separation rates and mean max deviation of an aggregate."""
+    return {
+        "collision": float(aggregate["episode.collision"]["rate"]),
+        "loss_of_separation": float(aggregate["episode.loss_of_separation"]["rate"]),
+        "max_deviation": float(aggregate["episode.max_deviation"]["mean"]),
+    }
+
+
+def make_bar(aggregate: dict[str, Any], episodes: int) -> Bar:
+    """The bar set by the shipped checkpoint's aggregate on the validation encounters."""
+    return Bar(
+        episodes=episodes,
+        loss_of_separation=float(aggregate["episode.loss_of_separation"]["ci_high"]),
+        max_deviation=float(aggregate["episode.max_deviation"]["ci_high"]),
+        shipped=figures(aggregate),
+    )
+
+
+def reached(fig: dict[str, float], bar: Bar) -> bool:
+    """Whether ``fig`` clears ``bar``: no collision, the rate and the deviation within it."""
+    return (
+        fig["collision"] == 0.0
+        and fig["loss_of_separation"] <= bar.loss_of_separation
+        and fig["max_deviation"] <= bar.max_deviation
+    )
+
+
+@dataclass(kw_only=True)
+class Clock:
+    """Seconds spent in each part of training (wrapped around the parts' calls)."""
+
+    env_s: float = 0.0
+    rollout_s: float = 0.0
+    learner_s: float = 0.0
+    eval_s: float = 0.0
+    marks: dict[str, float] = field(default_factory=dict)
+
+    def wrap(self, owner: Any, name: str, slot: str) -> None:
+        """Time every call of ``owner.name`` into ``slot`` (an instance attribute)."""
+        inner = getattr(owner, name)
+
+        @functools.wraps(inner)
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                setattr(self, slot, getattr(self, slot) + time.perf_counter() - t0)
+
+        setattr(owner, name, timed)
+
+
+def _recipe_args(recipe: str, run_dir: Path, extra: list[str]) -> Any:
+    import importlib
+
+    from uasep_env.training import ppo_shared
+
+    _, module, attr = RECIPES[recipe]
+    defaults = getattr(importlib.import_module(module), attr)
+    defaults = defaults() if isinstance(defaults, type) else defaults
+    argv = ["--out-dir", str(run_dir), "--no-progress", "--max-minutes", "1e6", *extra]
+    return ppo_shared.parse_args(argv, defaults)
+
+
+def _evaluate(policy: Any, config: Any, seeds: list[int]) -> dict[str, Any]:
+    from uasep_env.evaluation import evaluate
+
+    return evaluate({"p": policy}, config, seeds).results["p"].aggregate
+
+
+def run(
+    recipe: str,
+    episodes: int,
+    check_every: int,
+    max_minutes: float,
+    run_dir: Path,
+    extra: list[str],
+) -> dict[str, Any]:
+    """Train until the bar is reached or the budget is spent; the record (see the module)."""
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    from uasep_env.policies import load_policy
+    from uasep_env.scenarios import VALIDATION_SEEDS
+    from uasep_env.training import ppo_shared
+    from uasep_env.training.rundir import prepare_out_dir
+
+    args = _recipe_args(recipe, run_dir, extra)
+    torch.set_num_threads(args.torch_threads)
+    config = ppo_shared.make_env_config(args)
+    eval_cfg = config.replace(action={"mode": "direct"})
+    seeds = list(VALIDATION_SEEDS)[:episodes]
+    shipped = CHECKPOINTS / f"{RECIPES[recipe][0]}.zip"
+    bar = make_bar(_evaluate(load_policy(shipped, eval_cfg), eval_cfg, seeds), episodes)
+    # The residual starts at the APF: a bar the APF clears measures nothing.
+    apf = figures(_evaluate("apf", eval_cfg, seeds))
+    if reached(apf, bar):
+        print(f"warning: the APF clears the bar on these {episodes} encounters ({apf}); "
+              "more --episodes narrow it", file=sys.stderr)  # fmt: skip
+    print(f"bar ({episodes} validation encounters, {shipped.name}): no collision, loss of "
+          f"separation <= {bar.loss_of_separation:.1%}, mean max deviation <= "
+          f"{bar.max_deviation:.1f} m", flush=True)  # fmt: skip
+
+    prepare_out_dir(run_dir, "", overwrite=True)
+    venv, model = ppo_shared.build(args, config)
+    clock = Clock()
+    clock.wrap(venv.venv.venv, "step_wait", "env_s")  # the batched env under the wrappers
+    clock.wrap(model, "collect_rollouts", "rollout_s")
+    clock.wrap(model, "train", "learner_s")
+    progress = ppo_shared.make_callback(args, config, venv, 0.0, args.total_timesteps)
+    checks: list[dict[str, Any]] = []
+    state = {"next": check_every, "done": False}
+    t0 = time.perf_counter()
+
+    def training_s() -> float:
+        return time.perf_counter() - t0 - clock.eval_s
+
+    class Check(BaseCallback):
+        def _on_step(self) -> bool:
+            return not state["done"] and training_s() < max_minutes * 60.0
+
+        def _on_rollout_end(self) -> None:
+            if self.num_timesteps < state["next"]:
+                return
+            state["next"] += check_every
+            e0 = time.perf_counter()
+            path = ppo_shared.export_policy(self.model, venv, config, args,
+                                            run_dir / "check.zip", {})  # fmt: skip
+            fig = figures(_evaluate(load_policy(path, eval_cfg), eval_cfg, seeds))
+            clock.eval_s += time.perf_counter() - e0
+            ok = reached(fig, bar)
+            checks.append(
+                {
+                    "agent_steps": int(self.num_timesteps),
+                    "training_minutes": training_s() / 60.0,
+                    **fig,
+                    "reached": ok,
+                }
+            )
+            print(f"{self.num_timesteps:>12,} agent-steps {training_s() / 60:6.1f} min: "
+                  f"collisions {fig['collision']:.1%}, loss of separation "
+                  f"{fig['loss_of_separation']:.1%}, max deviation {fig['max_deviation']:.1f} m"
+                  f"{'  reached' if ok else ''}", flush=True)  # fmt: skip
+            state["done"] = ok
+
+    model.learn(args.total_timesteps, callback=CallbackList([Check(), progress]))
+    train_s = training_s()
+    hit = next((c for c in checks if c["reached"]), None)
+    return {
+        "recipe": recipe,
+        "shipped": f"baselines/checkpoints/{shipped.name}",
+        "bar": asdict(bar),
+        "apf": apf,
+        "apf_clears_bar": reached(apf, bar),
+        "reached": hit is not None,
+        "training_minutes": (hit["training_minutes"] if hit else train_s / 60.0),
+        "agent_steps": hit["agent_steps"] if hit else int(model.num_timesteps),
+        "time_s": {
+            "training": train_s,
+            "env": clock.env_s,
+            # The checks run inside the rollout (at its end): not rollout time.
+            "rollout_other": clock.rollout_s - clock.env_s - clock.eval_s,
+            "learner": clock.learner_s,
+            "evaluation": clock.eval_s,
+        },
+        "checks": checks,
+        "recipe_args": asdict(args),
+        "machine": {"cpus": os.cpu_count(), "affinity": len(os.sched_getaffinity(0)),
+                    "processor": platform.processor() or platform.machine(),
+                    "python": platform.python_version(), "torch": torch.__version__},
+    }  # fmt: skip
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Parse, run, print the summary and write the record."""
+    from uasep_env.atomic import atomic_write
+    from uasep_env.training.args import non_negative_float, positive_int
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    extra: list[str] = []
+    if "--" in argv:
+        i = argv.index("--")
+        argv, extra = argv[:i], argv[i + 1 :]
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--recipe", choices=sorted(RECIPES), required=True)
+    p.add_argument("--episodes", type=positive_int, default=100, help="validation encounters")
+    p.add_argument("--check-every", type=positive_int, default=2_000_000, help="agent-steps")
+    p.add_argument("--max-minutes", type=non_negative_float, default=60.0,
+                   help="training time budget (evaluations excluded)")  # fmt: skip
+    p.add_argument("--run-dir", type=Path, default=None)
+    p.add_argument("--out", type=Path, default=None, help="the JSON record")
+    p.add_argument("--force", action="store_true", help="replace an existing --out")
+    a = p.parse_args(argv)
+    out = a.out or ROOT / "benchmarks" / "results" / f"time_to_policy_{a.recipe}.json"
+    if out.exists() and not a.force:
+        p.error(f"argument --out: {out} exists (--force replaces it)")
+    run_dir = a.run_dir or ROOT / "runs" / "time_to_policy" / a.recipe
+    record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra)
+    record["command"] = "python benchmarks/time_to_policy.py " + " ".join(
+        [*argv, *(["--", *extra] if extra else [])]
+    )
+    t = record["time_s"]
+    share = {k: t[k] / t["training"] if t["training"] else 0.0
+             for k in ("env", "rollout_other", "learner")}  # fmt: skip
+    print(f"{a.recipe}: {'reached' if record['reached'] else 'NOT reached'} in "
+          f"{record['training_minutes']:.1f} training minutes, {record['agent_steps']:,} "
+          f"agent-steps; time: env {share['env']:.0%}, rest of the rollout "
+          f"{share['rollout_other']:.0%}, learner {share['learner']:.0%} (evaluation "
+          f"{t['evaluation'] / 60:.1f} min apart)")  # fmt: skip
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(out, json.dumps(record, indent=2) + "\n")
+    return record
+
+
+if __name__ == "__main__":
+    main()
