@@ -1,4 +1,4 @@
-"""Training recipes for the shared policies (``uasep-train RECIPE``): PPO, residual PPO, MAPPO.
+"""Training recipes for the shared policies (``uasep-train RECIPE``): PPO, MAPPO, MAPPO-Lag.
 
 One module per recipe, the flags they share in :mod:`~uasep_env.training.args` and the run
 folder's rules in :mod:`~uasep_env.training.rundir`:
@@ -6,7 +6,10 @@ folder's rules in :mod:`~uasep_env.training.rundir`:
 * ``ppo_shared`` (:mod:`~uasep_env.training.ppo_shared`): one PPO policy shared by every UAV;
 * ``ppo_residual_apf`` (:mod:`~uasep_env.training.ppo_residual_apf`): the same, learning
   corrections to the APF's command;
-* ``mappo`` (:mod:`~uasep_env.training.mappo`): skrl's MAPPO, a centralised critic.
+* ``mappo`` (:mod:`~uasep_env.training.mappo`): skrl's MAPPO, a centralised critic;
+* ``mappo_lagrangian`` (:mod:`~uasep_env.training.mappo_lagrangian`): MAPPO with a cost
+  critic and a Lagrange multiplier, the separation a constraint
+  (:mod:`~uasep_env.training.constraint`).
 
 torch, stable-baselines3 and skrl (the ``train`` extra) are imported when a recipe runs,
 never on import, so ``uasep-train --help`` works on a core install.
@@ -24,4 +27,8 @@ RECIPES: dict[str, tuple[str, str]] = {
         "PPO residual on the APF (a zero action flies the APF)",
     ),
     "mappo": ("uasep_env.training.mappo", "skrl's MAPPO (centralised critic, shared actor)"),
+    "mappo_lagrangian": (
+        "uasep_env.training.mappo_lagrangian",
+        "MAPPO with a cost critic and a PID Lagrange multiplier (separation as a constraint)",
+    ),
 }
