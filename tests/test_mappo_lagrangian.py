@@ -252,3 +252,15 @@ def test_seed_driver_targets(monkeypatch):
     ]  # fmt: skip
     assert all(met.values())
     assert list(measured(45.0).values()) == [True, True, False]  # wider than the APF: not met
+
+
+def test_resume_from_a_plain_mappo_checkpoint_is_refused(tmp_path, capsys):
+    from uasep_env.training.rundir import CHECKPOINT_FILES
+
+    ckpt = tmp_path / "mappo" / "checkpoints" / "step_96"
+    ckpt.mkdir(parents=True)
+    for name in CHECKPOINT_FILES:
+        (ckpt / name).write_text('{"agent_steps": 96}' if name == "state.json" else "")
+    argv = ["mappo_lagrangian", "--resume", str(ckpt), "--out-dir", str(tmp_path / "mappo")]
+    assert uasep_train(argv) == 1
+    assert "not a MAPPO-Lagrangian checkpoint" in capsys.readouterr().err
