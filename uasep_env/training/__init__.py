@@ -1,4 +1,4 @@
-"""Training recipes for the shared policies (``uasep-train RECIPE``): PPO, residual PPO, MAPPO.
+"""Training recipes for the shared policies (``uasep-train RECIPE``): PPO, MAPPO, MAPPO-Lag.
 
 One module per recipe, the flags they share in :mod:`~uasep_env.training.args` and the run
 folder's rules in :mod:`~uasep_env.training.rundir`:
@@ -9,7 +9,10 @@ folder's rules in :mod:`~uasep_env.training.rundir`:
 * ``mappo`` (:mod:`~uasep_env.training.mappo`): skrl's MAPPO, a centralised critic;
 * ``ppo_lagrangian`` and ``ppo_lagrangian_residual``
   (:mod:`~uasep_env.training.ppo_lagrangian`): PPO (pure, residual) on the task reward with
-  loss of separation as a constraint (a PID Lagrange multiplier).
+  loss of separation as a constraint (a PID Lagrange multiplier);
+* ``mappo_lagrangian`` (:mod:`~uasep_env.training.mappo_lagrangian`): MAPPO with a cost
+  critic and a Lagrange multiplier, the separation a constraint
+  (:mod:`~uasep_env.training.constraint`).
 
 torch, stable-baselines3 and skrl (the ``train`` extra) are imported when a recipe runs,
 never on import, so ``uasep-train --help`` works on a core install.
@@ -34,5 +37,9 @@ RECIPES: dict[str, tuple[str, str]] = {
     "ppo_lagrangian_residual": (
         "uasep_env.training.ppo_lagrangian_residual",
         "the same, residual on the APF",
+    ),
+    "mappo_lagrangian": (
+        "uasep_env.training.mappo_lagrangian",
+        "MAPPO with a cost critic and a PID Lagrange multiplier (separation as a constraint)",
     ),
 }

@@ -245,7 +245,9 @@ def build_parser(
     """The parser of a recipe: one validated ``--kebab-case`` flag per field of ``defaults``.
 
     A field listed in :data:`FIELDS` gets its validator and help; a subclass's other fields
-    are parsed by their annotation (``int``, a finite ``float``, ``bool`` on/off, ``str``).
+    take them from their metadata (``dataclasses.field(metadata={"type": validator,
+    "help": text})``; ``"type": None`` for an on/off flag), else are parsed by their
+    annotation (``int``, a finite ``float``, ``bool`` on/off, ``str``).
 
     Args:
         defaults: The recipe's defaults (an :class:`Args` or a subclass's instance).
@@ -263,7 +265,10 @@ def build_parser(
         # A recipe's own field without an entry in FIELDS is typed by its annotation.
         kind = getattr(f.type, "__name__", f.type)  # a type, or its name under PEP 563
         fallback = {"bool": None, "int": _int, "float": finite_float}.get(str(kind), str)
-        validator, text = FIELDS.get(f.name, (fallback, f.name.replace("_", " ")))
+        validator, text = FIELDS.get(f.name) or (
+            f.metadata.get("type", fallback),
+            f.metadata.get("help", f.name.replace("_", " ")),
+        )
         if validator is None:
             parser.add_argument(
                 flag, action=argparse.BooleanOptionalAction, default=default, help=text

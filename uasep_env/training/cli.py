@@ -28,7 +28,7 @@ def _overview() -> str:
     lines += [f"  {name:<{width}}  {text}" for name, (_, text) in RECIPES.items()]
     lines += [
         "",
-        "Each recipe needs the train extra (install torch==2.13.0 first; mappo also skrl).",
+        "Each recipe needs the train extra (install torch==2.13.0 first; mappo* also skrl).",
         "A run writes progress.csv, curves.png, checkpoints/, policy.zip and validation.json",
         "to --out-dir; uasep-eval --policy OUT_DIR/policy.zip evaluates the result.",
     ]

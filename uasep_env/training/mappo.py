@@ -55,7 +55,7 @@ import numpy as np
 from uasep_env.training import ppo_shared
 from uasep_env.training.args import parse_args as _parse_args
 
-__all__ = ["Args", "SkrlView", "build", "export_policy", "load_checkpoint", "main",
+__all__ = ["Args", "Hooks", "SkrlView", "build", "export_policy", "load_checkpoint", "main",
            "parse_args", "ppo_shared", "run", "save_checkpoint", "train"]  # fmt: skip
 
 
@@ -92,8 +92,16 @@ def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> A
     )
 
 
-def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
-    """The normalised SB3 vector env, its skrl multi-agent view, and the MAPPO agent."""
+def build(args: Args, config: Any, agent_class: type | None = None) -> tuple[Any, Any, Any]:
+    """The normalised SB3 vector env, its skrl multi-agent view, and the MAPPO agent.
+
+    Args:
+        args: The options.
+        config: The environment config.
+        agent_class: skrl's ``MAPPO`` (None) or a subclass; the names in its
+            ``extra_critics`` attribute (MAPPO-Lagrangian's ``"cost_value"``) get one more
+            critic each, of the value critic's shape, shared by the agents.
+    """
     import gymnasium
     import torch
     from skrl.memories.torch import RandomMemory
@@ -147,6 +155,14 @@ def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
     actor = Actor(env.observation_spaces[uid0], env.action_spaces[uid0])
     critic = Critic(env.state_spaces[uid0])
     models = {uid: {"policy": actor, "value": critic} for uid in env.possible_agents}
+    for k, role in enumerate(getattr(agent_class, "extra_critics", ())):
+        # From a stream of its own: the actor, the critic and every later sample stay plain
+        # MAPPO's for the same seed.
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(args.seed + 7919 * (k + 1))
+            extra = Critic(env.state_spaces[uid0])
+        for uid in env.possible_agents:
+            models[uid][role] = extra
     memories = {
         uid: RandomMemory(memory_size=args.n_steps, num_envs=args.n_envs, device="cpu")
         for uid in env.possible_agents
@@ -183,7 +199,7 @@ def build(args: Args, config: Any) -> tuple[Any, Any, Any]:
             directory=args.out_dir, write_interval=0, checkpoint_interval=0
         ),
     }
-    agent = MAPPO(
+    agent = (agent_class or MAPPO)(
         possible_agents=env.possible_agents,
         models=models,
         memories=memories,
@@ -228,6 +244,7 @@ class SkrlView:
         self.clip = clip
         self.state_spaces = {a: space for a in self.possible_agents}
         self.infos: list[dict] = []
+        self.dones = np.zeros(self.num_envs * self.n, dtype=bool)
         self._obs: dict = {}
 
     def _split(self, flat: np.ndarray) -> dict:
@@ -254,7 +271,7 @@ class SkrlView:
 
         stacked = np.stack([actions[a].numpy() for a in self.possible_agents], axis=1)
         obs, rew, dones, infos = self.venv.step(stacked.reshape(-1, 3))
-        self.infos = infos
+        self.infos, self.dones = infos, dones
         done = dones.reshape(self.num_envs, self.n)[:, :1]
         # The time limit counts as an end: the global state holds the episode's progress, so
         # a state at the limit is terminal, and skrl's GAE (time_limit_bootstrap off) would
@@ -346,19 +363,55 @@ def load_checkpoint(agent: Any, venv: Any, directory: Path) -> dict:
     return json.loads((directory / "state.json").read_text())
 
 
-def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
-    """The training loop (skrl's trainer loop, with the recipes' bookkeeping)."""
+class Hooks:
+    """What a variant of the recipe adds to :func:`train`'s loop; here, nothing.
+
+    MAPPO-Lagrangian (:mod:`uasep_env.training.mappo_lagrangian`) reads the costs, moves its
+    multiplier once per rollout and keeps both in the checkpoints through these.
+
+    Attributes:
+        agent_class: The skrl agent :func:`build` makes (None: skrl's ``MAPPO``).
+    """
+
+    agent_class: type | None = None
+
+    def start(self, agent: Any, env: SkrlView, out: Path, resumed: dict) -> None:
+        """Before the first step; ``resumed`` is the checkpoint's ``state.json`` (or ``{}``)."""
+
+    def step(self, env: SkrlView) -> dict:
+        """After each environment step: more ``infos`` for skrl's ``record_transition``."""
+        return {}
+
+    def rollout_end(self, agent_steps: int) -> None:
+        """At the last step of each rollout, before skrl's update (``agent_steps`` after it)."""
+
+    def info(self) -> dict:
+        """Facts added to the run's summary (``state.json``, ``validation.json``)."""
+        return {}
+
+    def state(self) -> dict:
+        """What a checkpoint's ``state.json`` holds beyond :meth:`info` (replacing its keys)."""
+        return {}
+
+    def close(self) -> None:
+        """After the last checkpoint."""
+
+
+def train(args: Args, config: Any, out: Path, hooks: Hooks | None = None) -> tuple[Any, Any, dict]:
+    """The training loop (skrl's trainer loop, with the recipes' bookkeeping and ``hooks``)."""
     import torch
 
     from uasep_env.atomic import atomic_symlink
     from uasep_env.training.rundir import ProgressLog, check_checkpoint, rewind
 
-    venv, env, agent = build(args, config)
+    hooks = hooks or Hooks()
+    venv, env, agent = build(args, config, hooks.agent_class)
     resumed: dict = {}
     if args.resume:
         resumed = load_checkpoint(agent, venv, check_checkpoint(Path(args.resume)))
         rewind(out, ppo_shared.CSV_FIELDS, int(resumed["agent_steps"]))
         print(f"resumed from {args.resume} at {int(resumed['agent_steps']):,} agent-steps")
+    hooks.start(agent, env, out, resumed)
     steps, wall_offset = int(resumed.get("agent_steps", 0)), float(resumed.get("wall_s", 0.0))
     per_step = args.n_envs * env.n
     t0 = time.perf_counter() - wall_offset
@@ -400,24 +453,27 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
             "wall_s": time.perf_counter() - t0,
             "episodes": episodes,
             **summary(),
+            **hooks.info(),
         }
 
     def checkpoint() -> None:
         d = out / "checkpoints" / f"step_{steps}"
         window_rows = [[float(x) for x in e] for e in window]
-        save_checkpoint(agent, venv, config, args, d, {**facts(), "window": window_rows})
+        state = {**facts(), "window": window_rows, **hooks.state()}
+        save_checkpoint(agent, venv, config, args, d, state)
         atomic_symlink(d.name, out / "checkpoints" / "latest")
 
     obs, _ = env.reset()
     states = env.state()
     t, horizon = 0, max(1, args.total_timesteps // per_step)
     while steps < args.total_timesteps and time.perf_counter() - t0 < args.max_minutes * 60:
-        for _ in range(args.n_steps):  # one rollout, then skrl's update
+        for i in range(args.n_steps):  # one rollout, then skrl's update
             agent.pre_interaction(timestep=t, timesteps=horizon)
             with torch.no_grad():
                 actions, _ = agent.act(obs, states, timestep=t, timesteps=horizon)
                 next_obs, rewards, term, trunc, infos = env.step(actions)
                 next_states = env.state()
+                infos = {**infos, **hooks.step(env)}
                 agent.record_transition(
                     observations=obs,
                     states=states,
@@ -431,6 +487,8 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
                     timestep=t,
                     timesteps=horizon,
                 )
+            if i == args.n_steps - 1:
+                hooks.rollout_end(steps + per_step)
             agent.post_interaction(timestep=t, timesteps=horizon)
             obs, states, t, steps = next_obs, next_states, t + 1, steps + per_step
             for k, info in enumerate(env.infos):
@@ -468,6 +526,7 @@ def train(args: Args, config: Any, out: Path) -> tuple[Any, Any, dict]:
                 )
     checkpoint()
     log.close()
+    hooks.close()
     if bar is not None:
         bar.close()
     return agent, venv, facts()

@@ -23,7 +23,7 @@ many steps in loss of separation as the APF on average) or ``apf-rate`` (the APF
 loss-of-separation rate ``r`` over the formation size ``N``: meeting it bounds the policy's
 loss rate by ``r``; see :class:`uasep_env.lagrangian.CostBudget`). The budget is measured
 at the start with the project's evaluation code and written to ``budget.json`` (a resumed
-run reads it back).
+run keeps its checkpoint's limit).
 
 Beside ``ppo_shared``'s outputs a run writes ``cost_progress.csv`` (one row per PPO
 iteration: the mean episode cost of the rollout and of the last 200 episodes, the limit
@@ -34,37 +34,30 @@ checkpoint's ``state.json`` and in ``validation.json`` (``training.lagrangian``)
 
 from __future__ import annotations
 
-import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from uasep_env.training import ppo_shared
 from uasep_env.training.args import parse_args as _parse_args
+from uasep_env.training.constraint import (
+    COST_FILES,
+    LagrangianArgs,
+    check,
+    cost_limit,
+    make_lagrangian,
+    measure_budget,
+)
 from uasep_env.training.ppo_residual_apf import RESIDUAL_DEFAULTS
 
-__all__ = ["COST_FILES", "Args", "Constraint", "cost_limit", "main", "parse_args", "run"]
-
-#: What this recipe writes beside ``ppo_shared``'s run files (``--overwrite`` deletes them).
-COST_FILES = ("cost_progress.csv", "cost_curves.png", "budget.json")
+__all__ = ["COST_FILES", "Args", "Constraint", "cost_limit", "main", "parse_args", "run",
+           "run_residual"]  # fmt: skip
 
 
 @dataclass
-class Args(ppo_shared.Args):
-    """``ppo_shared.Args`` with the constraint's options."""
+class Args(LagrangianArgs, ppo_shared.Args):
+    """``ppo_shared.Args`` with the constraint's options (:mod:`~uasep_env.training.constraint`)."""
 
-    # env overrides; keep reward=task in them for the task reward (this default)
-    config: str = "reward=task"
-    cost: str = "cost"  # the constrained cost: "cost" or one of uasep_env.costs.COST_TERMS
-    cost_limit: str = "apf"  # a number >= 0, "apf" or "apf-rate" (module docstring)
-    budget_episodes: int = 1000  # validation encounters the APF's budget is measured on
-    pid_kp: float = 1.0  # proportional gain (0 with --pid-kd 0: gradient ascent)
-    pid_ki: float = 0.2  # integral gain: the multiplier's learning rate
-    pid_kd: float = 0.0  # derivative gain
-    pid_ema: float = 0.9  # smoothing of the proportional and derivative terms
-    multiplier_init: float = 1.0  # a LoS step outweighs a step of deviation from the start
-    multiplier_max: float = 100.0  # 0: no bound
     out_dir: str = "runs/ppo_lagrangian"
 
 
@@ -77,93 +70,11 @@ RESIDUAL_LAGRANGIAN_DEFAULTS = Args(
 )
 
 
-def _check(args: Args) -> str | None:
-    """The constraint's options checked (one message naming the value), or None."""
-    from uasep_env.sb3_lagrangian import cost_reader
-
-    try:
-        cost_reader(args.cost)
-        cost_limit(args)
-        make_lagrangian(args, 0.0)
-    except ValueError as err:
-        return str(err)
-    if args.budget_episodes < 1:
-        return f"argument --budget-episodes: must be an integer >= 1, got {args.budget_episodes}"
-    if args.norm_reward:
-        return "argument --norm-reward: rescales the reward but not the cost; not supported"
-    return None
-
-
 def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:
     """:class:`Args` from the command line, or exit (status 2) with one line naming the value."""
     return _parse_args(
-        argv, defaults or Args(), prog=ppo_shared._prog(), description=__doc__, check=_check
+        argv, defaults or Args(), prog=ppo_shared._prog(), description=__doc__, check=check
     )
-
-
-def cost_limit(args: Args) -> float | str:
-    """``--cost-limit`` as a number, or ``"apf"`` / ``"apf-rate"`` (measured later).
-
-    Raises:
-        ValueError: Anything else, or a negative or non-finite number, named.
-    """
-    from uasep_env.lagrangian import check_cost_limit
-
-    if args.cost_limit in ("apf", "apf-rate"):
-        return args.cost_limit
-    try:
-        value = float(args.cost_limit)
-    except ValueError:
-        raise ValueError(
-            f"--cost-limit {args.cost_limit!r}: a number >= 0, 'apf' or 'apf-rate'"
-        ) from None
-    return check_cost_limit(value, "--cost-limit")
-
-
-def make_lagrangian(args: Args, limit: float) -> Any:
-    """The multiplier's controller for ``args`` and the limit ``limit``."""
-    from uasep_env.lagrangian import PIDLagrangian
-
-    return PIDLagrangian(
-        limit,
-        kp=args.pid_kp,
-        ki=args.pid_ki,
-        kd=args.pid_kd,
-        ema_p=args.pid_ema,
-        ema_d=args.pid_ema,
-        init=args.multiplier_init,
-        max_multiplier=args.multiplier_max if args.multiplier_max > 0 else math.inf,
-    )
-
-
-def measure_budget(args: Args, config: Any, out: Path) -> float:
-    """The cost limit of ``args`` (the APF's budget measured if asked); ``budget.json``.
-
-    A resumed run reads ``budget.json`` back instead of measuring again.
-    """
-    import dataclasses
-
-    from uasep_env.atomic import atomic_write
-    from uasep_env.lagrangian import apf_cost_budget
-    from uasep_env.scenarios import VALIDATION_SEEDS
-
-    path = out / "budget.json"
-    if args.resume and path.exists():
-        record = json.loads(path.read_text())
-        if record.get("cost_limit_option") == args.cost_limit:
-            return float(record["cost_limit"])
-    limit = cost_limit(args)
-    record = {"cost_limit_option": args.cost_limit}
-    if isinstance(limit, str):
-        seeds = list(VALIDATION_SEEDS)[: args.budget_episodes]
-        budget = apf_cost_budget(config, seeds)
-        record.update(dataclasses.asdict(budget), parity_limit=budget.parity_limit,
-                      rate_limit=budget.rate_limit)  # fmt: skip
-        limit = budget.parity_limit if limit == "apf" else budget.rate_limit
-    record["cost_limit"] = limit
-    atomic_write(path, json.dumps(record, indent=2) + "\n")
-    print(f"cost limit {limit:.4g} per agent and episode ({args.cost_limit})")
-    return float(limit)
 
 
 class Constraint:
@@ -186,7 +97,12 @@ class Constraint:
         if not resumed:
             for name in COST_FILES:  # --overwrite: ppo_shared's files are gone, ours too
                 (out / name).unlink(missing_ok=True)
-        lagrangian = make_lagrangian(self.args, measure_budget(self.args, config, out))
+        kept = resumed.get("lagrangian", {})
+        if resumed and kept.get("cost_limit_option") == self.args.cost_limit:
+            limit = float(kept["cost_limit"])  # the run's own, not measured again
+        else:
+            limit = measure_budget(self.args, config, out)
+        lagrangian = make_lagrangian(self.args, limit)
         path = out / "cost_progress.csv"
         self.callback = LagrangianCallback(lagrangian, self.args.cost, path)
         if resumed:
@@ -201,6 +117,7 @@ class Constraint:
         """The constraint's state, saved in every checkpoint and in ``validation.json``."""
         lag = self.callback.lagrangian
         return {"lagrangian": {"cost": self.args.cost, "cost_limit": lag.cost_limit,
+                               "cost_limit_option": self.args.cost_limit,
                                "multiplier": lag.multiplier,
                                "state": self.callback.state_dict()}}  # fmt: skip
 

@@ -129,10 +129,7 @@ def rewind(out: Path, fields: tuple[str, ...], agent_steps: int) -> None:
             shutil.rmtree(tmp)
         else:
             tmp.unlink()
-    progress = out / "progress.csv"
-    if progress.exists():
-        rows = [r for r in read_progress(progress) if int(r["agent_steps"]) <= agent_steps]
-        write_rows(progress, fields, rows)
+    rewind_csv(out / "progress.csv", fields, agent_steps)
     for d in (out / "checkpoints").glob("step_*"):
         step = d.name.removeprefix("step_")
         if step.isdigit() and int(step) > agent_steps and not d.is_symlink():
@@ -140,6 +137,17 @@ def rewind(out: Path, fields: tuple[str, ...], agent_steps: int) -> None:
     resumed = out / "checkpoints" / f"step_{agent_steps}"
     if resumed.is_dir():
         atomic_symlink(resumed.name, out / "checkpoints" / "latest")
+
+
+def rewind_csv(path: Path, fields: tuple[str, ...], agent_steps: int) -> None:
+    """Keep the rows of the CSV ``path`` up to ``agent_steps`` (rewritten atomically).
+
+    For ``progress.csv`` (:func:`rewind`) and a recipe's own per-iteration CSV (MAPPO-
+    Lagrangian's ``cost_progress.csv``); a file that does not exist is left so.
+    """
+    if path.exists():
+        rows = [r for r in read_progress(path) if int(r["agent_steps"]) <= agent_steps]
+        write_rows(path, fields, rows)
 
 
 def publish_dir(tmp: Path, final: Path) -> None:

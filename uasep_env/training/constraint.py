@@ -1,0 +1,262 @@
+"""The Lagrangian recipes' constraint: its options, its cost limit, its multiplier, its costs.
+
+Shared by MAPPO-Lagrangian (:mod:`~uasep_env.training.mappo_lagrangian`) and PPO-Lagrangian.
+The constraint keeps the expected episode cost per agent (:mod:`uasep_env.costs`: steps in
+loss of separation) at most a limit, with a PID Lagrange multiplier
+(:class:`uasep_env.lagrangian.PIDLagrangian`) moved once per rollout:
+
+* :class:`LagrangianArgs`: the options, a dataclass mixin placed before the recipe's
+  ``Args`` (``class Args(LagrangianArgs, mappo.Args)``); each flag carries its validator,
+  so :func:`uasep_env.training.args.parse_args` refuses a bad value in one line naming it;
+* :func:`check`: what the parser refuses beyond each flag's range (``check=`` of
+  :func:`~uasep_env.training.args.parse_args`);
+* :func:`cost_limit`, :func:`make_lagrangian`, :func:`measure_budget` (``budget.json``);
+* :class:`CostTracker`: the agents' running episode costs, the multiplier's update at the
+  end of each rollout, the ``cost_progress.csv`` rows
+  (:data:`uasep_env.sb3_lagrangian.COST_FIELDS`) and the state a checkpoint keeps.
+
+``--cost-limit``: a number >= 0 (steps in loss of separation per agent and episode),
+``apf`` (the APF's mean episode cost on ``--budget-episodes`` validation encounters) or
+``apf-rate`` (the APF's loss-of-separation rate over the formation size; see
+:class:`uasep_env.lagrangian.CostBudget`).
+
+This module imports neither torch nor stable-baselines3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uasep_env.costs import COST_TERMS
+from uasep_env.lagrangian import PIDLagrangian, check_cost_limit
+from uasep_env.training.args import non_negative_float, positive_int
+
+__all__ = [
+    "COST_FILES",
+    "CostTracker",
+    "LagrangianArgs",
+    "check",
+    "cost_limit",
+    "cost_limit_option",
+    "cost_name",
+    "make_lagrangian",
+    "measure_budget",
+]
+
+#: What a Lagrangian run writes beside its recipe's run files (``--overwrite`` deletes them).
+COST_FILES = ("cost_progress.csv", "cost_curves.png", "budget.json")
+
+
+def cost_name(text: str) -> str:
+    """An argparse type: a cost the environments report (``cost`` or a term's name)."""
+    if text != "cost" and text not in COST_TERMS:
+        raise argparse.ArgumentTypeError(
+            f"cost {text!r} is not reported by the environment; choose 'cost' or one of its "
+            f"terms {COST_TERMS}"
+        )
+    return text
+
+
+def cost_limit_option(text: str) -> str:
+    """An argparse type: ``--cost-limit``, a number >= 0, ``apf`` or ``apf-rate``."""
+    if text in ("apf", "apf-rate"):
+        return text
+    try:
+        check_cost_limit(float(text), "--cost-limit")
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a number >= 0, 'apf' or 'apf-rate', got {text!r}"
+        ) from None
+    return text
+
+
+def _smoothing(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"must be a number in [0, 1), got {text!r}")
+    return value
+
+
+def _opt(default: Any, kind: Any, text: str) -> Any:
+    return field(default=default, metadata={"type": kind, "help": text})
+
+
+@dataclass
+class LagrangianArgs:
+    """The constraint's options (a mixin: ``class Args(LagrangianArgs, RecipeArgs)``)."""
+
+    # The task reward by default: the separation is the constraint's, not the reward's.
+    config: str = "reward=task"
+    cost: str = _opt("cost", cost_name, "the constrained cost: 'cost' or one of its terms")
+    cost_limit: str = _opt(
+        "apf", cost_limit_option, "episode cost per agent allowed: a number >= 0, apf, apf-rate"
+    )
+    budget_episodes: int = _opt(
+        1000, positive_int, "validation encounters the APF's budget is measured on"
+    )
+    # Gains and start for the scales here (docs/training.md): a step in loss of separation
+    # costs 1 against at most 0.2 of deviation reward, and lambda moves about once per four
+    # rollouts; an integral gain of 0.01 moved it by < 0.01 an update, too slow for an hour.
+    pid_kp: float = _opt(1.0, non_negative_float, "multiplier: proportional gain")
+    pid_ki: float = _opt(0.2, non_negative_float, "multiplier: integral gain (learning rate)")
+    pid_kd: float = _opt(0.0, non_negative_float, "multiplier: derivative gain")
+    pid_ema: float = _opt(0.9, _smoothing, "multiplier: smoothing of the P and D terms")
+    multiplier_init: float = _opt(1.0, non_negative_float, "multiplier at the start")
+    multiplier_max: float = _opt(100.0, non_negative_float, "multiplier's bound (0: none)")
+
+
+def check(args: Any) -> str | None:
+    """What the Lagrangian recipes refuse beyond each flag's range (a message), or None."""
+    from uasep_env.scenarios import VALIDATION_SEEDS
+
+    if args.norm_reward:
+        return (
+            "argument --norm-reward: rescales the reward but not the cost; a Lagrangian "
+            "recipe trains without it"
+        )
+    if isinstance(cost_limit(args), str) and args.budget_episodes > len(VALIDATION_SEEDS):
+        return (
+            f"argument --budget-episodes: {args.budget_episodes} > the "
+            f"{len(VALIDATION_SEEDS)} validation encounters"
+        )
+    return None
+
+
+def cost_limit(args: Any) -> float | str:
+    """``--cost-limit`` as a number, or ``"apf"`` / ``"apf-rate"`` (measured later).
+
+    Raises:
+        ValueError: Anything else, or a negative or non-finite number, named.
+    """
+    if args.cost_limit in ("apf", "apf-rate"):
+        return str(args.cost_limit)
+    try:
+        value = float(args.cost_limit)
+    except ValueError:
+        raise ValueError(
+            f"--cost-limit {args.cost_limit!r}: a number >= 0, 'apf' or 'apf-rate'"
+        ) from None
+    return check_cost_limit(value, "--cost-limit")
+
+
+def make_lagrangian(args: Any, limit: float) -> PIDLagrangian:
+    """The multiplier's controller for ``args`` and the limit ``limit``."""
+    return PIDLagrangian(
+        limit,
+        kp=args.pid_kp,
+        ki=args.pid_ki,
+        kd=args.pid_kd,
+        ema_p=args.pid_ema,
+        ema_d=args.pid_ema,
+        init=args.multiplier_init,
+        max_multiplier=args.multiplier_max if args.multiplier_max > 0 else math.inf,
+    )
+
+
+def measure_budget(args: Any, config: Any, out: Path) -> float:
+    """The cost limit of ``args`` (the APF's budget measured if asked); ``budget.json``."""
+    from uasep_env.atomic import atomic_write
+    from uasep_env.lagrangian import apf_cost_budget
+    from uasep_env.scenarios import VALIDATION_SEEDS
+
+    limit = cost_limit(args)
+    record: dict[str, Any] = {"cost_limit_option": args.cost_limit}
+    if isinstance(limit, str):
+        seeds = list(VALIDATION_SEEDS)[: args.budget_episodes]
+        budget = apf_cost_budget(config, seeds)
+        record.update(dataclasses.asdict(budget), parity_limit=budget.parity_limit,
+                      rate_limit=budget.rate_limit)  # fmt: skip
+        limit = budget.parity_limit if limit == "apf" else budget.rate_limit
+    record["cost_limit"] = limit
+    atomic_write(out / "budget.json", json.dumps(record, indent=2) + "\n")
+    print(f"cost limit {limit:.4g} per agent and episode ({args.cost_limit})")
+    return float(limit)
+
+
+class CostTracker:
+    """The agents' episode costs over a run, and the multiplier they move.
+
+    Args:
+        lagrangian: The multiplier's controller (its ``cost_limit`` is the constraint's).
+        cost: The constrained cost's name (recorded in :meth:`info`).
+        n: Sub-environments (one per agent and environment), each a running episode.
+        window: Episodes in the running mean ``episode_cost_window``.
+
+    Attributes:
+        episodes: Agent-episodes ended so far.
+        window: The last ``window`` episode costs.
+    """
+
+    def __init__(self, lagrangian: PIDLagrangian, cost: str, n: int, window: int = 200) -> None:
+        self.lagrangian, self.cost = lagrangian, cost
+        self.window: collections.deque[float] = collections.deque(maxlen=int(window))
+        self.episodes = 0
+        self._batch: list[float] = []
+        self._running = np.zeros(int(n))
+
+    def step(self, costs: np.ndarray, dones: np.ndarray) -> None:
+        """Add one step's costs ``(n,)``; the episodes of ``dones`` ``(n,)`` end with it."""
+        self._running += costs
+        for k in np.flatnonzero(dones):
+            self._batch.append(float(self._running[k]))
+            self.window.append(float(self._running[k]))
+            self._running[k] = 0.0
+            self.episodes += 1
+
+    def end_rollout(self, agent_steps: int) -> dict[str, Any]:
+        """Move the multiplier with the mean cost of the rollout's episodes (if any ended).
+
+        Returns:
+            The ``cost_progress.csv`` row (:data:`uasep_env.sb3_lagrangian.COST_FIELDS`).
+        """
+        batch = float(np.mean(self._batch)) if self._batch else math.nan
+        if self._batch:
+            self.lagrangian.update(batch)
+        self._batch = []
+        return {
+            "agent_steps": int(agent_steps),
+            "episodes": self.episodes,
+            "episode_cost_mean": batch,
+            "episode_cost_window": self.window_mean(),
+            "cost_limit": self.lagrangian.cost_limit,
+            "multiplier": self.lagrangian.multiplier,
+        }
+
+    def window_mean(self) -> float:
+        """The mean of the last episode costs (NaN before the first ends)."""
+        return float(np.mean(self.window)) if self.window else math.nan
+
+    def info(self) -> dict[str, Any]:
+        """The constraint's summary: cost, limit, the multiplier's state, episodes."""
+        return {
+            "cost": self.cost,
+            "cost_limit": self.lagrangian.cost_limit,
+            **self.lagrangian.state_dict(),
+            "episodes": self.episodes,
+            "episode_cost_window": self.window_mean(),
+        }
+
+    def state_dict(self) -> dict[str, Any]:
+        """:meth:`info` and the episode window: what a checkpoint keeps (JSON-friendly)."""
+        return {**self.info(), "window": list(self.window)}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict` (running episodes start anew, as the environments do)."""
+        self.lagrangian.load_state_dict(state)
+        self.episodes = int(state["episodes"])
+        self.window.clear()
+        self.window.extend(float(c) for c in state["window"])
+        self._batch = []
+        self._running[:] = 0.0
