@@ -165,12 +165,15 @@ def _random_plan(rng: np.random.Generator, length: float) -> np.ndarray:
     turns *= rng.random(N_WAYPOINTS - 2) < 0.5  # about half the legs are straight
     fractions = np.sort(rng.uniform(0.2, 0.8, size=N_WAYPOINTS - 2))
     legs = np.diff(np.concatenate([[0.0], fractions, [1.0]])) * length
-    pts = [np.array([0.0, 0.0, -FLIGHT_ALTITUDE])]
+    # Python floats: the same IEEE operations as numpy's, without a small array per leg.
+    x, y, z = 0.0, 0.0, -FLIGHT_ALTITUDE
+    pts = [(x, y, z)]
     h = heading
-    for k, leg in enumerate(legs):
+    for k, leg in enumerate(legs.tolist()):
         if k > 0:
             h += turns[k - 1]
-        pts.append(pts[-1] + leg * np.array([math.cos(h), math.sin(h), 0.0]))
+        x, y, z = x + leg * math.cos(h), y + leg * math.sin(h), z + leg * 0.0
+        pts.append((x, y, z))
     return np.array(pts)
 
 
