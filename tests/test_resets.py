@@ -86,3 +86,27 @@ def test_batched_partial_reset_with_seeds_equals_fresh_envs():
             )
         assert a.families[i] == fresh.families[0]
         assert a._noise.rngs[i].bit_generator.state == fresh._noise.rngs[0].bit_generator.state
+
+
+def test_vector_env_infos_of_reset_rows_are_masked_out_and_zero():
+    """NextStep autoreset: the rows reset in a step carry the reset's (empty) info."""
+    from uasep_env.envs.vector import FormationVectorEnv
+
+    vec = FormationVectorEnv(4, episode_duration=1.0, n_obstacles=1)  # 5 steps an episode
+    vec.reset(seed=3)
+    zero = np.zeros(vec.action_space.shape, dtype=np.float32)
+    for _ in range(2):
+        vec.step(zero)
+    vec.reset(options={"reset_mask": np.array([True, True, False, False])})  # out of step
+    pending = np.zeros(4, dtype=bool)
+    while not pending.any():
+        *_, terminated, truncated, _ = vec.step(zero)
+        pending = terminated | truncated
+    assert not pending.all()
+    _, _, _, _, infos = vec.step(zero)  # resets the pending rows
+    keys = [k for k in infos if not k.startswith("_")]
+    assert "min_uav_distance" in keys
+    for k in keys:
+        np.testing.assert_array_equal(infos["_" + k], ~pending, err_msg=k)
+        assert not np.any(infos[k][pending]), k
+    assert np.all(infos["min_uav_distance"][~pending] > 0.0)
