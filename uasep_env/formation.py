@@ -209,6 +209,22 @@ def segment_offsets(direction: np.ndarray, slots: np.ndarray) -> np.ndarray:
     return rotate(rot, np.repeat(slots, n_seg, axis=0)).reshape(e, n_seg, *slots.shape[1:])
 
 
+def _plan_geometry(wp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cumulative arc length ``(E, W)`` and unit segment directions ``(E, W - 1, 3)``."""
+    seg = np.diff(wp, axis=1)
+    seg_len = np.linalg.norm(seg, axis=-1)
+    cum = np.concatenate([np.zeros((wp.shape[0], 1)), np.cumsum(seg_len, axis=1)], axis=1)
+    # Direction of each segment; padding (zero-length) segments inherit the last one.
+    direction = np.zeros_like(seg)
+    last = np.zeros((wp.shape[0], 3))
+    last[:, 0] = 1.0
+    for k in range(seg.shape[1]):
+        ok = seg_len[:, k] > 1e-9
+        last = np.where(ok[:, None], seg[:, k] / np.maximum(seg_len[:, k, None], 1e-12), last)
+        direction[:, k] = last
+    return cum, direction
+
+
 class PlannedTrajectory:
     """Batched polyline trajectories flown by the formation centre at cruise speed.
 
@@ -226,13 +242,14 @@ class PlannedTrajectory:
         wp = np.asarray(waypoints, dtype=float)
         if wp.ndim != 3 or wp.shape[-1] != 3 or wp.shape[1] < 2:
             raise ValueError(f"waypoints must have shape (n_envs, W>=2, 3), got {wp.shape}")
-        n = wp.shape[0]
+        # Every row is new: the arrays themselves, not masked writes into zeros (a scenario
+        # builds one plan per episode, and small-array calls are most of its cost).
         self.waypoints = wp.copy()
-        self.cum = np.zeros(wp.shape[:2])
-        self.length = np.zeros(n)
-        self.direction = np.zeros((n, wp.shape[1] - 1, 3))
-        self.cruise_speed = np.zeros(n)
-        self.set_rows(np.ones(n, dtype=bool), wp, cruise_speed)
+        self.cum, self.direction = _plan_geometry(wp)
+        self.length = self.cum[:, -1].copy()
+        self.cruise_speed = np.array(
+            np.broadcast_to(np.asarray(cruise_speed, dtype=float), (wp.shape[0],))
+        )
 
     def set_rows(
         self, mask: np.ndarray, waypoints: np.ndarray, cruise_speed: np.ndarray | float
@@ -245,17 +262,7 @@ class PlannedTrajectory:
             cruise_speed: ``(mask.sum(),)`` or scalar cruise speed (m/s).
         """
         wp = np.asarray(waypoints, dtype=float)
-        seg = np.diff(wp, axis=1)
-        seg_len = np.linalg.norm(seg, axis=-1)
-        cum = np.concatenate([np.zeros((wp.shape[0], 1)), np.cumsum(seg_len, axis=1)], axis=1)
-        # Direction of each segment; padding (zero-length) segments inherit the last one.
-        direction = np.zeros_like(seg)
-        last = np.zeros((wp.shape[0], 3))
-        last[:, 0] = 1.0
-        for k in range(seg.shape[1]):
-            ok = seg_len[:, k] > 1e-9
-            last = np.where(ok[:, None], seg[:, k] / np.maximum(seg_len[:, k, None], 1e-12), last)
-            direction[:, k] = last
+        cum, direction = _plan_geometry(wp)
         self.waypoints[mask] = wp
         self.cum[mask] = cum
         self.length[mask] = cum[:, -1]

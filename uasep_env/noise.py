@@ -126,6 +126,29 @@ class NoiseStreams:
         self._sync_lockstep()
         return normals, unifs
 
+    def draw_rows(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The next physics step's noise of the environments ``rows`` only.
+
+        The same numbers as ``draw(active)`` with ``active`` true at ``rows`` gives in those
+        rows, without gathering the whole batch (a partial reset's first measurements).
+
+        Args:
+            rows: Index array of the environments that draw, ascending.
+
+        Returns:
+            ``(normals, uniforms)``, ``(len(rows), K)`` and ``(len(rows), n_uniform)``.
+        """
+        refill = rows[self.buf_pos[rows] >= self.noise_block]
+        if len(refill):
+            _run_chunked(self._refill, refill)
+            self.buf_pos[refill] = 0
+        at = self.buf_pos[rows]
+        normals = self._normal_buf[at, rows]
+        unifs = self._unif_buf[at, rows]
+        self.buf_pos[rows] = at + 1
+        self._lockstep = False  # until the next masked draw checks again
+        return normals, unifs
+
     def _sync_lockstep(self) -> None:
         """Note whether every environment is at the same place in its noise block."""
         self._lockstep = bool((self.buf_pos == self.buf_pos[0]).all())

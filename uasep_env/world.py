@@ -213,46 +213,47 @@ class World(RenamedAttributes):
         def stack(name: str) -> np.ndarray:
             return np.stack([getattr(s, name) for s in specs])
 
-        self.time[mask] = 0.0
-        self.steps[mask] = 0
-        self._kf_count[mask] = 0
+        self.time[idx] = 0.0
+        self.steps[idx] = 0
+        self._kf_count[idx] = 0
         self.plan.set_rows(mask, stack("waypoints"), np.array([s.cruise_speed for s in specs]))
-        self.slots[mask] = stack("slots")
-        self._plan_offsets[mask] = segment_offsets(self.plan.direction[mask], self.slots[mask])
-        self.uav_pos[mask] = stack("uav_pos")
-        self.uav_vel[mask] = stack("uav_vel")
-        self.uav_acc[mask] = 0.0
-        self.accel_cmd[mask] = 0.0
-        self.prev_accel_cmd[mask] = 0.0
+        self.slots[idx] = stack("slots")
+        self._plan_offsets[idx] = segment_offsets(self.plan.direction[idx], self.slots[idx])
+        self.uav_pos[idx] = stack("uav_pos")
+        self.uav_vel[idx] = stack("uav_vel")
+        self.uav_acc[idx] = 0.0
+        self.accel_cmd[idx] = 0.0
+        self.prev_accel_cmd[idx] = 0.0
         ob = self.obstacles
         if self.n_obstacles:
-            place_obstacles(ob, mask, specs, cfg)
+            place_obstacles(ob, idx, specs, cfg)
             # The ellipsoid's shape is fixed by the obstacle's performance; only its pose moves.
             # Inflations keep the true obstacle inside despite wind drift and the track error.
             pred = cfg.prediction
-            wind_speed = np.linalg.norm(ob.wind[mask], axis=-1)[:, None]
+            wind_speed = np.linalg.norm(ob.wind[idx], axis=-1)[:, None]
             track_err = 3.0 * self._obstacle_kf.steady_state_position_std()
-            inflation = ob.radius[mask] + wind_speed * pred.horizon + track_err
+            inflation = ob.radius[idx] + wind_speed * pred.horizon + track_err
             if pred.fit == "calibrated":  # sized per step from the estimate (_predict_regions)
-                self._pred_inflation[mask] = inflation
+                self._pred_inflation[idx] = inflation
             else:
                 offset, axes = reachable.ellipsoid(
-                    ob.speed[mask],
-                    ob.max_turn_rate[mask],
-                    ob.max_climb_rate[mask],
+                    ob.speed[idx],
+                    ob.max_turn_rate[idx],
+                    ob.max_climb_rate[idx],
                     pred.horizon,
                     inflation,
                     mode=pred.mode,
                     fit=pred.fit,
                 )
-                self.pred_offset[mask] = offset
-                self.pred_axes[mask] = axes
+                self.pred_offset[idx] = offset
+                self.pred_axes[idx] = axes
             if self.replay is not None:  # after the ellipsoid: it uses the median speed
                 self.replay.start(ob, mask, specs)
-        # First measurements start the tracks.
-        self._sense(mask, initialise=True)
-        self._predict_regions(mask)
-        self._update_safety(reset_mask=mask)
+        # First measurements start the tracks. Only the reset rows are measured, predicted
+        # and checked: a partial reset's cost should not grow with the batch.
+        self._sense(idx, initialise=True)
+        self._predict_regions(idx)
+        self._update_safety(reset_rows=idx)
         self._refresh_plan()
 
     # ------------------------------------------------------------------ step
@@ -287,7 +288,7 @@ class World(RenamedAttributes):
             if active.all():
                 active = None
             else:
-                frozen = self._snapshot(~active)
+                frozen = self._snapshot(np.flatnonzero(~active))
         self.prev_accel_cmd[...] = self.accel_cmd
         np.minimum(np.maximum(cmd, -cfg.uav.max_accel), cfg.uav.max_accel, out=self.accel_cmd)
         self.min_uav_dist.fill(np.inf)
@@ -297,7 +298,7 @@ class World(RenamedAttributes):
         self.steps += 1
         self._predict_regions()
         if frozen is not None:
-            self._restore(~active, frozen)
+            self._restore(frozen)
         self._refresh_plan()
 
     def _refresh_plan(self) -> None:
@@ -363,17 +364,20 @@ class World(RenamedAttributes):
     )
     _OBSTACLE_STATE = ("pos", "heading", "speed", "turn_rate", "climb_rate")
 
-    def _snapshot(self, mask: np.ndarray) -> dict[str, np.ndarray]:
-        snap = {name: getattr(self, name)[mask].copy() for name in self._STATE}
+    def _snapshot(self, rows: np.ndarray) -> dict[str, np.ndarray]:
+        # An index array: a few frozen rows of a large batch cost a few rows, not a scan.
+        snap = {name: getattr(self, name)[rows] for name in self._STATE}
         for name in self._OBSTACLE_STATE:
-            snap["obstacles." + name] = getattr(self.obstacles, name)[mask].copy()
+            snap["obstacles." + name] = getattr(self.obstacles, name)[rows]
+        snap["rows"] = rows
         return snap
 
-    def _restore(self, mask: np.ndarray, snap: dict[str, np.ndarray]) -> None:
+    def _restore(self, snap: dict[str, np.ndarray]) -> None:
+        rows = snap["rows"]
         for name in self._STATE:
-            getattr(self, name)[mask] = snap[name]
+            getattr(self, name)[rows] = snap[name]
         for name in self._OBSTACLE_STATE:
-            getattr(self.obstacles, name)[mask] = snap["obstacles." + name]
+            getattr(self.obstacles, name)[rows] = snap["obstacles." + name]
 
     def _physics_step(self, active: np.ndarray | None = None) -> None:
         cfg = self.config
@@ -403,7 +407,7 @@ class World(RenamedAttributes):
     # ------------------------------------------------------------------ sensing
     def _sense(
         self,
-        mask: np.ndarray | None,
+        rows: np.ndarray | None,
         *,
         initialise: bool,
         normals: np.ndarray | None = None,
@@ -411,16 +415,17 @@ class World(RenamedAttributes):
     ) -> None:
         cfg = self.config
         n, m = self.n_uavs, self.n_obstacles
+        # The environments measured: all, or the index array ``rows`` (a partial reset).
+        r = slice(None) if rows is None else rows
         if normals is None:
             # Initial measurements use the next noise draw too (consumed only by those envs).
-            normals, _ = self._noise.draw(mask)
-        # The environments measured: all, or those in ``mask`` (a partial reset).
-        r = slice(None) if mask is None else mask
-        z = normals[r]
+            z, _ = self._noise.draw_rows(rows)
+        else:
+            z = normals[r]
         z_meas = z[:, n * 3 : n * 9].reshape(-1, n, 6)
         mp, mv = measure(self.uav_pos[r], self.uav_vel[r], z_meas[..., :3], z_meas[..., 3:])
         if m:
-            obstacle_vel = obstacle_velocity(self.obstacles, None if mask is None else mask)
+            obstacle_vel = obstacle_velocity(self.obstacles, rows)
             z_obs = z[:, n * 9 :].reshape(-1, m, 6)
             omp, omv = measure(self.obstacles.pos[r], obstacle_vel, z_obs[..., :3], z_obs[..., 3:])
         if initialise or not cfg.prediction.kalman:
@@ -438,14 +443,14 @@ class World(RenamedAttributes):
             )
 
     # ------------------------------------------------------------------ prediction
-    def _predict_regions(self, mask: np.ndarray | None = None) -> None:
+    def _predict_regions(self, rows: np.ndarray | None = None) -> None:
         """Place each obstacle's reachable ellipsoid on its current estimate (eqs. 8-18).
 
-        All environments, or those in ``mask`` (a partial reset).
+        All environments, or the index array ``rows`` (a partial reset).
         """
         if not self.n_obstacles:
             return
-        r = slice(None) if mask is None else mask
+        r = slice(None) if rows is None else rows
         pred = self.config.prediction
         if pred.fit == "calibrated":
             # Conformal region per aircraft class: centre along the estimated ground velocity,
@@ -476,12 +481,16 @@ class World(RenamedAttributes):
         self.pred_center[r] = center
 
     # ------------------------------------------------------------------ safety
-    def _update_safety(self, reset_mask: np.ndarray | None = None) -> None:
-        d_uav, d_obstacle = self.separations()
-        if reset_mask is not None:
-            self.min_uav_dist[reset_mask] = d_uav[reset_mask]
-            self.min_obstacle_dist[reset_mask] = d_obstacle[reset_mask]
+    def _update_safety(self, reset_rows: np.ndarray | None = None) -> None:
+        if reset_rows is not None:
+            ob = self.obstacles
+            d_uav, d_obstacle = nearest_separations(
+                self.uav_pos[reset_rows], ob.pos[reset_rows], ob.active[reset_rows]
+            )
+            self.min_uav_dist[reset_rows] = d_uav
+            self.min_obstacle_dist[reset_rows] = d_obstacle
         else:
+            d_uav, d_obstacle = self.separations()
             np.minimum(self.min_uav_dist, d_uav, out=self.min_uav_dist)
             np.minimum(self.min_obstacle_dist, d_obstacle, out=self.min_obstacle_dist)
 

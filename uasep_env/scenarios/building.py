@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from uasep_env.config.groups import FLIGHT_ALTITUDE
-from uasep_env.formation import PlannedTrajectory, pattern_slots
+from uasep_env.formation import PlannedTrajectory, pattern_slots, segment_offsets
 from uasep_env.scenarios.spec import N_WAYPOINTS, ScenarioSpec
 
 if TYPE_CHECKING:
@@ -80,6 +80,28 @@ class Layout:
     plan: PlannedTrajectory
     uav_pos: np.ndarray
     uav_vel: np.ndarray
+    offsets: np.ndarray | None = None
+
+    def planned_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Planned UAV positions ``(n_uavs, 3)`` (m) and the plan's unit direction at ``t``.
+
+        The numbers of :func:`planned_position` and ``plan.heading_velocity``, bit for bit
+        (the slots rotated once per segment, :func:`~uasep_env.formation.segment_offsets`,
+        as the world does): a scenario asks this several times per episode.
+        """
+        return _planned_at(self.plan, self.slots, t, self.offsets)
+
+
+def _planned_at(
+    plan: PlannedTrajectory, slots: np.ndarray, t: float, offsets: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`Layout.planned_at` of ``plan`` with ``slots`` (their ``offsets``, if known)."""
+    if offsets is None:
+        offsets = segment_offsets(plan.direction, slots[None])
+    tt = np.array([t])
+    located = plan.locate(tt)
+    center, _, direction = plan.center_and_direction(tt, located)
+    return center[0] + offsets[0, located[1][0]], direction[0]
 
 
 @dataclass
@@ -143,13 +165,19 @@ def _random_plan(rng: np.random.Generator, length: float) -> np.ndarray:
     turns *= rng.random(N_WAYPOINTS - 2) < 0.5  # about half the legs are straight
     fractions = np.sort(rng.uniform(0.2, 0.8, size=N_WAYPOINTS - 2))
     legs = np.diff(np.concatenate([[0.0], fractions, [1.0]])) * length
-    pts = [np.array([0.0, 0.0, -FLIGHT_ALTITUDE])]
+    # Python floats: the same IEEE operations as numpy's, without a small array per leg.
+    x, y, z = 0.0, 0.0, -FLIGHT_ALTITUDE
+    pts = [(x, y, z)]
     h = heading
-    for k, leg in enumerate(legs):
+    for k, leg in enumerate(legs.tolist()):
         if k > 0:
             h += turns[k - 1]
-        pts.append(pts[-1] + leg * np.array([math.cos(h), math.sin(h), 0.0]))
+        x, y, z = x + leg * math.cos(h), y + leg * math.sin(h), z + leg * 0.0
+        pts.append((x, y, z))
     return np.array(pts)
+
+
+_SHRINK_FACTORS = np.linspace(1.0, 0.0, 21)
 
 
 def _separated_start(slots: np.ndarray, pos: np.ndarray, separation: float) -> np.ndarray:
@@ -159,7 +187,7 @@ def _separated_start(slots: np.ndarray, pos: np.ndarray, separation: float) -> n
     are then unchanged); no random draw, so the generator's stream is the same either way.
     """
     scatter = pos - slots
-    for f in np.linspace(1.0, 0.0, 21):
+    for f in _SHRINK_FACTORS:
         cand = slots + f * scatter if f < 1.0 else pos
         d = np.linalg.norm(cand[:, None] - cand[None], axis=-1)
         d[np.diag_indices(len(d))] = np.inf
@@ -185,10 +213,11 @@ def layout(
     """
     slots = pattern_slots(pattern or config.formation, config.n_uavs, config.formation_spacing)
     plan = _extend(waypoints, config)
-    start_slots = planned_position(plan, 0.0, slots)
+    offsets = segment_offsets(plan.direction, slots[None])
+    start_slots, _ = _planned_at(plan, slots, 0.0, offsets)
     uav_pos, uav_vel = start(start_slots, plan.direction[0, 0])  # type: ignore[misc]
     uav_pos = _separated_start(start_slots, uav_pos, config.uav.separation_distance)
-    return Layout(waypoints, slots, plan, uav_pos, uav_vel)
+    return Layout(waypoints, slots, plan, uav_pos, uav_vel, offsets)
 
 
 def random_layout(
@@ -226,8 +255,8 @@ def aimed_obstacle(
     meet = rng.uniform(*MEET_TIME_RANGE) * TIMELINE_S
     if who is None:
         who = int(rng.integers(config.n_uavs))
-    target = planned_position(lay.plan, meet, lay.slots)[who]
-    plan_dir = lay.plan.heading_velocity(np.array([meet]))[0]
+    target, plan_dir = lay.planned_at(meet)
+    target = target[who]
     w_max = rng.uniform(*TURN_RATE_RANGE_RADPS)
     vz_max = rng.uniform(*CLIMB_RATE_RANGE_MPS)
     speed, heading = encounter.horizontal(rng, config, math.atan2(plan_dir[1], plan_dir[0]))

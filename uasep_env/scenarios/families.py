@@ -31,7 +31,6 @@ from uasep_env.scenarios.building import (
     assemble,
     layout,
     obstacle_slots,
-    planned_position,
     random_layout,
     straight_plan,
 )
@@ -160,7 +159,7 @@ def _paper(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
 
     def first() -> ObstacleStart:
         meet = min(_PAPER_MEET_TIME_S, 0.575 * TIMELINE_S)  # 115 s, as its float was
-        target = planned_position(lay.plan, meet, lay.slots)[n - 1 if n == 3 else n // 2]
+        target = lay.planned_at(meet)[0][n - 1 if n == 3 else n // 2]
         heading = _PAPER_OBSTACLE_HEADING_RAD
         pos = target + np.array([0.0, 0.0, _PAPER_OBSTACLE_BELOW_M])
         pos[:2] -= ob.speed * meet * np.array([math.cos(heading), math.sin(heading)])
@@ -221,7 +220,7 @@ def _collision_course(kind: str) -> ScenarioFamily:
         timeline = min(config.episode_duration, TIMELINE_S)
         meet = max(rng.uniform(*_COLLISION_MEET_RANGE) * timeline, _COLLISION_MIN_MEET_S)
         who = int(rng.integers(n))
-        target = planned_position(lay.plan, meet, lay.slots)[who]
+        target = lay.planned_at(meet)[0][who]
         heading = _COLLISION_HEADINGS[kind](rng)  # the plan heads north (0 rad)
         speed = rng.uniform(*SPEED_RANGE_MPS)
         pos = target.copy()

@@ -106,7 +106,7 @@ def place_obstacles(
 
     Args:
         obstacles: The batch's obstacle state, written in place.
-        mask: ``(E,)`` bool; the environments starting an episode.
+        mask: ``(E,)`` bool, or an index array: the environments starting an episode.
         specs: One spec per selected environment, in order.
         config: The configuration (the pilots' command changes, the ground).
     """
