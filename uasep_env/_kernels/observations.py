@@ -16,8 +16,8 @@ _N_CLASSES = 5
 
 
 # The small store helpers are plain calls that LLVM inlines, not numba's IR inlining
-# (``inline="always"``): dozens of IR copies made the observations take ~30 s to compile;
-# as calls ~6 s, at the same speed (benchmarks/bench_compile.py).
+# (``inline="always"``): dozens of IR copies made the observations take ~30 s of an
+# evaluation's ~43 s to compile; as calls they run at the same speed (docs/speed.md).
 @numba.njit(**_JIT)
 def _put(out, e, i, col, value, clip):  # noqa: ANN001, ANN202
     """Store in ``out``'s dtype, then clip in it (the numpy form's cast-then-``np.clip``).
