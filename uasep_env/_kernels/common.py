@@ -1,4 +1,4 @@
-"""What the compiled kernels share: numba's options, the loop choice, 3-vector norms."""
+"""What the compiled kernels share: numba's options, the loop choice, inputs, 3-vector norms."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import math
 import os
 
 import numba
+import numpy as np
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
@@ -24,6 +25,21 @@ THREADS = [1]
 def _parallel(size: int) -> bool:
     """Whether a loop over ``size`` items is spread over the cores."""
     return size >= PARALLEL_MIN and not _forked[0] and THREADS[0] > 1
+
+
+def frozen(a: np.ndarray) -> np.ndarray:
+    """``a`` C-contiguous and read-only (a view when it is contiguous already).
+
+    numba compiles a kernel once per argument type, and an array's type holds its layout and
+    whether it is writable: callers pass broadcast views, copies and the world's own arrays,
+    so without this one kernel compiled up to three times (several seconds each). The
+    kernels only read their inputs.
+    """
+    a = np.ascontiguousarray(a)
+    if a.flags.writeable:
+        a = a.view()
+        a.flags.writeable = False
+    return a
 
 
 @numba.njit(inline="always", **_JIT)

@@ -7,7 +7,7 @@ import math
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, _parallel
+from uasep_env._kernels.common import _JIT, _parallel, frozen
 
 
 @numba.njit(inline="always", **_JIT)
@@ -199,7 +199,8 @@ def nearest_on_ellipsoids(
     n = np.empty((k, 3))
     fn = _parallel_loop if _parallel(k) else _serial
     # numpy's cos/sin, not libm's: the rotation must match the numpy form to the last bit.
-    fn(p, c, ax, np.cos(psi), np.sin(psi), n_newton, x, d, n)
+    cos_h, sin_h = np.cos(psi), np.sin(psi)
+    fn(frozen(p), frozen(c), frozen(ax), frozen(cos_h), frozen(sin_h), n_newton, x, d, n)
     return x.reshape(*shape, 3), d.reshape(shape), n.reshape(*shape, 3)
 
 
@@ -310,6 +311,6 @@ def _region_loop(
     e, n, _ = points.shape
     out = np.empty((e, n, centers.shape[1]))
     fn = _pairs_parallel if _parallel(out.size) else _pairs_serial
-    c = np.ascontiguousarray
+    c = frozen
     fn(c(points), c(centers), c(axes), c(cos_h), c(sin_h), c(active), n_newton, out)
     return out

@@ -7,7 +7,7 @@ import math
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel
+from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel, frozen
 
 #: Entries of the optional ``obstacle_class`` feature: one per code of
 #: ``uasep_env.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
@@ -15,7 +15,10 @@ from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel
 _N_CLASSES = 5
 
 
-@numba.njit(inline="always", **_JIT)
+# The small store helpers are plain calls that LLVM inlines, not numba's IR inlining
+# (``inline="always"``): dozens of IR copies made the observations take ~30 s of an
+# evaluation's ~43 s to compile; as calls they run at the same speed (docs/speed.md).
+@numba.njit(**_JIT)
 def _put(out, e, i, col, value, clip):  # noqa: ANN001, ANN202
     """Store in ``out``'s dtype, then clip in it (the numpy form's cast-then-``np.clip``).
 
@@ -30,7 +33,7 @@ def _put(out, e, i, col, value, clip):  # noqa: ANN001, ANN202
         out[e, i, col] = clip
 
 
-@numba.njit(inline="always", **_JIT)
+@numba.njit(**_JIT)
 def _mean(x, e, a):  # noqa: ANN001, ANN202
     """``x[e, :, a].mean()`` as :func:`uasep_env.formation._mean_over_uavs` adds it."""
     total = x[e, 0, a]
@@ -78,7 +81,7 @@ def _observe_env(e, x, scales, limit, cols, out):  # noqa: ANN001, ANN202
         _observe_agent(e, i, frame, x, scales, limit[0], cols, out)
 
 
-@numba.njit(inline="always", **_JIT)
+@numba.njit(**_JIT)
 def _put3(out, e, i, col, v0, v1, v2, clip):  # noqa: ANN001, ANN202
     """A 3-vector feature at ``col``, unless the layout lacks it (``col < 0``)."""
     if col >= 0:
@@ -87,7 +90,7 @@ def _put3(out, e, i, col, v0, v1, v2, clip):  # noqa: ANN001, ANN202
         _put(out, e, i, col + 2, v2, clip)
 
 
-@numba.njit(inline="always", **_JIT)
+@numba.njit(**_JIT)
 def _put1(out, e, i, col, v, clip):  # noqa: ANN001, ANN202
     """A scalar feature at ``col``, unless the layout lacks it (``col < 0``)."""
     if col >= 0:
@@ -267,8 +270,8 @@ def assemble_observations(
             min_frame_speed,
         ]
     )
-    # Contiguous arrays only: one compiled signature, whatever views the caller passes.
-    x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
+    # One compiled signature, whatever views the caller passes (common.frozen).
+    x = type(inputs)(*(frozen(a) for a in inputs))
     fn = _observe_parallel if _parallel(out.shape[0] * out.shape[1]) else _observe_serial
     limit = np.full(1, layout.clip, dtype=out.dtype)  # the clip bound in out's dtype
     fn(x, scales, limit, layout.columns, out)

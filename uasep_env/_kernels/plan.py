@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT
+from uasep_env._kernels.common import _JIT, frozen
 
 
 @numba.njit(**_JIT)
@@ -49,8 +49,7 @@ def plan_now(
     e, _, n, _ = offsets.shape
     center, d = np.empty((e, 3)), np.empty((e, 3))
     pos, vel = np.empty((e, n, 3)), np.empty((e, n, 3))
-    _plan_rows(
-        time, plan.cruise_speed, plan.length, plan.cum, plan.waypoints, plan.direction,
-        offsets, center, d, pos, vel,
-    )  # fmt: skip
+    inputs = (time, plan.cruise_speed, plan.length, plan.cum, plan.waypoints, plan.direction,
+              offsets)  # fmt: skip
+    _plan_rows(*(frozen(a) for a in inputs), center, d, pos, vel)  # one compiled signature
     return center, d, pos, vel

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, _norm3, _parallel, _sq3
+from uasep_env._kernels.common import _JIT, _norm3, _parallel, _sq3, frozen
 
 
 @numba.njit(inline="always", **_JIT)
@@ -81,10 +81,10 @@ def reward_terms(
     Returns:
         ``(own, terms)``: ``(E, N)`` weighted sums and ``(T, E, N)`` unweighted terms.
     """
-    x = type(inputs)(*(np.ascontiguousarray(a) for a in inputs))
+    x = type(inputs)(*(frozen(a) for a in inputs))  # one compiled signature
     e, n = x.min_uav_dist.shape
     own = np.empty((e, n))
     terms = np.empty((len(index), e, n))
     fn = _rewards_parallel if _parallel(own.size) else _rewards_serial
-    fn(x, constants, index, weights, own, terms)
+    fn(x, constants, index, frozen(weights), own, terms)
     return own, terms

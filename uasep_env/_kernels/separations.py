@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, _gap, _parallel
+from uasep_env._kernels.common import _JIT, _gap, _parallel, frozen
 
 
 @numba.njit(inline="always", **_JIT)
@@ -55,6 +55,5 @@ def separations(
     d_uav = np.empty((e, n))
     d_obstacle = np.empty((e, n))
     fn = _separations_parallel if _parallel(d_uav.size) else _separations_serial
-    c = np.ascontiguousarray
-    fn(c(uav_pos), c(obstacle_pos), c(active), d_uav, d_obstacle)
+    fn(frozen(uav_pos), frozen(obstacle_pos), frozen(active), d_uav, d_obstacle)
     return d_uav, d_obstacle
