@@ -180,6 +180,18 @@ def add_policies(
     return meta, stored
 
 
+def shipped_meta() -> dict[str, dict]:
+    """The training facts of every shipped learned policy (what the targets read)."""
+    policies = compared_policies()
+    meta = {name: load_policy(CHECKPOINTS / f"{name}.zip").meta.info for name in LEARNED
+            if name in policies}  # fmt: skip
+    for name in meta:  # train/reproduce.py --ship-to: what a retrained file reproduces
+        side = CHECKPOINTS / f"{name}_reproduction.json"
+        if side.exists():
+            meta[name] = {**meta[name], "reproduces": json.loads(side.read_text())}
+    return meta
+
+
 def render(results: dict[str, Any], meta: dict[str, dict]) -> str:
     """The markdown of the results (``scenario -> EvaluationResult`` or a stored one)."""
     sections = []
@@ -234,6 +246,7 @@ def main(argv: list[str] | None = None) -> str:
         if bad := [n for n in names if n not in compared_policies()]:
             p.error(f"argument --add: not a compared policy: {bad} ({list(compared_policies())})")
         meta, stored = add_policies(names, args.out / "learned_vs_apf.json.gz", args.workers)
+        meta = {**meta, **{n: v for n, v in shipped_meta().items() if n in names}}
         text = render({k: _Stored(v) for k, v in stored.items()}, meta)
         atomic_write(args.out / "learned_vs_apf.md", text)
         write_json({"meta": meta, **stored}, args.out / "learned_vs_apf.json.gz")
@@ -241,12 +254,7 @@ def main(argv: list[str] | None = None) -> str:
         return text
 
     policies = compared_policies()
-    meta = {name: load_policy(CHECKPOINTS / f"{name}.zip").meta.info for name in LEARNED
-            if name in policies}  # fmt: skip
-    for name in meta:  # train/reproduce.py --ship-to: what a retrained file reproduces
-        side = CHECKPOINTS / f"{name}_reproduction.json"
-        if side.exists():
-            meta[name] = {**meta[name], "reproduces": json.loads(side.read_text())}
+    meta = shipped_meta()
     results = {}
     for scenario, seeds in (
         ("random", list(HELD_OUT_SEEDS)[: args.episodes]),
