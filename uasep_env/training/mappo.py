@@ -44,7 +44,6 @@ import io
 import json
 import os
 import shutil
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -552,11 +551,8 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
 
 
 def cli(argv: list[str] | None = None) -> None:
-    """Run :func:`main`; a file that cannot be written (a full disk) is one line, status 1."""
-    try:
-        main(argv)
-    except OSError as err:
-        sys.exit(f"{ppo_shared._prog() or Path(sys.argv[0]).name}: error: {err}")
+    """Run :func:`main` (:func:`uasep_env.training.ppo_shared.cli`'s error handling)."""
+    ppo_shared.cli(None, argv, main)
 
 
 run = cli  # ``uasep-train mappo``

@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import functools
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -373,11 +372,8 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
 
 
 def cli(argv: list[str] | None = None) -> None:
-    """Run :func:`main`; a file that cannot be written (a full disk) is one line, status 1."""
-    try:
-        main(argv)
-    except OSError as err:
-        sys.exit(f"{ppo_shared._prog() or Path(sys.argv[0]).name}: error: {err}")
+    """Run :func:`main` (:func:`uasep_env.training.ppo_shared.cli`'s error handling)."""
+    ppo_shared.cli(None, argv, main)
 
 
 run = cli  # ``uasep-train mappo_lagrangian``

@@ -135,20 +135,11 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     return ppo_shared.train(args, Constraint(args))
 
 
-def _cli(defaults: Args | None, argv: list[str] | None) -> None:
-    import sys
-
-    try:
-        main(argv, defaults)
-    except OSError as err:
-        sys.exit(f"{ppo_shared._prog() or Path(sys.argv[0]).name}: error: {err}")
-
-
 def run(argv: list[str] | None = None) -> None:
     """``uasep-train ppo_lagrangian``: the pure policy under the constraint."""
-    _cli(None, argv)
+    ppo_shared.cli(None, argv, main)
 
 
 def run_residual(argv: list[str] | None = None) -> None:
     """``uasep-train ppo_lagrangian_residual``: the residual policy under the constraint."""
-    _cli(RESIDUAL_LAGRANGIAN_DEFAULTS, argv)
+    ppo_shared.cli(RESIDUAL_LAGRANGIAN_DEFAULTS, argv, main)

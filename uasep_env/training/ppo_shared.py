@@ -477,10 +477,14 @@ def write_validation(out: Path, config: Any, policy_path: Path, info: dict, epis
     return summary
 
 
-def cli(defaults: Args | None = None, argv: list[str] | None = None) -> None:
-    """Run :func:`main`; a file that cannot be written (a full disk) is one line, status 1."""
+def cli(defaults: Args | None = None, argv: list[str] | None = None, entry: Any = None) -> None:
+    """Run a recipe's ``main`` (this one's by default) with ``argv`` and ``defaults``.
+
+    Every recipe's command line ends here: a file that cannot be written (a full disk) is
+    one line naming it, status 1.
+    """
     try:
-        main(argv, defaults=defaults)
+        (entry or main)(argv, defaults)
     except OSError as err:
         sys.exit(f"{_prog() or Path(sys.argv[0]).name}: error: {err}")
 
