@@ -277,7 +277,7 @@ def test_recipe_resumes_the_multiplier_and_its_cost_log(recipe, tmp_path):
                                "--resume", str(ckpt), "--multiplier-init", "7"])  # fmt: skip
     finally:
         LagrangianCallback.load_state_dict = real
-    assert seen == expect.state_dict() and seen["pid"]["multiplier"] != 7.0
+    assert seen == expect.state_dict() and seen["multiplier"] != 7.0
     rows = _cost_rows(out)
     # The rows of the abandoned continuation are gone; the resumed run's follow on.
     steps = [int(r["agent_steps"]) for r in rows]

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import collections
 import csv
-import math
 import os
 from pathlib import Path
 from typing import Any
@@ -43,6 +42,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from uasep_env.costs import COST_TERMS
 from uasep_env.lagrangian import PIDLagrangian
+from uasep_env.training.constraint import CostTracker
 
 __all__ = ["COST_FIELDS", "LagrangianCallback", "cost_reader", "plot_cost_curves"]
 
@@ -111,10 +111,7 @@ class LagrangianCallback(BaseCallback):
         self.cost = cost
         self._read = cost_reader(cost)
         self.csv_path = None if csv_path is None else Path(csv_path)
-        self.window: collections.deque[float] = collections.deque(maxlen=int(window))
-        self.episodes = 0
-        self._batch: list[float] = []
-        self._running: np.ndarray | None = None
+        self.tracker = CostTracker(lagrangian, cost, 1, window)
         self._fh: Any = None
 
     @property
@@ -122,24 +119,28 @@ class LagrangianCallback(BaseCallback):
         """The current multiplier ``lambda``."""
         return self.lagrangian.multiplier
 
-    def state_dict(self) -> dict[str, Any]:
-        """What a resumed run needs (JSON-friendly).
+    @property
+    def episodes(self) -> int:
+        """Episodes ended so far (one per agent)."""
+        return self.tracker.episodes
 
-        The multiplier's state, the episodes counted and the cost window. The rollout in
+    @property
+    def window(self) -> collections.deque[float]:
+        """The last ``window`` episode costs."""
+        return self.tracker.window
+
+    def state_dict(self) -> dict[str, Any]:
+        """What a resumed run needs (JSON-friendly): the tracker's state.
+
+        The multiplier's state, the episodes counted and the cost window
+        (:meth:`uasep_env.training.constraint.CostTracker.state_dict`). The rollout in
         progress is not kept (a resumed run drops it, as the recipes do).
         """
-        return {
-            "pid": self.lagrangian.state_dict(),
-            "episodes": self.episodes,
-            "window": list(self.window),
-        }
+        return self.tracker.state_dict()
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore :meth:`state_dict` (the limit and gains are the constructor's)."""
-        self.lagrangian.load_state_dict(state["pid"])
-        self.episodes = int(state["episodes"])
-        self.window.clear()
-        self.window.extend(float(c) for c in state["window"])
+        self.tracker.load_state_dict(state)
 
     def _on_training_start(self) -> None:
         env = self.training_env
@@ -150,7 +151,7 @@ class LagrangianCallback(BaseCallback):
                     "but not the cost; train the Lagrangian recipe with norm_reward=False"
                 )
             env = getattr(env, "venv", None)
-        self._running = np.zeros(self.training_env.num_envs)
+        self.tracker.start(self.training_env.num_envs)
         if self.csv_path is not None:
             new = not self.csv_path.exists() or self.csv_path.stat().st_size == 0
             self.csv_path.parent.mkdir(parents=True, exist_ok=True)
@@ -176,28 +177,11 @@ class LagrangianCallback(BaseCallback):
         lam = self.lagrangian.multiplier
         if lam:
             rewards[...] = (rewards - lam * costs) / (1.0 + lam)
-        running = self._running
-        running += costs
-        for k in np.flatnonzero(self.locals["dones"]):
-            self._batch.append(float(running[k]))
-            self.window.append(float(running[k]))
-            running[k] = 0.0
-            self.episodes += 1
+        self.tracker.step(costs, np.asarray(self.locals["dones"]))
         return True
 
     def _on_rollout_end(self) -> None:
-        batch = float(np.mean(self._batch)) if self._batch else math.nan
-        if self._batch:
-            self.lagrangian.update(batch)
-        self._batch = []
-        row = {
-            "agent_steps": self.num_timesteps,
-            "episodes": self.episodes,
-            "episode_cost_mean": batch,
-            "episode_cost_window": float(np.mean(self.window)) if self.window else math.nan,
-            "cost_limit": self.lagrangian.cost_limit,
-            "multiplier": self.lagrangian.multiplier,
-        }
+        row = self.tracker.end_rollout(self.num_timesteps)
         for key in ("episode_cost_mean", "episode_cost_window", "multiplier"):
             self.logger.record(f"lagrangian/{key}", row[key])
         if self._fh is not None:

@@ -206,6 +206,11 @@ class CostTracker:
         self._batch: list[float] = []
         self._running = np.zeros(int(n))
 
+    def start(self, n: int) -> None:
+        """Begin ``n`` running episodes at zero cost (a run's start, or its resumption)."""
+        self._running = np.zeros(int(n))
+        self._batch = []
+
     def step(self, costs: np.ndarray, dones: np.ndarray) -> None:
         """Add one step's costs ``(n,)``; the episodes of ``dones`` ``(n,)`` end with it."""
         self._running += costs
