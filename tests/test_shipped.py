@@ -82,8 +82,9 @@ def flown() -> dict[str, Any]:
     return json.loads(result.to_json())["results"]
 
 
-def test_three_checkpoints_ship():
-    assert {p.stem for p in CHECKPOINTS} == {"ppo_shared", "ppo_residual_apf", "mappo"}
+def test_the_shipped_checkpoints():
+    shipped = {"ppo_shared", "ppo_residual_apf", "mappo", "ppo_lagrangian"}
+    assert {p.stem for p in CHECKPOINTS} == shipped
 
 
 @pytest.mark.parametrize(
