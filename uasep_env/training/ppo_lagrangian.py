@@ -89,7 +89,7 @@ class Constraint:
     def start(self, out: Path, config: Any, resumed: dict) -> list:
         """The multiplier's callback, its state restored from ``resumed`` if any."""
         from uasep_env.sb3_lagrangian import COST_FIELDS, LagrangianCallback
-        from uasep_env.training.rundir import read_progress, write_rows
+        from uasep_env.training.rundir import rewind_csv
 
         task = config.reward == config.reward.task()
         print(f"reward: {'the task reward' if task else config.reward} "
@@ -107,10 +107,8 @@ class Constraint:
         self.callback = LagrangianCallback(lagrangian, self.args.cost, path)
         if resumed:
             self.callback.load_state_dict(resumed["lagrangian"]["state"])
-            steps = int(resumed["agent_steps"])
-            if path.exists():  # rows of the abandoned continuation go, as progress.csv's
-                rows = [r for r in read_progress(path) if int(r["agent_steps"]) <= steps]
-                write_rows(path, COST_FIELDS, rows)
+            # Rows of the abandoned continuation go, as progress.csv's.
+            rewind_csv(path, COST_FIELDS, int(resumed["agent_steps"]))
         return [self.callback]
 
     def facts(self) -> dict:
