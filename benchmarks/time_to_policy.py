@@ -3,7 +3,8 @@
 Usage::
 
     python benchmarks/time_to_policy.py --recipe residual_apf [--max-minutes 60]
-        [--episodes 100] [--check-every 2000000] [--out FILE] [--force] [-- recipe flags]
+        [--episodes 100] [--check-every 2000000] [--out FILE] [--force] [--overwrite]
+        [-- recipe flags]
 
 The shipped checkpoint of the recipe (``baselines/checkpoints/<name>.zip``) plays the first
 ``--episodes`` validation encounters (:data:`uasep_env.scenarios.VALIDATION_SEEDS`; never
@@ -21,7 +22,8 @@ was (evaluation time excluded and reported apart), every check's figures, and wh
 training time went: the environment (the vector env's step), the rest of the rollout
 (policy inference, normalisation, the buffer) and the learner (PPO's update epochs).
 The run folder (``--run-dir``, default ``runs/time_to_policy/<recipe>``) keeps the recipe's
-usual files (``progress.csv``, checkpoints).
+usual files (``progress.csv``, checkpoints); a used one is refused before anything runs,
+unless ``--overwrite`` (which replaces those files).
 
 Recipes: ``residual_apf`` (shipped ``ppo_residual_apf.zip``) and ``shared``
 (``ppo_shared.zip``), the SB3 recipes of :mod:`uasep_env.training`. Needs the ``train``
@@ -149,6 +151,7 @@ def run(
     max_minutes: float,
     run_dir: Path,
     extra: list[str],
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Train until the bar is reached or the budget is spent; the record (see the module)."""
     import torch
@@ -160,6 +163,7 @@ def run(
     from uasep_env.training.rundir import prepare_out_dir
 
     args = _recipe_args(recipe, run_dir, extra)
+    prepare_out_dir(run_dir, "", overwrite)  # before the bar's evaluation: refused at once
     torch.set_num_threads(args.torch_threads)
     config = ppo_shared.make_env_config(args)
     eval_cfg = config.replace(action={"mode": "direct"})
@@ -175,7 +179,6 @@ def run(
           f"separation <= {bar.loss_of_separation:.1%}, mean max deviation <= "
           f"{bar.max_deviation:.1f} m", flush=True)  # fmt: skip
 
-    prepare_out_dir(run_dir, "", overwrite=True)
     venv, model = ppo_shared.build(args, config)
     clock = Clock()
     clock.wrap(venv.venv.venv, "step_wait", "env_s")  # the batched env under the wrappers
@@ -264,12 +267,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--run-dir", type=Path, default=None)
     p.add_argument("--out", type=Path, default=None, help="the JSON record")
     p.add_argument("--force", action="store_true", help="replace an existing --out")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a previous run's files in --run-dir")  # fmt: skip
     a = p.parse_args(argv)
     out = a.out or ROOT / "benchmarks" / "results" / f"time_to_policy_{a.recipe}.json"
     if out.exists() and not a.force:
         p.error(f"argument --out: {out} exists (--force replaces it)")
     run_dir = a.run_dir or ROOT / "runs" / "time_to_policy" / a.recipe
-    record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra)
+    record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra, a.overwrite)
     record["command"] = "python benchmarks/time_to_policy.py " + " ".join(
         [*argv, *(["--", *extra] if extra else [])]
     )

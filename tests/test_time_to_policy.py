@@ -49,3 +49,7 @@ def test_a_run_stops_at_the_bar_and_records_where_the_time_went(tmp_path):
     assert t["env"] + t["rollout_other"] + t["learner"] <= t["training"] + 1e-6
     with pytest.raises(SystemExit):  # no silent overwrite
         ttp.main(["--recipe", "residual_apf", "--out", str(out)])
+    other = tmp_path / "other.json"  # nor of the run folder: refused before any episode
+    with pytest.raises(SystemExit, match="is not empty"):
+        ttp.main([*flags, "--out", str(other), "--run-dir", str(tmp_path / "run"), "--", *tiny])
+    assert not other.exists()
