@@ -47,7 +47,9 @@ from uasep_env.noise import NoiseStreams
 from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 from uasep_env.reachable import calibrated
 from uasep_env.replay import ReplayTracks
-from uasep_env.scenarios import N_WAYPOINTS, ScenarioSpec, place_obstacles, sample_scenario
+from uasep_env.scenarios import N_WAYPOINTS, place_obstacles
+from uasep_env.scenarios.batched import sample_batch
+from uasep_env.scenarios.spec import ScenarioBatch
 from uasep_env.scenarios.real_traffic import check_replay_tracks, replay_samples
 
 __all__ = ["World"]
@@ -195,38 +197,36 @@ class World(RenamedAttributes):
         else:
             seeds = list(seed)  # type: ignore[arg-type]
         idx = np.flatnonzero(mask)
-        specs: list[ScenarioSpec] = []
+        if len(idx) == 0:
+            return
         for i in idx:
             s = seeds[i]
             if s is not None:
                 self._noise.reseed(i, s)
-            specs.append(sample_scenario(self._noise.rngs[i], self.config))
-            self.families[i] = specs[-1].family
-        if len(idx) == 0:
-            return
-        self._apply_specs(mask, idx, specs)
+        # Each environment's scenario from its own generator, the geometry batched over
+        # them: the episodes of sample_scenario, bit for bit (uasep_env.scenarios.batched).
+        batch = sample_batch([self._noise.rngs[i] for i in idx], self.config)
+        for i, family in zip(idx.tolist(), batch.families, strict=True):
+            self.families[i] = family
+        self._apply_specs(mask, idx, batch)
         self._has_reset = True
 
-    def _apply_specs(self, mask: np.ndarray, idx: np.ndarray, specs: list[ScenarioSpec]) -> None:
+    def _apply_specs(self, mask: np.ndarray, idx: np.ndarray, batch: ScenarioBatch) -> None:
         cfg = self.config
-
-        def stack(name: str) -> np.ndarray:
-            return np.stack([getattr(s, name) for s in specs])
-
         self.time[idx] = 0.0
         self.steps[idx] = 0
         self._kf_count[idx] = 0
-        self.plan.set_rows(mask, stack("waypoints"), np.array([s.cruise_speed for s in specs]))
-        self.slots[idx] = stack("slots")
+        self.plan.set_rows(mask, batch.waypoints, batch.cruise_speed)
+        self.slots[idx] = batch.slots
         self._plan_offsets[idx] = segment_offsets(self.plan.direction[idx], self.slots[idx])
-        self.uav_pos[idx] = stack("uav_pos")
-        self.uav_vel[idx] = stack("uav_vel")
+        self.uav_pos[idx] = batch.uav_pos
+        self.uav_vel[idx] = batch.uav_vel
         self.uav_acc[idx] = 0.0
         self.accel_cmd[idx] = 0.0
         self.prev_accel_cmd[idx] = 0.0
         ob = self.obstacles
         if self.n_obstacles:
-            place_obstacles(ob, idx, specs, cfg)
+            place_obstacles(ob, idx, batch, cfg)
             # The ellipsoid's shape is fixed by the obstacle's performance; only its pose moves.
             # Inflations keep the true obstacle inside despite wind drift and the track error.
             pred = cfg.prediction
@@ -248,7 +248,7 @@ class World(RenamedAttributes):
                 self.pred_offset[idx] = offset
                 self.pred_axes[idx] = axes
             if self.replay is not None:  # after the ellipsoid: it uses the median speed
-                self.replay.start(ob, mask, specs)
+                self.replay.start(ob, mask, [batch.spec(k) for k in range(len(batch))])
         # First measurements start the tracks. Only the reset rows are measured, predicted
         # and checked: a partial reset's cost should not grow with the batch.
         self._sense(idx, initialise=True)

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Encounter",
+    "EncounterDraws",
     "Layout",
     "ObstacleStart",
     "aimed_obstacle",
@@ -118,6 +119,28 @@ class ObstacleStart:
 
 
 @dataclass(frozen=True, kw_only=True)
+class EncounterDraws:
+    """What an :class:`Encounter` draws, declared for the batched scenarios.
+
+    :func:`aimed_obstacle` draws, after the meeting time and the UAV: ``w_max``, ``vz_max``,
+    then ``horizontal``'s speed (uniform in :attr:`speed`, plus the cruise speed if
+    :attr:`above_cruise`), its side (a ``random() < 0.5`` sign, if :attr:`either_side`) and
+    its turn from the plan's heading (uniform in :attr:`turn`; the heading is
+    ``(plan_heading + heading_offset) + side * turn``), the altitude offset, ``vertical``'s
+    climb sign (a ``random() < 0.5`` sign times ``vz_max``, if :attr:`climbs`; level
+    otherwise) and the reaction lead. :mod:`uasep_env.scenarios.batched` draws the same
+    numbers in the same order from this description; its tests hold it to the callables.
+    """
+
+    speed: tuple[float, float]
+    above_cruise: bool = False
+    heading_offset: float = 0.0
+    either_side: bool = False
+    turn: tuple[float, float]
+    climbs: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
 class Encounter:
     """A kind of encounter: how an obstacle approaches the UAV it is aimed at.
 
@@ -128,12 +151,15 @@ class Encounter:
         summary: One line: what encounter it makes (the family's, for a one-encounter
             family).
         parameters: What it draws (units).
+        draws: The same draws, declared for the batched scenarios (``None``: episodes
+            with this encounter are drawn one at a time).
     """
 
     horizontal: Callable[[np.random.Generator, EnvConfig, float], tuple[float, float]]
     vertical: Callable[[np.random.Generator, float], float | None]
     summary: str
     parameters: str
+    draws: EncounterDraws | None = None
 
 
 def planned_position(plan: PlannedTrajectory, t: float, slots: np.ndarray) -> np.ndarray:

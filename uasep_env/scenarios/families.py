@@ -19,11 +19,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from uasep_env.formation import pattern_slots
 from uasep_env.scenarios import real_traffic as _real_traffic
+from uasep_env.scenarios.batched import EpisodeDraws, draw_encounters
 from uasep_env.scenarios.building import (
     SPEED_RANGE_MPS,
     TIMELINE_S,
     Encounter,
+    EncounterDraws,
     Layout,
     ObstacleStart,
     aimed_obstacle,
@@ -87,24 +90,35 @@ ENCOUNTERS: dict[str, Encounter] = {
         vertical=_level,
         summary="An obstacle crosses the formation's track from either side.",
         parameters=_MEETS + "speed 3-12 m/s, 45-135° off the track, altitude ±8 m.",
+        draws=EncounterDraws(
+            speed=SPEED_RANGE_MPS, either_side=True, turn=(math.pi / 4, 3 * math.pi / 4)
+        ),
     ),
     "head_on": Encounter(
         horizontal=_from_the_front,
         vertical=_level,
         summary="An obstacle comes head-on.",
         parameters=_MEETS + "speed 3-12 m/s, within ±20° of head-on, altitude ±8 m.",
+        draws=EncounterDraws(speed=SPEED_RANGE_MPS, heading_offset=math.pi, turn=(-0.35, 0.35)),
     ),
     "overtaking": Encounter(
         horizontal=_from_behind,
         vertical=_level,
         summary="A faster obstacle overtakes the formation from behind.",
         parameters=_MEETS + "speed cruise + 3-8 m/s, within ±14° of the track, altitude ±8 m.",
+        draws=EncounterDraws(speed=(3.0, 8.0), above_cruise=True, turn=(-0.25, 0.25)),
     ),
     "climbing": Encounter(
         horizontal=_from_either_side,
         vertical=_climbing_or_descending,
         summary="An obstacle climbs or descends through the formation's altitude.",
         parameters=_MEETS + "speed 3-12 m/s, 45-135° off the track, " + _CLIMBING,
+        draws=EncounterDraws(
+            speed=SPEED_RANGE_MPS,
+            either_side=True,
+            turn=(math.pi / 4, 3 * math.pi / 4),
+            climbs=True,
+        ),
     ),
 }
 
@@ -131,8 +145,15 @@ def _encounter(kind: str) -> ScenarioFamily:
         )
         return assemble(kind, config, lay, obstacles)
 
+    def draws(rng: np.random.Generator, config: EnvConfig) -> EpisodeDraws:
+        return draw_encounters(kind, config, rng, encounter, TRAFFIC_MIX, ENCOUNTERS)
+
     return ScenarioFamily(
-        name=kind, summary=encounter.summary, parameters=encounter.parameters, generate=generate
+        name=kind,
+        summary=encounter.summary,
+        parameters=encounter.parameters,
+        generate=generate,
+        draws=draws if _batched(encounter, *ENCOUNTERS.values()) else None,
     )
 
 
@@ -179,6 +200,25 @@ def _multi_obstacle(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec
         config, lambda: _background(rng, config, lay), lambda: _background(rng, config, lay)
     )
     return assemble("multi_obstacle", config, lay, obstacles)
+
+
+def _multi_obstacle_draws(rng: np.random.Generator, config: EnvConfig) -> EpisodeDraws:
+    return draw_encounters("multi_obstacle", config, rng, None, TRAFFIC_MIX, ENCOUNTERS)
+
+
+def _large_formation_draws(rng: np.random.Generator, config: EnvConfig) -> EpisodeDraws:
+    pattern = "wedge" if config.formation == "paper" else config.formation
+    slots = pattern_slots(pattern, config.n_uavs, config.formation_spacing)
+    middle = int(np.argmin(np.linalg.norm(slots, axis=1)))
+    crossing = ENCOUNTERS["crossing"]
+    return draw_encounters(
+        "large_formation", config, rng, crossing, TRAFFIC_MIX, ENCOUNTERS, pattern, middle
+    )
+
+
+def _batched(*encounters: Encounter) -> bool:
+    """Whether every one of ``encounters`` declares its draws (a batched form is possible)."""
+    return all(e.draws is not None for e in encounters)
 
 
 def _large_formation(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
@@ -256,6 +296,10 @@ def _random(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
     return FAMILIES[RANDOM_MIX.draw(rng)].generate(rng, config)
 
 
+def _random_draws(rng: np.random.Generator, config: EnvConfig) -> EpisodeDraws:
+    return FAMILIES[RANDOM_MIX.draw(rng)].draws(rng, config)  # type: ignore[misc]
+
+
 #: The families the ``random`` scenario draws per episode, with their integer weights.
 RANDOM_MIX = Mix(
     weights={"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1, "multi_obstacle": 1}
@@ -283,6 +327,7 @@ register(
         generate=_random,
         gym_name="Formation",
         mix=RANDOM_MIX,
+        draws=_random_draws if _batched(*ENCOUNTERS.values()) else None,
     )
 )
 for _kind in ENCOUNTERS:
@@ -293,6 +338,7 @@ register(
         summary="Every obstacle slot aimed at the formation, each of a random kind.",
         parameters="Each slot's kind drawn from " + TRAFFIC_MIX.describe() + ".",
         generate=_multi_obstacle,
+        draws=_multi_obstacle_draws if _batched(*ENCOUNTERS.values()) else None,
     )
 )
 register(
@@ -304,6 +350,7 @@ register(
             "`paper` pattern becomes a wedge."
         ),
         generate=_large_formation,
+        draws=_large_formation_draws if _batched(*ENCOUNTERS.values()) else None,
         gym_name="LargeFormation",
         defaults={"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
     )

@@ -84,6 +84,10 @@ class ScenarioFamily:
         mix: For a family that draws another family per episode (``random``), that mix.
         obstacle_model: The ``obstacle.model`` its episodes need (``"dubins"``, or
             ``"replay"`` for a family of recorded tracks); the config checks it.
+        draws: Its batched form, ``(rng, config) -> EpisodeDraws``: the same draws as
+            :attr:`generate`, in the same order, with the geometry left to
+            :func:`uasep_env.scenarios.batched.geometry` (``None``: a batch of its episodes
+            is generated one at a time).
     """
 
     name: str
@@ -94,6 +98,7 @@ class ScenarioFamily:
     defaults: Mapping[str, Any] = field(default_factory=dict)
     mix: Mix | None = None
     obstacle_model: str = "dubins"
+    draws: Callable[[np.random.Generator, Any], Any] | None = None
 
 
 #: Every registered family by name, in registration order.

@@ -1,4 +1,8 @@
-"""One episode's initial conditions (:class:`ScenarioSpec`) and how they start the world."""
+"""Episodes' initial conditions and how they start the world.
+
+One episode's is a :class:`ScenarioSpec`; several episodes starting in one call (the
+environments that end in a step) are a :class:`ScenarioBatch`, the same fields stacked.
+"""
 
 from __future__ import annotations
 
@@ -14,7 +18,7 @@ from uasep_env.obstacles import DUBINS_CLASS, ObstacleState
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
 
-__all__ = ["N_WAYPOINTS", "ScenarioSpec", "place_obstacles"]
+__all__ = ["N_WAYPOINTS", "ScenarioBatch", "ScenarioSpec", "place_obstacles"]
 
 #: Way-points of every planned trajectory (shorter plans are padded with their end point).
 N_WAYPOINTS = 4
@@ -81,6 +85,59 @@ class ScenarioSpec:
 
 
 _FIELD_NAMES = frozenset(f.name for f in fields(ScenarioSpec))
+#: The array fields of a spec, stacked in a :class:`ScenarioBatch` (all but ``family``).
+_ARRAY_FIELDS = tuple(f.name for f in fields(ScenarioSpec) if f.name != "family")
+
+
+@dataclass
+class ScenarioBatch:
+    """The initial conditions of several episodes: :class:`ScenarioSpec`'s fields stacked.
+
+    Every array field of :class:`ScenarioSpec` with a leading axis of one row per episode
+    (``cruise_speed`` is ``(B,)``), plus:
+
+    Attributes:
+        families: Each episode's family name.
+        specs: The per-episode specs it was stacked from, if it was (a family without a
+            batched form; their extra fields, such as a replayed track, stay on them).
+    """
+
+    families: list[str]
+    waypoints: np.ndarray
+    cruise_speed: np.ndarray
+    slots: np.ndarray
+    uav_pos: np.ndarray
+    uav_vel: np.ndarray
+    obstacle_pos: np.ndarray
+    obstacle_heading: np.ndarray
+    obstacle_speed: np.ndarray
+    obstacle_turn_rate: np.ndarray
+    obstacle_climb_rate: np.ndarray
+    obstacle_max_turn_rate: np.ndarray
+    obstacle_max_climb_rate: np.ndarray
+    obstacle_radius: np.ndarray
+    obstacle_alt_band: np.ndarray
+    obstacle_active: np.ndarray
+    obstacle_hold_until: np.ndarray
+    wind: np.ndarray
+    specs: list[ScenarioSpec] | None = None
+
+    @classmethod
+    def from_specs(cls, specs: Sequence[ScenarioSpec]) -> ScenarioBatch:
+        """The specs stacked (at least one)."""
+        arrays = {name: np.stack([np.asarray(getattr(s, name)) for s in specs]) for name in _ARRAY_FIELDS}
+        return cls(families=[s.family for s in specs], specs=list(specs), **arrays)
+
+    def __len__(self) -> int:
+        return len(self.families)
+
+    def spec(self, k: int) -> ScenarioSpec:
+        """Episode ``k``'s :class:`ScenarioSpec` (the one it was stacked from, if any)."""
+        if self.specs is not None:
+            return self.specs[k]
+        values = {name: getattr(self, name)[k] for name in _ARRAY_FIELDS}
+        values["cruise_speed"] = float(values["cruise_speed"])
+        return ScenarioSpec(family=self.families[k], **values)
 
 #: The obstacle state's per-obstacle fields that a :class:`ScenarioSpec` gives
 #: (``obstacle_*``).
@@ -100,21 +157,26 @@ _OBSTACLE_FIELDS = (
 
 
 def place_obstacles(
-    obstacles: ObstacleState, mask: np.ndarray, specs: Sequence[ScenarioSpec], config: EnvConfig
+    obstacles: ObstacleState,
+    mask: np.ndarray,
+    specs: Sequence[ScenarioSpec] | ScenarioBatch,
+    config: EnvConfig,
 ) -> None:
     """Start the obstacles of ``specs`` in the environments selected by ``mask``.
 
     Args:
         obstacles: The batch's obstacle state, written in place.
         mask: ``(E,)`` bool, or an index array: the environments starting an episode.
-        specs: One spec per selected environment, in order.
+        specs: One spec per selected environment, in order, or their :class:`ScenarioBatch`.
         config: The configuration (the pilots' command changes, the ground).
     """
+    if not isinstance(specs, ScenarioBatch):
+        specs = ScenarioBatch.from_specs(specs)
     for name in _OBSTACLE_FIELDS:
-        getattr(obstacles, name)[mask] = np.stack([getattr(s, "obstacle_" + name) for s in specs])
+        getattr(obstacles, name)[mask] = getattr(specs, "obstacle_" + name)
     obstacles.switch_prob[mask] = min(1.0, config.dt / config.obstacle.mean_switch_time)
     obstacles.straight_prob[mask] = config.obstacle.straight_probability
-    obstacles.wind[mask] = np.stack([s.wind for s in specs])
+    obstacles.wind[mask] = specs.wind
     obstacles.ground[mask] = config.airspace.ground_altitude
     # Synthetic obstacles fly the Dubins model; a replayed track's class is set by the replay.
     obstacles.aircraft_class[mask] = DUBINS_CLASS

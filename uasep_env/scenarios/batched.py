@@ -1,0 +1,349 @@
+"""Scenarios of many episodes at once: per-episode draws, then the geometry batched.
+
+A partial reset of a vector env starts a few episodes per step. Built one at a time
+(:func:`uasep_env.scenarios.sample_scenario`), each costs a few hundred small-array numpy
+calls; here the families that declare a batched form (:attr:`ScenarioFamily.draws
+<uasep_env.scenarios.registry.ScenarioFamily.draws>`) are built in two steps:
+
+1. *draws*, per episode, from its own generator: the same numbers, in the same order, as
+   the family's generator draws them (they never depend on the geometry), kept as plain
+   floats (:class:`EpisodeDraws`);
+2. *geometry*, once over all the episodes: the plans, slots, starts, planned positions at
+   the meeting times, obstacle starts and altitude bands, stacked as a
+   :class:`~uasep_env.scenarios.spec.ScenarioBatch`.
+
+The numbers are those of the per-episode generator, bit for bit (``tests/test_batched_scenarios.py``):
+each value is computed by the same operations in the same order, with the same functions
+(Python's ``math.cos``, ``math.sin`` and ``math.atan2`` element by element where the
+generator uses them, the numpy functions where it uses those, and Python's ``min``/``max``
+semantics where it uses them). Families without a batched form are drawn one at a time by
+:func:`sample_batch`, and stacked.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from uasep_env.config.groups import FLIGHT_ALTITUDE
+from uasep_env.formation import PlannedTrajectory, pattern_slots, segment_offsets
+from uasep_env.scenarios.building import (
+    _ALT_BAND_HALF_WIDTH_M,
+    _START_SCATTER_M,
+    _START_SPEED_SCATTER_MPS,
+    ALTITUDE_OFFSET_RANGE_M,
+    CLIMB_RATE_RANGE_MPS,
+    MEET_TIME_RANGE,
+    REACTION_LEAD_RANGE_S,
+    TIMELINE_S,
+    TURN_RATE_RANGE_RADPS,
+    Encounter,
+    EncounterDraws,
+    _separated_start,
+    airspace,
+)
+from uasep_env.scenarios.registry import Mix, get_family
+from uasep_env.scenarios.spec import N_WAYPOINTS, ScenarioBatch
+
+if TYPE_CHECKING:
+    from uasep_env.config import EnvConfig
+
+__all__ = ["EpisodeDraws", "draw_encounters", "sample_batch"]
+
+_TURNS = N_WAYPOINTS - 2
+# The layout's uniform draws, in order: the plan's heading, its turns, whether each turn is
+# taken (random() < 0.5), the turns' places along the plan; then per UAV the start scatter
+# of the position, and of the velocity.
+_PLAN_LOW = [-math.pi] + [-math.pi / 4] * _TURNS + [0.0] * _TURNS + [0.2] * _TURNS
+_PLAN_HIGH = [math.pi] + [math.pi / 4] * _TURNS + [1.0] * _TURNS + [0.8] * _TURNS
+_N_PLAN = len(_PLAN_LOW)
+#: Columns of one obstacle's draws (:meth:`EpisodeDraws.obstacles`).
+_MEET, _WHO, _W_MAX, _VZ_MAX, _SPEED, _OFFSET, _TURN, _ALT, _CLIMB, _CLIMBS, _LEAD = range(11)
+_N_COLS = 11
+
+
+@dataclass
+class EpisodeDraws:
+    """One episode's random draws, before any geometry.
+
+    Attributes:
+        family: The family's name.
+        pattern: The formation pattern (``None``: the config's).
+        layout: The layout's uniform draws (plan, then the UAVs' start scatter).
+        obstacles: ``(M, 11)`` per obstacle: meeting time, UAV aimed at, ``w_max``,
+            ``vz_max``, speed, heading offset and turn (the heading is
+            ``(plan_heading + offset) + turn``), altitude offset, climb (``nan`` if level),
+            whether it climbs, reaction lead.
+    """
+
+    family: str
+    pattern: str | tuple | None
+    layout: np.ndarray
+    obstacles: np.ndarray
+
+
+def _bounds(d: EncounterDraws) -> tuple[np.ndarray, np.ndarray]:
+    """Low and high ends of an encounter's uniform draws after its meeting time and UAV."""
+    low = [TURN_RATE_RANGE_RADPS[0], CLIMB_RATE_RANGE_MPS[0], d.speed[0]]
+    high = [TURN_RATE_RANGE_RADPS[1], CLIMB_RATE_RANGE_MPS[1], d.speed[1]]
+    if d.either_side:
+        low.append(0.0)
+        high.append(1.0)
+    low += [d.turn[0], ALTITUDE_OFFSET_RANGE_M[0]]
+    high += [d.turn[1], ALTITUDE_OFFSET_RANGE_M[1]]
+    if d.climbs:
+        low.append(0.0)
+        high.append(1.0)
+    low.append(REACTION_LEAD_RANGE_S[0])
+    high.append(REACTION_LEAD_RANGE_S[1])
+    return np.array(low), np.array(high)
+
+
+def _draw_layout(rng: np.random.Generator, config: EnvConfig) -> np.ndarray:
+    """:func:`~uasep_env.scenarios.building.random_layout`'s draws, in one call.
+
+    Consecutive uniform draws (``random()`` is ``uniform(0, 1)``: ``0 + 1 * x``) from one
+    ``uniform`` call with arrays of bounds: the same doubles, in the same order.
+    """
+    n = config.n_uavs
+    low = _PLAN_LOW + [-_START_SCATTER_M] * (3 * n) + [-_START_SPEED_SCATTER_MPS] * (3 * n)
+    high = _PLAN_HIGH + [_START_SCATTER_M] * (3 * n) + [_START_SPEED_SCATTER_MPS] * (3 * n)
+    return rng.uniform(low, high)
+
+
+def _draw_obstacle(
+    rng: np.random.Generator, config: EnvConfig, encounter: Encounter, who: int | None
+) -> list[float]:
+    """:func:`~uasep_env.scenarios.building.aimed_obstacle`'s draws, as one row."""
+    d = encounter.draws
+    assert d is not None  # families with such an encounter declare no batched form
+    meet = rng.uniform(*MEET_TIME_RANGE) * TIMELINE_S
+    if who is None:
+        who = int(rng.integers(config.n_uavs))
+    low, high = _bounds(d)
+    r = rng.uniform(low, high).tolist()
+    w_max, vz_max, speed = r[0], r[1], r[2]
+    if d.above_cruise:
+        speed = config.cruise_speed + speed
+    k = 3
+    if d.either_side:
+        side = 1.0 if r[k] < 0.5 else -1.0
+        turn = side * r[k + 1]
+        k += 2
+    else:
+        turn = r[k]
+        k += 1
+    alt = r[k]
+    k += 1
+    climb = math.nan
+    if d.climbs:
+        climb = (1.0 if r[k] < 0.5 else -1.0) * vz_max
+        k += 1
+    lead = r[k]
+    return [meet, who, w_max, vz_max, speed, d.heading_offset, turn, alt, climb, d.climbs, lead]
+
+
+def draw_encounters(
+    family: str,
+    config: EnvConfig,
+    rng: np.random.Generator,
+    first: Encounter | None,
+    traffic: Mix,
+    encounters: dict[str, Encounter],
+    pattern: str | tuple | None = None,
+    who: int | None = None,
+) -> EpisodeDraws:
+    """The draws of a random layout and its aimed obstacles.
+
+    Args:
+        family: The family's name.
+        config: The config.
+        rng: The episode's generator.
+        first: Slot 0's encounter (``None``: background traffic, like the others).
+        traffic: The mix background traffic's kinds are drawn from.
+        encounters: The encounter kinds by name.
+        pattern: The formation pattern (``None``: the config's).
+        who: The UAV slot 0 is aimed at (``None``: drawn).
+    """
+    layout = _draw_layout(rng, config)
+    rows = []
+    for k in range(config.n_obstacles):
+        if k == 0 and first is not None:
+            rows.append(_draw_obstacle(rng, config, first, who))
+        else:
+            rows.append(_draw_obstacle(rng, config, encounters[traffic.draw(rng)], None))
+    obstacles = np.array(rows, dtype=float).reshape(config.n_obstacles, _N_COLS)
+    return EpisodeDraws(family, pattern, layout, obstacles)
+
+
+def sample_batch(rngs: list[np.random.Generator], config: EnvConfig) -> ScenarioBatch:
+    """Draw one episode's initial conditions per generator, as one batch.
+
+    The same numbers as :func:`uasep_env.scenarios.sample_scenario` with each generator,
+    bit for bit, and the generators left in the same states.
+
+    Args:
+        rngs: Each episode's generator (at least one).
+        config: The environment config (``config.scenario`` names the family).
+    """
+    family = get_family(config.scenario)
+    if family.draws is None:
+        return ScenarioBatch.from_specs([family.generate(rng, config) for rng in rngs])
+    return geometry([family.draws(rng, config) for rng in rngs], config)
+
+
+def _py_max(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
+    """Python's ``max(a, b)`` element by element (``a`` unless ``b > a``)."""
+    return np.where(b > a, b, a)
+
+
+def _py_min(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
+    """Python's ``min(a, b)`` element by element (``a`` unless ``b < a``)."""
+    return np.where(b < a, b, a)
+
+
+def _each(fn: object, *args: np.ndarray) -> np.ndarray:
+    """``fn`` (a ``math`` function) element by element: libm's numbers, as the generator's."""
+    return np.array([fn(*xs) for xs in zip(*(a.tolist() for a in args))], dtype=float)  # type: ignore[operator]
+
+
+def _plans(draws: np.ndarray, config: EnvConfig) -> np.ndarray:
+    """``(B, N_WAYPOINTS, 3)`` the random plans, extended for long episodes."""
+    b = len(draws)
+    heading = draws[:, 0]
+    turns = draws[:, 1 : 1 + _TURNS] * (draws[:, 1 + _TURNS : 1 + 2 * _TURNS] < 0.5)
+    fractions = np.sort(draws[:, 1 + 2 * _TURNS : _N_PLAN], axis=1)
+    edges = np.concatenate([np.zeros((b, 1)), fractions, np.ones((b, 1))], axis=1)
+    legs = np.diff(edges, axis=1) * (config.cruise_speed * TIMELINE_S)
+    wp = np.empty((b, N_WAYPOINTS, 3))
+    x, y, z = np.zeros(b), np.zeros(b), np.full(b, -FLIGHT_ALTITUDE)
+    wp[:, 0] = np.stack([x, y, z], axis=1)
+    h = heading
+    for k in range(N_WAYPOINTS - 1):
+        if k > 0:
+            h = h + turns[:, k - 1]
+        leg = legs[:, k]
+        x = x + leg * _each(math.cos, h)
+        y = y + leg * _each(math.sin, h)
+        z = z + leg * 0.0
+        wp[:, k + 1, 0], wp[:, k + 1, 1], wp[:, k + 1, 2] = x, y, z
+    if config.episode_duration > TIMELINE_S:
+        # One row at a time, as the generator does (a 1-D norm is a dot product).
+        extra = config.cruise_speed * (config.episode_duration - TIMELINE_S)
+        for row in wp:
+            last = row[-1] - row[-2]
+            row[-1] += last / np.linalg.norm(last) * extra
+    return wp
+
+
+def _slots(draws: list[EpisodeDraws], config: EnvConfig) -> np.ndarray:
+    """``(B, n_uavs, 3)`` each episode's formation pattern."""
+    made: dict[object, np.ndarray] = {}
+    out = np.empty((len(draws), config.n_uavs, 3))
+    for k, d in enumerate(draws):
+        key = d.pattern or config.formation
+        if key not in made:
+            made[key] = pattern_slots(key, config.n_uavs, config.formation_spacing)
+        out[k] = made[key]
+    return out
+
+
+def _planned_at(
+    plan: PlannedTrajectory, offsets: np.ndarray, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Planned UAV positions ``(B, n_uavs, 3)`` and the plan's direction at times ``t``."""
+    located = plan.locate(t)
+    center, _, direction = plan.center_and_direction(t, located)
+    return center[:, None, :] + offsets[np.arange(len(t)), located[1]], direction
+
+
+def geometry(draws: list[EpisodeDraws], config: EnvConfig) -> ScenarioBatch:
+    """The episodes of ``draws``, their geometry computed once over the batch.
+
+    Bit for bit what :func:`~uasep_env.scenarios.building.random_layout`,
+    :func:`~uasep_env.scenarios.building.aimed_obstacle` and
+    :func:`~uasep_env.scenarios.building.assemble` make of the same draws.
+    """
+    b, n, m = len(draws), config.n_uavs, config.n_obstacles
+    lay = np.stack([d.layout for d in draws])
+    wp = _plans(lay, config)
+    plan = PlannedTrajectory(wp, config.cruise_speed)
+    slots = _slots(draws, config)
+    offsets = segment_offsets(plan.direction, slots)
+    start_slots, _ = _planned_at(plan, offsets, np.zeros(b))
+    scatter = lay[:, _N_PLAN:]
+    uav_pos = start_slots + scatter[:, : 3 * n].reshape(b, n, 3)
+    plan_dir = plan.direction[:, 0, :]
+    uav_vel = (plan_dir * config.cruise_speed)[:, None, :] + scatter[:, 3 * n :].reshape(b, n, 3)
+    # The start scatter is shrunk only where two UAVs start too close (rare): those rows
+    # one at a time, as the generator does.
+    d = np.linalg.norm(uav_pos[:, :, None] - uav_pos[:, None], axis=-1)
+    d[:, np.arange(n), np.arange(n)] = np.inf
+    sep = config.uav.separation_distance
+    for k in np.flatnonzero(~(d.min(axis=(1, 2)) >= sep)):
+        uav_pos[k] = _separated_start(start_slots[k], uav_pos[k], sep)
+
+    ob = np.stack([d.obstacles for d in draws]) if m else np.zeros((b, 0, _N_COLS))
+    floor, ceiling = airspace(config)
+    pos = np.empty((b, m, 3))
+    heading = np.empty((b, m))
+    climb = np.empty((b, m))
+    hold = np.empty((b, m))
+    rows = np.arange(b)
+    for j in range(m):
+        o = ob[:, j]
+        meet = o[:, _MEET]
+        targets, direction = _planned_at(plan, offsets, meet)
+        target = targets[rows, o[:, _WHO].astype(np.intp)]
+        plan_heading = _each(math.atan2, direction[:, 1], direction[:, 0])
+        h = (plan_heading + o[:, _OFFSET]) + o[:, _TURN]
+        climbs = o[:, _CLIMBS] != 0.0
+        target_alt = -target[:, 2]
+        with np.errstate(invalid="ignore"):  # nan climbs of level obstacles, not used
+            clamped = _py_min(
+                _py_max(o[:, _CLIMB], (target_alt - ceiling) / meet), (target_alt - floor) / meet
+            )
+        c = np.where(climbs, clamped, 0.0)
+        start = np.empty((b, 3))
+        start[:, 0] = target[:, 0] + 0.0
+        start[:, 1] = target[:, 1] + 0.0
+        start[:, 2] = target[:, 2] + np.where(climbs, 0.0, o[:, _ALT])
+        speed = o[:, _SPEED]
+        start[:, 0] -= speed * _each(math.cos, h) * meet
+        start[:, 1] -= speed * _each(math.sin, h) * meet
+        start[:, 2] += c * meet
+        start[:, 2] = -_py_min(_py_max(-start[:, 2], floor), ceiling)
+        pos[:, j], heading[:, j], climb[:, j] = start, h, c
+        hold[:, j] = _py_max(0.0, meet - o[:, _LEAD])
+
+    # assemble(): the altitude bands, widened to contain the starts, within the airspace.
+    band = np.empty((b, m, 2))
+    band[..., 0] = FLIGHT_ALTITUDE - _ALT_BAND_HALF_WIDTH_M
+    band[..., 1] = FLIGHT_ALTITUDE + _ALT_BAND_HALF_WIDTH_M
+    alts = -pos[..., 2]
+    band[..., 0] = np.maximum(np.minimum(band[..., 0], alts), floor)
+    band[..., 1] = np.minimum(np.maximum(band[..., 1], alts), ceiling)
+    obc = config.obstacle
+    return ScenarioBatch(
+        families=[d.family for d in draws],
+        waypoints=wp,
+        cruise_speed=np.full(b, float(config.cruise_speed)),
+        slots=slots,
+        uav_pos=uav_pos,
+        uav_vel=uav_vel,
+        obstacle_pos=pos,
+        obstacle_heading=np.mod(heading + math.pi, 2 * math.pi) - math.pi,
+        obstacle_speed=ob[..., _SPEED].copy(),
+        obstacle_turn_rate=np.zeros((b, m)),
+        obstacle_climb_rate=climb,
+        obstacle_max_turn_rate=ob[..., _W_MAX].copy(),
+        obstacle_max_climb_rate=ob[..., _VZ_MAX].copy(),
+        obstacle_radius=np.full((b, m), obc.radius, dtype=float),
+        obstacle_alt_band=band,
+        obstacle_active=np.ones((b, m), dtype=bool),
+        obstacle_hold_until=hold,
+        wind=np.tile(np.asarray(obc.wind, dtype=float), (b, 1)),
+    )
