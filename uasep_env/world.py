@@ -49,8 +49,8 @@ from uasep_env.reachable import calibrated
 from uasep_env.replay import ReplayTracks
 from uasep_env.scenarios import N_WAYPOINTS, place_obstacles
 from uasep_env.scenarios.batched import sample_batch
-from uasep_env.scenarios.spec import ScenarioBatch
 from uasep_env.scenarios.real_traffic import check_replay_tracks, replay_samples
+from uasep_env.scenarios.spec import ScenarioBatch
 
 __all__ = ["World"]
 

@@ -12,17 +12,18 @@ calls; here the families that declare a batched form (:attr:`ScenarioFamily.draw
    the meeting times, obstacle starts and altitude bands, stacked as a
    :class:`~uasep_env.scenarios.spec.ScenarioBatch`.
 
-The numbers are those of the per-episode generator, bit for bit (``tests/test_batched_scenarios.py``):
-each value is computed by the same operations in the same order, with the same functions
-(Python's ``math.cos``, ``math.sin`` and ``math.atan2`` element by element where the
-generator uses them, the numpy functions where it uses those, and Python's ``min``/``max``
-semantics where it uses them). Families without a batched form are drawn one at a time by
-:func:`sample_batch`, and stacked.
+The numbers are those of the per-episode generator, bit for bit
+(``tests/test_batched_scenarios.py``): each value is computed by the same operations in the
+same order, with the same functions (Python's ``math.cos``, ``math.sin`` and ``math.atan2``
+element by element where the generator uses them, the numpy functions where it uses those,
+and Python's ``min``/``max`` semantics where it uses them). Families without a batched form
+are drawn one at a time by :func:`sample_batch`, and stacked.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -205,9 +206,10 @@ def _py_min(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
     return np.where(b < a, b, a)
 
 
-def _each(fn: object, *args: np.ndarray) -> np.ndarray:
+def _each(fn: Callable[..., float], *args: np.ndarray) -> np.ndarray:
     """``fn`` (a ``math`` function) element by element: libm's numbers, as the generator's."""
-    return np.array([fn(*xs) for xs in zip(*(a.tolist() for a in args))], dtype=float)  # type: ignore[operator]
+    columns = [a.tolist() for a in args]
+    return np.array([fn(*xs) for xs in zip(*columns, strict=True)], dtype=float)
 
 
 def _plans(draws: np.ndarray, config: EnvConfig) -> np.ndarray:

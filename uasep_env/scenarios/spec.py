@@ -125,7 +125,7 @@ class ScenarioBatch:
     @classmethod
     def from_specs(cls, specs: Sequence[ScenarioSpec]) -> ScenarioBatch:
         """The specs stacked (at least one)."""
-        arrays = {name: np.stack([np.asarray(getattr(s, name)) for s in specs]) for name in _ARRAY_FIELDS}
+        arrays = {n: np.stack([np.asarray(getattr(s, n)) for s in specs]) for n in _ARRAY_FIELDS}
         return cls(families=[s.family for s in specs], specs=list(specs), **arrays)
 
     def __len__(self) -> int:
@@ -138,6 +138,7 @@ class ScenarioBatch:
         values = {name: getattr(self, name)[k] for name in _ARRAY_FIELDS}
         values["cruise_speed"] = float(values["cruise_speed"])
         return ScenarioSpec(family=self.families[k], **values)
+
 
 #: The obstacle state's per-obstacle fields that a :class:`ScenarioSpec` gives
 #: (``obstacle_*``).
