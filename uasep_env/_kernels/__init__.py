@@ -17,12 +17,15 @@ kernel receives as keyword arguments. These modules import nothing else of the p
 * :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
 * :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`;
 * :func:`plan_now` -- :func:`uasep_env.formation.planned_state`;
+* :func:`fit_ellipse` -- :func:`uasep_env.reachable.fit._fit_certified` (the enclosing
+  ellipse's centre search, axes and certificate);
 * :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
   network's layer, in float64 before the rounding).
 """
 
 from __future__ import annotations
 
+from uasep_env._kernels.ellipse_fit import fit_ellipse
 from uasep_env._kernels.ellipsoids import (
     nearest_on_ellipsoids,
     pairwise_distances,
@@ -37,6 +40,7 @@ from uasep_env._kernels.separations import separations
 __all__ = [
     "assemble_observations",
     "dense",
+    "fit_ellipse",
     "nearest_on_ellipsoids",
     "pairwise_distances",
     "plan_now",

@@ -16,6 +16,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from uasep_env._numba import compiled_twin
 from uasep_env.reachable.sets import (
     FloatArray,
     Mode,
@@ -145,6 +146,18 @@ class _Nodes:
         self.inv_s2_in = 1.0 / self.s2[..., 1:-1]
         self.h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept, sin, self.cos)
 
+    @classmethod
+    def from_trig(
+        cls, cos: FloatArray, c2: FloatArray, s2: FloatArray, d2: FloatArray, h: FloatArray
+    ) -> _Nodes:
+        """Nodes of known trigonometry and support (no angles: :meth:`take` needs ``th``)."""
+        nd = object.__new__(cls)
+        nd.cos, nd.c2, nd.s2, nd.d2, nd.h = cos, c2, s2, d2, h
+        nd.cos_in = cos[..., 1:-1]
+        nd.c2_in = c2[..., 1:-1]
+        nd.inv_s2_in = 1.0 / s2[..., 1:-1]
+        return nd
+
     def take(self, idx: NDArray[np.intp]) -> _Nodes:
         """The nodes of the rows ``idx``."""
         sub = object.__new__(_Nodes)
@@ -237,6 +250,58 @@ def _extents(
     return h0, hpi, hx
 
 
+@compiled_twin("fit_ellipse", golden_iters=_C_ITERS)
+def _fit_certified(
+    cos: FloatArray,
+    c2: FloatArray,
+    s2: FloatArray,
+    d2: FloatArray,
+    h: FloatArray,
+    c: FloatArray,
+    half: FloatArray,
+    lat: FloatArray,
+    lon: FloatArray,
+    r: FloatArray,
+    eps_abs: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The centre polished, the axes fitted at the nodes, and whether they pass the certificate.
+
+    Arithmetic and square roots only, compiled as ``fit_ellipse``: here, a handful of rows
+    (a partial reset's) costs a few hundred small numpy calls.
+
+    Args:
+        cos: ``(R, K)`` the nodes' cosines.
+        c2: ``(R, K)`` their squares.
+        s2: ``(R, K)`` the squared sines.
+        d2: ``(R, K - 1)`` the squared node spacings over 8.
+        h: ``(R, K)`` the set's support at the nodes (m).
+        c: ``(R,)`` the table's centre (m).
+        half: ``(R,)`` the half-width of the centre's search (m).
+        lat: ``(R,)`` the table's lateral axis, at least a tiny fraction of the scale (m).
+        lon: ``(R,)`` the table's longitudinal axis (m).
+        r: ``(R,)`` the radius (m).
+        eps_abs: ``(R,)`` the rounding margin (m).
+
+    Returns:
+        ``(c, A, B, certified)``, each ``(R,)``.
+    """
+    nd = _Nodes.from_trig(cos, c2, s2, d2, h)
+    lat_g = lat
+    # The margins depend on (A, B): fit twice, taking the margins at the previous axes with a
+    # 25% allowance, then certify; rows that still fail grow until they pass (the caller).
+    delta = 1.25 * _margins(nd, lat_g, lon, r, eps_abs)
+
+    # Polish the centre by a short golden-section search on the area (margins held fixed).
+    def neg_area(cc: FloatArray) -> FloatArray:
+        a_, b_ = _axes_for(nd, delta, cc, lon)
+        return -(a_ * b_)
+
+    c = _golden_max(neg_area, c - half, c + half, _C_ITERS)
+    for _ in range(2):
+        lat, lon = _fit_axes(nd, c, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)
+    return c, lat, lon, _certified(nd, c, lat, lon, r, eps_abs)
+
+
 def _ellipse_core(
     vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -280,21 +345,10 @@ def _ellipse_core(
     uni = np.broadcast_to(_UNIFORM_NODES, (*th.shape[:-1], _UNIFORM_NODES.size))
     th = np.sort(np.concatenate([th, uni, kink[..., None]], axis=-1), axis=-1)
     nd = _Nodes(th, vt, phi, r, swept)
-    # The margins depend on (A, B): fit twice, taking the margins at the previous axes with a
-    # 25% allowance, then certify; rows that still fail grow until they pass.
-    delta = 1.25 * _margins(nd, lat_g, lon, r, eps_abs)
-    # Polish the centre by a short golden-section search on the area (margins held fixed).
-    half = _C_SEARCH * ext
-
-    def neg_area(cc: FloatArray) -> FloatArray:
-        a_, b_ = _axes_for(nd, delta, cc, lon)
-        return -(a_ * b_)
-
-    c = _golden_max(neg_area, c - half, c + half, _C_ITERS)
-    lat = lat_g
-    for _ in range(2):
-        lat, lon = _fit_axes(nd, c, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)
-    ok = _certified(nd, c, lat, lon, r, eps_abs) | ~live
+    c, lat, lon, ok = _fit_certified(
+        nd.cos, nd.c2, nd.s2, nd.d2, nd.h, c, _C_SEARCH * ext, lat_g, lon, r, eps_abs
+    )
+    ok |= ~live
     grow = 1e-6
     for _ in range(30):
         if np.all(ok):
