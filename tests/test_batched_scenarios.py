@@ -7,7 +7,7 @@ import pytest
 
 from uasep_env import World
 from uasep_env.config import make_config
-from uasep_env.scenarios import FAMILIES, RANDOM_MIX, sample_scenario
+from uasep_env.scenarios import FAMILIES, RANDOM_MIX, batched, sample_scenario
 from uasep_env.scenarios.batched import sample_batch
 from uasep_env.scenarios.spec import ScenarioBatch
 
@@ -48,6 +48,30 @@ def test_the_drawn_families_have_a_batched_form():
 
 @pytest.mark.parametrize("family", BATCHED)
 def test_batched_scenarios_equal_the_generator_bit_for_bit(family):
+    _assert_batched_equal_the_generator(family)
+
+
+@pytest.mark.parametrize("family", ["random", "large_formation"])
+def test_the_slow_uniform_path_equals_the_generator_too(family, monkeypatch):
+    """A numpy whose uniform rounds ``low + span * x`` fused draws with ``rng.uniform``."""
+    monkeypatch.setattr(batched, "_uniforms", batched._uniforms_by_call)
+    _assert_batched_equal_the_generator(family)
+
+
+def test_the_uniform_formula_check_sees_a_rounding_difference(monkeypatch):
+    if not batched._formula_is_exact():
+        pytest.skip("this numpy's uniform rounds otherwise: the slow path is in use")
+    nudged = batched._uniforms_by_formula
+
+    def fused_like(rng, low, high, span):  # what a fused multiply-add changes: the last bit
+        x = nudged(rng, low, high, span)
+        return np.where(np.arange(len(x)) % 3 == 0, np.nextafter(x, np.inf), x)
+
+    monkeypatch.setattr(batched, "_uniforms_by_formula", fused_like)
+    assert not batched._formula_is_exact()
+
+
+def _assert_batched_equal_the_generator(family: str) -> None:
     for i, (n, m, shape) in enumerate(itertools.product(N_UAVS, N_OBSTACLES, SHAPES)):
         cfg = make_config(scenario=family, n_uavs=n, n_obstacles=m, **SHAPES[shape])
         seeds = range(1000 * i, 1000 * i + SEEDS_PER_CONFIG)

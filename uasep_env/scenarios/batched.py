@@ -22,6 +22,7 @@ are drawn one at a time by :func:`sample_batch`, and stacked.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -86,8 +87,9 @@ class EpisodeDraws:
     obstacles: np.ndarray
 
 
-def _bounds(d: EncounterDraws) -> tuple[np.ndarray, np.ndarray]:
-    """Low and high ends of an encounter's uniform draws after its meeting time and UAV."""
+@functools.cache
+def _bounds(d: EncounterDraws) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Low and high ends and ranges of an encounter's draws after its meeting time and UAV."""
     low = [TURN_RATE_RANGE_RADPS[0], CLIMB_RATE_RANGE_MPS[0], d.speed[0]]
     high = [TURN_RATE_RANGE_RADPS[1], CLIMB_RATE_RANGE_MPS[1], d.speed[1]]
     if d.either_side:
@@ -100,32 +102,89 @@ def _bounds(d: EncounterDraws) -> tuple[np.ndarray, np.ndarray]:
         high.append(1.0)
     low.append(REACTION_LEAD_RANGE_S[0])
     high.append(REACTION_LEAD_RANGE_S[1])
-    return np.array(low), np.array(high)
+    return _low_and_range(low, high)
 
 
-def _draw_layout(rng: np.random.Generator, config: EnvConfig) -> np.ndarray:
-    """:func:`~uasep_env.scenarios.building.random_layout`'s draws, in one call.
-
-    Consecutive uniform draws (``random()`` is ``uniform(0, 1)``: ``0 + 1 * x``) from one
-    ``uniform`` call with arrays of bounds: the same doubles, in the same order.
-    """
-    n = config.n_uavs
+@functools.cache
+def _layout_bounds(n: int, meet: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Low and high ends and ranges of a layout's draws for ``n`` UAVs (then a meeting time)."""
     low = _PLAN_LOW + [-_START_SCATTER_M] * (3 * n) + [-_START_SPEED_SCATTER_MPS] * (3 * n)
     high = _PLAN_HIGH + [_START_SCATTER_M] * (3 * n) + [_START_SPEED_SCATTER_MPS] * (3 * n)
+    if meet:
+        low.append(MEET_TIME_RANGE[0])
+        high.append(MEET_TIME_RANGE[1])
+    return _low_and_range(low, high)
+
+
+def _low_and_range(
+    low: list[float], high: list[float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    lo, hi = np.array(low), np.array(high)
+    return lo, hi, hi - lo  # numpy's uniform takes high - low too
+
+
+def _uniforms_by_formula(
+    rng: np.random.Generator, low: np.ndarray, high: np.ndarray, span: np.ndarray
+) -> np.ndarray:
+    """``low + span * rng.random()``, element by element: numpy's uniform, written out.
+
+    numpy draws ``uniform(low, high)`` as ``low + (high - low) * next_double`` (and
+    ``random()`` is ``next_double``): the same doubles as consecutive ``uniform`` and
+    ``random`` calls, in one fast call. Used only where :data:`_FORMULA_IS_EXACT` (a
+    numpy built to fuse the multiply-add would round differently).
+    """
+    return low + span * rng.random(len(low))
+
+
+def _uniforms_by_call(
+    rng: np.random.Generator, low: np.ndarray, high: np.ndarray, span: np.ndarray
+) -> np.ndarray:
+    """``rng.uniform`` with arrays of bounds (numpy's own arithmetic; slower)."""
     return rng.uniform(low, high)
 
 
+def _formula_is_exact() -> bool:
+    """Whether :func:`_uniforms_by_formula` gives ``rng.uniform``'s numbers on this numpy."""
+    check = np.random.default_rng(20261203)
+    low = check.uniform(-500.0, 500.0, 256)
+    high = low + check.uniform(0.0, 1000.0, 256)
+    low[:8] = [-math.pi, -math.pi / 4, 0.0, 0.2, -8.0, -1.0, 3.0, 10.0]
+    high[:8] = [math.pi, math.pi / 4, 1.0, 0.8, 8.0, 1.0, 12.0, 40.0]
+    a, b = np.random.default_rng(7), np.random.default_rng(7)
+    want = np.concatenate([a.uniform(lo, hi, 64) for lo, hi in zip(low, high, strict=True)])
+    got = np.concatenate(
+        [
+            _uniforms_by_formula(b, *_low_and_range([lo] * 64, [hi] * 64))
+            for lo, hi in zip(low, high, strict=True)
+        ]
+    )
+    return bool(np.array_equal(want, got))
+
+
+#: Whether this numpy's uniform is the unfused ``low + span * next_double`` (checked once).
+_FORMULA_IS_EXACT = _formula_is_exact()
+_uniforms = _uniforms_by_formula if _FORMULA_IS_EXACT else _uniforms_by_call
+
+
 def _draw_obstacle(
-    rng: np.random.Generator, config: EnvConfig, encounter: Encounter, who: int | None
+    rng: np.random.Generator,
+    config: EnvConfig,
+    encounter: Encounter,
+    who: int | None,
+    meet: float | None = None,
 ) -> list[float]:
-    """:func:`~uasep_env.scenarios.building.aimed_obstacle`'s draws, as one row."""
+    """:func:`~uasep_env.scenarios.building.aimed_obstacle`'s draws, as one row.
+
+    ``meet``: the meeting time's uniform draw, if drawn already (with the layout's).
+    """
     d = encounter.draws
     assert d is not None  # families with such an encounter declare no batched form
-    meet = rng.uniform(*MEET_TIME_RANGE) * TIMELINE_S
+    if meet is None:
+        meet = rng.uniform(*MEET_TIME_RANGE)
+    meet = meet * TIMELINE_S
     if who is None:
         who = int(rng.integers(config.n_uavs))
-    low, high = _bounds(d)
-    r = rng.uniform(low, high).tolist()
+    r = _uniforms(rng, *_bounds(d)).tolist()
     w_max, vz_max, speed = r[0], r[1], r[2]
     if d.above_cruise:
         speed = config.cruise_speed + speed
@@ -169,11 +228,14 @@ def draw_encounters(
         pattern: The formation pattern (``None``: the config's).
         who: The UAV slot 0 is aimed at (``None``: drawn).
     """
-    layout = _draw_layout(rng, config)
+    # The layout's draws and slot 0's meeting time are consecutive uniforms: one call.
+    meet_too = config.n_obstacles > 0 and first is not None
+    drawn = _uniforms(rng, *_layout_bounds(config.n_uavs, meet_too))
+    layout = drawn[: _N_PLAN + 6 * config.n_uavs]
     rows = []
     for k in range(config.n_obstacles):
         if k == 0 and first is not None:
-            rows.append(_draw_obstacle(rng, config, first, who))
+            rows.append(_draw_obstacle(rng, config, first, who, float(drawn[-1])))
         else:
             rows.append(_draw_obstacle(rng, config, encounters[traffic.draw(rng)], None))
     obstacles = np.array(rows, dtype=float).reshape(config.n_obstacles, _N_COLS)
