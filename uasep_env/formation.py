@@ -271,6 +271,18 @@ class PlannedTrajectory:
             np.asarray(cruise_speed, dtype=float), (wp.shape[0],)
         )
 
+    def copy_rows(self, mask: np.ndarray, other: PlannedTrajectory) -> None:
+        """Replace the trajectories where ``mask`` by ``other``'s (one row per selected env).
+
+        :meth:`set_rows` with ``other``'s way-points and speeds, its geometry not computed
+        again.
+        """
+        self.waypoints[mask] = other.waypoints
+        self.cum[mask] = other.cum
+        self.length[mask] = other.length
+        self.direction[mask] = other.direction
+        self.cruise_speed[mask] = other.cruise_speed
+
     def center(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Planned centre position and velocity at times ``t`` (``(n_envs,)``, s)."""
         pos, vel, _ = self.center_and_direction(t)

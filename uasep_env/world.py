@@ -216,9 +216,15 @@ class World(RenamedAttributes):
         self.time[idx] = 0.0
         self.steps[idx] = 0
         self._kf_count[idx] = 0
-        self.plan.set_rows(mask, batch.waypoints, batch.cruise_speed)
         self.slots[idx] = batch.slots
-        self._plan_offsets[idx] = segment_offsets(self.plan.direction[idx], self.slots[idx])
+        if batch.plan is not None and batch.plan_offsets is not None:
+            # The scenario made the plans and offsets already (the same functions of the same
+            # arrays): not again.
+            self.plan.copy_rows(mask, batch.plan)
+            self._plan_offsets[idx] = batch.plan_offsets
+        else:
+            self.plan.set_rows(mask, batch.waypoints, batch.cruise_speed)
+            self._plan_offsets[idx] = segment_offsets(self.plan.direction[idx], self.slots[idx])
         self.uav_pos[idx] = batch.uav_pos
         self.uav_vel[idx] = batch.uav_vel
         self.uav_acc[idx] = 0.0

@@ -410,4 +410,6 @@ def geometry(draws: list[EpisodeDraws], config: EnvConfig) -> ScenarioBatch:
         obstacle_active=np.ones((b, m), dtype=bool),
         obstacle_hold_until=hold,
         wind=np.tile(np.asarray(obc.wind, dtype=float), (b, 1)),
+        plan=plan,
+        plan_offsets=offsets,
     )

@@ -17,6 +17,7 @@ from uasep_env.obstacles import DUBINS_CLASS, ObstacleState
 
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
+    from uasep_env.formation import PlannedTrajectory
 
 __all__ = ["N_WAYPOINTS", "ScenarioBatch", "ScenarioSpec", "place_obstacles"]
 
@@ -100,6 +101,9 @@ class ScenarioBatch:
         families: Each episode's family name.
         specs: The per-episode specs it was stacked from, if it was (a family without a
             batched form; their extra fields, such as a replayed track, stay on them).
+        plan: The plans of ``waypoints`` and ``cruise_speed``, if made already.
+        plan_offsets: ``(B, W - 1, N, 3)`` the slots rotated along each segment
+            (:func:`~uasep_env.formation.segment_offsets`), if made already.
     """
 
     families: list[str]
@@ -121,6 +125,8 @@ class ScenarioBatch:
     obstacle_hold_until: np.ndarray
     wind: np.ndarray
     specs: list[ScenarioSpec] | None = None
+    plan: PlannedTrajectory | None = None
+    plan_offsets: np.ndarray | None = None
 
     @classmethod
     def from_specs(cls, specs: Sequence[ScenarioSpec]) -> ScenarioBatch:
