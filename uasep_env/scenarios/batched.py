@@ -282,18 +282,20 @@ def _plans(draws: np.ndarray, config: EnvConfig) -> np.ndarray:
     fractions = np.sort(draws[:, 1 + 2 * _TURNS : _N_PLAN], axis=1)
     edges = np.concatenate([np.zeros((b, 1)), fractions, np.ones((b, 1))], axis=1)
     legs = np.diff(edges, axis=1) * (config.cruise_speed * TIMELINE_S)
-    wp = np.empty((b, N_WAYPOINTS, 3))
-    x, y, z = np.zeros(b), np.zeros(b), np.full(b, -FLIGHT_ALTITUDE)
-    wp[:, 0] = np.stack([x, y, z], axis=1)
-    h = heading
-    for k in range(N_WAYPOINTS - 1):
-        if k > 0:
-            h = h + turns[:, k - 1]
-        leg = legs[:, k]
-        x = x + leg * _each(math.cos, h)
-        y = y + leg * _each(math.sin, h)
-        z = z + leg * 0.0
-        wp[:, k + 1, 0], wp[:, k + 1, 1], wp[:, k + 1, 2] = x, y, z
+    # Each leg's heading: the turns added in order, as the generator does.
+    h = np.empty((b, N_WAYPOINTS - 1))
+    h[:, 0] = heading
+    for k in range(1, N_WAYPOINTS - 1):
+        h[:, k] = h[:, k - 1] + turns[:, k - 1]
+    cos_h = _each(math.cos, h.ravel()).reshape(h.shape)
+    sin_h = _each(math.sin, h.ravel()).reshape(h.shape)
+    # The way-points, each the previous plus its leg (a cumulative sum adds in that order).
+    steps = np.empty((b, N_WAYPOINTS, 3))
+    steps[:, 0] = [0.0, 0.0, -FLIGHT_ALTITUDE]
+    steps[:, 1:, 0] = legs * cos_h
+    steps[:, 1:, 1] = legs * sin_h
+    steps[:, 1:, 2] = legs * 0.0
+    wp = np.cumsum(steps, axis=1)
     if config.episode_duration > TIMELINE_S:
         # One row at a time, as the generator does (a 1-D norm is a dot product).
         extra = config.cruise_speed * (config.episode_duration - TIMELINE_S)
