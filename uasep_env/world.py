@@ -20,6 +20,11 @@ and then predicts each obstacle's reachable ellipsoid over the horizon from its 
 (:mod:`uasep_env.reachable`, eqs. 8-18; or, with ``prediction.fit="calibrated"``, the
 conformal region of its aircraft class, :mod:`uasep_env.reachable.calibrated`).
 
+A reset (of all environments, or of those whose episodes ended) draws each environment's
+scenario from its own generator and builds the geometry once over the reset rows
+(:mod:`uasep_env.scenarios.batched`), so that a few episode ends in a step of a large batch
+cost a few rows.
+
 Randomness: each environment owns a :class:`numpy.random.Generator`, seeded at reset
 (``seed + i`` for environment ``i`` when one seed is given for the batch, the Gymnasium
 vector convention). Noise is drawn from it in blocks of ``noise_block`` physics steps, per

@@ -4,7 +4,9 @@
 minimum area by a shipped shape table (``data/ellipse_table.npz``, rebuilt by
 ``tools/build_reachable_table.py`` from :mod:`uasep_env.reachable.optimal`); ``fit="paper"``
 is eq. 17 as published. The certificate and the measured area factors are derived in
-``docs/reachable_sets.md``.
+``docs/reachable_sets.md``. The fit's search, axes and certificate (arithmetic and square roots
+only) have a compiled twin (``fit_ellipse``), so that the few rows of a partial reset cost
+little.
 """
 
 from __future__ import annotations

@@ -17,6 +17,11 @@ encounter (drawn per obstacle; 25 s in ``paper``) and then manoeuvres at random,
 encounters happen and their outcome is uncertain. Every obstacle starts between the ground
 plus ``airspace.obstacle_margin`` and ``airspace.ceiling_altitude``.
 
+A partial reset draws many episodes at once (:func:`uasep_env.scenarios.batched.sample_batch`):
+the families that declare a batched form (:attr:`ScenarioFamily.draws`) draw per episode,
+from its generator in its order, and build the geometry once over the batch; the same
+episodes as :func:`sample_scenario`, bit for bit.
+
 The encounters' timing does not depend on ``episode_duration``: they are laid out on the
 default 200 s timeline (meetings at 60-140 s, the paper's at 115 s), so a shorter episode is
 the start of the same encounter and a longer one flies on along the plan's last leg. No
