@@ -12,8 +12,17 @@ import pytest
 from conftest import HANG_GUARD_S
 
 # Importing the modules registers their twins.
-from uasep_env import _numba, formation, geometry, observation, reachable, rewards  # noqa: F401
-from uasep_env import dynamics, estimation, obstacles  # noqa: F401 (the physics step's twins)
+from uasep_env import (  # noqa: F401
+    _numba,
+    dynamics,
+    estimation,
+    formation,
+    geometry,
+    observation,
+    obstacles,
+    reachable,
+    rewards,
+)
 from uasep_env.policies import learned  # noqa: F401 (registers the network's twin)
 from uasep_env.reachable import distance
 

@@ -129,9 +129,9 @@ def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
     """Decorator: the numpy function runs as the kernel ``kernel`` when numba is in use.
 
     The kernel takes the same arguments (with the same names) and returns the same
-    numbers, bit for bit; ``constants`` (values the numpy code owns, e.g. an iteration count or column
-    offsets) are passed to it as keyword arguments. The undecorated function stays
-    reachable as ``.reference``.
+    numbers, bit for bit; ``constants`` (values the numpy code owns, e.g. an iteration
+    count or column offsets) are passed to it as keyword arguments. The undecorated
+    function stays reachable as ``.reference``.
 
     Args:
         kernel: Name of the compiled form in :mod:`uasep_env._kernels`.

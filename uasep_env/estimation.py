@@ -94,11 +94,9 @@ class KalmanModel:
             count: ``(n_envs,)`` number of updates since each env's tracks started
                 (>= 1 here); selects the gain.
         """
-        if count.min() >= len(self.gains) - 1:
-            # Every track has converged (the usual case): one gain, no gather.
-            gains = self._steady_gains
-        else:
-            gains = self.gains
+        # Every track converged (the usual case): the last gain alone, no gather.
+        converged = count.min() >= len(self.gains) - 1
+        gains = self._steady_gains if converged else self.gains
         kalman_correct(est_pos, est_vel, accel, meas_pos, meas_vel, count, gains, self.dt)
 
     def steady_state_position_std(self) -> float:

@@ -99,9 +99,11 @@ def double_integrator(
 
 
 # ---------------------------------------------------------------- obstacles
+# fmt: off
 @numba.njit(**_JIT)
-def _commands(u, switch_prob, time, has_time, hold_until, straight_prob, max_turn, max_climb,
-              turn, climb, pos, band, wind, ground, dt, new_turn, new_climb, y, mid, heading):  # noqa: ANN001, ANN202
+def _commands(u, switch_prob, time, has_time, hold_until, straight_prob, max_turn, max_climb,  # noqa: ANN001, ANN202
+              turn, climb, pos, band, wind, ground, dt, new_turn, new_climb, y, mid, heading):  # noqa: ANN001
+# fmt: on
     """The pilot's commands (turn, climb) and the arc's ``y`` and mid-heading per obstacle."""
     for e in range(turn.shape[0]):
         for j in range(turn.shape[1]):
@@ -129,9 +131,11 @@ def _commands(u, switch_prob, time, has_time, hold_until, straight_prob, max_tur
 _EPS = float(np.finfo(float).eps)  # np.sinc's guard against 0 / 0, as obstacles._EPS
 
 
+# fmt: off
 @numba.njit(**_JIT)
-def _move(pos, heading, speed, climb, active, wind, ground, dt, y, sin_y, cos_mid, sin_mid,
-          turn, new_heading):  # noqa: ANN001, ANN202
+def _move(pos, heading, speed, climb, active, wind, ground, dt, y, sin_y, cos_mid, sin_mid,  # noqa: ANN001, ANN202
+          turn, new_heading):  # noqa: ANN001
+# fmt: on
     """The arc flown (with the wind), the new heading, and the ground floor, per obstacle."""
     two_pi = 2 * np.pi
     for e in range(heading.shape[0]):
