@@ -353,6 +353,8 @@ def _obstacle_case(time_now: float = 20.0):
     e, m = ob.heading.shape
     rng = np.random.default_rng(25)
     uniforms = rng.uniform(size=(e, m, obstacles.N_UNIFORMS))
+    ob.speed *= rng.uniform(0.9, 1.1, size=ob.speed.shape)  # not round numbers
+    ob.turn_rate[:] = rng.uniform(-1.0, 1.0, size=(e, m)) * ob.max_turn_rate  # turning
     ob.switch_prob[:] = 0.5
     ob.straight_prob[:] = 0.3
     time = np.full(e, time_now)
@@ -378,6 +380,7 @@ def _obstacle_case(time_now: float = 20.0):
     ob.alt_band[12, :, 1] = alt[12] - 10.0  # above its band, descending back into it
     ob.climb_rate[12] = -ob.max_climb_rate[12]
     uniforms[12, :, 0] = 1.0
+    ob.pos[13:20, :, :2] = 0.0  # at the origin: the move's every bit shows in the position
     return ob, uniforms, time
 
 
