@@ -28,6 +28,10 @@ APF_LOOPS = {
     "plan._plan_rows",
     "observations._observe_serial",
     "rewards._rewards_serial",
+    "physics._integrate",  # the physics step
+    "physics._commands",
+    "physics._move",
+    "physics._correct",
 }
 
 # In a fresh process: the APF evaluated, then every kernel module's dispatchers and the
@@ -43,8 +47,8 @@ _PROBE = """
     evaluate(["apf"], {"scenario": "paper"}, [0])  # what make eval runs (whole episode)
     _numba.kernels()  # loaded, as every kernel call does
     counts = {}
-    for name in ("common", "ellipsoids", "network", "observations", "plan", "rewards",
-                 "separations"):
+    for name in ("common", "ellipsoids", "network", "observations", "physics", "plan",
+                 "rewards", "separations"):
         module = importlib.import_module(f"uasep_env._kernels.{name}")
         for attr, obj in vars(module).items():
             if isinstance(obj, numba.core.registry.CPUDispatcher):
