@@ -169,7 +169,7 @@ def bench_noise(n: int, seconds: float) -> float:
 
     world = World({"n_uavs": 3, "n_obstacles": 1, "scenario": "random"}, n)
     world.reset(seed=0)
-    return _rate(world._draw, seconds) * n
+    return _rate(world._noise.draw, seconds) * n
 
 
 def bench_apf(n: int, seconds: float) -> float:
