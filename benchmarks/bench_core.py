@@ -35,7 +35,7 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 4096])
     parser.add_argument("--seconds", type=float, default=3.0)
     args = parser.parse_args()
-    config = {"n_uavs": 3, "n_obstacles": 1, "scenario": "random", "episode_duration": 1e6}
+    config = {"n_uavs": 3, "n_obstacles": 1, "scenario": "random", "episode_duration": 1e5}
     print(f"{'n_envs':>8} {'env-steps/s':>14} {'agent-steps/s':>14}")
     for n in args.sizes:
         rate, n_uavs = measure(n, args.seconds, config)

@@ -5,6 +5,7 @@ Usage::
     pip install -e ".[bench]"        # MPE2 and VMAS (torch==2.13.0 installed first)
     python benchmarks/bench_peers.py [--seconds 3] [--sizes 1 64 1024 4096]
                                      [--ppo-envs 64 256] [--skip-ppo]
+                                     [--jaxmarl-python /tmp/peers-venv/bin/python]
 
 Prints steps/s and agent-steps/s of
 
@@ -19,6 +20,11 @@ Prints steps/s and agent-steps/s of
 * SB3 PPO training env-steps/s through the parameter-sharing adapter, and the share of
   its wall time spent inside the environment, for each ``--ppo-envs`` batch size;
 
+* with ``--jaxmarl-python`` (a Python with JaxMARL, which is not a dependency of this project:
+  ``benchmarks/bench_jaxmarl.py`` says how to make one), JaxMARL's MPE ``simple_spread_v3``
+  at the largest size (jit, vmap and scan, random continuous actions) in a subprocess, right
+  after the vector env's own figure at that size with random actions;
+
 followed by the ratios the project's targets are stated in. Peers are optional: a missing
 one is reported and skipped.
 """
@@ -26,8 +32,11 @@ one is reported and skipped.
 from __future__ import annotations
 
 import argparse
+import json
+import subprocess
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -99,6 +108,19 @@ def bench_vector(n: int, seconds: float) -> float:
     return _rate(step, seconds) * n
 
 
+def bench_jaxmarl(python: str, n: int) -> float | None:
+    """Agent-steps/s of JaxMARL's MPE ``simple_spread_v3`` at ``n`` envs, run by ``python``."""
+    script = Path(__file__).with_name("bench_jaxmarl.py")
+    done = subprocess.run(
+        [python, str(script), "--envs", str(n)], capture_output=True, text=True, check=False
+    )
+    lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
+    if done.returncode != 0 or not lines:
+        print(f"JaxMARL: {python} failed ({done.stderr.strip().splitlines()[-1:]})")
+        return None
+    return float(json.loads(lines[-1])["jaxmarl_agent_steps_per_s"])
+
+
 def bench_vmas(n: int, seconds: float) -> float | None:
     """Env-steps/s of VMAS navigation (3 agents, CPU, one torch thread)."""
     try:
@@ -147,7 +169,7 @@ def bench_noise(n: int, seconds: float) -> float:
 
     world = World({"n_uavs": 3, "n_obstacles": 1, "scenario": "random"}, n)
     world.reset(seed=0)
-    return _rate(world._draw, seconds) * n
+    return _rate(world._noise.draw, seconds) * n
 
 
 def bench_apf(n: int, seconds: float) -> float:
@@ -206,6 +228,7 @@ def main() -> None:
     parser.add_argument("--ppo-timesteps", type=int, default=200_000)
     parser.add_argument("--ppo-envs", type=int, nargs="+", default=[64, 256])
     parser.add_argument("--skip-ppo", action="store_true")
+    parser.add_argument("--jaxmarl-python", default="", help="a Python with JaxMARL installed")
     args = parser.parse_args()
     s = args.seconds
     from uasep_env import _numba
@@ -238,6 +261,15 @@ def main() -> None:
         )
 
     big = max(args.sizes)
+    jax_rate = None
+    if args.jaxmarl_python:
+        jax_rate = bench_jaxmarl(args.jaxmarl_python, big)
+        ours_big = bench_vector(big, s) * 3  # again, right beside JaxMARL's figure
+        if jax_rate:
+            print(
+                f"\nJaxMARL MPE simple_spread_v3 at {big} envs: {jax_rate:,.0f} agent-steps/s; "
+                f"uasep vector env right after it: {ours_big:,.0f}"
+            )
     apf = bench_apf(big, s)
     print(f"\nbatched APF at {big} envs: {apf:,.0f} decisions/s")
 
@@ -259,6 +291,8 @@ def main() -> None:
     print(f"vector env at {big}: {ours * 3:,.0f} agent-steps/s (target >= 3M)")
     if vm:
         print(f"vector env vs VMAS at {big}: {ours / vm:.1f}x (target >= 5x)")
+    if jax_rate:
+        print(f"vector env vs JaxMARL MPE at {big}: {ours_big / jax_rate:.2f}x (target >= 1x)")
     print(f"vector env vs bare numpy at {big}: {ours / bare:.1%} (target >= 60%)")
     print(f"batched APF: {apf:,.0f} decisions/s (target >= 1M)")
     for n_envs, (_, share) in ppo.items():

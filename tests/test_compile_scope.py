@@ -28,6 +28,10 @@ APF_LOOPS = {
     "plan._plan_rows",
     "observations._observe_serial",
     "rewards._rewards_serial",
+    "physics._integrate",  # the physics step
+    "physics._commands",
+    "physics._move",
+    "physics._correct",
     "ellipse_fit._fit_rows",  # the obstacles' reachable ellipses, at reset
 }
 
@@ -44,8 +48,8 @@ _PROBE = """
     evaluate(["apf"], {"scenario": "paper"}, [0])  # what make eval runs (whole episode)
     _numba.kernels()  # loaded, as every kernel call does
     counts = {}
-    for name in ("common", "ellipse_fit", "ellipsoids", "network", "observations", "plan",
-                 "rewards", "separations"):
+    for name in ("common", "ellipse_fit", "ellipsoids", "network", "observations", "physics",
+                 "plan", "rewards", "separations"):
         module = importlib.import_module(f"uasep_env._kernels.{name}")
         for attr, obj in vars(module).items():
             if isinstance(obj, numba.core.registry.CPUDispatcher):

@@ -128,10 +128,10 @@ TWINS: dict[str, Twin] = {}
 def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
     """Decorator: the numpy function runs as the kernel ``kernel`` when numba is in use.
 
-    The kernel takes the same positional arguments and returns the same numbers, bit for
-    bit; ``constants`` (values the numpy code owns, e.g. an iteration count or column
-    offsets) are passed to it as keyword arguments. The undecorated function stays
-    reachable as ``.reference``.
+    The kernel takes the same arguments (with the same names) and returns the same
+    numbers, bit for bit; ``constants`` (values the numpy code owns, e.g. an iteration
+    count or column offsets) are passed to it as keyword arguments. The undecorated
+    function stays reachable as ``.reference``.
 
     Args:
         kernel: Name of the compiled form in :mod:`uasep_env._kernels`.
@@ -143,11 +143,11 @@ def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
         TWINS[kernel] = twin
 
         @functools.wraps(reference)
-        def dispatch(*args: Any) -> Any:
+        def dispatch(*args: Any, **kwargs: Any) -> Any:
             compiled = kernels()
             if compiled is None:
-                return reference(*args)
-            return getattr(compiled, kernel)(*args, **twin.constants)
+                return reference(*args, **kwargs)
+            return getattr(compiled, kernel)(*args, **kwargs, **twin.constants)
 
         dispatch.reference = reference  # type: ignore[attr-defined]
         return dispatch  # type: ignore[return-value]

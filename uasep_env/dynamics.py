@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from uasep_env._numba import compiled_twin
+
 __all__ = ["AXES", "measure", "step_double_integrator", "transition_matrices"]
 #: NED axes (north, east, down), as metric and plot names.
 AXES: tuple[str, str, str] = ("x", "y", "z")
@@ -39,6 +41,7 @@ def transition_matrices(dt: float) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
+@compiled_twin("double_integrator")
 def step_double_integrator(
     pos: np.ndarray,
     vel: np.ndarray,

@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["KalmanModel"]
+from uasep_env._numba import compiled_twin
+
+__all__ = ["KalmanModel", "kalman_correct"]
 
 
 class KalmanModel:
@@ -68,7 +70,8 @@ class KalmanModel:
             if converged:
                 break
         self.gains = np.array(gains)
-        self._steady_gain = tuple(float(g) for g in self.gains[-1].ravel())
+        # The converged gain alone: a table whose every index gives it.
+        self._steady_gains = self.gains[-1:].copy()
         self.covariances = np.array(covs)
 
     def update(
@@ -91,25 +94,55 @@ class KalmanModel:
             count: ``(n_envs,)`` number of updates since each env's tracks started
                 (>= 1 here); selects the gain.
         """
-        dt = self.dt
-        if accel is None:
-            pred_p = est_pos + dt * est_vel
-            pred_v = est_vel
-        else:
-            pred_p = est_pos + dt * est_vel + (0.5 * dt * dt) * accel
-            pred_v = est_vel + dt * accel
-        last = len(self.gains) - 1
-        if count.min() >= last:
-            # Every track has converged (the usual case): one gain, no gather.
-            k00, k01, k10, k11 = self._steady_gain
-        else:
-            k = self.gains[np.minimum(count, last)][:, None, None]  # (n_envs, 1, 1, 2, 2)
-            k00, k01, k10, k11 = k[..., 0, 0], k[..., 0, 1], k[..., 1, 0], k[..., 1, 1]
-        ip = meas_pos - pred_p
-        iv = meas_vel - pred_v
-        est_pos[...] = pred_p + k00 * ip + k01 * iv
-        est_vel[...] = pred_v + k10 * ip + k11 * iv
+        # Every track converged (the usual case): the last gain alone, no gather.
+        converged = count.min() >= len(self.gains) - 1
+        gains = self._steady_gains if converged else self.gains
+        kalman_correct(est_pos, est_vel, accel, meas_pos, meas_vel, count, gains, self.dt)
 
     def steady_state_position_std(self) -> float:
         """Posterior position standard deviation once the filter has converged (m)."""
         return float(np.sqrt(max(0.0, self.covariances[-1, 0, 0])))
+
+
+@compiled_twin("kalman_correct")
+def kalman_correct(
+    est_pos: np.ndarray,
+    est_vel: np.ndarray,
+    accel: np.ndarray | None,
+    meas_pos: np.ndarray,
+    meas_vel: np.ndarray,
+    count: np.ndarray,
+    gains: np.ndarray,
+    dt: float,
+) -> None:
+    """One Kalman step of every track, in place (:meth:`KalmanModel.update`'s arithmetic).
+
+    Args:
+        est_pos: Estimated positions (m), ``(n_envs, n, 3)``; updated.
+        est_vel: Estimated velocities (m/s), ``(n_envs, n, 3)``; updated.
+        accel: Known acceleration over the step (m/s^2) or ``None`` (zero input).
+        meas_pos: Measured positions (m), same shape.
+        meas_vel: Measured velocities (m/s), same shape.
+        count: ``(n_envs,)`` updates since each env's tracks started; row ``e`` uses the
+            gain ``gains[min(count[e], len(gains) - 1)]``.
+        gains: ``(K, 2, 2)`` gain table (:attr:`KalmanModel.gains`, or its last gain alone
+            once every track has converged).
+        dt: Time between updates (s).
+    """
+    if accel is None:
+        pred_p = est_pos + dt * est_vel
+        pred_v = est_vel
+    else:
+        pred_p = est_pos + dt * est_vel + (0.5 * dt * dt) * accel
+        pred_v = est_vel + dt * accel
+    last = len(gains) - 1
+    if last == 0:
+        # One gain for every track: scalars, no gather (they show at small batches).
+        k00, k01, k10, k11 = (float(g) for g in gains[0].ravel())
+    else:
+        k = gains[np.minimum(count, last)][:, None, None]  # (n_envs, 1, 1, 2, 2)
+        k00, k01, k10, k11 = k[..., 0, 0], k[..., 0, 1], k[..., 1, 0], k[..., 1, 1]
+    ip = meas_pos - pred_p
+    iv = meas_vel - pred_v
+    est_pos[...] = pred_p + k00 * ip + k01 * iv
+    est_vel[...] = pred_v + k10 * ip + k11 * iv

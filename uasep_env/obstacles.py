@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from uasep_env._numba import compiled_twin
+
 __all__ = [
     "AIRCRAFT_CLASSES",
     "DUBINS_CLASS",
@@ -121,6 +123,7 @@ def obstacle_velocity(obs: ObstacleState, rows: np.ndarray | None = None) -> np.
     return vel
 
 
+@compiled_twin("obstacle_step")
 def step_obstacles(
     obs: ObstacleState, uniforms: np.ndarray, dt: float, time: np.ndarray | None = None
 ) -> None:

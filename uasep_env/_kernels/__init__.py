@@ -17,6 +17,10 @@ kernel receives as keyword arguments. These modules import nothing else of the p
 * :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
 * :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`;
 * :func:`plan_now` -- :func:`uasep_env.formation.planned_state`;
+* :func:`double_integrator` -- :func:`uasep_env.dynamics.step_double_integrator`,
+  :func:`obstacle_step` -- :func:`uasep_env.obstacles.step_obstacles` and
+  :func:`kalman_correct` -- :func:`uasep_env.estimation.kalman_correct` (the physics step;
+  these write the world's arrays in place);
 * :func:`fit_ellipse` -- :func:`uasep_env.reachable.fit._fit_certified` (the enclosing
   ellipse's centre search, axes and certificate);
 * :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
@@ -33,6 +37,7 @@ from uasep_env._kernels.ellipsoids import (
 )
 from uasep_env._kernels.network import dense
 from uasep_env._kernels.observations import assemble_observations
+from uasep_env._kernels.physics import double_integrator, kalman_correct, obstacle_step
 from uasep_env._kernels.plan import plan_now
 from uasep_env._kernels.rewards import reward_terms
 from uasep_env._kernels.separations import separations
@@ -40,8 +45,11 @@ from uasep_env._kernels.separations import separations
 __all__ = [
     "assemble_observations",
     "dense",
+    "double_integrator",
     "fit_ellipse",
+    "kalman_correct",
     "nearest_on_ellipsoids",
+    "obstacle_step",
     "pairwise_distances",
     "plan_now",
     "region_distances",
