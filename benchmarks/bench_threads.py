@@ -56,7 +56,7 @@ def _worker(envs: int, seconds: float, actions: str) -> None:
     while (elapsed := time.perf_counter() - start) < seconds:
         vec.step(act())
         steps += 1
-    n_uavs = shape[1]
+    n_uavs = shape[1] // 3  # (envs, 3 * n_uavs): one 3-axis command per UAV
     threads = kernel_threads() if _numba.available() else 0
     print(json.dumps({"rate": steps * envs * n_uavs / elapsed, "threads": threads}))
 
