@@ -53,3 +53,27 @@ def test_a_run_stops_at_the_bar_and_records_where_the_time_went(tmp_path):
     with pytest.raises(SystemExit, match="is not empty"):
         ttp.main([*flags, "--out", str(other), "--run-dir", str(tmp_path / "run"), "--", *tiny])
     assert not other.exists()
+
+
+def test_the_committed_record_is_consistent():
+    """The shipped result file: its stop is the first check that clears its own bar."""
+    rec = json.loads((ROOT / "benchmarks/results/time_to_policy_residual_apf.json").read_text())
+    b = rec["bar"]
+    bar = ttp.Bar(
+        episodes=b["episodes"],
+        loss_of_separation=b["loss_of_separation"],
+        max_deviation=b["max_deviation"],
+        shipped=b["shipped"],
+    )
+    verdicts = [ttp.reached(c, bar) for c in rec["checks"]]
+    assert [c["reached"] for c in rec["checks"]] == verdicts
+    assert rec["reached"] == any(verdicts)
+    assert verdicts.count(True) <= 1 and (not any(verdicts) or verdicts[-1])  # stops there
+    last = rec["checks"][-1]
+    assert (rec["agent_steps"], rec["training_minutes"]) == pytest.approx(
+        (last["agent_steps"], last["training_minutes"])
+    )
+    t = rec["time_s"]
+    parts = t["env"] + t["rollout_other"] + t["learner"]  # the rest: checkpoints, logging
+    assert 0.99 * t["training"] <= parts <= t["training"]
+    assert not rec["apf_clears_bar"]  # else the bar measures nothing
