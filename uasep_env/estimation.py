@@ -85,14 +85,8 @@ class KalmanModel:
     ) -> None:
         """Predict with the known input then correct with the measurement, in place.
 
-        Args:
-            est_pos: Estimated positions (m), ``(n_envs, n, 3)``; updated.
-            est_vel: Estimated velocities (m/s), ``(n_envs, n, 3)``; updated.
-            accel: Known acceleration over the step (m/s^2) or ``None`` (zero input).
-            meas_pos: Measured positions (m), same shape.
-            meas_vel: Measured velocities (m/s), same shape.
-            count: ``(n_envs,)`` number of updates since each env's tracks started
-                (>= 1 here); selects the gain.
+        The arguments are :func:`kalman_correct`'s first six (``count`` >= 1 here); this
+        model supplies the gain table and the time step.
         """
         # Every track converged (the usual case): the last gain alone, no gather.
         converged = count.min() >= len(self.gains) - 1
