@@ -143,10 +143,14 @@ class _Nodes:
         sin = np.sin(th)
         self.s2 = sin**2
         self.d2 = np.diff(th, axis=-1) ** 2 / 8.0
+        self.h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept, sin, self.cos)
+        self._set_interior()
+
+    def _set_interior(self) -> None:
+        """The interior nodes' cosines, squared cosines and inverse squared sines."""
         self.cos_in = self.cos[..., 1:-1]
         self.c2_in = self.c2[..., 1:-1]
         self.inv_s2_in = 1.0 / self.s2[..., 1:-1]
-        self.h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept, sin, self.cos)
 
     @classmethod
     def from_trig(
@@ -155,9 +159,7 @@ class _Nodes:
         """Nodes of known trigonometry and support (no angles: :meth:`take` needs ``th``)."""
         nd = object.__new__(cls)
         nd.cos, nd.c2, nd.s2, nd.d2, nd.h = cos, c2, s2, d2, h
-        nd.cos_in = cos[..., 1:-1]
-        nd.c2_in = c2[..., 1:-1]
-        nd.inv_s2_in = 1.0 / s2[..., 1:-1]
+        nd._set_interior()
         return nd
 
     def take(self, idx: NDArray[np.intp]) -> _Nodes:
