@@ -111,9 +111,12 @@ def bench_vector(n: int, seconds: float) -> float:
 def bench_jaxmarl(python: str, n: int) -> float | None:
     """Agent-steps/s of JaxMARL's MPE ``simple_spread_v3`` at ``n`` envs, run by ``python``."""
     script = Path(__file__).with_name("bench_jaxmarl.py")
-    done = subprocess.run(
-        [python, str(script), "--envs", str(n)], capture_output=True, text=True, check=False
-    )
+    try:
+        done = subprocess.run(
+            [python, str(script), "--envs", str(n)], capture_output=True, text=True, check=False
+        )
+    except OSError as err:  # not there, or not a program
+        raise SystemExit(f"--jaxmarl-python {python!r}: cannot run it ({err})") from err
     lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
     if done.returncode != 0 or not lines:
         print(f"JaxMARL: {python} failed ({done.stderr.strip().splitlines()[-1:]})")
