@@ -4,7 +4,8 @@ Usage::
 
     python benchmarks/time_to_policy.py --recipe residual_apf [--max-minutes 60]
         [--episodes 100] [--check-every 2000000] [--out FILE] [--force] [--overwrite]
-        [-- recipe flags]
+        [--held-out N] [-- recipe flags]
+    python benchmarks/time_to_policy.py --held-out N --of RECORD.json [--workers W]
 
 The shipped checkpoint of the recipe (``baselines/checkpoints/<name>.zip``) plays the first
 ``--episodes`` validation encounters (:data:`uasep_env.scenarios.VALIDATION_SEEDS`; never
@@ -21,13 +22,23 @@ Printed, and written to ``--out`` (JSON, atomically; an existing file is kept un
 was (evaluation time excluded and reported apart), every check's figures, and where the
 training time went: the environment (the vector env's step), the rest of the rollout
 (policy inference, normalisation, the buffer) and the learner (PPO's update epochs).
+With ``--held-out N``, a policy that reached the bar then plays the first ``N`` encounters of
+the held-out bank (:data:`uasep_env.scenarios.HELD_OUT_SEEDS`, as ``train/seeds.py``'s
+held-out stage), beside the APF and the shipped checkpoint, and the record gets their
+figures with 95 % intervals (``held_out``): whether a policy reached this fast is as good as
+the shipped one where no selection looked. ``--of RECORD`` adds them to an earlier record
+whose run folder still holds its policy (``check.zip``, the last check's; its SHA-256 is
+recorded).
+
 The run folder (``--run-dir``, default ``runs/time_to_policy/<recipe>``) keeps the recipe's
 usual files (``progress.csv``, checkpoints); a used one is refused before anything runs,
 unless ``--overwrite`` (which replaces those files).
 
 Recipes: ``residual_apf`` (shipped ``ppo_residual_apf.zip``) and ``shared``
-(``ppo_shared.zip``), the SB3 recipes of :mod:`uasep_env.training`. Needs the ``train``
-extra. Speed figures are machine-dependent: the file records the machine.
+(``ppo_shared.zip``), the SB3 recipes of :mod:`uasep_env.training`, and ``mappo``
+(``mappo.zip``, skrl's MAPPO; its rollout time is the training less the env, the learner and
+the checks, skrl having no rollout method to time). Needs the ``train`` extra. Speed figures
+are machine-dependent: the file records the machine.
 """
 
 from __future__ import annotations
@@ -46,12 +57,15 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 CHECKPOINTS = ROOT / "baselines" / "checkpoints"
 
-#: ``--recipe`` -> (shipped checkpoint name, the recipe's defaults, by module and attribute).
+#: ``--recipe`` -> (shipped checkpoint name, the recipe's defaults, by module and attribute,
+#: and the module whose ``parse_args`` reads its flags: SB3's PPO or skrl's MAPPO).
 RECIPES = {
     "residual_apf": (
         "ppo_residual_apf", "uasep_env.training.ppo_residual_apf", "RESIDUAL_DEFAULTS",
+        "uasep_env.training.ppo_shared",
     ),
-    "shared": ("ppo_shared", "uasep_env.training.args", "Args"),
+    "shared": ("ppo_shared", "uasep_env.training.args", "Args", "uasep_env.training.ppo_shared"),
+    "mappo": ("mappo", "uasep_env.training.mappo", "Args", "uasep_env.training.mappo"),
 }  # fmt: skip
 
 
@@ -129,19 +143,142 @@ class Clock:
 def _recipe_args(recipe: str, run_dir: Path, extra: list[str]) -> Any:
     import importlib
 
-    from uasep_env.training import ppo_shared
-
-    _, module, attr = RECIPES[recipe]
+    _, module, attr, reader = RECIPES[recipe]
     defaults = getattr(importlib.import_module(module), attr)
     defaults = defaults() if isinstance(defaults, type) else defaults
     argv = ["--out-dir", str(run_dir), "--no-progress", "--max-minutes", "1e6", *extra]
-    return ppo_shared.parse_args(argv, defaults)
+    return importlib.import_module(reader).parse_args(argv, defaults)
 
 
 def _evaluate(policy: Any, config: Any, seeds: list[int]) -> dict[str, Any]:
     from uasep_env.evaluation import evaluate
 
     return evaluate({"p": policy}, config, seeds).results["p"].aggregate
+
+
+@dataclass(kw_only=True)
+class Checker:
+    """Plays the validation encounters every ``check_every`` agent-steps; records each check.
+
+    Attributes:
+        bar: The figures to reach.
+        seeds: The validation encounters.
+        eval_cfg: The config they are played with (direct actions).
+        check_every: Agent-steps between checks.
+        max_minutes: Training-time budget (evaluations excluded).
+        clock: Where the evaluation time is counted.
+        checks: Every check's figures, in order.
+        done: Whether a check cleared the bar.
+        t0: When training started (``time.perf_counter``; the trainer sets it).
+        next: The agent-steps at which the next check runs.
+    """
+
+    bar: Bar
+    seeds: list[int]
+    eval_cfg: Any
+    check_every: int
+    max_minutes: float
+    clock: Clock
+    checks: list[dict[str, Any]] = field(default_factory=list)
+    done: bool = False
+    t0: float = field(default_factory=time.perf_counter)
+    next: int = 0
+
+    def __post_init__(self) -> None:
+        self.next = self.check_every
+
+    def training_s(self) -> float:
+        """Wall seconds since the start, evaluations excluded."""
+        return time.perf_counter() - self.t0 - self.clock.eval_s
+
+    def spent(self) -> bool:
+        """Whether training should stop: the bar cleared or the budget spent."""
+        return self.done or self.training_s() >= self.max_minutes * 60.0
+
+    def maybe_check(self, agent_steps: int, export: Any) -> None:
+        """At a rollout's end: play the encounters when ``check_every`` more steps are done.
+
+        Args:
+            agent_steps: Agent-steps trained so far.
+            export: Writes the current actor as a policy file; returns its path.
+        """
+        from uasep_env.policies import load_policy
+
+        if agent_steps < self.next:
+            return
+        self.next += self.check_every
+        e0 = time.perf_counter()
+        fig = figures(_evaluate(load_policy(export(), self.eval_cfg), self.eval_cfg, self.seeds))
+        self.clock.eval_s += time.perf_counter() - e0
+        ok = reached(fig, self.bar)
+        minutes = self.training_s() / 60.0
+        self.checks.append(
+            {"agent_steps": int(agent_steps), "training_minutes": minutes, **fig, "reached": ok}
+        )
+        print(f"{agent_steps:>12,} agent-steps {minutes:6.1f} min: "
+              f"collisions {fig['collision']:.1%}, loss of separation "
+              f"{fig['loss_of_separation']:.1%}, max deviation {fig['max_deviation']:.1f} m"
+              f"{'  reached' if ok else ''}", flush=True)  # fmt: skip
+        self.done = ok
+
+
+def _train_sb3(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
+    """Train an SB3 recipe under ``checker``; the agent-steps done."""
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    from uasep_env.training import ppo_shared
+
+    venv, model = ppo_shared.build(args, config)
+    clock = checker.clock
+    clock.wrap(venv.venv.venv, "step_wait", "env_s")  # the batched env under the wrappers
+    clock.wrap(model, "collect_rollouts", "rollout_s")
+    clock.wrap(model, "train", "learner_s")
+    progress = ppo_shared.make_callback(args, config, venv, 0.0, args.total_timesteps)
+
+    class Check(BaseCallback):
+        def _on_step(self) -> bool:
+            return not checker.spent()
+
+        def _on_rollout_end(self) -> None:
+            export = functools.partial(ppo_shared.export_policy, self.model, venv, config,
+                                       args, run_dir / "check.zip", {})  # fmt: skip
+            checker.maybe_check(int(self.num_timesteps), export)
+
+    checker.t0 = time.perf_counter()
+    model.learn(args.total_timesteps, callback=CallbackList([Check(), progress]))
+    # The checks run inside the rollout (at its end): not rollout time.
+    clock.rollout_s -= clock.eval_s
+    return int(model.num_timesteps)
+
+
+def _train_skrl(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
+    """Train the skrl MAPPO recipe under ``checker``; the agent-steps done."""
+    from uasep_env.training import mappo
+
+    clock = checker.clock
+    done = [0]
+
+    class Hooks(mappo.Hooks):
+        def start(self, agent: Any, env: Any, out: Path, resumed: dict) -> None:
+            self.agent, self.venv = agent, env.venv
+            clock.wrap(env.base, "step_wait", "env_s")  # the batched env under the wrappers
+            clock.wrap(agent, "update", "learner_s")  # once per agent, after each rollout
+            checker.t0 = time.perf_counter()
+
+        def rollout_end(self, agent_steps: int) -> None:
+            done[0] = agent_steps
+            export = functools.partial(mappo.export_policy, self.agent, self.venv, config,
+                                       args, run_dir / "check.zip", {})  # fmt: skip
+            checker.maybe_check(agent_steps, export)
+
+        def stop(self) -> bool:
+            return checker.spent()
+
+    mappo.train(args, config, run_dir, Hooks())
+    # No rollout method to time: the rollout is the training less the env, the learner and
+    # the checks (skrl's own step, the normalisation, the buffer).
+    clock.rollout_s = checker.training_s() - clock.learner_s
+    return done[0]
 
 
 def run(
@@ -155,7 +292,6 @@ def run(
 ) -> dict[str, Any]:
     """Train until the bar is reached or the budget is spent; the record (see the module)."""
     import torch
-    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
     from uasep_env.policies import load_policy
     from uasep_env.scenarios import VALIDATION_SEEDS
@@ -179,49 +315,13 @@ def run(
           f"separation <= {bar.loss_of_separation:.1%}, mean max deviation <= "
           f"{bar.max_deviation:.1f} m", flush=True)  # fmt: skip
 
-    venv, model = ppo_shared.build(args, config)
     clock = Clock()
-    clock.wrap(venv.venv.venv, "step_wait", "env_s")  # the batched env under the wrappers
-    clock.wrap(model, "collect_rollouts", "rollout_s")
-    clock.wrap(model, "train", "learner_s")
-    progress = ppo_shared.make_callback(args, config, venv, 0.0, args.total_timesteps)
-    checks: list[dict[str, Any]] = []
-    state = {"next": check_every, "done": False}
-    t0 = time.perf_counter()
-
-    def training_s() -> float:
-        return time.perf_counter() - t0 - clock.eval_s
-
-    class Check(BaseCallback):
-        def _on_step(self) -> bool:
-            return not state["done"] and training_s() < max_minutes * 60.0
-
-        def _on_rollout_end(self) -> None:
-            if self.num_timesteps < state["next"]:
-                return
-            state["next"] += check_every
-            e0 = time.perf_counter()
-            path = ppo_shared.export_policy(self.model, venv, config, args,
-                                            run_dir / "check.zip", {})  # fmt: skip
-            fig = figures(_evaluate(load_policy(path, eval_cfg), eval_cfg, seeds))
-            clock.eval_s += time.perf_counter() - e0
-            ok = reached(fig, bar)
-            checks.append(
-                {
-                    "agent_steps": int(self.num_timesteps),
-                    "training_minutes": training_s() / 60.0,
-                    **fig,
-                    "reached": ok,
-                }
-            )
-            print(f"{self.num_timesteps:>12,} agent-steps {training_s() / 60:6.1f} min: "
-                  f"collisions {fig['collision']:.1%}, loss of separation "
-                  f"{fig['loss_of_separation']:.1%}, max deviation {fig['max_deviation']:.1f} m"
-                  f"{'  reached' if ok else ''}", flush=True)  # fmt: skip
-            state["done"] = ok
-
-    model.learn(args.total_timesteps, callback=CallbackList([Check(), progress]))
-    train_s = training_s()
+    checker = Checker(bar=bar, seeds=seeds, eval_cfg=eval_cfg, check_every=check_every,
+                      max_minutes=max_minutes, clock=clock)  # fmt: skip
+    trainer = _train_skrl if RECIPES[recipe][3].endswith(".mappo") else _train_sb3
+    steps = trainer(args, config, run_dir, checker)
+    train_s = checker.training_s()
+    checks = checker.checks
     hit = next((c for c in checks if c["reached"]), None)
     return {
         "recipe": recipe,
@@ -231,12 +331,11 @@ def run(
         "apf_clears_bar": reached(apf, bar),
         "reached": hit is not None,
         "training_minutes": (hit["training_minutes"] if hit else train_s / 60.0),
-        "agent_steps": hit["agent_steps"] if hit else int(model.num_timesteps),
+        "agent_steps": hit["agent_steps"] if hit else steps,
         "time_s": {
             "training": train_s,
             "env": clock.env_s,
-            # The checks run inside the rollout (at its end): not rollout time.
-            "rollout_other": clock.rollout_s - clock.env_s - clock.eval_s,
+            "rollout_other": clock.rollout_s - clock.env_s,
             "learner": clock.learner_s,
             "evaluation": clock.eval_s,
         },
@@ -246,6 +345,67 @@ def run(
                     "processor": platform.processor() or platform.machine(),
                     "python": platform.python_version(), "torch": torch.__version__},
     }  # fmt: skip
+
+
+#: The held-out figures recorded, with their intervals.
+HELD_OUT_KEYS = ("episode.collision", "episode.loss_of_separation", "episode.max_deviation")
+
+
+def held_out(record: dict[str, Any], episodes: int, workers: int = 1) -> dict[str, Any]:
+    """The policy a record reached, the APF and the shipped checkpoint on the held-out bank.
+
+    Args:
+        record: A time-to-policy record that reached its bar; its run folder
+            (``recipe_args["out_dir"]``) still holds the policy (``check.zip``).
+        episodes: Held-out encounters (the bank's first).
+        workers: Evaluation processes (the figures do not depend on them).
+
+    Returns:
+        ``{"episodes", "policy_sha256", "figures": {label: {key: {value, ci_low, ci_high}}}}``
+        for the labels ``apf``, ``shipped`` and ``reached``.
+
+    Raises:
+        ValueError: The record did not reach its bar, or its policy file is gone.
+    """
+    import hashlib
+
+    if not record.get("reached"):
+        raise ValueError("the record did not reach its bar: no policy to play")
+    policy = Path(record["recipe_args"]["out_dir"]) / "check.zip"
+    if not policy.is_file():
+        raise ValueError(f"{policy} is gone: the run folder no longer holds the policy")
+    # train/seeds.py's own held-out stage (its config and encounters), so that the figures
+    # compare with the published seeds reports.
+    sys.path.insert(0, str(ROOT / "train"))
+    import seeds as seeds_driver
+
+    res = seeds_driver.held_out([ROOT / record["shipped"], policy], episodes, workers)
+    figs = {}
+    for label, theirs in (("apf", "apf"), ("shipped", "seed_0"), ("reached", "seed_1")):
+        agg = res.results[theirs].aggregate
+        figs[label] = {
+            key.removeprefix("episode."): {
+                "value": float(agg[key]["rate" if agg[key]["kind"] == "rate" else "mean"]),
+                "ci_low": float(agg[key]["ci_low"]),
+                "ci_high": float(agg[key]["ci_high"]),
+            }
+            for key in HELD_OUT_KEYS
+        }
+    return {
+        "episodes": episodes,
+        "policy_sha256": hashlib.sha256(policy.read_bytes()).hexdigest(),
+        "figures": figs,
+    }
+
+
+def _print_held_out(h: dict[str, Any]) -> None:
+    print(f"held-out bank, first {h['episodes']} encounters:")
+    for label, f in h["figures"].items():
+        c, los, dev = f["collision"], f["loss_of_separation"], f["max_deviation"]
+        print(f"  {label:8s} collisions {c['value']:.1%} [{c['ci_low']:.1%}, {c['ci_high']:.1%}]"
+              f", loss of separation {los['value']:.1%} [{los['ci_low']:.1%}, "
+              f"{los['ci_high']:.1%}], max deviation {dev['value']:.1f} m "
+              f"[{dev['ci_low']:.1f}, {dev['ci_high']:.1f}]")  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -259,7 +419,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         i = argv.index("--")
         argv, extra = argv[:i], argv[i + 1 :]
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--recipe", choices=sorted(RECIPES), required=True)
+    p.add_argument("--recipe", choices=sorted(RECIPES))
     p.add_argument("--episodes", type=positive_int, default=100, help="validation encounters")
     p.add_argument("--check-every", type=positive_int, default=2_000_000, help="agent-steps")
     p.add_argument("--max-minutes", type=non_negative_float, default=60.0,
@@ -269,7 +429,26 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.add_argument("--overwrite", action="store_true",
                    help="replace a previous run's files in --run-dir")  # fmt: skip
+    p.add_argument("--held-out", type=positive_int, default=None, metavar="N",
+                   help="then play the first N held-out encounters (see above)")  # fmt: skip
+    p.add_argument("--of", type=Path, default=None, metavar="RECORD",
+                   help="add --held-out figures to this earlier record (no training)")  # fmt: skip
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="held-out evaluation processes")  # fmt: skip
     a = p.parse_args(argv)
+    if a.of is not None:
+        if a.held_out is None or a.recipe or extra:
+            p.error("argument --of: takes --held-out N (and --workers) only")
+        record = json.loads(a.of.read_text())
+        try:
+            record["held_out"] = held_out(record, a.held_out, a.workers)
+        except ValueError as err:
+            p.error(f"argument --of: {err}")
+        _print_held_out(record["held_out"])
+        atomic_write(a.of, json.dumps(record, indent=2) + "\n")
+        return record
+    if a.recipe is None:
+        p.error("the following arguments are required: --recipe")
     out = a.out or ROOT / "benchmarks" / "results" / f"time_to_policy_{a.recipe}.json"
     if out.exists() and not a.force:
         p.error(f"argument --out: {out} exists (--force replaces it)")
@@ -286,6 +465,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
           f"agent-steps; time: env {share['env']:.0%}, rest of the rollout "
           f"{share['rollout_other']:.0%}, learner {share['learner']:.0%} (evaluation "
           f"{t['evaluation'] / 60:.1f} min apart)")  # fmt: skip
+    if a.held_out is not None and record["reached"]:
+        record["held_out"] = held_out(record, a.held_out, a.workers)
+        _print_held_out(record["held_out"])
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, json.dumps(record, indent=2) + "\n")
     return record

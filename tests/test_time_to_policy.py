@@ -31,14 +31,21 @@ def test_the_bar_is_the_shipped_intervals_upper_ends():
     assert not ttp.reached(ttp.figures(_agg(0.0, 0.0, 0, 35.1, 0)), bar)
 
 
-def test_a_run_stops_at_the_bar_and_records_where_the_time_went(tmp_path):
+@pytest.mark.parametrize("recipe", ["residual_apf", "mappo"])
+def test_a_run_stops_at_the_bar_and_records_where_the_time_went(tmp_path, recipe):
+    if recipe == "mappo":
+        pytest.importorskip("skrl")
     out = tmp_path / "ttp.json"
     tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
             "--hidden", "16", "--total-timesteps", "1200", "--episode-duration", "20"]  # fmt: skip
-    flags = ["--recipe", "residual_apf", "--episodes", "2", "--check-every", "384"]
+    flags = ["--recipe", recipe, "--episodes", "2", "--check-every", "384"]
     rec = ttp.main([*flags, "--out", str(out), "--run-dir", str(tmp_path / "run"), "--", *tiny])
     assert json.loads(out.read_text())["agent_steps"] == rec["agent_steps"]
+    assert rec["recipe_args"]["out_dir"] == str(tmp_path / "run")
     checks = rec["checks"]
+    assert checks, "no check ran"
+    # A check every --check-every agent-steps (a rollout is 2 envs x 3 UAVs x 32 steps).
+    assert [c["agent_steps"] for c in checks] == [384 * (k + 1) for k in range(len(checks))]
     # It stopped at the first check that cleared the bar, or ran out of steps without one.
     hits = [c["reached"] for c in checks]
     assert hits.count(True) <= 1 and (not any(hits) or hits[-1])
@@ -47,12 +54,39 @@ def test_a_run_stops_at_the_bar_and_records_where_the_time_went(tmp_path):
     assert t["env"] > 0 and t["learner"] > 0 and t["rollout_other"] > 0 and t["evaluation"] > 0
     # The checks are evaluation time, not training time.
     assert t["env"] + t["rollout_other"] + t["learner"] <= t["training"] + 1e-6
+    _check_held_out(out, rec)
     with pytest.raises(SystemExit):  # no silent overwrite
-        ttp.main(["--recipe", "residual_apf", "--out", str(out)])
+        ttp.main(["--recipe", recipe, "--out", str(out)])
     other = tmp_path / "other.json"  # nor of the run folder: refused before any episode
     with pytest.raises(SystemExit, match="is not empty"):
         ttp.main([*flags, "--out", str(other), "--run-dir", str(tmp_path / "run"), "--", *tiny])
     assert not other.exists()
+
+
+def _check_held_out(out, rec):
+    """``--of``: the reached policy, the APF and the shipped one on the held-out bank."""
+    from uasep_env import make_config
+    from uasep_env.evaluation import evaluate
+    from uasep_env.scenarios import HELD_OUT_SEEDS, VALIDATION_SEEDS
+
+    if not rec["reached"]:
+        with pytest.raises(SystemExit):
+            ttp.main(["--held-out", "2", "--of", str(out)])
+        assert "held_out" not in json.loads(out.read_text())
+        return
+    got = ttp.main(["--held-out", "2", "--of", str(out)])["held_out"]
+    assert json.loads(out.read_text())["held_out"] == got
+    policy = Path(rec["recipe_args"]["out_dir"]) / "check.zip"
+    assert got["policy_sha256"] == __import__("hashlib").sha256(policy.read_bytes()).hexdigest()
+    assert set(got["figures"]) == {"apf", "shipped", "reached"}
+    # The held-out bank, not the validation encounters the checks played.
+    assert not set(HELD_OUT_SEEDS[:2]) & set(VALIDATION_SEEDS)
+    # The seeds reports' held-out config (train/seeds.py), so that the figures compare.
+    cfg = make_config(scenario="random")
+    mine = evaluate({"p": str(policy)}, cfg, list(HELD_OUT_SEEDS)[:2])
+    dev = mine.results["p"].aggregate["episode.max_deviation"]
+    assert got["figures"]["reached"]["max_deviation"]["value"] == dev["mean"]
+    assert got["figures"]["reached"]["max_deviation"]["ci_high"] == dev["ci_high"]
 
 
 RECORDS = sorted((ROOT / "benchmarks" / "results").glob("time_to_policy_*.json"))
@@ -73,15 +107,41 @@ def test_a_committed_record_is_consistent(path):
         max_deviation=b["max_deviation"],
         shipped=b["shipped"],
     )
+    t = rec["time_s"]
     verdicts = [ttp.reached(c, bar) for c in rec["checks"]]
     assert [c["reached"] for c in rec["checks"]] == verdicts
     assert rec["reached"] == any(verdicts)
     assert verdicts.count(True) <= 1 and (not any(verdicts) or verdicts[-1])  # stops there
     last = rec["checks"][-1]
-    assert (rec["agent_steps"], rec["training_minutes"]) == pytest.approx(
-        (last["agent_steps"], last["training_minutes"])
-    )
-    t = rec["time_s"]
+    if rec["reached"]:  # the figures at the check that cleared the bar
+        assert (rec["agent_steps"], rec["training_minutes"]) == pytest.approx(
+            (last["agent_steps"], last["training_minutes"])
+        )
+    else:  # the whole budget, past the last check
+        assert rec["agent_steps"] >= last["agent_steps"]
+        assert rec["training_minutes"] >= last["training_minutes"]
+        assert rec["training_minutes"] == pytest.approx(t["training"] / 60.0)
     parts = t["env"] + t["rollout_other"] + t["learner"]  # the rest: checkpoints, logging
     assert 0.99 * t["training"] <= parts <= t["training"]
-    assert not rec["apf_clears_bar"]  # else the bar measures nothing
+    if rec["recipe"] == "residual_apf":  # it starts at the APF: else the bar measures nothing
+        assert not rec["apf_clears_bar"]
+
+
+def test_held_out_figures_are_played_on_the_same_encounters():
+    """Every record's held-out APF row is the same (the same bank, config and count), and
+    the APF's row in the residual seeds report where the counts agree."""
+    rows = {}
+    for path in RECORDS:
+        h = json.loads(path.read_text()).get("held_out")
+        if h is not None:
+            assert set(h["figures"]) == {"apf", "shipped", "reached"}
+            rows.setdefault(h["episodes"], []).append(h["figures"]["apf"])
+    report = json.loads((ROOT / "baselines/results/seeds_residual_apf.json").read_text())
+    apf = report["per_seed"]["apf"]
+    for n, apf_rows in rows.items():
+        assert all(r == apf_rows[0] for r in apf_rows)
+        if apf["episode.max_deviation"]["n"] == n:
+            assert apf_rows[0]["max_deviation"]["value"] == apf["episode.max_deviation"]["mean"]
+            assert apf_rows[0]["loss_of_separation"]["ci_high"] == pytest.approx(
+                apf["episode.loss_of_separation"]["ci_high"]
+            )

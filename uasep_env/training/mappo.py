@@ -395,6 +395,13 @@ class Hooks:
     def close(self) -> None:
         """After the last checkpoint."""
 
+    def stop(self) -> bool:
+        """Whether training ends before the next rollout (the step and wall budgets aside).
+
+        ``benchmarks/time_to_policy.py`` stops a run at its bar through it.
+        """
+        return False
+
 
 def train(args: Args, config: Any, out: Path, hooks: Hooks | None = None) -> tuple[Any, Any, dict]:
     """The training loop (skrl's trainer loop, with the recipes' bookkeeping and ``hooks``)."""
@@ -465,7 +472,11 @@ def train(args: Args, config: Any, out: Path, hooks: Hooks | None = None) -> tup
     obs, _ = env.reset()
     states = env.state()
     t, horizon = 0, max(1, args.total_timesteps // per_step)
-    while steps < args.total_timesteps and time.perf_counter() - t0 < args.max_minutes * 60:
+    while (
+        steps < args.total_timesteps
+        and time.perf_counter() - t0 < args.max_minutes * 60
+        and not hooks.stop()
+    ):
         for i in range(args.n_steps):  # one rollout, then skrl's update
             agent.pre_interaction(timestep=t, timesteps=horizon)
             with torch.no_grad():
