@@ -52,21 +52,38 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 ROOT = Path(__file__).resolve().parents[1]
 CHECKPOINTS = ROOT / "baselines" / "checkpoints"
 
-#: ``--recipe`` -> (shipped checkpoint name, the recipe's defaults, by module and attribute,
-#: and the module whose ``parse_args`` reads its flags: SB3's PPO or skrl's MAPPO).
+
+class Recipe(NamedTuple):
+    """A recipe this benchmark trains.
+
+    Attributes:
+        shipped: Its shipped checkpoint's name (``baselines/checkpoints/<shipped>.zip``).
+        module: The module holding its defaults.
+        attr: Their name there (an ``Args`` instance, or the class: its defaults).
+        reader: The module whose ``parse_args`` reads its flags and whose loop trains it
+            (:data:`TRAINERS`): SB3's PPO or skrl's MAPPO.
+    """
+
+    shipped: str
+    module: str
+    attr: str
+    reader: str
+
+
+_PPO, _MAPPO = "uasep_env.training.ppo_shared", "uasep_env.training.mappo"
+#: ``--recipe`` -> the recipe.
 RECIPES = {
-    "residual_apf": (
-        "ppo_residual_apf", "uasep_env.training.ppo_residual_apf", "RESIDUAL_DEFAULTS",
-        "uasep_env.training.ppo_shared",
+    "residual_apf": Recipe(
+        "ppo_residual_apf", "uasep_env.training.ppo_residual_apf", "RESIDUAL_DEFAULTS", _PPO
     ),
-    "shared": ("ppo_shared", "uasep_env.training.args", "Args", "uasep_env.training.ppo_shared"),
-    "mappo": ("mappo", "uasep_env.training.mappo", "Args", "uasep_env.training.mappo"),
-}  # fmt: skip
+    "shared": Recipe("ppo_shared", "uasep_env.training.args", "Args", _PPO),
+    "mappo": Recipe("mappo", _MAPPO, "Args", _MAPPO),
+}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -143,11 +160,11 @@ class Clock:
 def _recipe_args(recipe: str, run_dir: Path, extra: list[str]) -> Any:
     import importlib
 
-    _, module, attr, reader = RECIPES[recipe]
-    defaults = getattr(importlib.import_module(module), attr)
+    r = RECIPES[recipe]
+    defaults = getattr(importlib.import_module(r.module), r.attr)
     defaults = defaults() if isinstance(defaults, type) else defaults
     argv = ["--out-dir", str(run_dir), "--no-progress", "--max-minutes", "1e6", *extra]
-    return importlib.import_module(reader).parse_args(argv, defaults)
+    return importlib.import_module(r.reader).parse_args(argv, defaults)
 
 
 def _evaluate(policy: Any, config: Any, seeds: list[int]) -> dict[str, Any]:
@@ -256,9 +273,10 @@ def _train_skrl(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
     from uasep_env.training import mappo
 
     clock = checker.clock
-    done = [0]
 
     class Hooks(mappo.Hooks):
+        steps = 0  # agent-steps at the last rollout's end
+
         def start(self, agent: Any, env: Any, out: Path, resumed: dict) -> None:
             self.agent, self.venv = agent, env.venv
             clock.wrap(env.base, "step_wait", "env_s")  # the batched env under the wrappers
@@ -266,7 +284,7 @@ def _train_skrl(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
             checker.t0 = time.perf_counter()
 
         def rollout_end(self, agent_steps: int) -> None:
-            done[0] = agent_steps
+            self.steps = agent_steps
             export = functools.partial(mappo.export_policy, self.agent, self.venv, config,
                                        args, run_dir / "check.zip", {})  # fmt: skip
             checker.maybe_check(agent_steps, export)
@@ -274,11 +292,16 @@ def _train_skrl(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
         def stop(self) -> bool:
             return checker.spent()
 
-    mappo.train(args, config, run_dir, Hooks())
+    hooks = Hooks()
+    mappo.train(args, config, run_dir, hooks)
     # No rollout method to time: the rollout is the training less the env, the learner and
     # the checks (skrl's own step, the normalisation, the buffer).
     clock.rollout_s = checker.training_s() - clock.learner_s
-    return done[0]
+    return hooks.steps
+
+
+#: Each recipe's training loop, by :attr:`Recipe.reader`.
+TRAINERS = {_PPO: _train_sb3, _MAPPO: _train_skrl}
 
 
 def run(
@@ -304,7 +327,7 @@ def run(
     config = ppo_shared.make_env_config(args)
     eval_cfg = config.replace(action={"mode": "direct"})
     seeds = list(VALIDATION_SEEDS)[:episodes]
-    shipped = CHECKPOINTS / f"{RECIPES[recipe][0]}.zip"
+    shipped = CHECKPOINTS / f"{RECIPES[recipe].shipped}.zip"
     bar = make_bar(_evaluate(load_policy(shipped, eval_cfg), eval_cfg, seeds), episodes)
     # The residual starts at the APF: a bar the APF clears measures nothing.
     apf = figures(_evaluate("apf", eval_cfg, seeds))
@@ -318,8 +341,7 @@ def run(
     clock = Clock()
     checker = Checker(bar=bar, seeds=seeds, eval_cfg=eval_cfg, check_every=check_every,
                       max_minutes=max_minutes, clock=clock)  # fmt: skip
-    trainer = _train_skrl if RECIPES[recipe][3].endswith(".mappo") else _train_sb3
-    steps = trainer(args, config, run_dir, checker)
+    steps = TRAINERS[RECIPES[recipe].reader](args, config, run_dir, checker)
     train_s = checker.training_s()
     checks = checker.checks
     hit = next((c for c in checks if c["reached"]), None)
@@ -376,7 +398,8 @@ def held_out(record: dict[str, Any], episodes: int, workers: int = 1) -> dict[st
         raise ValueError(f"{policy} is gone: the run folder no longer holds the policy")
     # train/seeds.py's own held-out stage (its config and encounters), so that the figures
     # compare with the published seeds reports.
-    sys.path.insert(0, str(ROOT / "train"))
+    if str(ROOT / "train") not in sys.path:
+        sys.path.insert(0, str(ROOT / "train"))
     import seeds as seeds_driver
 
     res = seeds_driver.held_out([ROOT / record["shipped"], policy], episodes, workers)
@@ -396,6 +419,18 @@ def held_out(record: dict[str, Any], episodes: int, workers: int = 1) -> dict[st
         "policy_sha256": hashlib.sha256(policy.read_bytes()).hexdigest(),
         "figures": figs,
     }
+
+
+def _is_record(record: Any) -> bool:
+    """Whether ``record`` has what :func:`held_out` reads (a record :func:`run` wrote)."""
+    return (
+        isinstance(record, dict)
+        and record.get("recipe") in RECIPES
+        and isinstance(record.get("shipped"), str)
+        and isinstance(record.get("reached"), bool)
+        and isinstance(record.get("recipe_args"), dict)
+        and isinstance(record["recipe_args"].get("out_dir"), str)
+    )
 
 
 def _print_held_out(h: dict[str, Any]) -> None:
@@ -439,7 +474,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if a.of is not None:
         if a.held_out is None or a.recipe or extra:
             p.error("argument --of: takes --held-out N (and --workers) only")
-        record = json.loads(a.of.read_text())
+        try:
+            record = json.loads(a.of.read_text())
+        except (OSError, ValueError) as err:  # missing, unreadable, not JSON
+            p.error(f"argument --of: cannot read {a.of} ({err})")
+        if not _is_record(record):
+            p.error(f"argument --of: {a.of} is not a time-to-policy record")
         try:
             record["held_out"] = held_out(record, a.held_out, a.workers)
         except ValueError as err:

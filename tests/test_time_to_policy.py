@@ -1,5 +1,6 @@
 """benchmarks/time_to_policy.py: the bar, the stop rule and the record."""
 
+import hashlib
 import json
 import sys
 from pathlib import Path
@@ -63,6 +64,18 @@ def test_a_run_stops_at_the_bar_and_records_where_the_time_went(tmp_path, recipe
     assert not other.exists()
 
 
+def test_of_names_a_file_that_is_not_a_record(tmp_path):
+    missing = tmp_path / "missing.json"
+    with pytest.raises(SystemExit):
+        ttp.main(["--held-out", "2", "--of", str(missing)])
+    for text in ("not json", "[1, 2]", json.dumps({"recipe": "residual_apf", "reached": True})):
+        bad = tmp_path / "bad.json"
+        bad.write_text(text)
+        with pytest.raises(SystemExit):
+            ttp.main(["--held-out", "2", "--of", str(bad)])
+        assert bad.read_text() == text  # left as it was
+
+
 def _check_held_out(out, rec):
     """``--of``: the reached policy, the APF and the shipped one on the held-out bank."""
     from uasep_env import make_config
@@ -77,7 +90,7 @@ def _check_held_out(out, rec):
     got = ttp.main(["--held-out", "2", "--of", str(out)])["held_out"]
     assert json.loads(out.read_text())["held_out"] == got
     policy = Path(rec["recipe_args"]["out_dir"]) / "check.zip"
-    assert got["policy_sha256"] == __import__("hashlib").sha256(policy.read_bytes()).hexdigest()
+    assert got["policy_sha256"] == hashlib.sha256(policy.read_bytes()).hexdigest()
     assert set(got["figures"]) == {"apf", "shipped", "reached"}
     # The held-out bank, not the validation encounters the checks played.
     assert not set(HELD_OUT_SEEDS[:2]) & set(VALIDATION_SEEDS)
