@@ -9,9 +9,10 @@ Usage::
 
 The shipped checkpoint of the recipe (``baselines/checkpoints/<name>.zip``) plays the first
 ``--episodes`` validation encounters (:data:`uasep_env.scenarios.VALIDATION_SEEDS`; never
-the held-out bank) and sets the bar: **no collision**, a loss-of-separation rate no higher
-than the upper end of the shipped policy's 95 % Wilson interval, and a mean max deviation
-no higher than the upper end of its 95 % Student-t interval. The recipe then trains from
+the held-out bank) and sets the bar: **no more collisions than the shipped policy** on them
+(none for the residual recipe's), a loss-of-separation rate no higher than the upper end of
+the shipped policy's 95 % Wilson interval, and a mean max deviation no higher than the upper
+end of its 95 % Student-t interval. The recipe then trains from
 scratch (its own defaults; flags after ``--`` go to it, ``uasep-train RECIPE --help``), and
 every ``--check-every`` agent-steps its current actor plays the same encounters; the run
 stops as soon as the figures clear the bar, or when ``--max-minutes`` of training time are
@@ -92,6 +93,8 @@ class Bar:
 
     Attributes:
         episodes: Validation encounters played.
+        collision: Highest collision rate: the shipped policy's own on these encounters
+            (records made before this field asked for none: 0).
         loss_of_separation: Highest loss-of-separation rate (the shipped policy's Wilson
             interval's upper end).
         max_deviation: Highest mean max deviation, m (its Student-t interval's upper end).
@@ -102,6 +105,7 @@ class Bar:
     loss_of_separation: float
     max_deviation: float
     shipped: dict[str, float]
+    collision: float = 0.0
 
 
 def figures(aggregate: dict[str, Any]) -> dict[str, float]:
@@ -117,6 +121,7 @@ def make_bar(aggregate: dict[str, Any], episodes: int) -> Bar:
     """The bar set by the shipped checkpoint's aggregate on the validation encounters."""
     return Bar(
         episodes=episodes,
+        collision=float(aggregate["episode.collision"]["rate"]),
         loss_of_separation=float(aggregate["episode.loss_of_separation"]["ci_high"]),
         max_deviation=float(aggregate["episode.max_deviation"]["ci_high"]),
         shipped=figures(aggregate),
@@ -124,9 +129,9 @@ def make_bar(aggregate: dict[str, Any], episodes: int) -> Bar:
 
 
 def reached(fig: dict[str, float], bar: Bar) -> bool:
-    """Whether ``fig`` clears ``bar``: no collision, the rate and the deviation within it."""
+    """Whether ``fig`` clears ``bar``: collisions, the rate and the deviation within it."""
     return (
-        fig["collision"] == 0.0
+        fig["collision"] <= bar.collision
         and fig["loss_of_separation"] <= bar.loss_of_separation
         and fig["max_deviation"] <= bar.max_deviation
     )
@@ -334,8 +339,9 @@ def run(
     if reached(apf, bar):
         print(f"warning: the APF clears the bar on these {episodes} encounters ({apf}); "
               "more --episodes narrow it", file=sys.stderr)  # fmt: skip
-    print(f"bar ({episodes} validation encounters, {shipped.name}): no collision, loss of "
-          f"separation <= {bar.loss_of_separation:.1%}, mean max deviation <= "
+    print(f"bar ({episodes} validation encounters, {shipped.name}): collisions <= "
+          f"{bar.collision:.1%}, loss of separation <= {bar.loss_of_separation:.1%}, "
+          "mean max deviation <= "
           f"{bar.max_deviation:.1f} m", flush=True)  # fmt: skip
 
     clock = Clock()
@@ -492,7 +498,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     out = a.out or ROOT / "benchmarks" / "results" / f"time_to_policy_{a.recipe}.json"
     if out.exists() and not a.force:
         p.error(f"argument --out: {out} exists (--force replaces it)")
-    run_dir = a.run_dir or ROOT / "runs" / "time_to_policy" / a.recipe
+    # Absolute: a later --of finds the policy from any folder.
+    run_dir = (a.run_dir or ROOT / "runs" / "time_to_policy" / a.recipe).resolve()
     record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra, a.overwrite)
     record["command"] = "python benchmarks/time_to_policy.py " + " ".join(
         [*argv, *(["--", *extra] if extra else [])]
@@ -508,6 +515,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if a.held_out is not None and record["reached"]:
         record["held_out"] = held_out(record, a.held_out, a.workers)
         _print_held_out(record["held_out"])
+    elif a.held_out is not None:
+        print("--held-out: the bar was not reached, so there is no policy to play", flush=True)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, json.dumps(record, indent=2) + "\n")
     return record

@@ -27,7 +27,7 @@ import seeds  # noqa: E402
 SHIPPED = ROOT / "baselines" / "checkpoints" / "ppo_residual_apf.zip"
 
 
-def _checkpoint(path, cfg, seed=0):
+def _checkpoint(path, cfg, seed=0, info=None):
     rng = np.random.default_rng(seed)
     dim = ObservationLayout.from_config(cfg).dim
     sizes = [dim, 8, 3]
@@ -36,8 +36,9 @@ def _checkpoint(path, cfg, seed=0):
         for i, o in itertools.pairwise(sizes)
     ]
     meta = PolicyCheckpoint(
-        config=cfg.to_dict(), obs_dim=dim, activation="tanh", hidden=(8,), obs_norm=False
-    )
+        config=cfg.to_dict(), obs_dim=dim, activation="tanh", hidden=(8,), obs_norm=False,
+        info=info or {},
+    )  # fmt: skip
     return save_policy(path, meta, weights)
 
 
@@ -168,6 +169,12 @@ def test_seed_driver_resumes_and_reports(tmp_path):
     result = evaluate(policies, cfg, list(HELD_OUT_SEEDS)[:6])
     shipped = {"seed": 1, "validation": {}}
     text, data = seeds.report("shared", out, 2, result, "python train/seeds.py ...", shipped)
+    assert data["recipe_args"] == {}  # no selected checkpoint to read them from
+    # The recipe's options as seed 0's selected checkpoint records them, less the run's own.
+    args = {"n_envs": 128, "learning_rate": 2.5e-4, "seed": 0, "out_dir": "runs/x/seed_0"}
+    _checkpoint(seeds.seed_dir(out, 0) / "selected.zip", cfg, info={"args": args})
+    data = seeds.report("shared", out, 2, result, "python train/seeds.py ...", shipped)[1]
+    assert data["recipe_args"] == {"n_envs": 128, "learning_rate": 2.5e-4}
     assert "IQM across seeds" in text and "at most 5 % collisions" in text
     assert "Chosen to ship: seed 1's checkpoint" in text and data["shipped"]["seed"] == 1
     assert "apf, the same IQM over families" in text
@@ -374,3 +381,26 @@ def test_compare_recipes_at_equal_wall_time(tmp_path, capsys):
     with pytest.raises(SystemExit):
         compare_recipes.main([*argv, "--force"])
     assert "different --max-minutes" in capsys.readouterr().err
+
+
+def test_the_fast_residual_report_is_what_its_command_and_checkpoints_say():
+    """``seeds_residual_apf_fast``: its recorded options are its command's flags over the
+    recipe's defaults, every kept checkpoint was trained with them, and its APF row is the
+    main report's (the same held-out encounters)."""
+    from uasep_env.policies.checkpoint_reader import read_checkpoint
+    from uasep_env.training import ppo_shared
+    from uasep_env.training.args import PER_RUN
+    from uasep_env.training.ppo_residual_apf import RESIDUAL_DEFAULTS
+
+    results = ROOT / "baselines" / "results"
+    fast = json.loads((results / "seeds_residual_apf_fast.json").read_text())
+    main = json.loads((results / "seeds_residual_apf.json").read_text())
+    flags = fast["command"].split(" -- ", 1)[1].split()
+    args = vars(ppo_shared.parse_args(flags, RESIDUAL_DEFAULTS))
+    assert fast["recipe_args"] == {k: v for k, v in args.items() if k not in PER_RUN}
+    for k in range(3):
+        meta = read_checkpoint(ROOT / f"baselines/seeds/residual_apf_fast/seed_{k}/selected.zip")[0]
+        trained = {n: v for n, v in meta.info["args"].items() if n not in PER_RUN}
+        assert trained == fast["recipe_args"] and meta.info["args"]["seed"] == 1000 * k
+    assert fast["held_out_seeds"] == main["held_out_seeds"]
+    assert fast["per_seed"]["apf"] == main["per_seed"]["apf"]

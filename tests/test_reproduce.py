@@ -15,6 +15,7 @@ from uasep_env.jsonio import dumps
 pytest.importorskip("stable_baselines3")
 sys.path.insert(0, str(ROOT / "train"))
 import reproduce
+import seeds as seeds_driver
 
 # A tiny recipe run on the `random` scenario (the held-out bank's), checkpoints every 240
 # agent-steps; --total-timesteps is the script's to set.
@@ -29,16 +30,20 @@ BANK = {"first": 5_000_000, "count": 2}
 def _original(tmp_path):
     """Seed 1 of a 'seeds run', trained to 1,200 agent-steps; its middle checkpoint chosen."""
     run = tmp_path / "orig" / "seed_1"
-    cmd = reproduce.train_command("shared", run, 1, 1199, TINY)
+    cmd = reproduce.train_command("shared", run, 1, 1199, TINY, {})
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
     subprocess.run(cmd, check=True, env=env, capture_output=True, cwd=ROOT)
     steps = sorted(int(p.name.removeprefix("step_")) for p in run.glob("checkpoints/step_*"))
     chosen = steps[len(steps) // 2]
     policy = run / "checkpoints" / f"step_{chosen}" / "policy.zip"
+    # What train/seeds.py records of the recipe: the options in the checkpoint.
+    (tmp_path / "orig" / "seed_0").mkdir()
+    (tmp_path / "orig" / "seed_0" / "selected.zip").write_bytes(policy.read_bytes())
     seeds = list(range(BANK["first"], BANK["first"] + BANK["count"]))
     result = evaluate({"seed_1": str(policy)}, make_config(scenario="random"), seeds)
     report = {
         "recipe": "shared",
+        "recipe_args": seeds_driver.recipe_args(tmp_path / "orig"),
         "held_out_seeds": BANK,
         "per_seed": {"seed_1": json.loads(dumps(result.results["seed_1"].aggregate))},
         "shipped": {"seed": 1, "validation": {"seeds": [
@@ -53,8 +58,10 @@ def _original(tmp_path):
 
 def test_a_chosen_checkpoint_is_retrained_bit_for_bit_and_a_difference_fails(tmp_path, capsys):
     path, report, chosen = _original(tmp_path)
+    assert report["recipe_args"]["n_envs"] == 2 and "out_dir" not in report["recipe_args"]
     ship = tmp_path / "ship" / "policy.zip"
-    argv = [str(path), "--out-dir", str(tmp_path / "repro"), "--ship-to", str(ship), "--", *TINY]
+    # No recipe flags: the report's recorded options are the recipe's, not today's defaults.
+    argv = [str(path), "--out-dir", str(tmp_path / "repro"), "--ship-to", str(ship)]
     record = reproduce.main(argv)
     assert record["held_out"]["identical"] and record["agent_steps"] == chosen
     assert "reproduced: seed 1's checkpoint" in capsys.readouterr().out
@@ -99,3 +106,14 @@ def test_a_folder_without_the_checkpoint_is_not_resumed(tmp_path, capsys):
     with pytest.raises(SystemExit):
         reproduce.main([str(path), "--out-dir", str(tmp_path / "r")])
     assert "not a step checkpoint" in capsys.readouterr().err
+
+
+def test_the_training_command_writes_out_the_reports_options_and_the_flags_win(tmp_path):
+    options = {"n_envs": 7, "norm_obs": False, "learning_rate": 2.5e-4, "seed": 9,
+               "out_dir": "elsewhere", "max_minutes": 1.0}  # fmt: skip
+    cmd = reproduce.train_command("shared", tmp_path, 1, 99, ["--n-envs", "3"], options)
+    text = " ".join(cmd)
+    assert "--n-envs 7 --no-norm-obs --learning-rate 0.00025 --n-envs 3" in text
+    # The run's own fields and the budget are this script's: seed 1000, no wall budget.
+    assert "elsewhere" not in text and cmd.count("--seed") == 1 and "--seed 1000" in text
+    assert cmd.count("--max-minutes") == 1 and "--max-minutes 100000" in text

@@ -30,19 +30,29 @@ def test_the_bar_is_the_shipped_intervals_upper_ends():
     assert not ttp.reached(ttp.figures(_agg(0.01, 0.0, 0, 20.0, 0)), bar)  # any collision
     assert not ttp.reached(ttp.figures(_agg(0.0, 0.06, 0, 30.0, 0)), bar)
     assert not ttp.reached(ttp.figures(_agg(0.0, 0.0, 0, 35.1, 0)), bar)
+    # A shipped policy that collides: no more collisions than it (never a bar it fails).
+    bar = ttp.make_bar(_agg(0.0125, 0.25, 0.29, 29.5, 30.5), 400)
+    assert bar.collision == 0.0125 and ttp.reached(ttp.figures(_agg(0.0125, 0.2, 0, 30, 0)), bar)
+    assert not ttp.reached(ttp.figures(_agg(0.015, 0.2, 0, 30.0, 0)), bar)
 
 
 @pytest.mark.parametrize("recipe", ["residual_apf", "mappo"])
-def test_a_run_stops_at_the_bar_and_records_where_the_time_went(tmp_path, recipe):
+def test_a_run_stops_at_the_bar_and_records_where_the_time_went(
+    tmp_path, recipe, monkeypatch, capsys
+):
     if recipe == "mappo":
         pytest.importorskip("skrl")
     out = tmp_path / "ttp.json"
     tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
             "--hidden", "16", "--total-timesteps", "1200", "--episode-duration", "20"]  # fmt: skip
     flags = ["--recipe", recipe, "--episodes", "2", "--check-every", "384"]
-    rec = ttp.main([*flags, "--out", str(out), "--run-dir", str(tmp_path / "run"), "--", *tiny])
+    monkeypatch.chdir(tmp_path)  # a relative run folder is recorded absolute (for --of)
+    rec = ttp.main([*flags, "--out", str(out), "--run-dir", "run", "--held-out", "2", "--", *tiny])
     assert json.loads(out.read_text())["agent_steps"] == rec["agent_steps"]
-    assert rec["recipe_args"]["out_dir"] == str(tmp_path / "run")
+    assert rec["recipe_args"]["out_dir"] == str(tmp_path.resolve() / "run")
+    # --held-out plays a reached policy, or says that there is none.
+    said = "no policy to play" in capsys.readouterr().out
+    assert ("held_out" in rec) == rec["reached"] == (not said)
     checks = rec["checks"]
     assert checks, "no check ran"
     # A check every --check-every agent-steps (a rollout is 2 envs x 3 UAVs x 32 steps).
@@ -114,12 +124,9 @@ def test_a_committed_record_is_consistent(path):
     """A committed result file: its stop is the first check that clears its own bar."""
     rec = json.loads(path.read_text())
     b = rec["bar"]
-    bar = ttp.Bar(
-        episodes=b["episodes"],
-        loss_of_separation=b["loss_of_separation"],
-        max_deviation=b["max_deviation"],
-        shipped=b["shipped"],
-    )
+    bar = ttp.Bar(**b)  # records before the collision field asked for none (its default)
+    if "collision" in b:
+        assert b["collision"] == b["shipped"]["collision"]
     t = rec["time_s"]
     verdicts = [ttp.reached(c, bar) for c in rec["checks"]]
     assert [c["reached"] for c in rec["checks"]] == verdicts

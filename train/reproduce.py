@@ -71,14 +71,28 @@ def chosen_checkpoint(report: dict[str, Any], seed: int | None) -> tuple[int, di
     return k, pick
 
 
-def train_command(recipe: str, run: Path, k: int, steps: int, extra: list[str]) -> list[str]:
-    """The recipe's command that saves ``checkpoints/step_<steps>`` of seed ``k``."""
+#: What :func:`train_command` sets itself, whatever the report's recipe options say.
+_SET_HERE = ("torch_threads", "total_timesteps", "max_minutes")
+
+
+def train_command(
+    recipe: str, run: Path, k: int, steps: int, extra: list[str], options: dict[str, Any]
+) -> list[str]:
+    """The recipe's command that saves ``checkpoints/step_<steps>`` of seed ``k``.
+
+    ``options`` are the report's recipe options (``recipe_args``; empty for a report that
+    predates them: the recipe's current defaults), every one written out as a flag; ``extra``
+    (the flags after ``--``) come last and win.
+    """
+    from uasep_env.training.args import PER_RUN, to_argv
+
     # A checkpoint is saved only below the step budget, so the run goes one step further
     # (to the end of that rollout) and stops there.
     return [
         sys.executable, str(HERE / seeds_driver.RECIPES[recipe]), "--out-dir", str(run),
         "--seed", str(seeds_driver.SEED_STRIDE * k), "--torch-threads", "1", "--no-progress",
-        "--total-timesteps", str(steps + 1), "--max-minutes", "100000", *extra,
+        "--total-timesteps", str(steps + 1), "--max-minutes", "100000",
+        *to_argv(options, skip=PER_RUN + _SET_HERE), *extra,
     ]  # fmt: skip
 
 
@@ -127,6 +141,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         steps, recipe = int(pick["agent_steps"]), str(report["recipe"])
         bank = report["held_out_seeds"]
         published = report["per_seed"][f"seed_{k}"]
+        options = dict(report.get("recipe_args", {}))
     except (OSError, ValueError, KeyError, TypeError) as e:
         p.error(f"{args.report}: not a seeds report with a chosen checkpoint ({e})")
     ship = [] if args.ship_to is None else [args.ship_to, sidecar(args.ship_to)]
@@ -136,7 +151,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
     run = args.out_dir / f"seed_{k}"
     checkpoint = run / "checkpoints" / f"step_{steps}" / "policy.zip"
-    cmd = train_command(recipe, run, k, steps, extra)
+    cmd = train_command(recipe, run, k, steps, extra, options)
     if not checkpoint.exists():
         if run.exists():
             p.error(f"{run} exists without {checkpoint}: a resumed run is not bit-exact; "

@@ -346,6 +346,25 @@ def _training_facts(run: Path) -> dict[str, Any]:
         return {}
 
 
+def recipe_args(out: Path) -> dict[str, Any]:
+    """The options seed 0 trained with, as its selected checkpoint records them.
+
+    The run's own fields (:data:`~uasep_env.training.args.PER_RUN`) are left out: every
+    seed shares the rest, and ``train/reproduce.py`` gives them back as flags, so that a
+    report is retrained as it was even after the recipe's defaults moved. Empty when the
+    checkpoint does not record them, or there is none.
+    """
+    from uasep_env.policies.checkpoint_reader import read_checkpoint
+    from uasep_env.training.args import PER_RUN
+
+    path = seed_dir(out, 0) / "selected.zip"
+    if not path.exists():
+        return {}
+    meta = read_checkpoint(path)[0]
+    args = meta.info.get("args") if isinstance(meta.info, dict) else None
+    return {k: v for k, v in args.items() if k not in PER_RUN} if isinstance(args, dict) else {}
+
+
 def report(
     recipe: str,
     out: Path,
@@ -412,6 +431,7 @@ def report(
     data = {
         "recipe": recipe,
         "command": command,
+        "recipe_args": recipe_args(out),
         "seeds": seeds,
         "held_out_seeds": {"first": result.seeds[0], "count": n},
         "per_seed": {

@@ -212,7 +212,7 @@ class ObservationLayout:
 
     def block(self, name: str) -> tuple[Feature, ...]:
         """The features of block ``name`` (``"self"``, ``"uav"``, ``"obstacle"``) it has."""
-        return tuple(f for f in FEATURES if f.block == name and f.key in self.features)
+        return _block(self.features, name)  # cached: policies decode every step
 
     def width(self, name: str) -> int:
         """Width of one ``name`` block (one neighbour's, for ``"uav"`` and ``"obstacle"``)."""
@@ -316,6 +316,11 @@ def _feature_keys(features: Iterable[str] | None) -> tuple[str, ...]:
     if unknown:
         raise ValueError(f"unknown observation feature(s) {unknown}; known: {list(_BY_KEY)}")
     return tuple(f.key for f in FEATURES if f.key in keys)
+
+
+@functools.lru_cache(maxsize=256)
+def _block(features: tuple[str, ...], name: str) -> tuple[Feature, ...]:
+    return tuple(f for f in FEATURES if f.block == name and f.key in features)
 
 
 @functools.lru_cache(maxsize=64)

@@ -129,15 +129,16 @@ class UAVSharedVecEnv(VecEnv):
         done_env = res.terminated | res.truncated
         dones = np.repeat(done_env, self.n_uavs)
         self._track(res.safety)
-        costs = res.cost.reshape(-1).tolist()
-        terms = [res.cost_terms[k].reshape(-1).tolist() for k in COST_TERMS]
+        # Python scalars from tolist, rows zipped from columns: an agent's dicts are most
+        # of this view's cost at a training's batch sizes, and numpy scalars,
+        # star-unpacking and a strict zip per row (each row has a term per name, by
+        # construction) cost twice as much.
+        columns = [res.cost_terms[k].reshape(-1).tolist() for k in COST_TERMS]
+        rows = zip(*columns, strict=True)
+        terms = [dict(zip(COST_TERMS, row, strict=False)) for row in rows]
+        per_agent = zip(self._clipped.tolist(), res.cost.reshape(-1).tolist(), terms, strict=True)
         infos: list[dict] = [
-            {
-                "clipped_actions": int(c),
-                "cost": cost,
-                "cost_terms": dict(zip(COST_TERMS, t, strict=True)),
-            }
-            for c, cost, *t in zip(self._clipped, costs, *terms, strict=True)
+            {"clipped_actions": c, "cost": cost, "cost_terms": t} for c, cost, t in per_agent
         ]
         if done_env.any():
             for e in np.flatnonzero(done_env):

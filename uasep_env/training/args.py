@@ -23,6 +23,7 @@ from typing import Any, NoReturn
 
 __all__ = [
     "FIELDS",
+    "PER_RUN",
     "Args",
     "HelpFormatter",
     "OneLineParser",
@@ -36,6 +37,7 @@ __all__ = [
     "parse_args",
     "positive_float",
     "positive_int",
+    "to_argv",
     "unit_interval",
 ]
 
@@ -318,6 +320,32 @@ def parse_args(
     if problem:
         parser.error(problem)
     return args
+
+
+#: The fields that say where one run goes and how it is driven, not what it learns.
+PER_RUN = ("seed", "out_dir", "resume", "overwrite", "tensorboard", "progress")
+
+
+def to_argv(values: dict[str, Any], skip: tuple[str, ...] = ()) -> list[str]:
+    """The flags that give a recipe the options ``values`` (an ``Args`` as a dict).
+
+    Every field is written out, so that the command means the same under later defaults
+    (a report's recipe, retrained by ``train/reproduce.py`` after a recipe's defaults moved).
+
+    Args:
+        values: Field name -> value (``dataclasses.asdict`` of an :class:`Args`).
+        skip: Fields left out (those the caller sets itself).
+    """
+    argv: list[str] = []
+    for name, value in values.items():
+        if name in skip:
+            continue
+        flag = name.replace("_", "-")
+        if isinstance(value, bool):
+            argv.append(f"--{flag}" if value else f"--no-{flag}")
+        else:
+            argv += [f"--{flag}", str(value)]
+    return argv
 
 
 def make_env_config(args: Args) -> Any:
