@@ -106,6 +106,14 @@ def test_a_folder_without_the_checkpoint_is_not_resumed(tmp_path, capsys):
     with pytest.raises(SystemExit):
         reproduce.main([str(path), "--out-dir", str(tmp_path / "r")])
     assert "not a step checkpoint" in capsys.readouterr().err
+    # Recorded options that are not flag values: refused before anything trains.
+    report["shipped"]["validation"]["seeds"][0]["policy"] = "seed_0/checkpoints/step_96/p.zip"
+    for bad in ([1], {"n_envs": [1, 2]}):
+        path.write_text(json.dumps({**report, "recipe_args": bad}))
+        with pytest.raises(SystemExit):
+            reproduce.main([str(path), "--out-dir", str(tmp_path / "fresh")])
+        assert "recipe_args is not a table" in capsys.readouterr().err
+        assert not (tmp_path / "fresh").exists()
 
 
 def test_the_training_command_writes_out_the_reports_options_and_the_flags_win(tmp_path):

@@ -7,9 +7,11 @@ A training run is deterministic given its seed and its agent-steps (seeded envir
 torch thread; tested in ``tests/test_reproduce.py``); the wall-clock budget only decides where
 a run stops. So the checkpoint that ``train/seeds.py`` chose for seed ``k`` (``--seed``,
 default: the one the report shipped) is retrained by running the report's recipe with
-``--seed 1000*k`` until it saves the checkpoint at that agent-step count, from scratch (a
-resumed run is not bit-exact). The wall budget is lifted (``--max-minutes``) so that a loaded
-machine still reaches the step count.
+``--seed 1000*k`` and the report's recorded options (``recipe_args``, every one written out
+as a flag, so that a later change of the recipe's defaults does not change the run; a report
+without them runs the recipe's current defaults) until it saves the checkpoint at that
+agent-step count, from scratch (a resumed run is not bit-exact). The wall budget is lifted
+(``--max-minutes``) so that a loaded machine still reaches the step count.
 
 Then the checkpoint plays the report's held-out encounters and every per-seed figure of the
 report (counts, sums, means, intervals) is compared with the published one: all equal, or the
@@ -141,7 +143,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         steps, recipe = int(pick["agent_steps"]), str(report["recipe"])
         bank = report["held_out_seeds"]
         published = report["per_seed"][f"seed_{k}"]
-        options = dict(report.get("recipe_args", {}))
+        options = report.get("recipe_args", {})
+        if not isinstance(options, dict) or not all(
+            isinstance(v, bool | int | float | str) for v in options.values()
+        ):
+            raise ValueError(f"recipe_args is not a table of flag values: {options!r:.80}")
     except (OSError, ValueError, KeyError, TypeError) as e:
         p.error(f"{args.report}: not a seeds report with a chosen checkpoint ({e})")
     ship = [] if args.ship_to is None else [args.ship_to, sidecar(args.ship_to)]
