@@ -340,7 +340,7 @@ def run(
         print(f"warning: the APF clears the bar on these {episodes} encounters ({apf}); "
               "more --episodes narrow it", file=sys.stderr)  # fmt: skip
     print(f"bar ({episodes} validation encounters, {shipped.name}): collisions <= "
-          f"{bar.collision:.1%}, loss of separation <= {bar.loss_of_separation:.1%}, "
+          f"{bar.collision:.2%}, loss of separation <= {bar.loss_of_separation:.1%}, "
           "mean max deviation <= "
           f"{bar.max_deviation:.1f} m", flush=True)  # fmt: skip
 

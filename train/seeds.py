@@ -29,7 +29,8 @@ Stages (each skipped when its output exists, so an interrupted run picks up wher
    seeds in one figure; ``--publish PREFIX`` copies them (and the scaling tables) to
    ``PREFIX.md`` etc. for the repository. ``--scaling-episodes N`` adds
    ``baselines/scaling.py`` over the selected checkpoints (``<out>/scaling.*``, kept when
-   it exists).
+   it exists). ``seeds.json`` records the recipe's options (``recipe_args``, from seed 0's
+   selected checkpoint), with which ``train/reproduce.py`` retrains a chosen checkpoint.
 """
 
 from __future__ import annotations
