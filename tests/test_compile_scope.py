@@ -74,7 +74,7 @@ def test_apf_evaluation_compiles_only_the_kernels_it_runs(compiled_by_apf_eval):
     assert counts.keys() >= APF_LOOPS  # the names still exist (no vacuous pass)
     compiled = {name for name, (n, _) in counts.items() if n}
     assert compiled >= APF_LOOPS
-    assert counts["network.dense"][0] == 0  # a learned policy's kernel: not the APF's
+    assert counts["network._dense_into"][0] == 0  # a learned policy's kernel: not the APF's
     parallel = {name for name, (n, is_parallel) in counts.items() if n and is_parallel}
     assert not parallel, f"parallel loops compiled by a one-thread process: {parallel}"
 

@@ -955,3 +955,27 @@ def test_noise_threads_take_the_process_share(monkeypatch):
     assert len(calls) == 3 and noise._pool[0]._max_workers == 2
     noise._pool[0].shutdown()
     assert cores.core_share({"UASEP_WORKERS": "2"}, cores=2) == 1
+
+
+def test_every_kernel_compiles_without_reference_counting():
+    """Each compiled loop allocates nothing and runs without numba's reference counts.
+
+    With them, every array a loop passes to a helper or slices pays atomic increments and
+    decrements: the observations at 4096 environments took 4.8x as long (docs/speed.md).
+    A kernel that needs to allocate gets its arrays from its Python wrapper instead.
+    """
+    import inspect
+
+    import numba
+
+    from uasep_env import _kernels
+
+    loops = {}
+    for module in sorted(_kernels.__all__):
+        owner = sys.modules[getattr(_kernels, module).__module__]
+        for name, value in inspect.getmembers(owner):
+            if isinstance(value, numba.core.registry.CPUDispatcher):
+                loops[f"{owner.__name__}.{name}"] = value
+    assert len(loops) >= 30, sorted(loops)  # every module's loops were found
+    counted = sorted(name for name, fn in loops.items() if fn.targetoptions.get("_nrt", True))
+    assert counted == []

@@ -8,7 +8,11 @@ import os
 import numba
 import numpy as np
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+# No reference counting (``_nrt``): every kernel writes into arrays it is given and creates
+# none (its wrapper allocates), and numba's atomic reference counts on each array a loop
+# passes around cost more than the arithmetic (the observations ran 4.8x slower with them
+# at 4096 environments; docs/speed.md).
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "_nrt": False}
 
 #: Points per call above which the loop is spread over the cores (thread start-up costs).
 PARALLEL_MIN = 2048

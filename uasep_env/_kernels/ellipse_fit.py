@@ -80,10 +80,10 @@ def _fit_rows(
     lat_out: np.ndarray,
     lon_out: np.ndarray,
     ok_out: np.ndarray,
+    rho: np.ndarray,
+    delta: np.ndarray,
 ) -> None:
     k = cos.shape[1]
-    rho = np.empty(k)
-    delta = np.empty(k)
     g = (math.sqrt(5.0) - 1.0) / 2.0
     for i in range(cos.shape[0]):
         ci, c2i, s2i, d2i, hi = cos[i], c2[i], s2[i], d2[i], h[i]
@@ -166,7 +166,8 @@ def fit_ellipse(
     rows = cos.shape[0]
     c_out, lat_out, lon_out = np.empty(rows), np.empty(rows), np.empty(rows)
     ok = np.empty(rows, dtype=np.bool_)
+    scratch = np.empty((2, cos.shape[1]))  # the margins' rho and delta of one row
     inputs = (cos, c2, s2, d2, h, c, half, lat, lon, r, eps_abs)
     _fit_rows(*(frozen(np.asarray(a, dtype=np.float64)) for a in inputs), golden_iters,
-              c_out, lat_out, lon_out, ok)  # fmt: skip
+              c_out, lat_out, lon_out, ok, scratch[0], scratch[1])  # fmt: skip
     return c_out, lat_out, lon_out, ok

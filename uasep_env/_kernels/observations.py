@@ -19,18 +19,18 @@ _N_CLASSES = 5
 # (``inline="always"``): dozens of IR copies made the observations take ~30 s of an
 # evaluation's ~43 s to compile; as calls they run at the same speed (docs/speed.md).
 @numba.njit(**_JIT)
-def _put(out, e, i, col, value, clip):  # noqa: ANN001, ANN202
+def _put(row, col, value, clip):  # noqa: ANN001, ANN202
     """Store in ``out``'s dtype, then clip in it (the numpy form's cast-then-``np.clip``).
 
     ``clip`` has ``out``'s dtype: float32 for the observations, float64 when a test reads
     the numbers before the cast.
     """
-    out[e, i, col] = value
-    v = out[e, i, col]
+    row[col] = value
+    v = row[col]
     if v < -clip:
-        out[e, i, col] = -clip
+        row[col] = -clip
     elif v > clip:
-        out[e, i, col] = clip
+        row[col] = clip
 
 
 @numba.njit(**_JIT)
@@ -82,19 +82,19 @@ def _observe_env(e, x, scales, limit, cols, out):  # noqa: ANN001, ANN202
 
 
 @numba.njit(**_JIT)
-def _put3(out, e, i, col, v0, v1, v2, clip):  # noqa: ANN001, ANN202
+def _put3(row, col, v0, v1, v2, clip):  # noqa: ANN001, ANN202
     """A 3-vector feature at ``col``, unless the layout lacks it (``col < 0``)."""
     if col >= 0:
-        _put(out, e, i, col, v0, clip)
-        _put(out, e, i, col + 1, v1, clip)
-        _put(out, e, i, col + 2, v2, clip)
+        _put(row, col, v0, clip)
+        _put(row, col + 1, v1, clip)
+        _put(row, col + 2, v2, clip)
 
 
 @numba.njit(**_JIT)
-def _put1(out, e, i, col, v, clip):  # noqa: ANN001, ANN202
+def _put1(row, col, v, clip):  # noqa: ANN001, ANN202
     """A scalar feature at ``col``, unless the layout lacks it (``col < 0``)."""
     if col >= 0:
-        _put(out, e, i, col, v, clip)
+        _put(row, col, v, clip)
 
 
 @numba.njit(inline="always", **_JIT)
@@ -105,6 +105,7 @@ def _observe_agent(e, i, frame, x, scales, clip, cols, out):  # noqa: ANN001, AN
     when that is -1.
     """
     pos, vel = x.pos, x.vel
+    row = out[e, i]
     n = pos.shape[1]
     m = x.region.shape[2]
     ps, vs, acs, sensing = scales[0], scales[1], scales[2], scales[3]
@@ -117,22 +118,20 @@ def _observe_agent(e, i, frame, x, scales, clip, cols, out):  # noqa: ANN001, AN
     slot1 = c1 + ((ct * q0 + (cp * st) * q1) + (-st * sp) * q2)
     slot2 = c2 + ((0.0 * q0 + (-sp) * q1) + (-cp) * q2)
     wp_dist = _norm3(x.final_wp[e, 0] - c0, x.final_wp[e, 1] - c1, x.final_wp[e, 2] - c2)
-    _put3(
-        out, e, i, cols.slot_offset, (slot0 - p0) / ps, (slot1 - p1) / ps, (slot2 - p2) / ps, clip
-    )
+    _put3(row, cols.slot_offset, (slot0 - p0) / ps, (slot1 - p1) / ps, (slot2 - p2) / ps, clip)
     pp, pv, ac, wd = x.plan_pos, x.plan_vel, x.accel_cmd, x.wp_dir
     v = ((pp[e, i, 0] - p0) / ps, (pp[e, i, 1] - p1) / ps, (pp[e, i, 2] - p2) / ps)
-    _put3(out, e, i, cols.plan_offset, v[0], v[1], v[2], clip)
-    _put3(out, e, i, cols.velocity, vel[e, i, 0] / vs, vel[e, i, 1] / vs, vel[e, i, 2] / vs, clip)
-    _put3(out, e, i, cols.plan_velocity, pv[e, i, 0] / vs, pv[e, i, 1] / vs, pv[e, i, 2] / vs, clip)
-    _put3(out, e, i, cols.formation_velocity, mv0 / vs, mv1 / vs, mv2 / vs, clip)
+    _put3(row, cols.plan_offset, v[0], v[1], v[2], clip)
+    _put3(row, cols.velocity, vel[e, i, 0] / vs, vel[e, i, 1] / vs, vel[e, i, 2] / vs, clip)
+    _put3(row, cols.plan_velocity, pv[e, i, 0] / vs, pv[e, i, 1] / vs, pv[e, i, 2] / vs, clip)
+    _put3(row, cols.formation_velocity, mv0 / vs, mv1 / vs, mv2 / vs, clip)
     pc = x.plan_center
     v = ((pc[e, 0] - c0) / ps, (pc[e, 1] - c1) / ps, (pc[e, 2] - c2) / ps)
-    _put3(out, e, i, cols.goal_offset, v[0], v[1], v[2], clip)
-    _put3(out, e, i, cols.waypoint_dir, wd[e, 0], wd[e, 1], wd[e, 2], clip)
-    _put1(out, e, i, cols.waypoint_dist, wp_dist / ps, clip)
-    _put3(out, e, i, cols.last_accel, ac[e, i, 0] / acs, ac[e, i, 1] / acs, ac[e, i, 2] / acs, clip)
-    _put1(out, e, i, cols.progress, x.progress[e], clip)
+    _put3(row, cols.goal_offset, v[0], v[1], v[2], clip)
+    _put3(row, cols.waypoint_dir, wd[e, 0], wd[e, 1], wd[e, 2], clip)
+    _put1(row, cols.waypoint_dist, wp_dist / ps, clip)
+    _put3(row, cols.last_accel, ac[e, i, 0] / acs, ac[e, i, 1] / acs, ac[e, i, 2] / acs, clip)
+    _put1(row, cols.progress, x.progress[e], clip)
     col = cols.self_dim
 
     # Nearest UAVs: the k smallest (distance, index) pairs in order, i.e. a stable argsort.
@@ -152,10 +151,10 @@ def _observe_agent(e, i, frame, x, scales, clip, cols, out):  # noqa: ANN001, AN
         c = col + s * cols.uav_width
         if best_d <= sensing:
             j = best_j
-            _uav_features(out, e, i, c, cols, x, j, best_d, ps, vs, clip)
+            _uav_features(row, e, i, c, cols, x, j, best_d, ps, vs, clip)
         else:
             for a in range(cols.uav_width):
-                out[e, i, c + a] = 0.0
+                row[c + a] = 0.0
     col += cols.k_uavs * cols.uav_width
 
     # Nearest obstacles by distance to their reachable region (stable, like the UAVs).
@@ -174,66 +173,66 @@ def _observe_agent(e, i, frame, x, scales, clip, cols, out):  # noqa: ANN001, AN
         prev_d, prev_j = best_d, best_j
         c = col + s * w
         if math.isfinite(best_d):
-            _obstacle_features(out, e, i, c, cols, x, best_j, ps, vs, clip)
+            _obstacle_features(row, e, i, c, cols, x, best_j, ps, vs, clip)
         else:
             for a in range(w):
-                out[e, i, c + a] = 0.0
+                row[c + a] = 0.0
     for a in range(col + kk * w, col + k_o * w):
-        out[e, i, a] = 0.0
+        row[a] = 0.0
 
 
 @numba.njit(inline="always", **_JIT)
-def _uav_features(out, e, i, c, cols, x, j, dist, ps, vs, clip):  # noqa: ANN001, ANN202
+def _uav_features(row, e, i, c, cols, x, j, dist, ps, vs, clip):  # noqa: ANN001, ANN202
     """UAV ``j`` as UAV ``i`` observes it, into the block at column ``c`` (it is present)."""
     pos, vel = x.pos, x.vel
     r = ((pos[e, j, 0] - pos[e, i, 0]) / ps, (pos[e, j, 1] - pos[e, i, 1]) / ps,
          (pos[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
     if cols.uav_rel_pos >= 0:
-        _put3(out, e, i, c + cols.uav_rel_pos, r[0], r[1], r[2], clip)
+        _put3(row, c + cols.uav_rel_pos, r[0], r[1], r[2], clip)
     r = ((vel[e, j, 0] - vel[e, i, 0]) / vs, (vel[e, j, 1] - vel[e, i, 1]) / vs,
          (vel[e, j, 2] - vel[e, i, 2]) / vs)  # fmt: skip
     if cols.uav_rel_vel >= 0:
-        _put3(out, e, i, c + cols.uav_rel_vel, r[0], r[1], r[2], clip)
+        _put3(row, c + cols.uav_rel_vel, r[0], r[1], r[2], clip)
     if cols.uav_dist >= 0:
-        _put(out, e, i, c + cols.uav_dist, dist / ps, clip)
+        _put(row, c + cols.uav_dist, dist / ps, clip)
     if cols.uav_mask >= 0:
-        _put(out, e, i, c + cols.uav_mask, 1.0, clip)
+        _put(row, c + cols.uav_mask, 1.0, clip)
 
 
 @numba.njit(inline="always", **_JIT)
-def _obstacle_features(out, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001, ANN202
+def _obstacle_features(row, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001, ANN202
     """Obstacle ``j`` as UAV ``i`` observes it, into the block at column ``c`` (present)."""
     pos, vel = x.pos, x.vel
     if cols.obstacle_center >= 0:
         pc = x.pred_center
         r = ((pc[e, j, 0] - pos[e, i, 0]) / ps, (pc[e, j, 1] - pos[e, i, 1]) / ps,
              (pc[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
-        _put3(out, e, i, c + cols.obstacle_center, r[0], r[1], r[2], clip)
+        _put3(row, c + cols.obstacle_center, r[0], r[1], r[2], clip)
     if cols.obstacle_axes >= 0:
         ax = x.pred_axes
         r = (ax[e, j, 0] / ps, ax[e, j, 1] / ps, ax[e, j, 2] / ps)
-        _put3(out, e, i, c + cols.obstacle_axes, r[0], r[1], r[2], clip)
+        _put3(row, c + cols.obstacle_axes, r[0], r[1], r[2], clip)
     if cols.obstacle_heading_cs >= 0:
-        _put(out, e, i, c + cols.obstacle_heading_cs, x.cos_h[e, j], clip)
-        _put(out, e, i, c + cols.obstacle_heading_cs + 1, x.sin_h[e, j], clip)
+        _put(row, c + cols.obstacle_heading_cs, x.cos_h[e, j], clip)
+        _put(row, c + cols.obstacle_heading_cs + 1, x.sin_h[e, j], clip)
     if cols.obstacle_rel_pos >= 0:
         op = x.obstacle_pos
         r = ((op[e, j, 0] - pos[e, i, 0]) / ps, (op[e, j, 1] - pos[e, i, 1]) / ps,
              (op[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
-        _put3(out, e, i, c + cols.obstacle_rel_pos, r[0], r[1], r[2], clip)
+        _put3(row, c + cols.obstacle_rel_pos, r[0], r[1], r[2], clip)
     if cols.obstacle_rel_vel >= 0:
         ov = x.obstacle_vel
         r = ((ov[e, j, 0] - vel[e, i, 0]) / vs, (ov[e, j, 1] - vel[e, i, 1]) / vs,
              (ov[e, j, 2] - vel[e, i, 2]) / vs)  # fmt: skip
-        _put3(out, e, i, c + cols.obstacle_rel_vel, r[0], r[1], r[2], clip)
+        _put3(row, c + cols.obstacle_rel_vel, r[0], r[1], r[2], clip)
     if cols.obstacle_region_dist >= 0:
-        _put(out, e, i, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
+        _put(row, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
     if cols.obstacle_mask >= 0:
-        _put(out, e, i, c + cols.obstacle_mask, 1.0, clip)
+        _put(row, c + cols.obstacle_mask, 1.0, clip)
     if cols.obstacle_class >= 0:  # one-hot of the aircraft class code
         code = x.aircraft_class[e, j]
         for a in range(_N_CLASSES):
-            _put(out, e, i, c + cols.obstacle_class + a, 1.0 if code == a else 0.0, clip)
+            _put(row, c + cols.obstacle_class + a, 1.0 if code == a else 0.0, clip)
 
 
 @numba.njit(**_JIT)
