@@ -110,3 +110,49 @@ def test_vector_env_infos_of_reset_rows_are_masked_out_and_zero():
         np.testing.assert_array_equal(infos["_" + k], ~pending, err_msg=k)
         assert not np.any(infos[k][pending]), k
     assert np.all(infos["min_uav_distance"][~pending] > 0.0)
+
+
+def test_a_reset_env_held_still_leaves_the_others_noise_their_own():
+    """The vector envs' autoreset: env 0 reset, then held still a step while the others move.
+
+    Its first measurements took a row of its noise, so it is a row ahead of the others; the
+    others still read their own rows, before and after their blocks refill, bit for bit as a
+    world without env 0 (fails when the held step hands them env 0's row).
+    """
+    cfg = make_config(scenario="random", n_obstacles=1)
+    a, b = World(cfg, 3, noise_block=8), World(cfg, 2, noise_block=8)
+    a.reset(seed=[10, 11, 12])
+    b.reset(seed=[11, 12])
+    rng = np.random.default_rng(2)
+    for k in range(20):
+        act = rng.uniform(-1.0, 1.0, (3, cfg.n_uavs, 3))
+        active = None
+        if k in (3, 12):
+            a.reset(mask=np.array([True, False, False]))
+            active = np.array([False, True, True])
+        a.step(act, active=active)
+        b.step(act[1:])
+        for name in ("uav_pos", "est_pos", "obstacle_est_pos", "pred_center"):
+            np.testing.assert_array_equal(getattr(a, name)[1:], getattr(b, name), err_msg=name)
+
+
+def test_a_partial_reset_updates_the_plan_already_computed():
+    """After a partial reset the reset rows of a plan read before it are the new episodes'.
+
+    The world updates those rows only (the vector envs' autoresets); every ``plan_*``
+    array equals the plan computed afresh, and what a caller kept before is unchanged.
+    """
+    a, _, _ = _pair()
+    kept = a.plan_pos  # computed now, before the reset
+    before = kept.copy()
+    mask = np.zeros(a.n_envs, dtype=bool)
+    mask[[2, 6, 7]] = True
+    a.reset(mask=mask)
+    got = (a.plan_center, a.plan_dir, a.plan_pos, a.plan_vel)
+    a._refresh_plan()  # stale: the next read recomputes every row
+    want = (a.plan_center, a.plan_dir, a.plan_pos, a.plan_vel)
+    for g, w, name in zip(got, want, ("center", "dir", "pos", "vel"), strict=True):
+        np.testing.assert_array_equal(g, w, err_msg=name, strict=True)
+        assert not g.flags.writeable
+    assert not np.array_equal(before[mask], got[2][mask])  # the new episodes' plans
+    np.testing.assert_array_equal(kept, before)

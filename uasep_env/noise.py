@@ -88,7 +88,8 @@ class NoiseStreams:
     def draw(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """This physics step's Gaussian noise (scaled by ``normal_std``) and uniforms.
 
-        Environments outside ``active`` consume nothing (their values are discarded).
+        Environments outside ``active`` consume nothing; their rows hold noise of some
+        other step or environment, to be discarded.
 
         Returns:
             ``(normals, uniforms)``, ``(E, K)`` and ``(E, n_uniform)``; possibly views of
@@ -112,10 +113,14 @@ class NoiseStreams:
             _run_chunked(self._refill, refill)
             self.buf_pos[refill] = 0
         at = np.minimum(self.buf_pos, self.noise_block - 1)
-        if (at == at[0]).all():
-            # Still in lockstep (a masked draw that every environment took part in): a view.
-            normals = self._normal_buf[at[0]]
-            unifs = self._unif_buf[at[0]]
+        live = at if active is None else at[active]
+        if not len(live) or (live == live[0]).all():
+            # Every environment that draws at the same place (the usual case after the
+            # vector envs' autoresets, which leave the reset ones a row ahead): a view. The
+            # others' rows hold some other step's noise, which they discard.
+            row = live[0] if len(live) else at[0]
+            normals = self._normal_buf[row]
+            unifs = self._unif_buf[row]
         else:
             rows = np.arange(self.n_envs)
             normals = self._normal_buf[at, rows]

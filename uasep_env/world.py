@@ -265,7 +265,7 @@ class World(RenamedAttributes):
         self._sense(idx, initialise=True)
         self._predict_regions(idx)
         self._update_safety(reset_rows=idx)
-        self._refresh_plan()
+        self._refresh_plan(idx, batch)
 
     # ------------------------------------------------------------------ step
     def step(self, accel_cmd: np.ndarray, active: np.ndarray | None = None) -> None:
@@ -312,12 +312,28 @@ class World(RenamedAttributes):
             self._restore(frozen)
         self._refresh_plan()
 
-    def _refresh_plan(self) -> None:
+    def _refresh_plan(
+        self, rows: np.ndarray | None = None, batch: ScenarioBatch | None = None
+    ) -> None:
         """Mark the plan stale; the next read of a ``plan_*`` attribute recomputes it.
 
-        Lazy, so that a reset followed by a step (the vector envs) evaluates it once.
+        Lazy, so that a reset followed by a step (the vector envs) evaluates it once. After a
+        partial reset whose scenarios brought their plans (``batch``), a plan already
+        computed gets the reset ``rows`` at time 0 instead (the same numbers, row by row):
+        the vector envs' autoresets would otherwise recompute every environment's.
         """
-        self._plan_now: tuple[np.ndarray, ...] | None = None
+        known = getattr(self, "_plan_now", None)
+        if rows is None or known is None or batch is None or batch.plan_offsets is None:
+            self._plan_now: tuple[np.ndarray, ...] | None = None
+            return
+        fresh = planned_state(batch.plan, np.zeros(len(rows)), batch.plan_offsets)
+        arrays = []
+        for old, new in zip(known, fresh, strict=True):
+            arr = old.copy()  # a copy: what a caller kept stays as it was
+            arr[rows] = new
+            arr.flags.writeable = False
+            arrays.append(arr)
+        self._plan_now = tuple(arrays)
 
     def _plan_arrays(self) -> tuple[np.ndarray, ...]:
         """``(center, direction, pos, vel)`` of the plan now, computed once per step.
