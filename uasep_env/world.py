@@ -323,7 +323,8 @@ class World(RenamedAttributes):
         the vector envs' autoresets would otherwise recompute every environment's.
         """
         known = getattr(self, "_plan_now", None)
-        if rows is None or known is None or batch is None or batch.plan_offsets is None:
+        made = batch is not None and batch.plan is not None and batch.plan_offsets is not None
+        if rows is None or known is None or not made:
             self._plan_now: tuple[np.ndarray, ...] | None = None
             return
         fresh = planned_state(batch.plan, np.zeros(len(rows)), batch.plan_offsets)
