@@ -55,6 +55,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 CHECKPOINTS = ROOT / "baselines" / "checkpoints"
 
@@ -369,10 +371,42 @@ def run(
         },
         "checks": checks,
         "recipe_args": asdict(args),
-        "machine": {"cpus": os.cpu_count(), "affinity": len(os.sched_getaffinity(0)),
-                    "processor": platform.processor() or platform.machine(),
-                    "python": platform.python_version(), "torch": torch.__version__},
-    }  # fmt: skip
+        "machine": machine(torch.__version__),
+    }
+
+
+def cpu_model(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The processor's model name (Linux's ``/proc/cpuinfo``), else Python's best guess.
+
+    ``platform.processor()`` says ``x86_64`` on Linux, which tells two machines apart no
+    better than nothing: speed figures are only comparable on the same model.
+    """
+    try:
+        for line in cpuinfo.read_text(errors="replace").splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and value.strip():
+                return value.strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def machine(torch_version: str) -> dict[str, Any]:
+    """Where a record was measured: the cores, the processor and the versions that set speed."""
+    try:
+        from numba import __version__ as numba_version
+    except ImportError:  # numba is optional (the numpy references run)
+        numba_version = None
+    return {
+        "cpus": os.cpu_count(),
+        "affinity": len(os.sched_getaffinity(0)),
+        "processor": platform.processor() or platform.machine(),
+        "cpu_model": cpu_model(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "numba": numba_version,
+        "torch": torch_version,
+    }
 
 
 #: The held-out figures recorded, with their intervals.

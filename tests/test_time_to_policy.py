@@ -5,6 +5,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("stable_baselines3")
@@ -63,6 +64,7 @@ def test_a_run_stops_at_the_bar_and_records_where_the_time_went(
     assert rec["reached"] == any(hits)
     t = rec["time_s"]
     assert t["env"] > 0 and t["learner"] > 0 and t["rollout_other"] > 0 and t["evaluation"] > 0
+    assert rec["machine"] == ttp.machine(rec["machine"]["torch"])  # where it was measured
     # The checks are evaluation time, not training time.
     assert t["env"] + t["rollout_other"] + t["learner"] <= t["training"] + 1e-6
     _check_held_out(out, rec)
@@ -165,3 +167,15 @@ def test_held_out_figures_are_played_on_the_same_encounters():
             assert apf_rows[0]["loss_of_separation"]["ci_high"] == pytest.approx(
                 apf["episode.loss_of_separation"]["ci_high"]
             )
+
+
+def test_the_machine_is_named_by_its_processor_model(tmp_path):
+    """Speed figures compare on one processor model: the record names it, not "x86_64"."""
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nvendor_id\t: GenuineIntel\n"
+                    "model name\t: Intel(R) Xeon(R) Processor\nflags\t\t: fpu\n")  # fmt: skip
+    assert ttp.cpu_model(info) == "Intel(R) Xeon(R) Processor"
+    info.write_text("processor\t: 0\n")  # no model: Python's guess, never empty
+    assert ttp.cpu_model(info) and ttp.cpu_model(tmp_path / "missing")
+    got = ttp.machine("x")
+    assert got["cpu_model"] == ttp.cpu_model() and got["numpy"] == np.__version__
