@@ -265,7 +265,7 @@ class World(RenamedAttributes):
         self._sense(idx, initialise=True)
         self._predict_regions(idx)
         self._update_safety(reset_rows=idx)
-        self._refresh_plan(idx, batch)
+        self._reset_plan_rows(idx, batch)
 
     # ------------------------------------------------------------------ step
     def step(self, accel_cmd: np.ndarray, active: np.ndarray | None = None) -> None:
@@ -312,24 +312,26 @@ class World(RenamedAttributes):
             self._restore(frozen)
         self._refresh_plan()
 
-    def _refresh_plan(
-        self, rows: np.ndarray | None = None, batch: ScenarioBatch | None = None
-    ) -> None:
+    def _refresh_plan(self) -> None:
         """Mark the plan stale; the next read of a ``plan_*`` attribute recomputes it.
 
-        Lazy, so that a reset followed by a step (the vector envs) evaluates it once. After a
-        partial reset whose scenarios brought their plans (``batch``), a plan already
-        computed gets the reset ``rows`` at time 0 instead (the same numbers, row by row):
-        the vector envs' autoresets would otherwise recompute every environment's.
+        Lazy, so that a reset followed by a step (the vector envs) evaluates it once.
         """
-        known = getattr(self, "_plan_now", None)
-        made = batch is not None and batch.plan is not None and batch.plan_offsets is not None
-        if rows is None or known is None or not made:
-            self._plan_now: tuple[np.ndarray, ...] | None = None
+        self._plan_now: tuple[np.ndarray, ...] | None = None
+
+    def _reset_plan_rows(self, rows: np.ndarray, batch: ScenarioBatch) -> None:
+        """After a partial reset: the plan already computed gets the ``rows`` at time 0.
+
+        The same numbers, row by row, as recomputing every environment's plan, which the
+        vector envs' autoresets would otherwise do for a few reset rows. Marks the plan
+        stale instead when none was computed or the scenarios did not bring their plans.
+        """
+        if self._plan_now is None or batch.plan is None or batch.plan_offsets is None:
+            self._refresh_plan()
             return
         fresh = planned_state(batch.plan, np.zeros(len(rows)), batch.plan_offsets)
         arrays = []
-        for old, new in zip(known, fresh, strict=True):
+        for old, new in zip(self._plan_now, fresh, strict=True):
             arr = old.copy()  # a copy: what a caller kept stays as it was
             arr[rows] = new
             arr.flags.writeable = False
