@@ -28,10 +28,9 @@ APF_LOOPS = {
     "plan._plan_rows",
     "observations._observe_serial",
     "rewards._rewards_serial",
-    "physics._integrate",  # the physics step
-    "physics._commands",
+    "physics._advance",  # the physics step
     "physics._move",
-    "physics._correct",
+    "physics._sense",
     "ellipse_fit._fit_rows",  # the obstacles' reachable ellipses, at reset
 }
 

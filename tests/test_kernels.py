@@ -20,6 +20,7 @@ from uasep_env import (  # noqa: F401
     geometry,
     observation,
     obstacles,
+    physics_step,
     reachable,
     rewards,
 )
@@ -440,6 +441,41 @@ def _case_kalman():
              meas_vel[:, ::2], count, kf.gains, kf.dt)]  # not contiguous: written back  # fmt: skip
 
 
+class _ShiftReplay:
+    """A stand-in for recorded tracks: moves obstacle slot 0 of the even worlds after the step."""
+
+    def step(self, obs, time):
+        obs.pos[::2, 0] += time[::2, None] * 0.5
+        obs.heading[::2, 0] = -obs.heading[::2, 0]
+
+
+def _case_physics():
+    """A world's arrays after a few steps, the obstacles on the model's edges, fresh noise."""
+    w = _world_case().world
+    ob, uniforms, time = _obstacle_case()
+    e, n, m = w.n_envs, w.n_uavs, w.n_obstacles
+    rng = np.random.default_rng(27)
+    arrays = physics_step.PhysicsArrays(
+        time, rng.integers(0, 2 * len(w._uav_kf.gains), size=e),  # before and after convergence
+        *(getattr(w, k).copy() for k in physics_step.PhysicsArrays._fields[2:10]),
+        rng.uniform(0.0, 40.0, size=(e, n)), rng.uniform(0.0, 400.0, size=(e, n)),
+    )  # fmt: skip
+    arrays.accel_cmd[...] = rng.normal(0.0, 6.0, size=(e, n, 3))  # beyond the bound on some axes
+    arrays.uav_vel[0] = 3.0 * w.config.uav.max_speed  # beyond the speed limit: scaled back
+    arrays.min_uav_dist[1] = np.inf  # nothing yet this step
+    normals = rng.normal(0.0, 0.7, size=(e, 9 * n + 6 * m))
+    u = uniforms.reshape(e, -1)
+    cfg = w.config
+    params = physics_step.PhysicsParams(
+        cfg.dt, cfg.uav.max_speed, cfg.uav.max_accel, True, w._uav_kf.gains, w._obstacle_kf.gains
+    )
+    steady = arrays._replace(kf_count=np.full(e, 5 * len(w._uav_kf.gains)))
+    return [(arrays, ob, normals, u, params),
+            (arrays, ob, normals, u, params._replace(kalman=False)),  # measurements as estimates
+            (steady, ob, normals, u, params),  # every track converged: the last gain
+            (arrays, ob, normals, u, params, _ShiftReplay())]  # replayed slots moved  # fmt: skip
+
+
 #: The cases of each compiled twin; a new twin without cases fails the registry test.
 TWIN_CASES = {
     "nearest_on_ellipsoids": _case_nearest,
@@ -454,6 +490,7 @@ TWIN_CASES = {
     "obstacle_step": _case_obstacles,
     "kalman_correct": _case_kalman,
     "fit_ellipse": _case_fit_ellipse,
+    "physics_step": _case_physics,
 }
 
 
@@ -462,6 +499,9 @@ IN_PLACE = {
     "assemble_observations": lambda args: args[2:],
     "kalman_correct": lambda args: args[:2],
     "obstacle_step": lambda args: (args[0].pos, args[0].heading, args[0].climb_rate),
+    "physics_step": lambda args: (
+        *(a for a in args[0] if a.dtype == np.float64), args[1].pos, args[1].heading
+    ),
 }
 
 

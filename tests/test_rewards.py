@@ -26,7 +26,7 @@ def _terms_with_uav2_at(core, pos, cmd=None, prev=None):
         w.accel_cmd[0, 2] = cmd
     if prev is not None:
         w.prev_accel_cmd[0, 2] = prev
-    w._update_safety(reset_rows=np.arange(1))
+    w._start_safety(np.arange(1))
     _, terms = compute_rewards(w, core.config.reward)
     return {k: v[0, 2] for k, v in terms.items()}
 

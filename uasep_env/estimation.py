@@ -21,7 +21,7 @@ import numpy as np
 
 from uasep_env._numba import compiled_twin
 
-__all__ = ["KalmanModel", "kalman_correct"]
+__all__ = ["KalmanModel", "gain_table", "kalman_correct"]
 
 
 class KalmanModel:
@@ -70,8 +70,6 @@ class KalmanModel:
             if converged:
                 break
         self.gains = np.array(gains)
-        # The converged gain alone: a table whose every index gives it.
-        self._steady_gains = self.gains[-1:].copy()
         self.covariances = np.array(covs)
 
     def update(
@@ -88,14 +86,25 @@ class KalmanModel:
         The arguments are :func:`kalman_correct`'s first six (``count`` >= 1 here); this
         model supplies the gain table and the time step.
         """
-        # Every track converged (the usual case): the last gain alone, no gather.
-        converged = count.min() >= len(self.gains) - 1
-        gains = self._steady_gains if converged else self.gains
+        gains = gain_table(self.gains, count)
         kalman_correct(est_pos, est_vel, accel, meas_pos, meas_vel, count, gains, self.dt)
 
     def steady_state_position_std(self) -> float:
         """Posterior position standard deviation once the filter has converged (m)."""
         return float(np.sqrt(max(0.0, self.covariances[-1, 0, 0])))
+
+
+def gain_table(gains: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """The gains :func:`kalman_correct` needs for tracks at ``count`` updates.
+
+    Once every track has converged (the usual case), the last gain alone: a table whose
+    every index gives it, which :func:`kalman_correct` applies without a gather.
+
+    Args:
+        gains: ``(K, 2, 2)`` the gain table (:attr:`KalmanModel.gains`).
+        count: ``(n_envs,)`` updates since each env's tracks started.
+    """
+    return gains[-1:] if count.min() >= len(gains) - 1 else gains
 
 
 @compiled_twin("kalman_correct")

@@ -44,12 +44,13 @@ from uasep_env import reachable
 from uasep_env._deprecation import RENAMED_WORLD_ATTRIBUTES, RenamedAttributes
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_positive_int, check_seed, is_int
-from uasep_env.dynamics import measure, step_double_integrator
+from uasep_env.dynamics import measure
 from uasep_env.estimation import KalmanModel
 from uasep_env.formation import PlannedTrajectory, planned_state, segment_offsets
 from uasep_env.geometry import nearest_separations, obstacle_distances, uav_distances
 from uasep_env.noise import NoiseStreams
-from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
+from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity
+from uasep_env.physics_step import PhysicsArrays, PhysicsParams, physics_step
 from uasep_env.reachable import calibrated
 from uasep_env.replay import ReplayTracks
 from uasep_env.scenarios import N_WAYPOINTS, place_obstacles
@@ -166,6 +167,10 @@ class World(RenamedAttributes):
             nz.obstacle_position_std,
             nz.obstacle_velocity_std,
         )
+        self._physics = PhysicsParams(
+            cfg.dt, cfg.uav.max_speed, cfg.uav.max_accel, cfg.prediction.kalman,
+            self._uav_kf.gains, self._obstacle_kf.gains,
+        )  # fmt: skip
         self._has_reset = False
 
     # ------------------------------------------------------------------ reset
@@ -262,9 +267,9 @@ class World(RenamedAttributes):
                 self.replay.start(ob, mask, [batch.spec(k) for k in range(len(batch))])
         # First measurements start the tracks. Only the reset rows are measured, predicted
         # and checked: a partial reset's cost should not grow with the batch.
-        self._sense(idx, initialise=True)
+        self._sense(idx)
         self._predict_regions(idx)
-        self._update_safety(reset_rows=idx)
+        self._start_safety(idx)
         self._reset_plan_rows(idx, batch)
 
     # ------------------------------------------------------------------ step
@@ -410,67 +415,34 @@ class World(RenamedAttributes):
             getattr(self.obstacles, name)[rows] = snap["obstacles." + name]
 
     def _physics_step(self, active: np.ndarray | None = None) -> None:
-        cfg = self.config
-        n, m = self.n_uavs, self.n_obstacles
         normals, unifs = self._noise.draw(active)
-        acc_noise = normals[:, : n * 3].reshape(self.n_envs, n, 3)
-        applied = step_double_integrator(
-            self.uav_pos,
-            self.uav_vel,
-            self.accel_cmd,
-            acc_noise,
-            cfg.dt,
-            cfg.uav.max_speed,
-            cfg.uav.max_accel,
-        )
-        self.uav_acc[...] = applied
-        if m:
-            step_obstacles(
-                self.obstacles, unifs.reshape(self.n_envs, m, N_UNIFORMS), cfg.dt, self.time
-            )
-            if self.replay is not None:
-                self.replay.step(self.obstacles, self.time)
-        self.time += cfg.dt
-        self._sense(None, initialise=False, normals=normals, known_accel=applied - acc_noise)
-        self._update_safety()
+        physics_step(self._physics_arrays(), self.obstacles, normals, unifs, self._physics,
+                     self.replay)  # fmt: skip
+
+    def _physics_arrays(self) -> PhysicsArrays:
+        return PhysicsArrays(
+            self.time, self._kf_count, self.uav_pos, self.uav_vel, self.uav_acc, self.accel_cmd,
+            self.est_pos, self.est_vel, self.obstacle_est_pos, self.obstacle_est_vel,
+            self.min_uav_dist, self.min_obstacle_dist,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ sensing
-    def _sense(
-        self,
-        rows: np.ndarray | None,
-        *,
-        initialise: bool,
-        normals: np.ndarray | None = None,
-        known_accel: np.ndarray | None = None,
-    ) -> None:
-        cfg = self.config
+    def _sense(self, rows: np.ndarray) -> None:
+        """The first measurements of the environments ``rows`` start their tracks."""
         n, m = self.n_uavs, self.n_obstacles
-        # The environments measured: all, or the index array ``rows`` (a partial reset).
-        r = slice(None) if rows is None else rows
-        if normals is None:
-            # Initial measurements use the next noise draw too (consumed only by those envs).
-            z, _ = self._noise.draw_rows(rows)
-        else:
-            z = normals[r]
+        # Initial measurements use the next noise draw too (consumed only by those envs).
+        z, _ = self._noise.draw_rows(rows)
         z_meas = z[:, n * 3 : n * 9].reshape(-1, n, 6)
-        mp, mv = measure(self.uav_pos[r], self.uav_vel[r], z_meas[..., :3], z_meas[..., 3:])
+        mp, mv = measure(self.uav_pos[rows], self.uav_vel[rows], z_meas[..., :3], z_meas[..., 3:])
+        self.est_pos[rows], self.est_vel[rows] = mp, mv
         if m:
             obstacle_vel = obstacle_velocity(self.obstacles, rows)
             z_obs = z[:, n * 9 :].reshape(-1, m, 6)
-            omp, omv = measure(self.obstacles.pos[r], obstacle_vel, z_obs[..., :3], z_obs[..., 3:])
-        if initialise or not cfg.prediction.kalman:
-            self.est_pos[r], self.est_vel[r] = mp, mv
-            if m:
-                self.obstacle_est_pos[r], self.obstacle_est_vel[r] = omp, omv
-            if initialise:
-                self._kf_count[r] = 0
-            return
-        self._kf_count += 1
-        self._uav_kf.update(self.est_pos, self.est_vel, known_accel, mp, mv, self._kf_count)
-        if m:
-            self._obstacle_kf.update(
-                self.obstacle_est_pos, self.obstacle_est_vel, None, omp, omv, self._kf_count
+            omp, omv = measure(
+                self.obstacles.pos[rows], obstacle_vel, z_obs[..., :3], z_obs[..., 3:]
             )
+            self.obstacle_est_pos[rows], self.obstacle_est_vel[rows] = omp, omv
+        self._kf_count[rows] = 0
 
     # ------------------------------------------------------------------ prediction
     def _predict_regions(self, rows: np.ndarray | None = None) -> None:
@@ -511,18 +483,12 @@ class World(RenamedAttributes):
         self.pred_center[r] = center
 
     # ------------------------------------------------------------------ safety
-    def _update_safety(self, reset_rows: np.ndarray | None = None) -> None:
-        if reset_rows is not None:
-            ob = self.obstacles
-            d_uav, d_obstacle = nearest_separations(
-                self.uav_pos[reset_rows], ob.pos[reset_rows], ob.active[reset_rows]
-            )
-            self.min_uav_dist[reset_rows] = d_uav
-            self.min_obstacle_dist[reset_rows] = d_obstacle
-        else:
-            d_uav, d_obstacle = self.separations()
-            np.minimum(self.min_uav_dist, d_uav, out=self.min_uav_dist)
-            np.minimum(self.min_obstacle_dist, d_obstacle, out=self.min_obstacle_dist)
+    def _start_safety(self, rows: np.ndarray) -> None:
+        """The separations of the environments ``rows`` at their reset."""
+        ob = self.obstacles
+        d_uav, d_obstacle = nearest_separations(self.uav_pos[rows], ob.pos[rows], ob.active[rows])
+        self.min_uav_dist[rows] = d_uav
+        self.min_obstacle_dist[rows] = d_obstacle
 
     # ------------------------------------------------------------------ queries
     def separations(self) -> tuple[np.ndarray, np.ndarray]:

@@ -19,8 +19,9 @@ kernel receives as keyword arguments. These modules import nothing else of the p
 * :func:`plan_now` -- :func:`uasep_env.formation.planned_state`;
 * :func:`double_integrator` -- :func:`uasep_env.dynamics.step_double_integrator`,
   :func:`obstacle_step` -- :func:`uasep_env.obstacles.step_obstacles` and
-  :func:`kalman_correct` -- :func:`uasep_env.estimation.kalman_correct` (the physics step;
-  these write the world's arrays in place);
+  :func:`kalman_correct` -- :func:`uasep_env.estimation.kalman_correct`, and the whole
+  physics step they make with the measurements and separations, :func:`physics_step` --
+  :func:`uasep_env.physics_step.physics_step` (these write the world's arrays in place);
 * :func:`fit_ellipse` -- :func:`uasep_env.reachable.fit._fit_certified` (the enclosing
   ellipse's centre search, axes and certificate);
 * :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
@@ -37,7 +38,12 @@ from uasep_env._kernels.ellipsoids import (
 )
 from uasep_env._kernels.network import dense
 from uasep_env._kernels.observations import assemble_observations
-from uasep_env._kernels.physics import double_integrator, kalman_correct, obstacle_step
+from uasep_env._kernels.physics import (
+    double_integrator,
+    kalman_correct,
+    obstacle_step,
+    physics_step,
+)
 from uasep_env._kernels.plan import plan_now
 from uasep_env._kernels.rewards import reward_terms
 from uasep_env._kernels.separations import separations
@@ -51,6 +57,7 @@ __all__ = [
     "nearest_on_ellipsoids",
     "obstacle_step",
     "pairwise_distances",
+    "physics_step",
     "plan_now",
     "region_distances",
     "reward_terms",

@@ -25,6 +25,7 @@ import numba
 import numpy as np
 
 from uasep_env._kernels.common import _JIT, _sq3
+from uasep_env._kernels.separations import _nearest
 
 
 @numba.njit(inline="always", **_JIT)
@@ -45,11 +46,23 @@ def _writable(a: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- double integrator
+@numba.njit(inline="always", **_JIT)
+def _speed_limited(v0, v1, v2, a0, a1, a2, dt, max_speed):  # noqa: ANN001, ANN202
+    """The new velocity and the applied acceleration under the speed limit (eq. 4)."""
+    n0 = v0 + dt * a0
+    n1 = v1 + dt * a1
+    n2 = v2 + dt * a2
+    speed2 = _sq3(n0, n1, n2)
+    if speed2 > max_speed * max_speed:
+        scale = (max_speed * (1.0 - 1e-12)) / math.sqrt(_maximum(speed2, 1e-300))
+        n0, n1, n2 = n0 * scale, n1 * scale, n2 * scale
+        a0, a1, a2 = (n0 - v0) / dt, (n1 - v1) / dt, (n2 - v2) / dt
+    return n0, n1, n2, a0, a1, a2
+
+
 @numba.njit(**_JIT)
 def _integrate(pos, vel, cmd, noise, has_noise, dt, max_speed, max_accel, out):  # noqa: ANN001, ANN202
     half_dt = 0.5 * dt
-    limit2 = max_speed * max_speed
-    scaled = max_speed * (1.0 - 1e-12)
     for k in range(pos.shape[0]):
         a0 = _minimum(_maximum(cmd[k, 0], -max_accel), max_accel)
         a1 = _minimum(_maximum(cmd[k, 1], -max_accel), max_accel)
@@ -59,14 +72,7 @@ def _integrate(pos, vel, cmd, noise, has_noise, dt, max_speed, max_accel, out): 
             a1 = a1 + noise[k, 1]
             a2 = a2 + noise[k, 2]
         v0, v1, v2 = vel[k, 0], vel[k, 1], vel[k, 2]
-        n0 = v0 + dt * a0
-        n1 = v1 + dt * a1
-        n2 = v2 + dt * a2
-        speed2 = _sq3(n0, n1, n2)
-        if speed2 > limit2:
-            scale = scaled / math.sqrt(_maximum(speed2, 1e-300))
-            n0, n1, n2 = n0 * scale, n1 * scale, n2 * scale
-            a0, a1, a2 = (n0 - v0) / dt, (n1 - v1) / dt, (n2 - v2) / dt
+        n0, n1, n2, a0, a1, a2 = _speed_limited(v0, v1, v2, a0, a1, a2, dt, max_speed)
         pos[k, 0] += half_dt * (v0 + n0)
         pos[k, 1] += half_dt * (v1 + n1)
         pos[k, 2] += half_dt * (v2 + n2)
@@ -180,28 +186,32 @@ def obstacle_step(obs, uniforms: np.ndarray, dt: float, time: np.ndarray | None 
 
 
 # ---------------------------------------------------------------- Kalman correction
+@numba.njit(inline="always", **_JIT)
+def _predict_correct(p, v, accel, has_accel, ip_meas, iv_meas, g, gains, dt):  # noqa: ANN001, ANN202
+    """One axis of one track: predicted with the known input, corrected with gain ``g``."""
+    if has_accel:
+        pred_p = p + dt * v + (0.5 * dt * dt) * accel
+        pred_v = v + dt * accel
+    else:
+        pred_p = p + dt * v
+        pred_v = v
+    ip = ip_meas - pred_p
+    iv = iv_meas - pred_v
+    return (pred_p + gains[g, 0, 0] * ip + gains[g, 0, 1] * iv,
+            pred_v + gains[g, 1, 0] * ip + gains[g, 1, 1] * iv)  # fmt: skip
+
+
 @numba.njit(**_JIT)
 def _correct(est_pos, est_vel, accel, has_accel, meas_pos, meas_vel, count, gains, dt):  # noqa: ANN001, ANN202
     """Predict with the known input and correct with the measurement, per track and axis."""
-    c = 0.5 * dt * dt
     last = gains.shape[0] - 1
-    per_env = est_pos.shape[1]
     for e in range(est_pos.shape[0]):
         g = min(count[e], last)
-        k00, k01, k10, k11 = gains[g, 0, 0], gains[g, 0, 1], gains[g, 1, 0], gains[g, 1, 1]
-        for i in range(per_env):
+        for i in range(est_pos.shape[1]):
             for a in range(3):
-                p, v = est_pos[e, i, a], est_vel[e, i, a]
-                if has_accel:
-                    pred_p = p + dt * v + c * accel[e, i, a]
-                    pred_v = v + dt * accel[e, i, a]
-                else:
-                    pred_p = p + dt * v
-                    pred_v = v
-                ip = meas_pos[e, i, a] - pred_p
-                iv = meas_vel[e, i, a] - pred_v
-                est_pos[e, i, a] = pred_p + k00 * ip + k01 * iv
-                est_vel[e, i, a] = pred_v + k10 * ip + k11 * iv
+                est_pos[e, i, a], est_vel[e, i, a] = _predict_correct(
+                    est_pos[e, i, a], est_vel[e, i, a], accel[e, i, a], has_accel,
+                    meas_pos[e, i, a], meas_vel[e, i, a], g, gains, dt)  # fmt: skip
 
 
 def kalman_correct(
@@ -224,3 +234,101 @@ def kalman_correct(
         est_pos[...] = p
     if v is not est_vel:
         est_vel[...] = v
+
+
+# ---------------------------------------------------------------- the whole physics step
+# fmt: off
+@numba.njit(**_JIT)
+def _advance(uav_pos, uav_vel, accel_cmd, normals, uav_acc, dt, max_speed, max_accel,  # noqa: ANN001, ANN202
+             u, switch_prob, time, hold_until, straight_prob, max_turn, max_climb, turn, climb,  # noqa: ANN001
+             pos, band, wind, ground, new_turn, new_climb, y, mid, heading):  # noqa: ANN001
+# fmt: on
+    """The UAVs' double integrator with their process noise, then the obstacles' commands."""
+    half_dt = 0.5 * dt
+    for e in range(uav_pos.shape[0]):
+        for i in range(uav_pos.shape[1]):
+            z = 3 * i  # the acceleration noise's columns
+            a0 = _minimum(_maximum(accel_cmd[e, i, 0], -max_accel), max_accel) + normals[e, z]
+            a1 = _minimum(_maximum(accel_cmd[e, i, 1], -max_accel), max_accel) + normals[e, z + 1]
+            a2 = _minimum(_maximum(accel_cmd[e, i, 2], -max_accel), max_accel) + normals[e, z + 2]
+            v0, v1, v2 = uav_vel[e, i, 0], uav_vel[e, i, 1], uav_vel[e, i, 2]
+            n0, n1, n2, a0, a1, a2 = _speed_limited(v0, v1, v2, a0, a1, a2, dt, max_speed)
+            uav_pos[e, i, 0] += half_dt * (v0 + n0)
+            uav_pos[e, i, 1] += half_dt * (v1 + n1)
+            uav_pos[e, i, 2] += half_dt * (v2 + n2)
+            uav_vel[e, i, 0], uav_vel[e, i, 1], uav_vel[e, i, 2] = n0, n1, n2
+            uav_acc[e, i, 0], uav_acc[e, i, 1], uav_acc[e, i, 2] = a0, a1, a2
+    _commands(u, switch_prob, time, True, hold_until, straight_prob, max_turn, max_climb, turn,
+              climb, pos, band, wind, ground, dt, new_turn, new_climb, y, mid, heading)  # fmt: skip
+
+
+# fmt: off
+@numba.njit(**_JIT)
+def _sense(time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals, est_pos, est_vel,  # noqa: ANN001, ANN202
+           pos, speed, climb, cos_h, sin_h, wind, active, obstacle_est_pos, obstacle_est_vel,  # noqa: ANN001
+           uav_gains, obstacle_gains, min_uav, min_obstacle):  # noqa: ANN001
+# fmt: on
+    """The clock, both tracks' measurements and Kalman steps, and the running separations."""
+    n, m = uav_pos.shape[1], pos.shape[1]
+    for e in range(uav_pos.shape[0]):
+        time[e] += dt
+        if kalman:
+            count[e] += 1
+        g = min(count[e], uav_gains.shape[0] - 1)
+        for i in range(n):
+            for a in range(3):
+                mp = uav_pos[e, i, a] + normals[e, 3 * n + 6 * i + a]
+                mv = uav_vel[e, i, a] + normals[e, 3 * n + 6 * i + 3 + a]
+                if kalman:  # the known input: the applied acceleration less its noise
+                    known = uav_acc[e, i, a] - normals[e, 3 * i + a]
+                    est_pos[e, i, a], est_vel[e, i, a] = _predict_correct(
+                        est_pos[e, i, a], est_vel[e, i, a], known, True, mp, mv, g, uav_gains, dt)
+                else:
+                    est_pos[e, i, a], est_vel[e, i, a] = mp, mv
+        g = min(count[e], obstacle_gains.shape[0] - 1)
+        for j in range(m):
+            # The ground velocity (obstacles.obstacle_velocity), then its measurement.
+            v0 = speed[e, j] * cos_h[e, j] + wind[e, 0]
+            v1 = speed[e, j] * sin_h[e, j] + wind[e, 1]
+            v2 = -climb[e, j] + wind[e, 2]
+            for a in range(3):
+                mp = pos[e, j, a] + normals[e, 9 * n + 6 * j + a]
+                mv = (v0 if a == 0 else v1 if a == 1 else v2) + normals[e, 9 * n + 6 * j + 3 + a]
+                if kalman:
+                    obstacle_est_pos[e, j, a], obstacle_est_vel[e, j, a] = _predict_correct(
+                        obstacle_est_pos[e, j, a], obstacle_est_vel[e, j, a], 0.0, False, mp,
+                        mv, g, obstacle_gains, dt)  # fmt: skip
+                else:
+                    obstacle_est_pos[e, j, a], obstacle_est_vel[e, j, a] = mp, mv
+        for i in range(n):
+            d_uav, d_obstacle = _nearest(uav_pos, pos, active, e, i)
+            min_uav[e, i] = _minimum(min_uav[e, i], d_uav)
+            min_obstacle[e, i] = _minimum(min_obstacle[e, i], d_obstacle)
+
+
+def physics_step(w, obs, normals, uniforms, p, replay=None, *, n_uniforms: int) -> None:  # noqa: ANN001
+    """:func:`uasep_env.physics_step.physics_step`, compiled: same arguments, same bits.
+
+    Three kernels; numpy's sines and cosines between them (of the arcs, then of the new
+    headings). The world's arrays are C-contiguous and written in place. ``n_uniforms``:
+    :data:`uasep_env.obstacles.N_UNIFORMS`.
+    """
+    shape = obs.heading.shape
+    new_turn, new_climb, y, mid, heading = (np.empty(shape) for _ in range(5))
+    dt = float(p.dt)
+    normals = np.ascontiguousarray(normals)
+    _advance(w.uav_pos, w.uav_vel, w.accel_cmd, normals, w.uav_acc, dt, float(p.max_speed),
+             float(p.max_accel), np.ascontiguousarray(uniforms).reshape(*shape, n_uniforms),
+             obs.switch_prob, w.time, obs.hold_until, obs.straight_prob, obs.max_turn_rate,
+             obs.max_climb_rate, obs.turn_rate, obs.climb_rate, obs.pos, obs.alt_band, obs.wind,
+             obs.ground, new_turn, new_climb, y, mid, obs.heading)  # fmt: skip
+    # numpy's sin and cos, not libm's: the numpy form's numbers to the last bit.
+    _move(obs.pos, obs.heading, obs.speed, new_climb, obs.active, obs.wind, obs.ground, dt, y,
+          np.sin(y), np.cos(mid), np.sin(mid), new_turn, heading)  # fmt: skip
+    obs.turn_rate, obs.climb_rate, obs.heading = new_turn, new_climb, heading
+    if replay is not None:
+        replay.step(obs, w.time)
+    _sense(w.time, w.kf_count, dt, bool(p.kalman), w.uav_pos, w.uav_vel, w.uav_acc, normals,
+           w.est_pos, w.est_vel, obs.pos, obs.speed, obs.climb_rate, np.cos(obs.heading),
+           np.sin(obs.heading), obs.wind, obs.active, w.obstacle_est_pos, w.obstacle_est_vel,
+           p.uav_gains, p.obstacle_gains, w.min_uav_dist, w.min_obstacle_dist)  # fmt: skip

@@ -9,20 +9,25 @@ from uasep_env._kernels.common import _JIT, _gap, _parallel, frozen
 
 
 @numba.njit(inline="always", **_JIT)
+def _nearest(uav_pos, obstacle_pos, active, e, i):  # noqa: ANN001, ANN202
+    """UAV ``i`` of world ``e``: distance to the nearest other UAV and active obstacle."""
+    best_uav = np.inf
+    for j in range(uav_pos.shape[1]):
+        if j != i:
+            best_uav = min(best_uav, _gap(uav_pos, e, i, uav_pos, j))
+    best_obstacle = np.inf
+    for j in range(obstacle_pos.shape[1]):
+        if active[e, j]:
+            best_obstacle = min(best_obstacle, _gap(uav_pos, e, i, obstacle_pos, j))
+    return best_uav, best_obstacle
+
+
+@numba.njit(inline="always", **_JIT)
 def _separation_row(k, uav_pos, obstacle_pos, active, d_uav, d_obstacle):  # noqa: ANN001, ANN202
-    n, m = uav_pos.shape[1], obstacle_pos.shape[1]
+    n = uav_pos.shape[1]
     e = k // n
     i = k % n
-    best = np.inf
-    for j in range(n):
-        if j != i:
-            best = min(best, _gap(uav_pos, e, i, uav_pos, j))
-    d_uav[e, i] = best
-    best = np.inf
-    for j in range(m):
-        if active[e, j]:
-            best = min(best, _gap(uav_pos, e, i, obstacle_pos, j))
-    d_obstacle[e, i] = best
+    d_uav[e, i], d_obstacle[e, i] = _nearest(uav_pos, obstacle_pos, active, e, i)
 
 
 @numba.njit(**_JIT)
