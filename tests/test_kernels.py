@@ -214,8 +214,17 @@ def _case_region():
     est = w.est_pos.copy()
     est[1::3, 0] = w.pred_center[1::3, 0]  # inside a region (its centre)
     est[2::5, 2] = w.pred_center[2::5, 2] + 0.5 * w.pred_axes[2::5, 2]
-    return [(est, w.pred_center, w.pred_axes, w.pred_heading, w.pred_cos, w.pred_sin,
-             w.obstacles.active)]  # fmt: skip
+    args = (est, w.pred_center, w.pred_axes, w.pred_heading, w.pred_cos, w.pred_sin,
+            w.obstacles.active)  # fmt: skip
+    # Gated by the obstacles' estimates: some pairs within reach, some beyond, one exactly
+    # at it (within), one obstacle without a position (NaN: beyond).
+    gate = w.obstacle_est_pos.copy()
+    gate[3, 0] = np.nan
+    rel = gate[:, None] - est[:, :, None]
+    dist = np.sqrt(np.einsum("...i,...i->...", rel, rel))
+    reach = float(np.nanmedian(dist[w.obstacles.active[:, None, :].repeat(4, 1)]))
+    gate[5, 1] = est[5, 2] + (gate[5, 1] - est[5, 2]) * (reach / dist[5, 2, 1])
+    return [args, (*args, gate, reach), (*args, gate, np.inf)]
 
 
 def _case_separations():
@@ -1019,3 +1028,36 @@ def test_every_kernel_compiles_without_reference_counting():
     assert len(loops) >= 30, sorted(loops)  # every module's loops were found
     counted = sorted(name for name, fn in loops.items() if fn.targetoptions.get("_nrt", True))
     assert counted == []
+
+
+def test_the_observations_region_gate_changes_no_observation(monkeypatch):
+    """Pairs beyond the sensing range are not solved for the observations: the same bits.
+
+    A random rollout with obstacles near and far; each step's observations against the
+    same world's observations with every pair solved.
+    """
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.observation import build_observations
+    from uasep_env.world import World
+
+    core = EnvCore({"n_uavs": 3, "n_obstacles": 3, "scenario": "random"}, 24)
+    core.reset(seed=5)
+    rng = np.random.default_rng(6)
+    ungated = World.region_distances
+
+    def every_pair(self, pos=None, rows=None, gate=None, reach=np.inf):
+        return ungated(self, pos, rows)
+
+    near = far = 0
+    for _ in range(40):
+        res = core.step(rng.uniform(-1, 1, size=(24, 3, 3)))
+        w = core.world
+        rel = w.obstacle_est_pos[:, None] - w.est_pos[:, :, None]
+        beyond = np.sqrt(np.einsum("...i,...i->...", rel, rel)) > core.layout.sensing_range
+        far += int(beyond.sum())
+        near += int((~beyond).sum())
+        with monkeypatch.context() as mp:
+            mp.setattr(World, "region_distances", every_pair)
+            want = build_observations(w, core.layout)
+        _assert_bits(res.obs, want)
+    assert near and far  # both kinds of pair were there

@@ -100,8 +100,14 @@ def _gather_inputs(
     r = slice(None) if rows is None else rows
     pos = world.est_pos[r]
     m = world.n_obstacles if layout.k_obstacles else 0
-    # Estimated UAV positions against the predicted ellipsoids (none if none is observed).
-    region = world.region_distances(pos, rows) if m else np.zeros((*pos.shape[:2], 0))
+    # Estimated UAV positions against the predicted ellipsoids (none if none is observed);
+    # an obstacle beyond the sensing range of its estimate is not observed, nor solved for.
+    ob_pos = world.obstacle_est_pos[r, :m]
+    region = (
+        world.region_distances(pos, rows, ob_pos, layout.sensing_range)
+        if m
+        else np.zeros((*pos.shape[:2], 0))
+    )
     return _Inputs(
         pos=pos,
         vel=world.est_vel[r],
@@ -114,7 +120,7 @@ def _gather_inputs(
         final_wp=world.plan.waypoints[r, -1],
         progress=np.minimum(world.time[r] / world.config.episode_duration, 1.0),
         region=region,
-        obstacle_pos=world.obstacle_est_pos[r, :m],
+        obstacle_pos=ob_pos,
         obstacle_vel=world.obstacle_est_vel[r, :m],
         pred_center=world.pred_center[r, :m],
         pred_axes=world.pred_axes[r, :m],
