@@ -27,7 +27,7 @@ APF_LOOPS = {
     "separations._separations_serial",
     "plan._plan_rows",
     "observations._observe_serial",
-    "rewards._rewards_serial",
+    "rewards._outcome_serial",  # rewards, episode ends, costs
     "physics._advance",  # the physics step
     "physics._move",
     "physics._sense",

@@ -14,12 +14,14 @@ from conftest import HANG_GUARD_S
 # Importing the modules registers their twins.
 from uasep_env import (  # noqa: F401
     _numba,
+    config,
     dynamics,
     estimation,
     formation,
     geometry,
     observation,
     obstacles,
+    outcome,
     physics_step,
     reachable,
     rewards,
@@ -312,6 +314,25 @@ def _case_rewards():
     return [(x, constants, weights), (x, constants, random), (no_region, constants, weights)]
 
 
+def _case_outcome():
+    """The reward cases with the episode-end tests and costs on their edges."""
+    core = _world_case()
+    cfg = core.config
+    cases = []
+    for k, (x, c, w) in enumerate(_case_rewards()):
+        x = type(x)(*(a.copy() for a in x))
+        u = cfg.uav
+        x.uav_pos[6] = x.plan_pos[6] + [u.lost_distance, 0.0, 0.0]  # exactly at the bound
+        x.uav_pos[7, 0] = x.plan_pos[7, 0] + [0.0, 0.0, 2 * u.lost_distance]  # lost
+        x.min_uav_dist[8] = u.collision_distance  # at the collision bound: not collided
+        weights = [
+            config.CostWeights(),
+            config.CostWeights(separation_uav=1.5, separation_obstacle=0.0, region=0.25),
+        ][k % 2]
+        cases.append((x, c, w, outcome.outcome_constants(u.lost_distance, weights)))
+    return cases
+
+
 def _case_plan():
     w = _world_case().world
     plan = w.plan
@@ -500,6 +521,7 @@ TWIN_CASES = {
     "kalman_correct": _case_kalman,
     "fit_ellipse": _case_fit_ellipse,
     "physics_step": _case_physics,
+    "step_outcome": _case_outcome,
 }
 
 
@@ -509,7 +531,9 @@ IN_PLACE = {
     "kalman_correct": lambda args: args[:2],
     "obstacle_step": lambda args: (args[0].pos, args[0].heading, args[0].climb_rate),
     "physics_step": lambda args: (
-        *(a for a in args[0] if a.dtype == np.float64), args[1].pos, args[1].heading
+        *(a for a in args[0] if a.dtype == np.float64),
+        args[1].pos,
+        args[1].heading,
     ),
 }
 

@@ -43,13 +43,14 @@ the cost is computed from figures the core already has, whether or not anyone re
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from uasep_env.config import CostWeights
 
-__all__ = ["COST_TERMS", "TERMS", "CostTerm", "compute_costs"]
+__all__ = ["COST_TERMS", "TERMS", "CostTerm", "compute_costs", "weighted_cost"]
 
 
 class CostTerm(NamedTuple):
@@ -93,9 +94,22 @@ def compute_costs(
         (0 or 1).
     """
     terms = {t.name: safety[t.safety].astype(np.float64) for t in TERMS}
-    cost = np.zeros(next(iter(terms.values())).shape)
-    for name, term in terms.items():
-        w = getattr(weights, name)
+    cost = weighted_cost(list(terms.values()), [getattr(weights, t.name) for t in TERMS])
+    return cost, terms
+
+
+def weighted_cost(terms: Sequence[np.ndarray], weights: Sequence[float]) -> np.ndarray:
+    """The cost: the terms (0 or 1, float64, in :data:`TERMS` order) by their weights.
+
+    Args:
+        terms: One ``(E, N)`` array per term.
+        weights: One weight per term.
+
+    Returns:
+        ``(E, N)`` float64.
+    """
+    cost = np.zeros(terms[0].shape)
+    for w, term in zip(weights, terms, strict=True):
         if w:  # a zero weight adds nothing (and keeps -0.0 and NaN out)
             cost += w * term
-    return cost, terms
+    return cost

@@ -235,10 +235,14 @@ def compute_rewards(
     x = _gather_inputs(world, region)
     w, c = _vectors(weights, world.config.uav, world.config.max_steps)
     own, stacked = _weighted_terms(x, c, w)
-    terms = dict(zip(REWARD_TERMS, stacked, strict=True))
+    return share_rewards(own, weights), dict(zip(REWARD_TERMS, stacked, strict=True))
+
+
+def share_rewards(own: np.ndarray, weights: RewardWeights) -> np.ndarray:
+    """``(E, N)`` rewards: each agent's own, or with the team's mean mixed in (``shared``)."""
     if weights.shared > 0.0:
-        own = (1.0 - weights.shared) * own + weights.shared * team_mean(own)[:, None]
-    return own, terms
+        return (1.0 - weights.shared) * own + weights.shared * team_mean(own)[:, None]
+    return own
 
 
 def _gather_inputs(world: World, region: np.ndarray | None = None) -> _Inputs:

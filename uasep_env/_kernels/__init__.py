@@ -15,7 +15,9 @@ kernel receives as keyword arguments. These modules import nothing else of the p
   inactive regions at ``inf`` (:func:`uasep_env.reachable.distance.region_distances`);
 * :func:`separations` -- :func:`uasep_env.geometry.nearest_separations`;
 * :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
-* :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`;
+* :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`, and with the step's
+  episode-end tests, safety flags and costs, :func:`step_outcome` --
+  :func:`uasep_env.outcome.step_outcome`;
 * :func:`plan_now` -- :func:`uasep_env.formation.planned_state`;
 * :func:`double_integrator` -- :func:`uasep_env.dynamics.step_double_integrator`,
   :func:`obstacle_step` -- :func:`uasep_env.obstacles.step_obstacles` and
@@ -45,7 +47,7 @@ from uasep_env._kernels.physics import (
     physics_step,
 )
 from uasep_env._kernels.plan import plan_now
-from uasep_env._kernels.rewards import reward_terms
+from uasep_env._kernels.rewards import reward_terms, step_outcome
 from uasep_env._kernels.separations import separations
 
 __all__ = [
@@ -62,4 +64,5 @@ __all__ = [
     "region_distances",
     "reward_terms",
     "separations",
+    "step_outcome",
 ]

@@ -9,6 +9,15 @@ from uasep_env._kernels.common import _JIT, _norm3, _parallel, _sq3, frozen
 
 
 @numba.njit(inline="always", **_JIT)
+def _nearest_region(x, e, i):  # noqa: ANN001, ANN202
+    """UAV ``(e, i)``'s distance to its nearest region, ``region.min(axis=-1, initial=inf)``."""
+    d_region = np.inf
+    for j in range(x.region.shape[2]):
+        d_region = min(d_region, x.region[e, i, j])
+    return d_region
+
+
+@numba.njit(inline="always", **_JIT)
 def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.rewards._weighted_terms`.
 
@@ -23,9 +32,7 @@ def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     d_col, dev_scale = c.collision_distance, c.deviation_scale
     region_cap, max_steps = c.region_cap, c.max_steps
     d_uav, d_obstacle = x.min_uav_dist[e, i], x.min_obstacle_dist[e, i]
-    d_region = np.inf
-    for j in range(x.region.shape[2]):
-        d_region = min(d_region, x.region[e, i, j])
+    d_region = _nearest_region(x, e, i)
     t = max(0.0, 1.0 - d_uav / d_sep)
     terms[ix.separation_inner, e, i] = -(t * t)
     t = max(0.0, 1.0 - d_obstacle / d_osep)
@@ -88,3 +95,70 @@ def reward_terms(
     fn = _rewards_parallel if _parallel(own.size) else _rewards_serial
     fn(x, constants, index, frozen(weights), own, terms)
     return own, terms
+
+
+# ---------------------------------------------------------------- the step's outcome
+@numba.njit(inline="always", **_JIT)
+def _outcome_agent(k, x, c, ix, weights, o, out):  # noqa: ANN001, ANN202
+    """Agent ``k`` of :func:`uasep_env.outcome.step_outcome` (``out``: its ``Outcome``)."""
+    _reward_agent(k, x, c, ix, weights, out.own, out.terms)
+    n = x.uav_pos.shape[1]
+    e = k // n
+    i = k % n
+    d_uav, d_obstacle = x.min_uav_dist[e, i], x.min_obstacle_dist[e, i]
+    d_region = _nearest_region(x, e, i)
+    out.d_region[e, i] = d_region
+    out.collided[e, i] = d_uav < c.collision_distance or d_obstacle < c.collision_distance
+    off = _sq3(x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0], x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
+               x.uav_pos[e, i, 2] - x.plan_pos[e, i, 2])  # fmt: skip
+    out.lost[e, i] = off > o.lost_sq
+    # The rows of uasep_env.outcome.SAFETY_FLAGS.
+    out.flags[0, e, i] = d_uav < c.separation_distance
+    out.flags[1, e, i] = d_obstacle < c.obstacle_separation
+    out.flags[2, e, i] = d_region < 0.0
+    total = 0.0
+    for t in range(o.cost_weights.shape[0]):
+        term = 1.0 if out.flags[o.cost_flags[t], e, i] else 0.0
+        out.cost_terms[t, e, i] = term
+        if o.cost_weights[t] != 0.0:  # a zero weight adds nothing (as costs.weighted_cost)
+            total += o.cost_weights[t] * term
+    out.cost[e, i] = total
+
+
+@numba.njit(**_JIT)
+def _outcome_serial(x, c, ix, weights, o, out):  # noqa: ANN001, ANN202
+    for k in range(out.own.size):
+        _outcome_agent(k, x, c, ix, weights, o, out)
+
+
+@numba.njit(parallel=True, **_JIT)
+def _outcome_parallel(x, c, ix, weights, o, out):  # noqa: ANN001, ANN202
+    for k in numba.prange(out.own.size):
+        _outcome_agent(k, x, c, ix, weights, o, out)
+
+
+def step_outcome(
+    inputs: tuple, constants: tuple, weights: np.ndarray, o: tuple, *, index: tuple, result: type
+) -> tuple:
+    """Compiled :func:`uasep_env.outcome.step_outcome`: same arguments, same bits.
+
+    Args:
+        inputs: The :class:`uasep_env.rewards._Inputs` of one call.
+        constants: The :class:`uasep_env.rewards._Constants` of one call.
+        weights: One weight per reward term.
+        o: The :class:`uasep_env.outcome.OutcomeConstants`.
+        index: :data:`uasep_env.rewards._TERM_INDEX`.
+        result: :class:`uasep_env.outcome.Outcome`, filled and returned.
+    """
+    x = type(inputs)(*(frozen(a) for a in inputs))  # one compiled signature
+    e, n = x.min_uav_dist.shape
+    n_costs = o.cost_weights.shape[0]
+    out = result(
+        np.empty((e, n)), np.empty((len(index), e, n)), np.empty((e, n)),
+        np.empty((e, n), np.bool_), np.empty((e, n), np.bool_), np.empty((3, e, n), np.bool_),
+        np.empty((e, n)), np.empty((n_costs, e, n)),
+    )  # fmt: skip
+    o = type(o)(float(o.lost_sq), frozen(o.cost_weights), frozen(o.cost_flags))
+    fn = _outcome_parallel if _parallel(e * n) else _outcome_serial
+    fn(x, constants, index, frozen(weights), o, out)
+    return out

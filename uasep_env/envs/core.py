@@ -21,9 +21,10 @@ from uasep_env.actions import ResidualAPF
 from uasep_env.capacity import check_count
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import is_real
-from uasep_env.costs import COST_TERMS, compute_costs
+from uasep_env.costs import COST_TERMS
 from uasep_env.observation import ObservationLayout, build_observations, global_state
-from uasep_env.rewards import REWARD_TERMS, collisions, compute_rewards
+from uasep_env.outcome import compute_outcome
+from uasep_env.rewards import REWARD_TERMS, share_rewards
 from uasep_env.world import World
 
 __all__ = [
@@ -331,28 +332,26 @@ class EnvCore:
         if self.residual is not None:
             actions = self.residual.command(self._base, actions)
         w.step(actions * self.config.uav.max_accel, active=active)
-        region = w.region_distances()
-        rewards, terms = compute_rewards(w, self.config.reward, region)
-        collided = collisions(w)
-        off = w.uav_pos - w.plan_pos
-        lost = np.einsum("eni,eni->en", off, off) > self.config.uav.lost_distance**2
-        terminated = (collided | lost).any(axis=1)
-        truncated = ((w.steps >= self.config.max_steps) | w.plan_finished()) & ~terminated
-        u = self.config.uav
-        d_region = region.min(axis=-1, initial=np.inf)
+        cfg = self.config
+        out = compute_outcome(w, cfg, w.region_distances())
+        terminated = (out.collided | out.lost).any(axis=1)
+        truncated = ((w.steps >= cfg.max_steps) | w.plan_finished()) & ~terminated
+        los_uav, los_obstacle, in_region = out.flags
         safety = {
             "min_uav_distance": w.min_uav_dist.copy(),
             "min_obstacle_distance": w.min_obstacle_dist.copy(),
-            "min_region_distance": d_region,
-            "loss_of_separation_uav": w.min_uav_dist < u.separation_distance,
-            "loss_of_separation_obstacle": w.min_obstacle_dist < u.obstacle_separation,
-            "in_reachable_region": d_region < 0.0,
-            "collision": collided,
-            "lost": lost,
+            "min_region_distance": out.d_region,
+            "loss_of_separation_uav": los_uav,
+            "loss_of_separation_obstacle": los_obstacle,
+            "in_reachable_region": in_region,
+            "collision": out.collided,
+            "lost": out.lost,
         }
-        cost, cost_terms = compute_costs(safety, self.config.cost)
+        rewards = share_rewards(out.own, cfg.reward)
+        terms = dict(zip(REWARD_TERMS, out.terms, strict=True))
+        cost_terms = dict(zip(COST_TERMS, out.cost_terms, strict=True))
         obs = self._observe()
-        return StepResult(obs, rewards, terms, terminated, truncated, safety, cost, cost_terms)
+        return StepResult(obs, rewards, terms, terminated, truncated, safety, out.cost, cost_terms)
 
     @staticmethod
     def env_infos(result: StepResult, env: int) -> list[dict]:
