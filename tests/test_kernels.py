@@ -216,17 +216,8 @@ def _case_region():
     est = w.est_pos.copy()
     est[1::3, 0] = w.pred_center[1::3, 0]  # inside a region (its centre)
     est[2::5, 2] = w.pred_center[2::5, 2] + 0.5 * w.pred_axes[2::5, 2]
-    args = (est, w.pred_center, w.pred_axes, w.pred_heading, w.pred_cos, w.pred_sin,
-            w.obstacles.active)  # fmt: skip
-    # Gated by the obstacles' estimates: some pairs within reach, some beyond, one exactly
-    # at it (within), one obstacle without a position (NaN: beyond).
-    gate = w.obstacle_est_pos.copy()
-    gate[3, 0] = np.nan
-    rel = gate[:, None] - est[:, :, None]
-    dist = np.sqrt(np.einsum("...i,...i->...", rel, rel))
-    reach = float(np.nanmedian(dist[w.obstacles.active[:, None, :].repeat(4, 1)]))
-    gate[5, 1] = est[5, 2] + (gate[5, 1] - est[5, 2]) * (reach / dist[5, 2, 1])
-    return [args, (*args, gate, reach), (*args, gate, np.inf)]
+    return [(est, w.pred_center, w.pred_axes, w.pred_heading, w.pred_cos, w.pred_sin,
+             w.obstacles.active)]  # fmt: skip
 
 
 def _case_separations():
@@ -243,7 +234,7 @@ def _observation_states():
     core = _world_case()
     x = observation._gather_inputs(core.world, core.layout)
     x = type(x)(*(a.copy() for a in x))
-    pos, vel, wp, region = x.pos, x.vel, x.wp_dir, x.region
+    pos, vel, wp = x.pos, x.vel, x.wp_dir
     # Env 0: two UAVs at one point; env 1: integer positions, neighbours tied at 10 m.
     pos[0, 1] = pos[0, 0]
     pos[1] = [[0.0, 0.0, -50.0], [10.0, 0.0, -50.0], [-10.0, 0.0, -50.0], [0.0, 10.0, -50.0]]
@@ -255,10 +246,12 @@ def _observation_states():
     vel[7], wp[7] = 0.0, [0.0, 0.0, 1.0]  # at rest, vertical direction
     x.active[8] = False  # no obstacle present
     x.obstacle_pos[9, 0] += 1e4  # an obstacle beyond the sensing range
-    region[10, :, 1] = region[10, :, 0]  # tied region distances
+    for f in ("obstacle_pos", "obstacle_vel", "pred_center", "pred_axes", "cos_h", "sin_h",
+              "heading"):  # fmt: skip
+        getattr(x, f)[10, 1] = getattr(x, f)[10, 0]  # two obstacles alike: tied distances
     x.active[10, :2] = True
-    region[11, 0, 0] = -3.0  # inside a region
-    region[12, :, 2] = np.inf  # an unreachable region
+    pos[11, 0] = x.pred_center[11, 0]  # inside a region (at its centre)
+    pos[12, 1] = x.obstacle_pos[12, 2] + [0.0, 0.0, 1e3]  # at the sensing range's edge
     pos[13, 3] = 1e200  # so far that the distances overflow to inf
     # An irregular formation in depth: every slot sums three non-zero terms.
     x.pattern[14:] += np.random.default_rng(6).normal(0.0, 5.0, size=x.pattern[14:].shape)
@@ -272,7 +265,7 @@ def _case_observations():
     layout, x = _observation_states()
     every = dataclasses.replace(layout, features=tuple(f.key for f in observation.FEATURES))
     n = x.pos.shape[1]
-    wide = dataclasses.replace(layout, k_uavs=n, k_obstacles=x.region.shape[2] + 2)
+    wide = dataclasses.replace(layout, k_uavs=n, k_obstacles=x.pred_center.shape[1] + 2)
     short = dataclasses.replace(every, sensing_range=30.0)
     # Either half of the features (each has some in every block): the absent ones are skipped.
     halves = [dataclasses.replace(every, features=every.features[k::2]) for k in (0, 1)]
@@ -282,8 +275,8 @@ def _case_observations():
 
     def obstacles(k):  # only the first k obstacle slots of the world
         cut = {f: getattr(x, f)[:, :k] for f in ("obstacle_pos", "obstacle_vel", "pred_center",
-               "pred_axes", "cos_h", "sin_h", "active")}  # fmt: skip
-        return x._replace(region=x.region[..., :k], **cut)
+               "pred_axes", "cos_h", "sin_h", "heading", "active")}  # fmt: skip
+        return x._replace(**cut)
 
     cases = []
     for lay, inputs in ((layout, x), (every, x), (wide, x), (short, x), (halves[0], x),
@@ -1052,36 +1045,3 @@ def test_every_kernel_compiles_without_reference_counting():
     assert len(loops) >= 30, sorted(loops)  # every module's loops were found
     counted = sorted(name for name, fn in loops.items() if fn.targetoptions.get("_nrt", True))
     assert counted == []
-
-
-def test_the_observations_region_gate_changes_no_observation(monkeypatch):
-    """Pairs beyond the sensing range are not solved for the observations: the same bits.
-
-    A random rollout with obstacles near and far; each step's observations against the
-    same world's observations with every pair solved.
-    """
-    from uasep_env.envs.core import EnvCore
-    from uasep_env.observation import build_observations
-    from uasep_env.world import World
-
-    core = EnvCore({"n_uavs": 3, "n_obstacles": 3, "scenario": "random"}, 24)
-    core.reset(seed=5)
-    rng = np.random.default_rng(6)
-    ungated = World.region_distances
-
-    def every_pair(self, pos=None, rows=None, gate=None, reach=np.inf):
-        return ungated(self, pos, rows)
-
-    near = far = 0
-    for _ in range(40):
-        res = core.step(rng.uniform(-1, 1, size=(24, 3, 3)))
-        w = core.world
-        rel = w.obstacle_est_pos[:, None] - w.est_pos[:, :, None]
-        beyond = np.sqrt(np.einsum("...i,...i->...", rel, rel)) > core.layout.sensing_range
-        far += int(beyond.sum())
-        near += int((~beyond).sum())
-        with monkeypatch.context() as mp:
-            mp.setattr(World, "region_distances", every_pair)
-            want = build_observations(w, core.layout)
-        _assert_bits(res.obs, want)
-    assert near and far  # both kinds of pair were there

@@ -19,6 +19,7 @@ from uasep_env.config import EnvConfig
 from uasep_env.formation import MIN_FRAME_SPEED, formation_center, slot_positions
 from uasep_env.observation_layout import FEATURES, Feature, ObservationLayout
 from uasep_env.obstacles import AIRCRAFT_CLASSES
+from uasep_env.reachable.distance import _N_NEWTON, region_distances
 from uasep_env.world import World
 
 __all__ = [
@@ -49,13 +50,13 @@ class _Inputs(NamedTuple):
     wp_dir: np.ndarray  # (E, 3) unit direction of the planned path
     final_wp: np.ndarray  # (E, 3) the plan's final way-point (m)
     progress: np.ndarray  # (E,) elapsed fraction of the episode
-    region: np.ndarray  # (E, N, M) signed distance to each reachable ellipsoid (m), inf if off
     obstacle_pos: np.ndarray  # (E, M, 3) estimated obstacle positions (m)
     obstacle_vel: np.ndarray  # (E, M, 3) estimated obstacle velocities (m/s)
     pred_center: np.ndarray  # (E, M, 3) ellipsoid centres (m)
     pred_axes: np.ndarray  # (E, M, 3) ellipsoid semi-axes (m)
     cos_h: np.ndarray  # (E, M) cosine of the ellipsoid heading
     sin_h: np.ndarray  # (E, M) sine of the ellipsoid heading
+    heading: np.ndarray  # (E, M) the ellipsoid heading (rad)
     active: np.ndarray  # (E, M) bool, obstacle present
     aircraft_class: np.ndarray  # (E, M) int64 class code (uasep_env.obstacles.AIRCRAFT_CLASSES)
 
@@ -68,10 +69,10 @@ def build_observations(
 ) -> np.ndarray:
     """Every agent's observation of the world, ``(n_envs, n_uavs, layout.world_dim)`` float32.
 
-    The plan and the distances to the reachable ellipsoids come from the world; the
-    estimated formation geometry (eqs. 5-7) and the per-agent assembly (relative vectors,
-    neighbour sorting, masks, scaling, clipping) are :func:`_assemble` (compiled when numba
-    is in use, the same numbers bit for bit).
+    The plan and the predicted ellipsoids come from the world; the estimated positions'
+    distances to the ellipsoids, the estimated formation geometry (eqs. 5-7) and the
+    per-agent assembly (relative vectors, neighbour sorting, masks, scaling, clipping) are
+    :func:`_assemble` (compiled when numba is in use, the same numbers bit for bit).
 
     Args:
         world: The batched world.
@@ -100,14 +101,6 @@ def _gather_inputs(
     r = slice(None) if rows is None else rows
     pos = world.est_pos[r]
     m = world.n_obstacles if layout.k_obstacles else 0
-    # Estimated UAV positions against the predicted ellipsoids (none if none is observed);
-    # an obstacle beyond the sensing range of its estimate is not observed, nor solved for.
-    ob_pos = world.obstacle_est_pos[r, :m]
-    region = (
-        world.region_distances(pos, rows, ob_pos, layout.sensing_range)
-        if m
-        else np.zeros((*pos.shape[:2], 0))
-    )
     return _Inputs(
         pos=pos,
         vel=world.est_vel[r],
@@ -119,13 +112,13 @@ def _gather_inputs(
         wp_dir=world.plan_dir[r],
         final_wp=world.plan.waypoints[r, -1],
         progress=np.minimum(world.time[r] / world.config.episode_duration, 1.0),
-        region=region,
-        obstacle_pos=ob_pos,
+        obstacle_pos=world.obstacle_est_pos[r, :m],
         obstacle_vel=world.obstacle_est_vel[r, :m],
         pred_center=world.pred_center[r, :m],
         pred_axes=world.pred_axes[r, :m],
         cos_h=world.pred_cos[r, :m],
         sin_h=world.pred_sin[r, :m],
+        heading=world.pred_heading[r, :m],
         active=world.obstacles.active[r, :m],
         aircraft_class=world.obstacles.aircraft_class[r, :m],
     )
@@ -150,7 +143,7 @@ def _write(block: np.ndarray, cols: dict[str, slice], values: dict[str, object])
             block[..., cols[key]] = value
 
 
-@compiled_twin("assemble_observations", min_frame_speed=MIN_FRAME_SPEED)
+@compiled_twin("assemble_observations", min_frame_speed=MIN_FRAME_SPEED, n_newton=_N_NEWTON)
 def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
     """The assembly of :func:`build_observations`: fills ``out`` in place.
 
@@ -160,7 +153,7 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
     clip-then-cast agree), which the tests compare with the compiled twin's, bit for bit.
     """
     e, n, _ = x.pos.shape
-    m = x.region.shape[-1]
+    m = x.pred_center.shape[1]
     ps, vs, acs = layout.pos_scale, layout.vel_scale, layout.acc_scale
     pos, vel = x.pos, x.vel
     cols = layout.slices
@@ -214,7 +207,11 @@ def _assemble(x: _Inputs, layout: ObservationLayout, out: np.ndarray) -> None:
     kk = min(k_o, m)
     block[:, :, kk:] = 0.0
     if kk:
-        region = x.region
+        # The estimated positions against the predicted ellipsoids (the compiled twin solves
+        # only the pairs it observes: within the sensing range of the obstacle's estimate).
+        region = region_distances.reference(
+            pos, x.pred_center, x.pred_axes, x.heading, x.cos_h, x.sin_h, x.active
+        )
         ob_rel = x.obstacle_pos[:, None, :, :] - pos[:, :, None, :]  # (E, N, M, 3)
         ob_dist = np.sqrt(np.einsum("...i,...i->...", ob_rel, ob_rel))
         active = x.active[:, None, :]

@@ -512,11 +512,7 @@ class World(RenamedAttributes):
         return obstacle_distances(p, self.obstacles.pos, self.obstacles.active)
 
     def region_distances(
-        self,
-        pos: np.ndarray | None = None,
-        rows: np.ndarray | None = None,
-        gate: np.ndarray | None = None,
-        reach: float = np.inf,
+        self, pos: np.ndarray | None = None, rows: np.ndarray | None = None
     ) -> np.ndarray:
         """``(E, N, M)`` signed distance to each predicted reachable ellipsoid (m).
 
@@ -526,10 +522,6 @@ class World(RenamedAttributes):
             pos: Positions to measure from (true UAV positions by default), ``(E, N, 3)``,
                 or ``(len(rows), N, 3)`` with ``rows``.
             rows: Only these environments (an index array); the result has their rows.
-            gate: Optional ``(E, M, 3)`` obstacle positions (of the ``rows``): a pair whose
-                position is not within ``reach`` of its obstacle's gives ``inf`` as well,
-                unsolved (see :func:`uasep_env.reachable.region_distances`).
-            reach: The gate's range (m).
         """
         sel = slice(None) if rows is None else rows
         p = self.uav_pos[sel] if pos is None else pos
@@ -537,7 +529,7 @@ class World(RenamedAttributes):
             return np.zeros((*p.shape[:2], 0))
         return reachable.region_distances(
             p, self.pred_center[sel], self.pred_axes[sel], self.pred_heading[sel],
-            self.pred_cos[sel], self.pred_sin[sel], self.obstacles.active[sel], gate, reach,
+            self.pred_cos[sel], self.pred_sin[sel], self.obstacles.active[sel],
         )  # fmt: skip
 
     def obstacle_velocities(self) -> np.ndarray:

@@ -7,7 +7,7 @@ import math
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, _gap, _parallel, frozen
+from uasep_env._kernels.common import _JIT, _parallel, frozen
 
 
 @numba.njit(inline="always", **_JIT)
@@ -205,19 +205,24 @@ def nearest_on_ellipsoids(
 
 
 @numba.njit(inline="always", **_JIT)
-def _pair_distance(k, points, centers, axes, cos_h, sin_h, active, gate, reach, n_newton, out):  # noqa: ANN001, ANN202
+def _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
     """Pair ``k`` of the flat ``(E, N, M)`` grid: point ``(e, i)`` against ellipsoid ``(e, j)``.
 
-    ``inf`` where the ellipsoid is not ``active``, or the point is not within ``reach`` of
-    the obstacle's ``gate`` position (``gate`` has no rows: no gate), without solving.
+    ``inf`` where the ellipsoid is not ``active``.
     """
     n, m = points.shape[1], centers.shape[1]
     e = k // (n * m)
     i = (k // m) % n
     j = k % m
-    if not active[e, j] or (gate.shape[0] and not _gap(points, e, i, gate, j) <= reach):
+    if not active[e, j]:
         out[e, i, j] = np.inf
         return
+    out[e, i, j] = _region_gap(points, e, i, centers, axes, cos_h, sin_h, j, n_newton)
+
+
+@numba.njit(inline="always", **_JIT)
+def _region_gap(points, e, i, centers, axes, cos_h, sin_h, j, n_newton):  # noqa: ANN001, ANN202
+    """Signed distance from ``points[e, i]`` to ellipsoid ``j`` of row ``e``."""
     cp = cos_h[e, j]
     sp = sin_h[e, j]
     d0 = points[e, i, 0] - centers[e, j, 0]
@@ -225,20 +230,19 @@ def _pair_distance(k, points, centers, axes, cos_h, sin_h, active, gate, reach, 
     d2 = points[e, i, 2] - centers[e, j, 2]
     q0 = d0 * cp + d1 * sp
     q1 = -d0 * sp + d1 * cp
-    res = _nearest_one(q0, q1, d2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2], n_newton)
-    out[e, i, j] = res[3]
+    return _nearest_one(q0, q1, d2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2], n_newton)[3]
 
 
 @numba.njit(**_JIT)
-def _pairs_serial(points, centers, axes, cos_h, sin_h, active, gate, reach, n_newton, out):  # noqa: ANN001, ANN202
+def _pairs_serial(points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
     for k in range(out.size):
-        _pair_distance(k, points, centers, axes, cos_h, sin_h, active, gate, reach, n_newton, out)
+        _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _pairs_parallel(points, centers, axes, cos_h, sin_h, active, gate, reach, n_newton, out):  # noqa: ANN001, ANN202
+def _pairs_parallel(points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
     for k in numba.prange(out.size):
-        _pair_distance(k, points, centers, axes, cos_h, sin_h, active, gate, reach, n_newton, out)
+        _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out)
 
 
 def pairwise_distances(
@@ -263,7 +267,7 @@ def pairwise_distances(
     """
     on = np.ones(headings.shape, dtype=bool)
     cos_h, sin_h = np.cos(headings), np.sin(headings)
-    return _region_loop(points, centers, axes, cos_h, sin_h, on, None, np.inf, n_newton)
+    return _region_loop(points, centers, axes, cos_h, sin_h, on, n_newton)
 
 
 def region_distances(
@@ -274,8 +278,6 @@ def region_distances(
     cos_h: np.ndarray,
     sin_h: np.ndarray,
     active: np.ndarray,
-    gate: np.ndarray | None = None,
-    reach: float = np.inf,
     *,
     n_newton: int,
 ) -> np.ndarray:
@@ -293,16 +295,13 @@ def region_distances(
         cos_h: ``(E, M)`` cosines of the headings.
         sin_h: ``(E, M)`` sines of the headings.
         active: ``(E, M)`` bool; inactive ellipsoids give ``inf``.
-        gate: Optional ``(E, M, 3)`` positions: pairs not within ``reach`` of theirs give
-            ``inf`` and are not solved.
-        reach: The gate's range (m).
         n_newton: Newton iterations (the numpy form's).
 
     Returns:
         ``(E, N, M)`` signed distances (m).
     """
     del headings
-    return _region_loop(points, centers, axes, cos_h, sin_h, active, gate, reach, n_newton)
+    return _region_loop(points, centers, axes, cos_h, sin_h, active, n_newton)
 
 
 def _region_loop(
@@ -312,18 +311,11 @@ def _region_loop(
     cos_h: np.ndarray,
     sin_h: np.ndarray,
     active: np.ndarray,
-    gate: np.ndarray | None,
-    reach: float,
     n_newton: int,
 ) -> np.ndarray:
     e, n, _ = points.shape
     out = np.empty((e, n, centers.shape[1]))
     fn = _pairs_parallel if _parallel(out.size) else _pairs_serial
     c = frozen
-    g = _NO_GATE if gate is None else c(gate)
-    fn(c(points), c(centers), c(axes), c(cos_h), c(sin_h), c(active), g, float(reach), n_newton,
-       out)  # fmt: skip
+    fn(c(points), c(centers), c(axes), c(cos_h), c(sin_h), c(active), n_newton, out)
     return out
-
-
-_NO_GATE = frozen(np.zeros((0, 0, 3)))  # no rows: every active pair is solved

@@ -8,6 +8,7 @@ import numba
 import numpy as np
 
 from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel, frozen
+from uasep_env._kernels.ellipsoids import _region_gap
 
 #: Entries of the optional ``obstacle_class`` feature: one per code of
 #: ``uasep_env.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
@@ -62,13 +63,14 @@ def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_env(e, x, scales, limit, cols, out):  # noqa: ANN001, ANN202
+def _observe_env(e, x, scales, limit, cols, region, n_newton, out):  # noqa: ANN001, ANN202
     """Environment ``e`` of :func:`uasep_env.observation._assemble`, every agent.
 
     ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays, ``cols`` the
     layout's :class:`uasep_env.observation_layout.Columns`: where each feature goes (-1 when
     the layout lacks it), the neighbour counts and the block widths; ``limit[0]`` is the
-    clip bound in ``out``'s dtype.
+    clip bound in ``out``'s dtype; ``region`` gets each agent's distances to the regions it
+    observes (``inf`` for the others).
     """
     pos, vel = x.pos, x.vel
     # The estimated formation (eqs. 5-7): centre, mean velocity and frame, once per env.
@@ -78,7 +80,7 @@ def _observe_env(e, x, scales, limit, cols, out):  # noqa: ANN001, ANN202
     ct, st, cp, sp = _frame(mv0, mv1, mv2, d[e, 0], d[e, 1], d[e, 2], scales[4])
     frame = (c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp)
     for i in range(pos.shape[1]):
-        _observe_agent(e, i, frame, x, scales, limit[0], cols, out)
+        _observe_agent(e, i, frame, x, scales, limit[0], cols, region, n_newton, out)
 
 
 @numba.njit(**_JIT)
@@ -98,7 +100,7 @@ def _put1(row, col, v, clip):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_agent(e, i, frame, x, scales, clip, cols, out):  # noqa: ANN001, ANN202
+def _observe_agent(e, i, frame, x, scales, clip, cols, region, n_newton, out):  # noqa: ANN001, ANN202
     """UAV ``i`` of environment ``e``; ``frame`` is the formation's, from :func:`_observe_env`.
 
     Every feature is written at its column of ``cols`` relative to its block, and skipped
@@ -107,7 +109,7 @@ def _observe_agent(e, i, frame, x, scales, clip, cols, out):  # noqa: ANN001, AN
     pos, vel = x.pos, x.vel
     row = out[e, i]
     n = pos.shape[1]
-    m = x.region.shape[2]
+    m = x.pred_center.shape[1]
     ps, vs, acs, sensing = scales[0], scales[1], scales[2], scales[3]
     c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp = frame
     p0, p1, p2 = pos[e, i, 0], pos[e, i, 1], pos[e, i, 2]
@@ -157,23 +159,28 @@ def _observe_agent(e, i, frame, x, scales, clip, cols, out):  # noqa: ANN001, AN
                 row[c + a] = 0.0
     col += cols.k_uavs * cols.uav_width
 
-    # Nearest obstacles by distance to their reachable region (stable, like the UAVs).
+    # Nearest obstacles by distance to their reachable region (stable, like the UAVs). The
+    # region is solved only for the obstacles observed: present, within the sensing range.
     k_o, w = cols.k_obstacles, cols.obstacle_width
     kk = min(k_o, m)
+    for j in range(m if kk else 0):
+        key = np.inf
+        if x.active[e, j] and _gap(pos, e, i, x.obstacle_pos, j) <= sensing:
+            key = _region_gap(pos, e, i, x.pred_center, x.pred_axes, x.cos_h, x.sin_h, j,
+                              n_newton)  # fmt: skip
+        region[e, i, j] = key
     prev_d, prev_j = -np.inf, -1
     for s in range(kk):
         best_d, best_j = np.inf, m
         for j in range(m):
-            key = np.inf
-            if x.active[e, j] and _gap(pos, e, i, x.obstacle_pos, j) <= sensing:
-                key = x.region[e, i, j]
+            key = region[e, i, j]
             after = key > prev_d or (key == prev_d and j > prev_j)
             if after and (key < best_d or (key == best_d and j < best_j)):
                 best_d, best_j = key, j
         prev_d, prev_j = best_d, best_j
         c = col + s * w
         if math.isfinite(best_d):
-            _obstacle_features(row, e, i, c, cols, x, best_j, ps, vs, clip)
+            _obstacle_features(row, e, i, c, cols, x, best_d, best_j, ps, vs, clip)
         else:
             for a in range(w):
                 row[c + a] = 0.0
@@ -200,8 +207,11 @@ def _uav_features(row, e, i, c, cols, x, j, dist, ps, vs, clip):  # noqa: ANN001
 
 
 @numba.njit(inline="always", **_JIT)
-def _obstacle_features(row, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001, ANN202
-    """Obstacle ``j`` as UAV ``i`` observes it, into the block at column ``c`` (present)."""
+def _obstacle_features(row, e, i, c, cols, x, dist, j, ps, vs, clip):  # noqa: ANN001, ANN202
+    """Obstacle ``j`` as UAV ``i`` observes it, into the block at column ``c`` (present).
+
+    ``dist``: the UAV's distance to the obstacle's region (m).
+    """
     pos, vel = x.pos, x.vel
     if cols.obstacle_center >= 0:
         pc = x.pred_center
@@ -226,7 +236,7 @@ def _obstacle_features(row, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001,
              (ov[e, j, 2] - vel[e, i, 2]) / vs)  # fmt: skip
         _put3(row, c + cols.obstacle_rel_vel, r[0], r[1], r[2], clip)
     if cols.obstacle_region_dist >= 0:
-        _put(row, c + cols.obstacle_region_dist, x.region[e, i, j] / ps, clip)
+        _put(row, c + cols.obstacle_region_dist, dist / ps, clip)
     if cols.obstacle_mask >= 0:
         _put(row, c + cols.obstacle_mask, 1.0, clip)
     if cols.obstacle_class >= 0:  # one-hot of the aircraft class code
@@ -236,19 +246,19 @@ def _obstacle_features(row, e, i, c, cols, x, j, ps, vs, clip):  # noqa: ANN001,
 
 
 @numba.njit(**_JIT)
-def _observe_serial(x, scales, limit, cols, out):  # noqa: ANN001, ANN202
+def _observe_serial(x, scales, limit, cols, region, n_newton, out):  # noqa: ANN001, ANN202
     for e in range(out.shape[0]):
-        _observe_env(e, x, scales, limit, cols, out)
+        _observe_env(e, x, scales, limit, cols, region, n_newton, out)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _observe_parallel(x, scales, limit, cols, out):  # noqa: ANN001, ANN202
+def _observe_parallel(x, scales, limit, cols, region, n_newton, out):  # noqa: ANN001, ANN202
     for e in numba.prange(out.shape[0]):
-        _observe_env(e, x, scales, limit, cols, out)
+        _observe_env(e, x, scales, limit, cols, region, n_newton, out)
 
 
 def assemble_observations(
-    inputs: tuple, layout: object, out: np.ndarray, *, min_frame_speed: float
+    inputs: tuple, layout: object, out: np.ndarray, *, min_frame_speed: float, n_newton: int
 ) -> None:
     """Compiled :func:`uasep_env.observation._assemble`: fills ``out`` in place.
 
@@ -259,6 +269,7 @@ def assemble_observations(
         out: ``(E, N, dim)`` float32, C-contiguous (float64: the same numbers before the
             cast to float32, for the tests).
         min_frame_speed: :data:`uasep_env.formation.MIN_FRAME_SPEED`.
+        n_newton: The region solve's Newton iterations (``uasep_env.reachable.distance``'s).
     """
     scales = np.array(
         [
@@ -273,4 +284,5 @@ def assemble_observations(
     x = type(inputs)(*(frozen(a) for a in inputs))
     fn = _observe_parallel if _parallel(out.shape[0] * out.shape[1]) else _observe_serial
     limit = np.full(1, layout.clip, dtype=out.dtype)  # the clip bound in out's dtype
-    fn(x, scales, limit, layout.columns, out)
+    region = np.empty((*out.shape[:2], x.pred_center.shape[1]))  # the agents' scratch rows
+    fn(x, scales, limit, layout.columns, region, n_newton, out)

@@ -248,14 +248,11 @@ def region_distances(
     cos_h: FloatArray,
     sin_h: FloatArray,
     active: NDArray[np.bool_],
-    gate: FloatArray | None = None,
-    reach: float = np.inf,
 ) -> FloatArray:
     """:func:`pairwise_distances` against the regions of a world, ``inf`` where inactive.
 
     The compiled form reads the headings' kept cosines and sines (numpy's, the same numbers
-    the numpy form computes from ``headings``), so a step does not compute them again, and
-    does not solve the pairs it gates out.
+    the numpy form computes from ``headings``), so a step does not compute them again.
 
     Args:
         points: ``(E, N, 3)`` positions, NED (m).
@@ -265,10 +262,6 @@ def region_distances(
         cos_h: ``(E, M)`` ``np.cos(headings)``.
         sin_h: ``(E, M)`` ``np.sin(headings)``.
         active: ``(E, M)`` bool; inactive ellipsoids give ``inf``.
-        gate: Optional ``(E, M, 3)`` positions (m), one per obstacle: a pair whose point
-            is not within ``reach`` of it gives ``inf`` too (the observations, which see
-            no obstacle beyond their sensing range of its estimated position).
-        reach: The gate's range (m).
 
     Returns:
         ``(E, N, M)`` signed distances (m, negative inside).
@@ -277,12 +270,7 @@ def region_distances(
     c = np.asarray(centers, dtype=np.float64)
     psi = np.asarray(headings, dtype=np.float64)
     d = _pairwise.reference(p, c, _check_axes(semi_axes), psi)
-    on = active[:, None, :]
-    if gate is not None:
-        # The observations' own distance, in their order of operations.
-        rel = np.asarray(gate, dtype=np.float64)[:, None, :, :] - p[:, :, None, :]
-        on = on & (np.sqrt(np.einsum("...i,...i->...", rel, rel)) <= reach)
-    return np.where(on, d, np.inf)
+    return np.where(active[:, None, :], d, np.inf)
 
 
 def nearest_point_on_ellipsoid(
