@@ -220,7 +220,9 @@ def _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out
     out[e, i, j] = _region_gap(points, e, i, centers, axes, cos_h, sin_h, j, n_newton)
 
 
-@numba.njit(inline="always", **_JIT)
+# A plain call (LLVM may inline it), not numba's IR inlining: the solve inlined into the
+# observations' kernel, itself inlined, made that kernel take 10 s to compile, not 4.
+@numba.njit(**_JIT)
 def _region_gap(points, e, i, centers, axes, cos_h, sin_h, j, n_newton):  # noqa: ANN001, ANN202
     """Signed distance from ``points[e, i]`` to ellipsoid ``j`` of row ``e``."""
     cp = cos_h[e, j]
