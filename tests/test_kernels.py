@@ -539,9 +539,20 @@ def test_every_compiled_twin_has_a_case():
     assert set(_numba.TWINS) == set(TWIN_CASES)
 
 
+@pytest.mark.parametrize("loops", ["serial", "parallel"])
 @pytest.mark.parametrize("name", sorted(TWIN_CASES))
-def test_each_kernel_matches_its_numpy_reference_bit_for_bit(name):
-    """Return values and arrays filled in place, in float64, for every registered pair."""
+def test_each_kernel_matches_its_numpy_reference_bit_for_bit(name, loops, monkeypatch):
+    """Return values and arrays filled in place, in float64, for every registered pair.
+
+    With the serial loops, and with the parallel ones wherever a kernel has them (numba's
+    parallel loops are compiled apart: one once wrote wrong numbers where its serial twin
+    did not).
+    """
+    from uasep_env._kernels import common
+
+    if loops == "parallel":
+        monkeypatch.setattr(common, "THREADS", [2])
+        monkeypatch.setattr(common, "PARALLEL_MIN", 0)
     twin = _numba.TWINS[name]
     for k, args in enumerate(TWIN_CASES[name]()):
         want_args, got_args = _copy(args), _copy(args)

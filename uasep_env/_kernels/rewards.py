@@ -98,7 +98,9 @@ def reward_terms(
 
 
 # ---------------------------------------------------------------- the step's outcome
-@numba.njit(inline="always", **_JIT)
+# A plain call, not numba's IR inlining: inlined into the parallel loop (a parfor), its
+# writes came out wrong (the serial and parallel loops disagreed; tests/test_kernels.py).
+@numba.njit(**_JIT)
 def _outcome_agent(k, x, c, ix, weights, o, out):  # noqa: ANN001, ANN202
     """Agent ``k`` of :func:`uasep_env.outcome.step_outcome` (``out``: its ``Outcome``)."""
     _reward_agent(k, x, c, ix, weights, out.own, out.terms)
