@@ -98,45 +98,57 @@ def reward_terms(
 
 
 # ---------------------------------------------------------------- the step's outcome
-# A plain call, not numba's IR inlining: inlined into the parallel loop (a parfor), its
-# writes came out wrong (the serial and parallel loops disagreed; tests/test_kernels.py).
-@numba.njit(**_JIT)
-def _outcome_agent(k, x, c, ix, weights, o, out):  # noqa: ANN001, ANN202
-    """Agent ``k`` of :func:`uasep_env.outcome.step_outcome` (``out``: its ``Outcome``)."""
-    _reward_agent(k, x, c, ix, weights, out.own, out.terms)
+# The outputs go in as separate arrays, not as the fields of one named tuple: read from a
+# tuple inside the parallel loop (a parfor), the writes were lost (tests/test_kernels.py
+# runs every kernel's parallel loops against its reference).
+# fmt: off
+@numba.njit(inline="always", **_JIT)
+def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
+                   cost_terms):  # noqa: ANN001
+# fmt: on
+    """Agent ``k`` of :func:`uasep_env.outcome.step_outcome` (the arrays: its ``Outcome``)."""
+    _reward_agent(k, x, c, ix, weights, own, terms)
     n = x.uav_pos.shape[1]
     e = k // n
     i = k % n
     d_uav, d_obstacle = x.min_uav_dist[e, i], x.min_obstacle_dist[e, i]
     d_region = _nearest_region(x, e, i)
-    out.d_region[e, i] = d_region
-    out.collided[e, i] = d_uav < c.collision_distance or d_obstacle < c.collision_distance
+    d_reg[e, i] = d_region
+    collided[e, i] = d_uav < c.collision_distance or d_obstacle < c.collision_distance
     off = _sq3(x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0], x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
                x.uav_pos[e, i, 2] - x.plan_pos[e, i, 2])  # fmt: skip
-    out.lost[e, i] = off > o.lost_sq
+    lost[e, i] = off > o.lost_sq
     # The rows of uasep_env.outcome.SAFETY_FLAGS.
-    out.flags[0, e, i] = d_uav < c.separation_distance
-    out.flags[1, e, i] = d_obstacle < c.obstacle_separation
-    out.flags[2, e, i] = d_region < 0.0
+    flags[0, e, i] = d_uav < c.separation_distance
+    flags[1, e, i] = d_obstacle < c.obstacle_separation
+    flags[2, e, i] = d_region < 0.0
     total = 0.0
     for t in range(o.cost_weights.shape[0]):
-        term = 1.0 if out.flags[o.cost_flags[t], e, i] else 0.0
-        out.cost_terms[t, e, i] = term
+        term = 1.0 if flags[o.cost_flags[t], e, i] else 0.0
+        cost_terms[t, e, i] = term
         if o.cost_weights[t] != 0.0:  # a zero weight adds nothing (as costs.weighted_cost)
             total += o.cost_weights[t] * term
-    out.cost[e, i] = total
+    cost[e, i] = total
 
 
+# fmt: off
 @numba.njit(**_JIT)
-def _outcome_serial(x, c, ix, weights, o, out):  # noqa: ANN001, ANN202
-    for k in range(out.own.size):
-        _outcome_agent(k, x, c, ix, weights, o, out)
+def _outcome_serial(x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
+                    cost_terms):  # noqa: ANN001
+# fmt: on
+    for k in range(own.size):
+        _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,
+                       cost_terms)  # fmt: skip
 
 
+# fmt: off
 @numba.njit(parallel=True, **_JIT)
-def _outcome_parallel(x, c, ix, weights, o, out):  # noqa: ANN001, ANN202
-    for k in numba.prange(out.own.size):
-        _outcome_agent(k, x, c, ix, weights, o, out)
+def _outcome_parallel(x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
+                      cost_terms):  # noqa: ANN001
+# fmt: on
+    for k in numba.prange(own.size):
+        _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,
+                       cost_terms)  # fmt: skip
 
 
 def step_outcome(
@@ -162,5 +174,5 @@ def step_outcome(
     )  # fmt: skip
     o = type(o)(float(o.lost_sq), frozen(o.cost_weights), frozen(o.cost_flags))
     fn = _outcome_parallel if _parallel(e * n) else _outcome_serial
-    fn(x, constants, index, frozen(weights), o, out)
+    fn(x, constants, index, frozen(weights), o, *out)
     return out
