@@ -1,14 +1,18 @@
 """The physics step's kernels: double integrator, obstacle motion and the Kalman correction.
 
 Twins of :func:`uasep_env.dynamics.step_double_integrator`,
-:func:`uasep_env.obstacles.step_obstacles` and :func:`uasep_env.estimation.kalman_correct`.
-Serial loops over the points (the work per point is a few dozen operations: threads would
-cost more than they save, and compiling parallel loops costs seconds).
+:func:`uasep_env.obstacles.step_obstacles` and :func:`uasep_env.estimation.kalman_correct`,
+and of the whole physics step they make with the measurements and separations,
+:func:`uasep_env.physics_step.physics_step` (:func:`physics_step`: three kernels that share
+the loops of the others). Serial loops over the points (the work per point is a few dozen
+operations: threads would cost more than they save, and compiling parallel loops costs
+seconds).
 
 Unlike the read-only kernels these update the world's arrays in place, so they take them as
 they are (the world's own arrays are C-contiguous and writable: one specialisation each)
 rather than through :func:`uasep_env._kernels.common.frozen`, whose copy of a view would
-lose the writes. An argument that is not C-contiguous is copied and the result copied back.
+lose the writes. An argument of the single-part twins that is not C-contiguous is copied
+and the result copied back; the whole step takes the world's own arrays only.
 
 Bit-identity notes: the transcendental functions (``sin``, ``cos``) are numpy's, computed
 between the loops as the other kernels do (``_kernels.ellipsoids``); ``np.maximum`` and
@@ -187,7 +191,7 @@ def obstacle_step(obs, uniforms: np.ndarray, dt: float, time: np.ndarray | None 
 
 # ---------------------------------------------------------------- Kalman correction
 @numba.njit(inline="always", **_JIT)
-def _predict_correct(p, v, accel, has_accel, ip_meas, iv_meas, g, gains, dt):  # noqa: ANN001, ANN202
+def _predict_correct(p, v, accel, has_accel, meas_p, meas_v, g, gains, dt):  # noqa: ANN001, ANN202
     """One axis of one track: predicted with the known input, corrected with gain ``g``."""
     if has_accel:
         pred_p = p + dt * v + (0.5 * dt * dt) * accel
@@ -195,8 +199,8 @@ def _predict_correct(p, v, accel, has_accel, ip_meas, iv_meas, g, gains, dt):  #
     else:
         pred_p = p + dt * v
         pred_v = v
-    ip = ip_meas - pred_p
-    iv = iv_meas - pred_v
+    ip = meas_p - pred_p
+    iv = meas_v - pred_v
     return (pred_p + gains[g, 0, 0] * ip + gains[g, 0, 1] * iv,
             pred_v + gains[g, 1, 0] * ip + gains[g, 1, 1] * iv)  # fmt: skip
 
