@@ -18,7 +18,9 @@ One environment step (``decision_interval`` physics steps of ``dt``) does, per p
 
 and then predicts each obstacle's reachable ellipsoid over the horizon from its estimate
 (:mod:`uasep_env.reachable`, eqs. 8-18; or, with ``prediction.fit="calibrated"``, the
-conformal region of its aircraft class, :mod:`uasep_env.reachable.calibrated`).
+conformal region of its aircraft class, :mod:`uasep_env.reachable.calibrated`). Steps 1-4
+are one function, :func:`uasep_env.physics_step.physics_step` (three compiled kernels when
+numba is in use).
 
 A reset (of all environments, or of those whose episodes ended) draws each environment's
 scenario from its own generator and builds the geometry once over the reset rows
