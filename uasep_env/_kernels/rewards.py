@@ -9,15 +9,6 @@ from uasep_env._kernels.common import _JIT, _norm3, _parallel, _sq3, frozen
 
 
 @numba.njit(inline="always", **_JIT)
-def _nearest_region(x, e, i):  # noqa: ANN001, ANN202
-    """UAV ``(e, i)``'s distance to its nearest region, ``region.min(axis=-1, initial=inf)``."""
-    d_region = np.inf
-    for j in range(x.region.shape[2]):
-        d_region = min(d_region, x.region[e, i, j])
-    return d_region
-
-
-@numba.njit(inline="always", **_JIT)
 def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.rewards._weighted_terms`.
 
@@ -32,7 +23,9 @@ def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     d_col, dev_scale = c.collision_distance, c.deviation_scale
     region_cap, max_steps = c.region_cap, c.max_steps
     d_uav, d_obstacle = x.min_uav_dist[e, i], x.min_obstacle_dist[e, i]
-    d_region = _nearest_region(x, e, i)
+    d_region = np.inf
+    for j in range(x.region.shape[2]):
+        d_region = min(d_region, x.region[e, i, j])
     t = max(0.0, 1.0 - d_uav / d_sep)
     terms[ix.separation_inner, e, i] = -(t * t)
     t = max(0.0, 1.0 - d_obstacle / d_osep)
@@ -60,6 +53,7 @@ def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     for t_idx in range(terms.shape[0]):
         total += weights[t_idx] * terms[t_idx, e, i]
     own[e, i] = total
+    return d_region  # the step's outcome reports it too
 
 
 @numba.njit(**_JIT)
@@ -107,12 +101,11 @@ def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, f
                    cost_terms):  # noqa: ANN001
 # fmt: on
     """Agent ``k`` of :func:`uasep_env.outcome.step_outcome` (the arrays: its ``Outcome``)."""
-    _reward_agent(k, x, c, ix, weights, own, terms)
+    d_region = _reward_agent(k, x, c, ix, weights, own, terms)
     n = x.uav_pos.shape[1]
     e = k // n
     i = k % n
     d_uav, d_obstacle = x.min_uav_dist[e, i], x.min_obstacle_dist[e, i]
-    d_region = _nearest_region(x, e, i)
     d_reg[e, i] = d_region
     collided[e, i] = d_uav < c.collision_distance or d_obstacle < c.collision_distance
     off = _sq3(x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0], x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
