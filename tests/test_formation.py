@@ -113,3 +113,28 @@ def test_segment_offsets_give_uav_positions_bit_for_bit():
         want, _ = plan.uav_positions(times, slots)
         np.testing.assert_array_equal(center[:, None] + offsets[np.arange(6), idx], want)
     assert seen == {0, 1, 2, 3}
+
+
+def test_usual_case_shortcuts_give_the_general_paths_numbers():
+    """The frame and the plan's directions of a batch with no odd row (every velocity
+    level and fast, no padding segment) are the general path's numbers, bit for bit: the
+    same rows computed inside a batch that takes the general path."""
+    rng = np.random.default_rng(11)
+    vel = rng.normal(0, 8, size=(40, 3))
+    vel[:, :2] += 3.0  # level enough everywhere
+    odd = np.array([[0.0, 0.0, 5.0], [0.1, 0.0, 0.0]])  # vertical; below MIN_FRAME_SPEED
+    fallback = rng.normal(0, 5, size=(42, 3))
+    usual = rotation_from_velocity(vel, fallback[:40])
+    general = rotation_from_velocity(np.concatenate([vel, odd]), fallback)
+    np.testing.assert_array_equal(usual, general[:40])
+    assert not np.array_equal(general[40], usual[0])  # the odd rows took the other path
+
+    wp = np.cumsum(rng.normal(0, 50, size=(6, 5, 3)), axis=1)
+    padded = wp.copy()
+    padded[-1, 3:] = padded[-1, 2]  # a padding segment sends the batch down the loop
+    plain = PlannedTrajectory(wp[:-1], 10.0)
+    looped = PlannedTrajectory(padded, 10.0)
+    np.testing.assert_array_equal(plain.direction, looped.direction[:-1])
+    np.testing.assert_array_equal(plain.cum, looped.cum[:-1])
+    np.testing.assert_array_equal(looped.direction[-1, 3], looped.direction[-1, 2])
+    np.testing.assert_array_equal(plain.cruise_speed, np.full(5, 10.0))

@@ -734,3 +734,49 @@ def test_paper_fit_ellipsoid_has_a_circular_cross_section():
         np.testing.assert_array_equal(axes, [lon, lat, lat])
     with pytest.raises(ValueError, match="fit must be 'enclosing' or 'paper', got 'exact'"):
         R.ellipsoid(4.0, 0.013, 0.5, 10.0, 3.0, fit="exact")
+
+
+def test_written_out_helpers_give_numpys_numbers():
+    """The fit's shortcuts against what they replace, bit for bit: ``sinc`` against
+    ``np.sinc``, the three extents in one call against three, the corner table against the
+    four gathers."""
+    from uasep_env.obstacles import sinc
+    from uasep_env.reachable import fit
+    from uasep_env.reachable.sets import _h_unit
+
+    rng = np.random.default_rng(5)
+    x = np.concatenate([[0.0, 1e-300, 0.5, 1.0, 3.0], rng.uniform(0.0, 4.0, 500)])
+    np.testing.assert_array_equal(sinc(x), np.sinc(x))
+    vt, phi, r = rng.uniform(0, 200, 64), rng.uniform(0, 5, 64), rng.uniform(0, 30, 64)
+    phi[:4] = 0.0
+    for swept in (True, False):
+        h0, hpi, hx = fit._extents(vt, phi, r, swept)
+        for got, a in ((h0, 0.0), (hpi, np.pi), (hx, 0.5 * np.pi)):
+            want = r + vt * _h_unit(np.zeros_like(vt) + a, phi, swept)
+            np.testing.assert_array_equal(got, want)
+        u = rng.uniform(0.0, 1.0, 200)
+        logr = np.concatenate([[np.nan, -np.inf, np.inf, -5.0, 5.0], rng.uniform(-3, 3, 195)])
+        tab = fit._TAB[swept]
+        na, nl = tab.shape[:2]
+        fa = np.clip((u - fit._TAB_U[0]) / (fit._TAB_U[1] - fit._TAB_U[0]), 0.0, na - 1.0)
+        fl = np.clip((logr - fit._TAB_LOGR[0]) / (fit._TAB_LOGR[1] - fit._TAB_LOGR[0]), 0, nl - 1)
+        fl = np.where(np.isnan(fl), 0.0, fl)
+        i0, j0 = np.minimum(fa.astype(np.intp), na - 2), np.minimum(fl.astype(np.intp), nl - 2)
+        ta, tl = (fa - i0)[:, None], (fl - j0)[:, None]
+        want = (
+            tab[i0, j0] * (1 - ta) * (1 - tl)
+            + tab[i0 + 1, j0] * ta * (1 - tl)
+            + tab[i0, j0 + 1] * (1 - ta) * tl
+            + tab[i0 + 1, j0 + 1] * ta * tl
+        )
+        np.testing.assert_array_equal(fit._interp_table(swept, u, logr), want)
+
+
+@pytest.mark.parametrize("name", ["speed", "max_turn_rate", "max_climb_rate", "horizon", "radius"])
+@pytest.mark.parametrize("bad", [-1.0, np.nan, np.inf])
+def test_ellipsoid_names_the_bad_parameter(name, bad):
+    args = {"speed": [5.0, 6.0], "max_turn_rate": 0.1, "max_climb_rate": 1.0, "horizon": 20.0,
+            "radius": [3.0, 4.0]}  # fmt: skip
+    args[name] = [1.0, bad] if isinstance(args[name], list) else bad
+    with pytest.raises(ValueError, match=f"^{name} must be finite and >= 0"):
+        R.ellipsoid(**args)

@@ -132,22 +132,30 @@ def rotation_from_velocity(
     """
     vel = np.asarray(vel, dtype=float)
     speed = np.linalg.norm(vel, axis=-1)
-    if fallback is None:
-        fallback = np.broadcast_to(np.array([1.0, 0.0, 0.0]), vel.shape)
-    use = np.where((speed >= min_speed)[..., None], vel, fallback)
+    fast = speed >= min_speed
+    use = vel
+    if not fast.all():
+        if fallback is None:
+            fallback = np.broadcast_to(np.array([1.0, 0.0, 0.0]), vel.shape)
+        use = np.where(fast[..., None], vel, fallback)
     # Heading theta (from north towards east) and climb angle phi (NED z down) as their
     # cosines and sines, straight from the components: no atan2, cos or sin.
     ux, uy, uz = use[..., 0], use[..., 1], use[..., 2]
     horiz = np.hypot(ux, uy)
     level = horiz > 1e-9  # a vertical fallback velocity has no heading: keep north there
-    safe_h = np.where(level, horiz, 1.0)
-    ct = np.where(level, ux / safe_h, 1.0)
-    st = np.where(level, uy / safe_h, 0.0)
     h = np.maximum(horiz, 1e-12)
-    still = ~level & (np.abs(uz) <= 1e-9)  # no velocity at all: level flight
-    r = np.where(still, 1.0, np.hypot(h, uz))
-    cp = np.where(still, 1.0, h / r)
-    sp = np.where(still, 0.0, -uz / r)
+    if level.all():  # the usual case: the same numbers, a dozen small calls fewer
+        ct, st = ux / horiz, uy / horiz
+        r = np.hypot(h, uz)
+        cp, sp = h / r, -uz / r
+    else:
+        safe_h = np.where(level, horiz, 1.0)
+        ct = np.where(level, ux / safe_h, 1.0)
+        st = np.where(level, uy / safe_h, 0.0)
+        still = ~level & (np.abs(uz) <= 1e-9)  # no velocity at all: level flight
+        r = np.where(still, 1.0, np.hypot(h, uz))
+        cp = np.where(still, 1.0, h / r)
+        sp = np.where(still, 0.0, -uz / r)
     rot = np.empty((*ct.shape, 3, 3))
     # Column X_f: starboard, horizontal.
     np.negative(st, out=rot[..., 0, 0])
@@ -214,6 +222,8 @@ def _plan_geometry(wp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     seg = np.diff(wp, axis=1)
     seg_len = np.linalg.norm(seg, axis=-1)
     cum = np.concatenate([np.zeros((wp.shape[0], 1)), np.cumsum(seg_len, axis=1)], axis=1)
+    if (seg_len > 1e-9).all():  # no padding: every segment its own direction, in one call
+        return cum, seg / np.maximum(seg_len[..., None], 1e-12)
     # Direction of each segment; padding (zero-length) segments inherit the last one.
     direction = np.zeros_like(seg)
     last = np.zeros((wp.shape[0], 3))
@@ -247,8 +257,11 @@ class PlannedTrajectory:
         self.waypoints = wp.copy()
         self.cum, self.direction = _plan_geometry(wp)
         self.length = self.cum[:, -1].copy()
-        self.cruise_speed = np.array(
-            np.broadcast_to(np.asarray(cruise_speed, dtype=float), (wp.shape[0],))
+        speed = np.asarray(cruise_speed, dtype=float)
+        self.cruise_speed = (
+            np.full(wp.shape[0], float(speed))
+            if speed.ndim == 0
+            else np.array(np.broadcast_to(speed, (wp.shape[0],)))
         )
 
     def set_rows(
@@ -273,6 +286,8 @@ class PlannedTrajectory:
 
     def copy_rows(self, mask: np.ndarray, other: PlannedTrajectory) -> None:
         """Replace the trajectories where ``mask`` by ``other``'s (one row per selected env).
+
+        ``mask``: ``(n_envs,)`` bool, or the selected rows' indices in increasing order.
 
         :meth:`set_rows` with ``other``'s way-points and speeds, its geometry not computed
         again.

@@ -232,7 +232,7 @@ class World(RenamedAttributes):
         if batch.plan is not None and batch.plan_offsets is not None:
             # The scenario made the plans and offsets already (the same functions of the same
             # arrays): not again.
-            self.plan.copy_rows(mask, batch.plan)
+            self.plan.copy_rows(idx, batch.plan)
             self._plan_offsets[idx] = batch.plan_offsets
         else:
             self.plan.set_rows(mask, batch.waypoints, batch.cruise_speed)

@@ -24,7 +24,7 @@ from uasep_env.reachable.sets import (
     Mode,
     _check_mode,
     _h_unit,
-    _nonneg,
+    _nonneg_all,
     _out,
 )
 
@@ -39,6 +39,8 @@ _N_CERT = 96
 _N_GEO = 14
 #: Nodes uniform in the normal angle, merged with those uniform in the ellipse's parameter.
 _UNIFORM_NODES = np.linspace(0.0, np.pi, 49)[1:-1]
+_PARAMETRIC_NODES = np.linspace(0.0, np.pi, _N_CERT + 1)
+_GEO_EXPONENTS = np.linspace(0.0, 1.0, _N_GEO)
 #: Relative absolute margin (of ``v t + r``) that absorbs floating-point rounding.
 _EPS_ABS = 1e-12
 #: Half-width (fraction of the set's length) and iterations of the centre's polishing search.
@@ -86,10 +88,18 @@ def _table_coords(phi: FloatArray, eps: FloatArray) -> tuple[FloatArray, FloatAr
     return u, logr
 
 
+def _corners(tab: FloatArray) -> FloatArray:
+    """``(na - 1, nl - 1, 4, 3)``: each cell's four corners, in the order of the interpolation."""
+    return np.stack([tab[:-1, :-1], tab[1:, :-1], tab[:-1, 1:], tab[1:, 1:]], axis=2)
+
+
+# One gather of a cell's four corners instead of four (a partial reset fits a few rows).
+_CORNERS = {swept: _corners(tab) for swept, tab in _TAB.items()}
+
+
 def _interp_table(swept: bool, u: FloatArray, logr: FloatArray) -> FloatArray:
     """Bilinear interpolation of the shape table, ``(..., 3)`` = (c, B, A) fractions."""
-    tab = _TAB[swept]
-    na, nl = tab.shape[:2]
+    na, nl = _TAB[swept].shape[:2]
     fa = np.clip((u - _TAB_U[0]) / (_TAB_U[1] - _TAB_U[0]), 0.0, na - 1.0)
     fl = np.clip((logr - _TAB_LOGR[0]) / (_TAB_LOGR[1] - _TAB_LOGR[0]), 0.0, nl - 1.0)
     fl = np.where(np.isnan(fl), 0.0, fl)
@@ -97,11 +107,13 @@ def _interp_table(swept: bool, u: FloatArray, logr: FloatArray) -> FloatArray:
     j0 = np.minimum(fl.astype(np.intp), nl - 2)
     ta = (fa - i0)[..., None]
     tl = (fl - j0)[..., None]
+    ua, ul = 1 - ta, 1 - tl
+    k = _CORNERS[swept][i0, j0]
     return (
-        tab[i0, j0] * (1 - ta) * (1 - tl)
-        + tab[i0 + 1, j0] * ta * (1 - tl)
-        + tab[i0, j0 + 1] * (1 - ta) * tl
-        + tab[i0 + 1, j0 + 1] * ta * tl
+        k[..., 0, :] * ua * ul
+        + k[..., 1, :] * ta * ul
+        + k[..., 2, :] * ua * tl
+        + k[..., 3, :] * ta * tl
     )
 
 
@@ -243,15 +255,17 @@ def _certified(
     return np.all(he - nd.h >= delta, axis=-1)
 
 
+# The directions of the extents: ahead, behind, to the side.
+_EXTENT_DIRECTIONS = np.array([0.0, np.pi, 0.5 * np.pi])
+
+
 def _extents(
     vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The set's supports ahead (``0``), behind (``pi``) and to the side (``pi / 2``) (m)."""
-    zero = np.zeros_like(vt)
-    h0 = r + vt * _h_unit(zero, phi, swept)
-    hpi = r + vt * _h_unit(zero + np.pi, phi, swept)
-    hx = r + vt * _h_unit(zero + 0.5 * np.pi, phi, swept)
-    return h0, hpi, hx
+    a = np.broadcast_to(_EXTENT_DIRECTIONS, (*vt.shape, 3))
+    h = r[..., None] + vt[..., None] * _h_unit(a, phi[..., None], swept)
+    return h[..., 0], h[..., 1], h[..., 2]
 
 
 @compiled_twin("fit_ellipse", golden_iters=_C_ITERS)
@@ -330,10 +344,10 @@ def _ellipse_core(
     lon_g = np.maximum(lon, 1e-9 * scale)
     step = np.pi / _N_CERT
     t_lo = np.minimum(0.2 * np.minimum(lat_g, lon_g) / np.maximum(lat_g, lon_g), step)
-    geo = t_lo[..., None] * (step / t_lo)[..., None] ** np.linspace(0.0, 1.0, _N_GEO)
+    geo = t_lo[..., None] * (step / t_lo)[..., None] ** _GEO_EXPONENTS
     tpar = np.concatenate(
         [
-            np.broadcast_to(np.linspace(0.0, np.pi, _N_CERT + 1), (*vt.shape, _N_CERT + 1)),
+            np.broadcast_to(_PARAMETRIC_NODES, (*vt.shape, _N_CERT + 1)),
             geo,
             0.5 * np.pi - geo,
             0.5 * np.pi + geo,
@@ -365,12 +379,14 @@ def _ellipse_core(
     # The circle of radius v t + r about the obstacle holds everything within reach; use it
     # if the certificate never passed, or if it is smaller (sets that are nearly discs).
     fallback = ~ok | (lat * lon > scale * scale)
-    c = np.where(fallback, 0.0, c)
-    lat = np.where(fallback, scale, lat)
-    lon = np.where(fallback, scale, lon)
     # Exact special cases: a disc (v t = 0, includes a point) and a segment (phi = 0, r = 0).
     disc = vt <= 0.0
     seg = (phi <= 0.0) & (r <= 0.0) & ~disc
+    if not (fallback | disc | seg).any():  # the usual case, in a dozen calls fewer
+        return c, lat, lon
+    c = np.where(fallback, 0.0, c)
+    lat = np.where(fallback, scale, lat)
+    lon = np.where(fallback, scale, lon)
     c = np.where(disc, 0.0, np.where(seg, 0.5 * vt, c))
     lat = np.where(disc, r, np.where(seg, 0.0, lat))
     lon = np.where(disc, r, np.where(seg, 0.5 * vt, lon))
@@ -434,10 +450,9 @@ def ellipse(
     """
     swept = _check_mode(mode)
     core = _paper_core if _check_fit(fit) else _ellipse_core
-    v = _nonneg("speed", speed)
-    w = _nonneg("max_turn_rate", max_turn_rate)
-    t = _nonneg("horizon", horizon)
-    r = _nonneg("radius", radius)
+    v, w, t, r = _nonneg_all(
+        speed=speed, max_turn_rate=max_turn_rate, horizon=horizon, radius=radius
+    )
     v, w, t, r = np.broadcast_arrays(v, w, t, r)
     shape = v.shape
     vt = (v * t).ravel()
@@ -491,11 +506,13 @@ def ellipsoid(
     """
     swept = _check_mode(mode)
     paper = _check_fit(fit)
-    v = _nonneg("speed", speed)
-    w = _nonneg("max_turn_rate", max_turn_rate)
-    vz = _nonneg("max_climb_rate", max_climb_rate)
-    t = _nonneg("horizon", horizon)
-    r = _nonneg("radius", radius)
+    v, w, vz, t, r = _nonneg_all(
+        speed=speed,
+        max_turn_rate=max_turn_rate,
+        max_climb_rate=max_climb_rate,
+        horizon=horizon,
+        radius=radius,
+    )
     v, w, vz, t, r = np.broadcast_arrays(v, w, vz, t, r)
     shape = v.shape
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):

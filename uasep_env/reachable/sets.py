@@ -13,6 +13,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from uasep_env.obstacles import sinc
+
 __all__ = ["FloatArray", "Mode", "boundary", "front_curve", "support"]
 
 Mode = Literal["swept", "terminal"]
@@ -29,6 +31,16 @@ def _nonneg(name: str, value: ArrayLike) -> FloatArray:
         first = arr[bad].flat[0] if arr.ndim else arr.item()
         raise ValueError(f"{name} must be finite and >= 0, got {first!r}")
     return arr
+
+
+def _nonneg_all(**values: ArrayLike) -> list[FloatArray]:
+    """:func:`_nonneg` of each value, in order, checked in one pass (a reset fits a few rows)."""
+    arrs = [np.asarray(v, dtype=np.float64) for v in values.values()]
+    flat = np.concatenate([a.ravel() for a in arrs])
+    if not (np.isfinite(flat) & (flat >= 0.0)).all():
+        for name, value in values.items():
+            _nonneg(name, value)  # raises, naming the first bad one
+    return arrs
 
 
 def _check_mode(mode: str) -> bool:
@@ -78,7 +90,7 @@ def _h_unit(
     ip = _inv(phi)
     reach = 1.0 - (a - sa) * ip
     omc = 2.0 * np.sin(0.5 * phi) ** 2 * ip  # (1 - cos phi) / phi
-    corner = sa * omc + ca * np.sinc(phi / np.pi)
+    corner = sa * omc + ca * sinc(phi / np.pi)
     if swept:
         corner = np.maximum(corner, 0.0)
     return np.where(a <= phi, reach, corner)

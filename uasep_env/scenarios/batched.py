@@ -307,14 +307,18 @@ def _plans(draws: np.ndarray, config: EnvConfig) -> np.ndarray:
 
 def _slots(draws: list[EpisodeDraws], config: EnvConfig) -> np.ndarray:
     """``(B, n_uavs, 3)`` each episode's formation pattern."""
-    made: dict[object, np.ndarray] = {}
     out = np.empty((len(draws), config.n_uavs, 3))
     for k, d in enumerate(draws):
-        key = d.pattern or config.formation
-        if key not in made:
-            made[key] = pattern_slots(key, config.n_uavs, config.formation_spacing)
-        out[k] = made[key]
+        out[k] = _pattern(d.pattern or config.formation, config.n_uavs, config.formation_spacing)
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _pattern(pattern: str | tuple, n: int, spacing: float) -> np.ndarray:
+    """:func:`pattern_slots`, made once per pattern (read-only)."""
+    slots = pattern_slots(pattern, n, spacing)
+    slots.flags.writeable = False
+    return slots
 
 
 def _planned_at(
