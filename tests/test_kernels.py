@@ -336,10 +336,8 @@ def _case_plan():
     return [(plan, t, w._plan_offsets)]
 
 
-def _case_fit_ellipse():
-    """The fit's inputs as ``_ellipse_core`` makes them: typical, degenerate and NaN rows."""
-    from uasep_env.reachable import fit
-
+def _case_fit_ellipse_params():
+    """``(vt, phi, r)``: typical and degenerate rows of the ellipse fit."""
     rng = np.random.default_rng(23)
     k = 300
     vt = rng.uniform(0.0, 150.0, k)
@@ -347,6 +345,15 @@ def _case_fit_ellipse():
     r = rng.uniform(0.0, 40.0, k)
     vt[:10], phi[10:20], r[20:30] = 0.0, 0.0, 0.0  # discs, straight flight, no radius
     phi[30:40] = rng.uniform(3.0, 20.0, 10)  # turns past pi
+    phi[40:45] = 0.5 * np.pi  # a node (pi / 2) exactly at the largest turn
+    return vt, phi, r
+
+
+def _case_fit_ellipse():
+    """The fit's inputs as ``_ellipse_core`` makes them: typical, degenerate and NaN rows."""
+    from uasep_env.reachable import fit
+
+    vt, phi, r = _case_fit_ellipse_params()
     cases = []
     reference = fit._fit_certified
     try:  # capture the arguments _ellipse_core passes (the twin's dispatch replaced)
@@ -356,11 +363,11 @@ def _case_fit_ellipse():
                 fit._ellipse_core(vt, phi, r, swept)
     finally:
         fit._fit_certified = reference
-    cases = [tuple(a.copy() for a in args) for args in cases]
-    nan = tuple(a[:12].copy() for a in cases[0])  # a NaN in each argument in turn
+    cases = [(*(a.copy() for a in args[:-1]), args[-1]) for args in cases]  # swept last
+    nan = tuple(a[:16].copy() for a in cases[0][:-1])  # a NaN in each array in turn
     for j, a in enumerate(nan):
         a[j] = np.nan
-    return [*cases, nan]
+    return [*cases, (*nan, True)]
 
 
 def _case_dense():
@@ -1056,3 +1063,34 @@ def test_every_kernel_compiles_without_reference_counting():
     assert len(loops) >= 30, sorted(loops)  # every module's loops were found
     counted = sorted(name for name, fn in loops.items() if fn.targetoptions.get("_nrt", True))
     assert counted == []
+
+
+@pytest.mark.parametrize("swept", [True, False])
+def test_fit_kernel_builds_the_nodes_of_numpy_bit_for_bit(swept):
+    """The fit kernel's per-row nodes (squares, spacings, the set's support) against
+    ``_Nodes``, array by array: a node's support feeds the fit only where it binds, so the
+    fit's results alone would not show a wrong branch at a node (e.g. exactly at the
+    largest turn, where the reachable and the corner formulas differ in the last bit)."""
+    from uasep_env._kernels.ellipse_fit import _nodes_row
+    from uasep_env.reachable import fit
+
+    cases = []
+    reference = fit._fit_certified
+    try:
+        fit._fit_certified = lambda *args: cases.append(args) or reference.reference(*args)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            fit._ellipse_core(*_case_fit_ellipse_params(), swept)
+    finally:
+        fit._fit_certified = reference
+    th, cos, sin, vt, phi, ip, omc, sc, r = cases[0][:9]
+    want = fit._Nodes(th, vt, phi, r, swept, cos, sin, (ip, omc, sc))
+    k = th.shape[1]
+    at_phi = 0
+    for i in range(th.shape[0]):
+        c2, s2, d2, h = np.empty(k), np.empty(k), np.empty(k - 1), np.empty(k)
+        _nodes_row(th[i], sin[i], cos[i], vt[i], phi[i], ip[i], omc[i], sc[i], r[i], swept,
+                   c2, s2, d2, h)  # fmt: skip
+        for got, ref in ((c2, want.c2), (s2, want.s2), (d2, want.d2), (h, want.h)):
+            np.testing.assert_array_equal(got, ref[i])
+        at_phi += int((th[i] == phi[i]).any())
+    assert at_phi >= 5  # rows with a node exactly at the largest turn were checked

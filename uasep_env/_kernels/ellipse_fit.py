@@ -63,31 +63,63 @@ def _axes_row(cos, c2, s2, h, delta, c, lon):  # noqa: ANN001, ANN202
 
 
 @numba.njit(**_JIT)
+def _nodes_row(th, sn, cs, vt, phi, ip, omc, sc, r, swept, c2, s2, d2, h):  # noqa: ANN001, ANN202
+    """One row of ``_Nodes``: squared cosines and sines, squared spacings over 8, support.
+
+    The support is ``sets._h_unit_of``'s, in its order: ``reach`` where the direction can be
+    reached, else the corner's (at least 0 for the swept set).
+    """
+    k = th.shape[0]
+    for j in range(k):
+        a, sa, ca = th[j], sn[j], cs[j]
+        c2[j] = ca * ca
+        s2[j] = sa * sa
+        if a <= phi:
+            unit = 1.0 - (a - sa) * ip
+        else:
+            unit = sa * omc + ca * sc
+            if swept:
+                unit = _maximum(unit, 0.0)
+        h[j] = r + vt * unit
+        if j + 1 < k:
+            d = th[j + 1] - a
+            d2[j] = d * d / 8.0
+
+
+@numba.njit(**_JIT)
 def _fit_rows(
+    th: np.ndarray,
+    sin: np.ndarray,
     cos: np.ndarray,
-    c2: np.ndarray,
-    s2: np.ndarray,
-    d2: np.ndarray,
-    h: np.ndarray,
+    vt: np.ndarray,
+    phi: np.ndarray,
+    ip: np.ndarray,
+    omc: np.ndarray,
+    sc: np.ndarray,
+    r: np.ndarray,
     c0: np.ndarray,
     half: np.ndarray,
     lat0: np.ndarray,
     lon0: np.ndarray,
-    r: np.ndarray,
     eps_abs: np.ndarray,
+    swept: bool,
     iters: int,
     c_out: np.ndarray,
     lat_out: np.ndarray,
     lon_out: np.ndarray,
     ok_out: np.ndarray,
-    rho: np.ndarray,
-    delta: np.ndarray,
+    scratch: np.ndarray,
 ) -> None:
     k = cos.shape[1]
     g = (math.sqrt(5.0) - 1.0) / 2.0
+    c2i, s2i, d2i, hi, rho, delta = (
+        scratch[0], scratch[1], scratch[2, : k - 1], scratch[3], scratch[4], scratch[5]
+    )  # fmt: skip
     for i in range(cos.shape[0]):
-        ci, c2i, s2i, d2i, hi = cos[i], c2[i], s2[i], d2[i], h[i]
+        ci = cos[i]
         ri, ei, lat_g, lon = r[i], eps_abs[i], lat0[i], lon0[i]
+        _nodes_row(th[i], sin[i], ci, vt[i], phi[i], ip[i], omc[i], sc[i], ri, swept,
+                   c2i, s2i, d2i, hi)  # fmt: skip
         # The centre: golden-section search on the area, margins at the start's axes.
         _margins_row(c2i, s2i, d2i, lat_g, lon, ri, ei, rho, delta)
         for j in range(k):
@@ -133,41 +165,51 @@ def _fit_rows(
 
 
 def fit_ellipse(
+    th: np.ndarray,
     cos: np.ndarray,
-    c2: np.ndarray,
-    s2: np.ndarray,
-    d2: np.ndarray,
-    h: np.ndarray,
+    sin: np.ndarray,
+    vt: np.ndarray,
+    phi: np.ndarray,
+    ip: np.ndarray,
+    omc: np.ndarray,
+    sc: np.ndarray,
+    r: np.ndarray,
     c: np.ndarray,
     half: np.ndarray,
     lat: np.ndarray,
     lon: np.ndarray,
-    r: np.ndarray,
     eps_abs: np.ndarray,
+    swept: bool,
     *,
     golden_iters: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Compiled :func:`uasep_env.reachable.fit._fit_certified`: ``(c, A, B, certified)``.
 
     Args:
-        cos: ``(R, K)`` the certificate nodes' cosines.
-        c2: ``(R, K)`` their squares.
-        s2: ``(R, K)`` the squared sines.
-        d2: ``(R, K - 1)`` the squared node spacings over 8.
-        h: ``(R, K)`` the set's support at the nodes (m).
+        th: ``(R, K)`` the certificate nodes, ascending.
+        cos: ``(R, K)`` their cosines.
+        sin: ``(R, K)`` their sines.
+        vt: ``(R,)`` the distance flown (m).
+        phi: ``(R,)`` the largest turn (rad).
+        ip: ``(R,)`` ``1 / phi`` (0 for a straight line).
+        omc: ``(R,)`` ``(1 - cos phi) / phi``.
+        sc: ``(R,)`` ``sin(phi) / phi``.
+        r: ``(R,)`` the radius (m).
         c: ``(R,)`` the start centre (m).
         half: ``(R,)`` the half-width of its search (m).
         lat: ``(R,)`` the start lateral axis (m).
         lon: ``(R,)`` the start longitudinal axis (m).
-        r: ``(R,)`` the radius (m).
         eps_abs: ``(R,)`` the rounding margin (m).
+        swept: The swept set (else the terminal one).
         golden_iters: Iterations of the centre's search.
     """
     rows = cos.shape[0]
     c_out, lat_out, lon_out = np.empty(rows), np.empty(rows), np.empty(rows)
     ok = np.empty(rows, dtype=np.bool_)
-    scratch = np.empty((2, cos.shape[1]))  # the margins' rho and delta of one row
-    inputs = (cos, c2, s2, d2, h, c, half, lat, lon, r, eps_abs)
-    _fit_rows(*(frozen(np.asarray(a, dtype=np.float64)) for a in inputs), golden_iters,
-              c_out, lat_out, lon_out, ok, scratch[0], scratch[1])  # fmt: skip
+    # One row's squared cosines, squared sines, spacings, support, and the margins' rho and
+    # delta.
+    scratch = np.empty((6, cos.shape[1]))
+    inputs = (th, sin, cos, vt, phi, ip, omc, sc, r, c, half, lat, lon, eps_abs)
+    _fit_rows(*(frozen(np.asarray(a, dtype=np.float64)) for a in inputs), bool(swept),
+              golden_iters, c_out, lat_out, lon_out, ok, scratch)  # fmt: skip
     return c_out, lat_out, lon_out, ok

@@ -24,8 +24,10 @@ from uasep_env.reachable.sets import (
     Mode,
     _check_mode,
     _h_unit,
+    _h_unit_of,
     _nonneg_all,
     _out,
+    _unit_factors,
 )
 
 __all__ = ["Fit", "ellipse", "ellipsoid"]
@@ -144,35 +146,37 @@ def _golden_max(
 
 # ---------------------------------------------------------------------------- ellipse fit
 class _Nodes:
-    """Certificate nodes on ``[0, pi]`` with their trigonometry and the set's support there."""
+    """Certificate nodes on ``[0, pi]`` with their trigonometry and the set's support there.
+
+    ``cos``/``sin``: the nodes' cosines and sines; ``factors``: :func:`_unit_factors` of
+    ``phi``, if known.
+    """
 
     def __init__(
-        self, th: FloatArray, vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
+        self,
+        th: FloatArray,
+        vt: FloatArray,
+        phi: FloatArray,
+        r: FloatArray,
+        swept: bool,
+        cos: FloatArray | None = None,
+        sin: FloatArray | None = None,
+        factors: tuple[FloatArray, FloatArray, FloatArray] | None = None,
     ) -> None:
         self.th = th
-        self.cos = np.cos(th)
+        self.cos = np.cos(th) if cos is None else cos
         self.c2 = self.cos**2
-        sin = np.sin(th)
+        sin = np.sin(th) if sin is None else sin
         self.s2 = sin**2
         self.d2 = np.diff(th, axis=-1) ** 2 / 8.0
-        self.h = r[..., None] + vt[..., None] * _h_unit(th, phi[..., None], swept, sin, self.cos)
-        self._set_interior()
-
-    def _set_interior(self) -> None:
-        """The interior nodes' cosines, squared cosines and inverse squared sines."""
+        ip, omc, sc = _unit_factors(phi) if factors is None else factors
+        unit = _h_unit_of(
+            th, sin, self.cos, phi[..., None], ip[..., None], omc[..., None], sc[..., None], swept
+        )
+        self.h = r[..., None] + vt[..., None] * unit
         self.cos_in = self.cos[..., 1:-1]
         self.c2_in = self.c2[..., 1:-1]
         self.inv_s2_in = 1.0 / self.s2[..., 1:-1]
-
-    @classmethod
-    def from_trig(
-        cls, cos: FloatArray, c2: FloatArray, s2: FloatArray, d2: FloatArray, h: FloatArray
-    ) -> _Nodes:
-        """Nodes of known trigonometry and support (no angles: :meth:`take` needs ``th``)."""
-        nd = object.__new__(cls)
-        nd.cos, nd.c2, nd.s2, nd.d2, nd.h = cos, c2, s2, d2, h
-        nd._set_interior()
-        return nd
 
     def take(self, idx: NDArray[np.intp]) -> _Nodes:
         """The nodes of the rows ``idx``."""
@@ -270,40 +274,49 @@ def _extents(
 
 @compiled_twin("fit_ellipse", golden_iters=_C_ITERS)
 def _fit_certified(
+    th: FloatArray,
     cos: FloatArray,
-    c2: FloatArray,
-    s2: FloatArray,
-    d2: FloatArray,
-    h: FloatArray,
+    sin: FloatArray,
+    vt: FloatArray,
+    phi: FloatArray,
+    ip: FloatArray,
+    omc: FloatArray,
+    sc: FloatArray,
+    r: FloatArray,
     c: FloatArray,
     half: FloatArray,
     lat: FloatArray,
     lon: FloatArray,
-    r: FloatArray,
     eps_abs: FloatArray,
+    swept: bool,
 ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
-    """The centre polished, the axes fitted at the nodes, and whether they pass the certificate.
+    """The nodes' support, the centre polished, the axes fitted, and the certificate.
 
-    Arithmetic and square roots only, compiled as ``fit_ellipse``: here, a handful of rows
-    (a partial reset's) costs a few hundred small numpy calls.
+    Arithmetic and square roots only (the sines and cosines come in), compiled as
+    ``fit_ellipse``: here, a handful of rows (a partial reset's) costs a few hundred small
+    numpy calls.
 
     Args:
-        cos: ``(R, K)`` the nodes' cosines.
-        c2: ``(R, K)`` their squares.
-        s2: ``(R, K)`` the squared sines.
-        d2: ``(R, K - 1)`` the squared node spacings over 8.
-        h: ``(R, K)`` the set's support at the nodes (m).
+        th: ``(R, K)`` the certificate nodes, ascending in ``[0, pi]``.
+        cos: ``(R, K)`` their cosines.
+        sin: ``(R, K)`` their sines.
+        vt: ``(R,)`` the distance flown ``v t`` (m).
+        phi: ``(R,)`` the largest turn ``w t`` (rad).
+        ip: ``(R,)`` ``1 / phi`` (0 for a straight line), as :func:`_unit_factors`.
+        omc: ``(R,)`` ``(1 - cos phi) / phi``.
+        sc: ``(R,)`` ``sin(phi) / phi``.
+        r: ``(R,)`` the radius (m).
         c: ``(R,)`` the table's centre (m).
         half: ``(R,)`` the half-width of the centre's search (m).
         lat: ``(R,)`` the table's lateral axis, at least a tiny fraction of the scale (m).
         lon: ``(R,)`` the table's longitudinal axis (m).
-        r: ``(R,)`` the radius (m).
         eps_abs: ``(R,)`` the rounding margin (m).
+        swept: The swept set (else the terminal one).
 
     Returns:
         ``(c, A, B, certified)``, each ``(R,)``.
     """
-    nd = _Nodes.from_trig(cos, c2, s2, d2, h)
+    nd = _Nodes(th, vt, phi, r, swept, cos, sin, (ip, omc, sc))
     lat_g = lat
     # The margins depend on (A, B): fit twice, taking the margins at the previous axes with a
     # 25% allowance, then certify; rows that still fail grow until they pass (the caller).
@@ -362,15 +375,19 @@ def _ellipse_core(
     kink = np.where(swept & (phi < np.pi), 0.5 * (np.pi + phi), 0.5 * np.pi)
     uni = np.broadcast_to(_UNIFORM_NODES, (*th.shape[:-1], _UNIFORM_NODES.size))
     th = np.sort(np.concatenate([th, uni, kink[..., None]], axis=-1), axis=-1)
-    nd = _Nodes(th, vt, phi, r, swept)
+    cos, sin = np.cos(th), np.sin(th)
+    ip, omc, sc = _unit_factors(phi)
     c, lat, lon, ok = _fit_certified(
-        nd.cos, nd.c2, nd.s2, nd.d2, nd.h, c, _C_SEARCH * ext, lat_g, lon, r, eps_abs
+        th, cos, sin, vt, phi, ip, omc, sc, r, c, _C_SEARCH * ext, lat_g, lon, eps_abs, swept
     )
     ok |= ~live
     grow = 1e-6
+    nd = None
     for _ in range(30):
         if np.all(ok):
             break
+        if nd is None:  # rare: the nodes in numpy, for the rows that grow
+            nd = _Nodes(th, vt, phi, r, swept, cos, sin, (ip, omc, sc))
         bad = np.flatnonzero(~ok)
         lat[bad] *= 1.0 + grow
         lon[bad] *= 1.0 + grow

@@ -87,10 +87,29 @@ def _h_unit(
     """
     sa = np.sin(a) if sin_a is None else sin_a
     ca = np.cos(a) if cos_a is None else cos_a
+    ip, omc, sc = _unit_factors(phi)
+    return _h_unit_of(a, sa, ca, phi, ip, omc, sc, swept)
+
+
+def _unit_factors(phi: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``1 / phi``, ``(1 - cos phi) / phi`` and ``sin(phi) / phi``: :func:`_h_unit`'s factors."""
     ip = _inv(phi)
+    return ip, 2.0 * np.sin(0.5 * phi) ** 2 * ip, sinc(phi / np.pi)
+
+
+def _h_unit_of(
+    a: FloatArray,
+    sa: FloatArray,
+    ca: FloatArray,
+    phi: FloatArray,
+    ip: FloatArray,
+    omc: FloatArray,
+    sc: FloatArray,
+    swept: bool,
+) -> FloatArray:
+    """:func:`_h_unit` from the sines, cosines and factors (the fit's kernel repeats it)."""
     reach = 1.0 - (a - sa) * ip
-    omc = 2.0 * np.sin(0.5 * phi) ** 2 * ip  # (1 - cos phi) / phi
-    corner = sa * omc + ca * sinc(phi / np.pi)
+    corner = sa * omc + ca * sc
     if swept:
         corner = np.maximum(corner, 0.0)
     return np.where(a <= phi, reach, corner)
