@@ -156,3 +156,26 @@ def test_a_partial_reset_updates_the_plan_already_computed():
         assert not g.flags.writeable
     assert not np.array_equal(before[mask], got[2][mask])  # the new episodes' plans
     np.testing.assert_array_equal(kept, before)
+
+
+def test_partial_resets_before_a_read_update_the_plan_in_order():
+    """Two partial resets (overlapping rows) before the plan is read again, then a step:
+    the rows are applied at the read, the later reset's last, and a step discards them."""
+    a, _, _ = _pair()
+    _ = a.plan_pos
+    first = np.zeros(a.n_envs, dtype=bool)
+    first[[1, 2, 6]] = True
+    second = np.zeros(a.n_envs, dtype=bool)
+    second[[2, 7]] = True
+    a.reset(mask=first)
+    a.reset(mask=second)
+    got = (a.plan_center, a.plan_dir, a.plan_pos, a.plan_vel)
+    a._refresh_plan()
+    want = (a.plan_center, a.plan_dir, a.plan_pos, a.plan_vel)
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_array_equal(g, w, strict=True)
+    a.reset(mask=first)  # then a step before any read: the step's plan, not the reset's
+    a.step(np.zeros((a.n_envs, a.n_uavs, 3)))
+    stepped = a.plan_pos
+    a._refresh_plan()
+    np.testing.assert_array_equal(stepped, a.plan_pos, strict=True)

@@ -325,25 +325,21 @@ class World(RenamedAttributes):
         Lazy, so that a reset followed by a step (the vector envs) evaluates it once.
         """
         self._plan_now: tuple[np.ndarray, ...] | None = None
+        self._plan_resets: list[tuple[np.ndarray, ScenarioBatch]] = []
 
     def _reset_plan_rows(self, rows: np.ndarray, batch: ScenarioBatch) -> None:
-        """After a partial reset: the plan already computed gets the ``rows`` at time 0.
+        """After a partial reset: the plan already computed is to get the ``rows`` at time 0.
 
         The same numbers, row by row, as recomputing every environment's plan, which the
-        vector envs' autoresets would otherwise do for a few reset rows. Marks the plan
-        stale instead when none was computed or the scenarios did not bring their plans.
+        vector envs' autoresets would otherwise do for a few reset rows; applied at the next
+        read (:meth:`_plan_arrays`), so not at all when a step comes first (the vector envs'
+        next-step autoreset). Marks the plan stale instead when none was computed or the
+        scenarios did not bring their plans.
         """
         if self._plan_now is None or batch.plan is None or batch.plan_offsets is None:
             self._refresh_plan()
             return
-        fresh = planned_state(batch.plan, np.zeros(len(rows)), batch.plan_offsets)
-        arrays = []
-        for old, new in zip(self._plan_now, fresh, strict=True):
-            arr = old.copy()  # a copy: what a caller kept stays as it was
-            arr[rows] = new
-            arr.flags.writeable = False
-            arrays.append(arr)
-        self._plan_now = tuple(arrays)
+        self._plan_resets.append((rows, batch))
 
     def _plan_arrays(self) -> tuple[np.ndarray, ...]:
         """``(center, direction, pos, vel)`` of the plan now, computed once per step.
@@ -355,6 +351,16 @@ class World(RenamedAttributes):
             for arr in (center, direction, pos, vel):
                 arr.flags.writeable = False
             self._plan_now = (center, direction, pos, vel)
+        elif self._plan_resets:
+            arrays = [old.copy() for old in self._plan_now]  # what a caller kept stays
+            for rows, batch in self._plan_resets:
+                fresh = planned_state(batch.plan, np.zeros(len(rows)), batch.plan_offsets)
+                for arr, new in zip(arrays, fresh, strict=True):
+                    arr[rows] = new
+            for arr in arrays:
+                arr.flags.writeable = False
+            self._plan_now = tuple(arrays)
+        self._plan_resets.clear()
         return self._plan_now
 
     @property
