@@ -22,7 +22,7 @@ pytestmark = pytest.mark.skipif(
 
 #: The loops one APF evaluation runs (serial: one thread), by ``module.function``.
 APF_LOOPS = {
-    "ellipsoids._serial",  # the APF's nearest points
+    "apf._apf_rows",  # the APF's decision
     "ellipsoids._pairs_serial",  # every UAV against every obstacle region
     "separations._separations_serial",
     "plan._plan_rows",
@@ -47,8 +47,8 @@ _PROBE = """
     evaluate(["apf"], {"scenario": "paper"}, [0])  # what make eval runs (whole episode)
     _numba.kernels()  # loaded, as every kernel call does
     counts = {}
-    for name in ("common", "ellipse_fit", "ellipsoids", "network", "observations", "physics",
-                 "plan", "rewards", "separations"):
+    for name in ("apf", "common", "ellipse_fit", "ellipsoids", "network", "observations",
+                 "physics", "plan", "rewards", "separations"):
         module = importlib.import_module(f"uasep_env._kernels.{name}")
         for attr, obj in vars(module).items():
             if isinstance(obj, numba.core.registry.CPUDispatcher):

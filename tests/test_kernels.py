@@ -507,7 +507,76 @@ def _case_physics():
 
 
 #: The cases of each compiled twin; a new twin without cases fails the registry test.
+def _case_apf():
+    """Observations of batches in flight (collision courses, random traffic with several
+    obstacles and neighbours), then rows edited into the APF's corners: a region on the UAV,
+    a UAV standing still or too fast, absent neighbours and obstacles, far goals, and one
+    row with a NaN velocity (case 2, NaN on purpose)."""
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.policies.apf import APF
+
+    cases = []
+    rng = np.random.default_rng(8)
+    configs = (
+        {"scenario": "collision_head_on", "n_uavs": 3, "n_obstacles": 1},
+        {"scenario": "random", "n_uavs": 4, "n_obstacles": 3,
+         "observation": {"k_uavs": 3, "k_obstacles": 3}},
+    )  # fmt: skip
+    for kw in configs:
+        core = EnvCore(kw, 24)
+        obs = core.reset(seed=11)
+        pol = APF(core.config)
+        rows = []
+        for t in range(640):  # past the collision courses' meeting times
+            act = pol(obs) if t % 3 else rng.uniform(-1, 1, (24, core.n_uavs, 3))
+            res = core.step(act)
+            obs = res.obs
+            done = res.terminated | res.truncated
+            if done.any():
+                obs[done] = core.reset_some(done)
+            if t % 40 == 39:
+                rows.append(obs.copy())
+        cases.append((np.concatenate(rows), pol.layout, pol.gains, pol.max_speed,
+                      pol.max_accel, pol.dt))  # fmt: skip
+    obs, layout, gains, *rest = cases[1]
+    obs = obs[:40].copy()
+    where = layout.decode_columns()
+
+    def put(row, key, value, slot=0):
+        start, size, scale, stride, _ = where[key]
+        c = start + slot * stride
+        obs[row, ..., c : c + size] = np.asarray(value, dtype=float) / scale
+
+    put(0, "obstacle_center", [0.5, -0.2, 0.1])  # the UAV inside the region
+    put(0, "obstacle_mask", [1.0])
+    put(0, "uav_rel_pos", [1.5, -1.0, 0.3])  # and a neighbour close by: both forces act
+    put(0, "uav_rel_vel", [-2.0, 1.0, 0.5])
+    put(0, "uav_mask", [1.0])
+    put(1, "velocity", [0.0, 0.0, 0.0])  # standing still
+    put(2, "velocity", [30.0, 5.0, -2.0])  # faster than V_max: the speed cap acts
+    put(3, "uav_mask", [0.0], slot=0)
+    put(3, "obstacle_mask", [0.0], slot=1)
+    put(4, "goal_offset", [900.0, -400.0, 10.0])  # far: the goal term saturates
+    put(5, "uav_rel_pos", [1.0, 0.5, 0.0], slot=1)  # a neighbour closing in, very near
+    put(5, "uav_rel_vel", [-3.0, -1.0, 0.0], slot=1)
+    put(5, "uav_mask", [1.0], slot=1)
+    put(6, "uav_rel_pos", [0.0, 0.0, 0.0], slot=2)  # an absent neighbour, as encoded
+    put(6, "uav_rel_vel", [0.0, 0.0, 0.0], slot=2)
+    put(6, "uav_mask", [0.0], slot=2)
+    put(7, "obstacle_center", [-8.0, 0.0, 0.0])  # a region just behind, flown away from
+    put(7, "obstacle_axes", [4.0, 3.0, 2.0])
+    put(7, "obstacle_heading_cs", [1.0, 0.0])
+    put(7, "obstacle_mask", [1.0])
+    put(7, "velocity", [6.0, 0.0, 0.0])
+    nan = obs[:8].copy()
+    start = where["velocity"][0]
+    nan[0, ..., start] = np.nan  # inside a region: the entry prediction meets the NaN
+    nan[4, ..., where["goal_offset"][0]] = np.nan  # the goal term's cap meets it
+    return [cases[0], (obs, layout, gains, *rest), (nan, layout, gains, *rest)]
+
+
 TWIN_CASES = {
+    "apf_actions": _case_apf,
     "nearest_on_ellipsoids": _case_nearest,
     "pairwise_distances": _case_pairwise,
     "region_distances": _case_region,
@@ -539,7 +608,7 @@ IN_PLACE = {
 
 
 #: Cases whose outputs hold NaN on purpose (NaN inputs propagate as numpy propagates them).
-NAN_ON_PURPOSE = {("double_integrator", 3), ("fit_ellipse", 2)}
+NAN_ON_PURPOSE = {("double_integrator", 3), ("fit_ellipse", 2), ("apf_actions", 2)}
 
 
 def test_every_compiled_twin_has_a_case():
@@ -1094,3 +1163,57 @@ def test_fit_kernel_builds_the_nodes_of_numpy_bit_for_bit(swept):
             np.testing.assert_array_equal(got, ref[i])
         at_phi += int((th[i] == phi[i]).any())
     assert at_phi >= 5  # rows with a node exactly at the largest turn were checked
+
+
+@pytest.mark.parametrize("numba_on", [True, False])
+def test_apf_checks_its_observations_with_and_without_the_kernel(monkeypatch, numba_on):
+    """The same errors either way: a wrong width, a NaN or infinite semi-axis (named as the
+    distance solve names it)."""
+    from uasep_env import make_config
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.policies import APF
+
+    if not numba_on:
+        monkeypatch.setitem(_numba._state, "numba", None)
+    cfg = make_config(scenario="random")
+    obs = EnvCore(cfg, n_envs=3).reset(seed=1)
+    apf = APF(cfg)
+    with pytest.raises(ValueError, match=f"observation width must be {obs.shape[-1]}, got 7"):
+        apf(obs[..., :7])
+    start = apf.layout.decode_columns()["obstacle_axes"][0]
+    for bad in (np.nan, np.inf):
+        edited = obs.copy()
+        edited[1, 2, start + 1] = bad
+        with pytest.raises(ValueError, match="semi_axes must be finite and >= 0"):
+            apf(edited)
+
+
+def test_an_apf_subclass_with_its_own_piece_runs_that_piece():
+    """The compiled decision is APF's pieces as they are: a subclass that replaces one
+    (here: no obstacle repulsion) gets the numpy form with its own piece."""
+    from uasep_env import make_config
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.policies import APF
+    from uasep_env.policies.apf import _plain
+
+    class NoObstacles(APF):
+        def obstacle_repulsion(self, o):
+            return np.zeros_like(o["velocity"])
+
+    cfg = make_config(scenario="collision_head_on")
+    core = EnvCore(cfg, n_envs=8)
+    obs = core.reset(seed=2)
+    apf, blind = APF(cfg), NoObstacles(cfg)
+    assert _plain(APF) and not _plain(NoObstacles)
+    seen = False
+    for _ in range(700):
+        o = blind.layout.decode(obs)
+        want = blind.bound(blind.attraction(o) + blind.inner_repulsion(o), o["velocity"])
+        np.testing.assert_array_equal(blind(obs), want.astype(np.float32))
+        seen |= not np.array_equal(apf(obs), blind(obs))  # the APF does avoid
+        res = core.step(apf(obs))
+        obs = res.obs
+        done = res.terminated | res.truncated
+        if done.any():
+            obs[done] = core.reset_some(done)
+    assert seen

@@ -288,6 +288,16 @@ class ObservationLayout:
             out["base_action"] = obs[..., i : i + 3].astype(float)
         return out
 
+    def decode_columns(self) -> dict[str, tuple[int, int, float, int, int]]:
+        """Where :meth:`decode` reads each feature: ``key: (start, size, scale, stride, count)``.
+
+        ``start``: its first column (the first neighbour's, in the neighbour blocks);
+        ``stride``: the columns from one neighbour's to the next's (0 in the own-state
+        block); ``count``: 1, or the neighbours. Compiled readers of the vector (the APF's
+        kernel) decode with these, as :meth:`decode` does.
+        """
+        return dict(_decode_columns(self))
+
     def feature_names(self) -> list[str]:
         """One name per entry of the vector (for logging, docs and checkpoints)."""
         names: list[str] = []
@@ -316,6 +326,23 @@ def _feature_keys(features: Iterable[str] | None) -> tuple[str, ...]:
     if unknown:
         raise ValueError(f"unknown observation feature(s) {unknown}; known: {list(_BY_KEY)}")
     return tuple(f.key for f in FEATURES if f.key in keys)
+
+
+@functools.lru_cache(maxsize=64)
+def _decode_columns(layout: ObservationLayout) -> dict[str, tuple[int, int, float, int, int]]:
+    out: dict[str, tuple[int, int, float, int, int]] = {}
+    i = 0
+    for f in layout.block("self"):
+        out[f.key] = (i, f.size, layout._scale(f.kind), 0, 1)
+        i += f.size
+    for name, k in (("uav", layout.k_uavs), ("obstacle", layout.k_obstacles)):
+        w = layout.width(name)
+        j = 0
+        for f in layout.block(name):
+            out[f.key] = (i + j, f.size, layout._scale(f.kind), w, k)
+            j += f.size
+        i += k * w
+    return out
 
 
 @functools.lru_cache(maxsize=256)

@@ -27,11 +27,14 @@ kernel receives as keyword arguments. These modules import nothing else of the p
 * :func:`fit_ellipse` -- :func:`uasep_env.reachable.fit._fit_certified` (the enclosing
   ellipse's centre search, axes and certificate);
 * :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
-  network's layer, in float64 before the rounding).
+  network's layer, in float64 before the rounding);
+* :func:`apf_actions` -- :func:`uasep_env.policies.apf._apf_actions` (the paper's APF's
+  decision from the observations).
 """
 
 from __future__ import annotations
 
+from uasep_env._kernels.apf import apf_actions
 from uasep_env._kernels.ellipse_fit import fit_ellipse
 from uasep_env._kernels.ellipsoids import (
     nearest_on_ellipsoids,
@@ -51,6 +54,7 @@ from uasep_env._kernels.rewards import reward_terms, step_outcome
 from uasep_env._kernels.separations import separations
 
 __all__ = [
+    "apf_actions",
     "assemble_observations",
     "dense",
     "double_integrator",

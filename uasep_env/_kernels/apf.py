@@ -1,0 +1,285 @@
+"""The paper's APF decision: :func:`uasep_env.policies.apf._apf_actions`, one UAV at a time.
+
+The observation vector decoded as ``ObservationLayout.decode`` does (its columns from
+``decode_columns``), then the attraction (eqs. 19-22), the obstacle repulsion with its entry
+prediction (eqs. 23-25), the inner repulsion (eqs. 26-30) and the bounds (eq. 4), in the
+numpy form's order. The regions' headings come in as numpy's cosines and sines of numpy's
+``arctan2`` (the numpy form's), and every 3-vector dot product adds as numpy's ``einsum``
+does (:func:`_dot3`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from uasep_env._kernels.common import _JIT, frozen
+from uasep_env._kernels.ellipsoids import _nearest_one
+
+#: The features the APF reads, in the order of the kernel's column and scale arrays.
+_KEYS = (
+    "goal_offset",
+    "slot_offset",
+    "plan_velocity",
+    "velocity",
+    "formation_velocity",
+    "uav_rel_pos",
+    "uav_rel_vel",
+    "uav_mask",
+    "obstacle_center",
+    "obstacle_axes",
+    "obstacle_heading_cs",
+    "obstacle_mask",
+)
+#: The gains the kernel reads, in the order of its gain array.
+_GAINS = (
+    "k_goal",
+    "goal_saturation",
+    "k_slot",
+    "k_vel",
+    "k_damp",
+    "k_obstacle",
+    "obstacle_safe_min",
+    "obstacle_time",
+    "alpha",
+    "beta",
+    "inner_safe_min",
+    "k_safe",
+    "max_repulsion",
+)
+
+
+@numba.njit(inline="always", **_JIT)
+def _maximum(x, y):  # noqa: ANN001, ANN202
+    """``np.maximum``'s rule: ``x`` unless ``y`` is larger, NaN if either is."""
+    return x if (x >= y or x != x) else y
+
+
+@numba.njit(inline="always", **_JIT)
+def _max0(y):  # noqa: ANN001, ANN202
+    """``np.maximum(0.0, y)``: NaN stays NaN."""
+    return 0.0 if y <= 0.0 else y
+
+
+@numba.njit(inline="always", **_JIT)
+def _dot3(a0, a1, a2, b0, b1, b2):  # noqa: ANN001, ANN202
+    """``einsum("...i,...i")`` of two 3-vectors, in the order numpy adds (two SIMD lanes)."""
+    return (a0 * b0 + a2 * b2) + a1 * b1
+
+
+@numba.njit(inline="always", **_JIT)
+def _capped(f0, f1, f2, cap):  # noqa: ANN001, ANN202
+    """``apf._cap_norm`` of one vector."""
+    s = cap / _maximum(math.sqrt(_dot3(f0, f1, f2, f0, f1, f2)), 1e-12)
+    if not s < 1.0:  # np.minimum(1.0, s): NaN stays NaN
+        s = 1.0 if s >= 1.0 else s
+    return f0 * s, f1 * s, f2 * s
+
+
+@numba.njit(**_JIT)
+def _read3(obs, b, col, k, stride, scale):  # noqa: ANN001, ANN202
+    """A decoded 3-vector feature (neighbour ``k``'s in its block)."""
+    c = col + k * stride
+    return obs[b, c] * scale, obs[b, c + 1] * scale, obs[b, c + 2] * scale
+
+
+@numba.njit(**_JIT)
+def _will_enter(v0, v1, v2, c0, c1, c2, a0, a1, a2, cp, sp, times, safe_min, n_newton):  # noqa: ANN001, ANN202
+    """Whether the straight-line flight comes within ``safe_min`` of the region.
+
+    The least distance over the sampled times, NaN if any is (``np.min``), below
+    ``safe_min``.
+    """
+    least = np.inf
+    for s in range(times.shape[0]):
+        t = times[s]
+        e0 = v0 * t - c0
+        e1 = v1 * t - c1
+        e2 = v2 * t - c2
+        q0 = e0 * cp + e1 * sp
+        q1 = -e0 * sp + e1 * cp
+        dist = _nearest_one(q0, q1, e2, a0, a1, a2, n_newton)[3]
+        if dist != dist:
+            return False
+        if s == 0 or dist < least:
+            least = dist
+    return least < safe_min
+
+
+@numba.njit(**_JIT)
+def _obstacles(obs, b, cols, scales, n_obs, stride, cos_h, sin_h, v, vh, speed, g, times, n_newton):  # noqa: ANN001, ANN202
+    """The obstacle repulsion of row ``b`` (eqs. 23-25), summed over the obstacles."""
+    t0 = t1 = t2 = 0.0
+    for k in range(n_obs):
+        c0, c1, c2 = _read3(obs, b, cols[8], k, stride, scales[8])
+        a0, a1, a2 = _read3(obs, b, cols[9], k, stride, scales[9])
+        a0, a1, a2 = _maximum(a0, 1e-3), _maximum(a1, 1e-3), _maximum(a2, 1e-3)
+        present = obs[b, cols[11] + k * stride] * scales[11] > 0.5
+        cp, sp = cos_h[b, k], sin_h[b, k]
+        # The UAV at the origin: its distance to the region and the outward normal.
+        d0, d1, d2 = 0.0 - c0, 0.0 - c1, 0.0 - c2
+        q0 = d0 * cp + d1 * sp
+        q1 = -d0 * sp + d1 * cp
+        _, _, _, dist, m0, m1, m2 = _nearest_one(q0, q1, d2, a0, a1, a2, n_newton)
+        n0 = m0 * cp - m1 * sp
+        n1 = m0 * sp + m1 * cp
+        n2 = m2
+        cos_delta = _dot3(-n0, -n1, -n2, vh[0], vh[1], vh[2])
+        approach = speed * cos_delta if cos_delta > 0.0 else 0.0
+        r_safe = g[6] + g[7] * approach
+        dd = _maximum(dist, 0.5)
+        active = present and dist < r_safe
+        if active:
+            active = _will_enter(v[0], v[1], v[2], c0, c1, c2, a0, a1, a2, cp, sp, times,
+                                 g[6], n_newton)  # fmt: skip
+        mag = g[5] * (1.0 / dd - 1.0 / r_safe) if active else 0.0
+        f0, f1, f2 = _capped(mag * n0, mag * n1, mag * n2, g[12])
+        if k == 0:
+            t0, t1, t2 = f0, f1, f2
+        else:
+            t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
+    return t0, t1, t2
+
+
+@numba.njit(**_JIT)
+def _inner(obs, b, cols, scales, n_uav, stride, g):  # noqa: ANN001, ANN202
+    """The inner repulsion of row ``b`` (eqs. 26-30), summed over the neighbours."""
+    t0 = t1 = t2 = 0.0
+    for k in range(n_uav):
+        r0, r1, r2 = _read3(obs, b, cols[5], k, stride, scales[5])
+        w0, w1, w2 = _read3(obs, b, cols[6], k, stride, scales[6])
+        present = obs[b, cols[7] + k * stride] * scales[7] > 0.5
+        r0, r1, r2 = -r0, -r1, -r2  # from the neighbour towards this UAV
+        d = math.sqrt(_dot3(r0, r1, r2, r0, r1, r2))
+        inv = _maximum(d, 1e-9)
+        u0, u1, u2 = r0 / inv, r1 / inv, r2 / inv
+        closing = _max0(_dot3(w0, w1, w2, u0, u1, u2))
+        r_inner = 2.0 * g[10] + g[11] * closing
+        dd = _maximum(d, 0.1)
+        mag = 1.0 / dd - 1.0 / r_inner if (d < r_inner and present) else 0.0
+        if not closing > 0.0:
+            w0 = w1 = w2 = 0.0
+        f0, f1, f2 = _capped(
+            mag * (g[8] * u0 + g[9] * w0),
+            mag * (g[8] * u1 + g[9] * w1),
+            mag * (g[8] * u2 + g[9] * w2),
+            g[12],
+        )
+        if k == 0:
+            t0, t1, t2 = f0, f1, f2
+        else:
+            t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
+    return t0, t1, t2
+
+
+@numba.njit(**_JIT)
+def _clip1(x):  # noqa: ANN001, ANN202
+    """``np.clip(x, -1, 1)`` (NaN stays NaN)."""
+    if x < -1.0:
+        return -1.0
+    if x > 1.0:
+        return 1.0
+    return x
+
+
+@numba.njit(**_JIT)
+def _apf_rows(
+    obs: np.ndarray,
+    cols: np.ndarray,
+    scales: np.ndarray,
+    n_uav: int,
+    uav_stride: int,
+    n_obs: int,
+    obs_stride: int,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    g: np.ndarray,
+    times: np.ndarray,
+    n_newton: int,
+    max_speed: float,
+    max_accel: float,
+    dt: float,
+    v: np.ndarray,
+    vh: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    for b in range(obs.shape[0]):
+        # Eqs. 19-22 (policies.nominal.plan_tracking).
+        x0, x1, x2 = _read3(obs, b, cols[0], 0, 0, scales[0])
+        x0, x1, x2 = _capped(x0, x1, x2, g[1])
+        s0, s1, s2 = _read3(obs, b, cols[1], 0, 0, scales[1])
+        p0, p1, p2 = _read3(obs, b, cols[2], 0, 0, scales[2])
+        v[0], v[1], v[2] = _read3(obs, b, cols[3], 0, 0, scales[3])
+        f0, f1, f2 = _read3(obs, b, cols[4], 0, 0, scales[4])
+        a0 = ((g[0] * x0 + g[2] * s0) + g[3] * (p0 - v[0])) - g[4] * (v[0] - f0)
+        a1 = ((g[0] * x1 + g[2] * s1) + g[3] * (p1 - v[1])) - g[4] * (v[1] - f1)
+        a2 = ((g[0] * x2 + g[2] * s2) + g[3] * (p2 - v[2])) - g[4] * (v[2] - f2)
+        speed = math.sqrt(_dot3(v[0], v[1], v[2], v[0], v[1], v[2]))
+        den = _maximum(speed, 1e-9)
+        vh[0], vh[1], vh[2] = v[0] / den, v[1] / den, v[2] / den
+        o0, o1, o2 = _obstacles(obs, b, cols, scales, n_obs, obs_stride, cos_h, sin_h, v, vh,
+                                speed, g, times, n_newton)  # fmt: skip
+        i0, i1, i2 = _inner(obs, b, cols, scales, n_uav, uav_stride, g)
+        a0, a1, a2 = (a0 + o0) + i0, (a1 + o1) + i1, (a2 + o2) + i2
+        # Eq. 4 and the acceleration bound (policies.nominal.bounded_action).
+        along = _dot3(a0, a1, a2, vh[0], vh[1], vh[2])
+        limit = (max_speed - speed) / dt
+        excess = _max0(along - _maximum(limit, 0.0))
+        out[b, 0] = _clip1((a0 - excess * vh[0]) / max_accel)
+        out[b, 1] = _clip1((a1 - excess * vh[1]) / max_accel)
+        out[b, 2] = _clip1((a2 - excess * vh[2]) / max_accel)
+
+
+def apf_actions(
+    observations: np.ndarray,
+    layout: object,
+    gains: object,
+    max_speed: float,
+    max_accel: float,
+    dt: float,
+    *,
+    samples: np.ndarray,
+    n_newton: int,
+) -> np.ndarray:
+    """Compiled :func:`uasep_env.policies.apf._apf_actions`: normalised actions ``(..., 3)``.
+
+    In float64 (the caller casts to float32), checked by the caller (the width, the
+    regions' semi-axes).
+
+    Args:
+        observations: ``(..., dim)`` observations of ``layout``.
+        layout: Their :class:`~uasep_env.observation.ObservationLayout`.
+        gains: The :class:`~uasep_env.policies.apf.APFGains`.
+        max_speed: ``V_max`` (m/s).
+        max_accel: The per-axis bound (m/s^2).
+        dt: The step duration (s).
+        samples: The fractions of the horizon the entry prediction checks.
+        n_newton: Newton iterations of the distance solve.
+
+    """
+    obs = np.asarray(observations)
+    dim = layout.dim  # type: ignore[attr-defined]
+    where = layout.decode_columns()  # type: ignore[attr-defined]
+    cols = np.array([where[k][0] for k in _KEYS], dtype=np.int64)
+    scales = np.array([where[k][2] for k in _KEYS])
+    lead = obs.shape[:-1]
+    flat = np.ascontiguousarray(obs.reshape(-1, dim), dtype=np.float64)
+    _, _, _, uav_stride, n_uav = where["uav_mask"]
+    _, _, _, obs_stride, n_obs = where["obstacle_mask"]
+    # The regions' headings: numpy's arctan2, then numpy's cosines and sines (the numpy
+    # form's distance solve).
+    rows = np.arange(n_obs) * obs_stride
+    cs = flat[:, where["obstacle_heading_cs"][0] + rows[:, None] + np.arange(2)]
+    cs = cs * where["obstacle_heading_cs"][2]
+    heading = np.arctan2(cs[..., 1], cs[..., 0])
+    g = np.array([getattr(gains, k) for k in _GAINS])
+    times = samples * gains.horizon  # type: ignore[attr-defined]
+    out = np.empty((flat.shape[0], 3))
+    scratch = np.empty((2, 3))  # the velocity and its direction
+    _apf_rows(frozen(flat), frozen(cols), frozen(scales), n_uav, uav_stride, n_obs, obs_stride,
+              frozen(np.cos(heading)), frozen(np.sin(heading)), frozen(g), frozen(times),
+              n_newton, float(max_speed), float(max_accel), float(dt), scratch[0], scratch[1],
+              out)  # fmt: skip
+    return out.reshape(*lead, 3)
