@@ -78,6 +78,14 @@ def _capped(f0, f1, f2, cap):  # noqa: ANN001, ANN202
     return f0 * s, f1 * s, f2 * s
 
 
+@numba.njit(inline="always", **_JIT)
+def _summed(k, t0, t1, t2, f0, f1, f2):  # noqa: ANN001, ANN202
+    """The sum over the neighbours as ``sum(axis=-2)`` adds: the first force, then each next."""
+    if k == 0:
+        return f0, f1, f2
+    return t0 + f0, t1 + f1, t2 + f2
+
+
 @numba.njit(**_JIT)
 def _read3(obs, b, col, k, stride, scale):  # noqa: ANN001, ANN202
     """A decoded 3-vector feature (neighbour ``k``'s in its block)."""
@@ -136,10 +144,7 @@ def _obstacles(obs, b, cols, scales, n_obs, stride, cos_h, sin_h, v, vh, speed, 
                                  g[6], n_newton)  # fmt: skip
         mag = g[5] * (1.0 / dd - 1.0 / r_safe) if active else 0.0
         f0, f1, f2 = _capped(mag * n0, mag * n1, mag * n2, g[12])
-        if k == 0:
-            t0, t1, t2 = f0, f1, f2
-        else:
-            t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
+        t0, t1, t2 = _summed(k, t0, t1, t2, f0, f1, f2)
     return t0, t1, t2
 
 
@@ -167,10 +172,7 @@ def _inner(obs, b, cols, scales, n_uav, stride, g):  # noqa: ANN001, ANN202
             mag * (g[8] * u2 + g[9] * w2),
             g[12],
         )
-        if k == 0:
-            t0, t1, t2 = f0, f1, f2
-        else:
-            t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
+        t0, t1, t2 = _summed(k, t0, t1, t2, f0, f1, f2)
     return t0, t1, t2
 
 
