@@ -148,8 +148,8 @@ def _golden_max(
 class _Nodes:
     """Certificate nodes on ``[0, pi]`` with their trigonometry and the set's support there.
 
-    ``cos``/``sin``: the nodes' cosines and sines; ``factors``: :func:`_unit_factors` of
-    ``phi``, if known.
+    ``cos``/``sin``: the nodes' cosines and sines (numpy's, as the fit's kernel gets them);
+    ``factors``: :func:`_unit_factors` of ``phi``.
     """
 
     def __init__(
@@ -159,19 +159,18 @@ class _Nodes:
         phi: FloatArray,
         r: FloatArray,
         swept: bool,
-        cos: FloatArray | None = None,
-        sin: FloatArray | None = None,
-        factors: tuple[FloatArray, FloatArray, FloatArray] | None = None,
+        cos: FloatArray,
+        sin: FloatArray,
+        factors: tuple[FloatArray, FloatArray, FloatArray],
     ) -> None:
         self.th = th
-        self.cos = np.cos(th) if cos is None else cos
-        self.c2 = self.cos**2
-        sin = np.sin(th) if sin is None else sin
+        self.cos = cos
+        self.c2 = cos**2
         self.s2 = sin**2
         self.d2 = np.diff(th, axis=-1) ** 2 / 8.0
-        ip, omc, sc = _unit_factors(phi) if factors is None else factors
+        ip, omc, sc = factors
         unit = _h_unit_of(
-            th, sin, self.cos, phi[..., None], ip[..., None], omc[..., None], sc[..., None], swept
+            th, sin, cos, phi[..., None], ip[..., None], omc[..., None], sc[..., None], swept
         )
         self.h = r[..., None] + vt[..., None] * unit
         self.cos_in = self.cos[..., 1:-1]

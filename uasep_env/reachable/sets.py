@@ -72,23 +72,16 @@ def _wrap_abs(theta: FloatArray) -> FloatArray:
     return np.abs(np.remainder(theta + np.pi, 2.0 * np.pi) - np.pi)
 
 
-def _h_unit(
-    a: FloatArray,
-    phi: FloatArray,
-    swept: bool,
-    sin_a: FloatArray | None = None,
-    cos_a: FloatArray | None = None,
-) -> FloatArray:
+def _h_unit(a: FloatArray, phi: FloatArray, swept: bool) -> FloatArray:
     """Support of the ``r = 0`` set in units of ``v t``, direction ``a = |theta|`` in [0, pi].
 
     ``1 - (a - sin a) / phi`` where the heading ``a`` can be reached (``a <= phi``), else the
     support of the corner ``F(phi)``: ``sin a (1 - cos phi) / phi + cos a sin(phi) / phi``;
-    clipped at 0 (the origin) for the swept set. ``sin_a``/``cos_a`` may be passed if known.
+    clipped at 0 (the origin) for the swept set (:func:`_h_unit_of`, where the sines and
+    cosines are known already).
     """
-    sa = np.sin(a) if sin_a is None else sin_a
-    ca = np.cos(a) if cos_a is None else cos_a
     ip, omc, sc = _unit_factors(phi)
-    return _h_unit_of(a, sa, ca, phi, ip, omc, sc, swept)
+    return _h_unit_of(a, np.sin(a), np.cos(a), phi, ip, omc, sc, swept)
 
 
 def _unit_factors(phi: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
