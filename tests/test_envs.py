@@ -333,6 +333,39 @@ def test_state_is_global_true_state(env):
     np.testing.assert_allclose(s[:3], (p0 - plan_center[0]) / 100.0, rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"scenario": "paper"},
+        {"n_uavs": 5, "n_obstacles": 3, "scenario": "random",
+         "observation": {"k_uavs": 3, "k_obstacles": 2, "optional_features": ["obstacle_class"]}},
+        {"n_obstacles": 0, "action": {"mode": "residual_apf"}},
+    ],
+)  # fmt: skip
+def test_decode_columns_are_where_decode_reads(kw):
+    """``decode_columns()``: each feature's columns, stride, count and scale, as ``decode``
+    reads them (what the APF's kernel decodes with)."""
+    from uasep_env import make_config
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.observation import ObservationLayout
+
+    cfg = make_config(**kw)
+    layout = ObservationLayout.from_config(cfg)
+    obs = EnvCore(cfg, n_envs=2).reset(seed=3)
+    obs = obs + np.arange(obs.shape[-1], dtype=obs.dtype)  # every column its own value
+    decoded = layout.decode(obs)
+    where = layout.decode_columns()
+    assert set(where) == set(decoded) - {"base_action"}
+    for key, (start, size, scale, stride, count) in where.items():
+        cols = start + (np.arange(count) * stride)[:, None] + np.arange(size)
+        got = obs[..., cols].astype(float) * scale
+        want = decoded[key]
+        if key.endswith("_mask"):
+            np.testing.assert_array_equal(got[..., 0] > 0.5, want, err_msg=key)
+        else:
+            np.testing.assert_array_equal(got.reshape(want.shape), want, err_msg=key)
+
+
 def test_observation_decodes_to_si_quantities():
     env = uasep_env.parallel_env(
         scenario="paper", observation={"sensing_range": 3000.0, "position_scale": 500.0}

@@ -330,18 +330,20 @@ def _feature_keys(features: Iterable[str] | None) -> tuple[str, ...]:
 
 @functools.lru_cache(maxsize=64)
 def _decode_columns(layout: ObservationLayout) -> dict[str, tuple[int, int, float, int, int]]:
+    # The within-block columns of _slices, placed: the own state, then k_uavs UAV blocks,
+    # then k_obstacles obstacle blocks.
+    w_uav, w_obstacle = layout.width("uav"), layout.width("obstacle")
+    placed = {
+        "self": (0, 0, 1),
+        "uav": (layout.self_dim, w_uav, layout.k_uavs),
+        "obstacle": (layout.self_dim + layout.k_uavs * w_uav, w_obstacle, layout.k_obstacles),
+    }
+    within = _slices(layout.features)
     out: dict[str, tuple[int, int, float, int, int]] = {}
-    i = 0
-    for f in layout.block("self"):
-        out[f.key] = (i, f.size, layout._scale(f.kind), 0, 1)
-        i += f.size
-    for name, k in (("uav", layout.k_uavs), ("obstacle", layout.k_obstacles)):
-        w = layout.width(name)
-        j = 0
-        for f in layout.block(name):
-            out[f.key] = (i + j, f.size, layout._scale(f.kind), w, k)
-            j += f.size
-        i += k * w
+    for f in FEATURES:
+        if f.key in within:
+            start, stride, count = placed[f.block]
+            out[f.key] = (start + within[f.key].start, f.size, layout._scale(f.kind), stride, count)
     return out
 
 
