@@ -343,8 +343,8 @@ def test_state_is_global_true_state(env):
     ],
 )  # fmt: skip
 def test_decode_columns_are_where_decode_reads(kw):
-    """``decode_columns()``: each feature's columns, stride, count and scale, as ``decode``
-    reads them (what the APF's kernel decodes with)."""
+    """``decode_columns()`` and ``feature_columns()``: each feature's columns, stride, count
+    and scale, as ``decode`` reads them (what the APF's kernel decodes with)."""
     from uasep_env import make_config
     from uasep_env.envs.core import EnvCore
     from uasep_env.observation import ObservationLayout
@@ -358,12 +358,18 @@ def test_decode_columns_are_where_decode_reads(kw):
     assert set(where) == set(decoded) - {"base_action"}
     for key, (start, size, scale, stride, count) in where.items():
         cols = start + (np.arange(count) * stride)[:, None] + np.arange(size)
+        shared, shared_scale = layout.feature_columns(key)
+        np.testing.assert_array_equal(shared, cols, err_msg=key)
+        assert shared_scale == scale and not shared.flags.writeable
         got = obs[..., cols].astype(float) * scale
         want = decoded[key]
         if key.endswith("_mask"):
             np.testing.assert_array_equal(got[..., 0] > 0.5, want, err_msg=key)
         else:
             np.testing.assert_array_equal(got.reshape(want.shape), want, err_msg=key)
+    if "obstacle_class" not in where:
+        with pytest.raises(KeyError, match="obstacle_class"):
+            layout.feature_columns("obstacle_class")
 
 
 def test_observation_decodes_to_si_quantities():

@@ -298,6 +298,17 @@ class ObservationLayout:
         """
         return dict(_decode_columns(self))
 
+    def feature_columns(self, key: str) -> tuple[np.ndarray, float]:
+        """``(columns, scale)``: where :meth:`decode` reads feature ``key``, ``(count, size)``.
+
+        The columns as a read-only index array (one row per neighbour; one row in the
+        own-state block), and the scale the entries are multiplied by.
+
+        Raises:
+            KeyError: For a feature the layout does not have.
+        """
+        return _feature_columns(self, key)
+
     def feature_names(self) -> list[str]:
         """One name per entry of the vector (for logging, docs and checkpoints)."""
         names: list[str] = []
@@ -345,6 +356,14 @@ def _decode_columns(layout: ObservationLayout) -> dict[str, tuple[int, int, floa
             start, stride, count = placed[f.block]
             out[f.key] = (start + within[f.key].start, f.size, layout._scale(f.kind), stride, count)
     return out
+
+
+@functools.lru_cache(maxsize=256)
+def _feature_columns(layout: ObservationLayout, key: str) -> tuple[np.ndarray, float]:
+    start, size, scale, stride, count = _decode_columns(layout)[key]
+    cols = start + (np.arange(count) * stride)[:, None] + np.arange(size)
+    cols.flags.writeable = False  # shared by every caller
+    return cols, scale
 
 
 @functools.lru_cache(maxsize=256)

@@ -10,6 +10,7 @@ does (:func:`_dot3`).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -234,6 +235,30 @@ def _apf_rows(
         out[b, 2] = _clip1((a2 - excess * vh[2]) / max_accel)
 
 
+# What depends only on the layout or the gains, made once for each (both are frozen
+# dataclasses): a decision batch at one environment is a few dozen microseconds.
+@functools.lru_cache(maxsize=32)
+def _columns(layout: object) -> tuple:
+    """The layout as the kernel reads it.
+
+    The columns and scales of :data:`_KEYS`, the neighbour counts and strides, and the
+    regions' heading columns with their scale.
+    """
+    where = layout.decode_columns()  # type: ignore[attr-defined]
+    cols = frozen(np.array([where[k][0] for k in _KEYS], dtype=np.int64))
+    scales = frozen(np.array([where[k][2] for k in _KEYS]))
+    _, _, _, uav_stride, n_uav = where["uav_mask"]
+    _, _, _, obs_stride, n_obs = where["obstacle_mask"]
+    cs_cols, cs_scale = layout.feature_columns("obstacle_heading_cs")  # type: ignore[attr-defined]
+    return cols, scales, n_uav, uav_stride, n_obs, obs_stride, cs_cols, cs_scale
+
+
+@functools.lru_cache(maxsize=32)
+def _gains(gains: object) -> np.ndarray:
+    """The gains of :data:`_GAINS`, in order."""
+    return frozen(np.array([getattr(gains, k) for k in _GAINS]))
+
+
 def apf_actions(
     observations: np.ndarray,
     layout: object,
@@ -263,25 +288,18 @@ def apf_actions(
     """
     obs = np.asarray(observations)
     dim = layout.dim  # type: ignore[attr-defined]
-    where = layout.decode_columns()  # type: ignore[attr-defined]
-    cols = np.array([where[k][0] for k in _KEYS], dtype=np.int64)
-    scales = np.array([where[k][2] for k in _KEYS])
+    cols, scales, n_uav, uav_stride, n_obs, obs_stride, cs_cols, cs_scale = _columns(layout)
     lead = obs.shape[:-1]
     flat = np.ascontiguousarray(obs.reshape(-1, dim), dtype=np.float64)
-    _, _, _, uav_stride, n_uav = where["uav_mask"]
-    _, _, _, obs_stride, n_obs = where["obstacle_mask"]
     # The regions' headings: numpy's arctan2, then numpy's cosines and sines (the numpy
     # form's distance solve).
-    rows = np.arange(n_obs) * obs_stride
-    cs = flat[:, where["obstacle_heading_cs"][0] + rows[:, None] + np.arange(2)]
-    cs = cs * where["obstacle_heading_cs"][2]
+    cs = flat[:, cs_cols] * cs_scale
     heading = np.arctan2(cs[..., 1], cs[..., 0])
-    g = np.array([getattr(gains, k) for k in _GAINS])
     times = samples * gains.horizon  # type: ignore[attr-defined]
     out = np.empty((flat.shape[0], 3))
     scratch = np.empty((2, 3))  # the velocity and its direction
-    _apf_rows(frozen(flat), frozen(cols), frozen(scales), n_uav, uav_stride, n_obs, obs_stride,
-              frozen(np.cos(heading)), frozen(np.sin(heading)), frozen(g), frozen(times),
+    _apf_rows(frozen(flat), cols, scales, n_uav, uav_stride, n_obs, obs_stride,
+              frozen(np.cos(heading)), frozen(np.sin(heading)), _gains(gains), frozen(times),
               n_newton, float(max_speed), float(max_accel), float(dt), scratch[0], scratch[1],
               out)  # fmt: skip
     return out.reshape(*lead, 3)

@@ -314,8 +314,7 @@ def _check_observations(observations: np.ndarray, layout: ObservationLayout) -> 
     """
     if observations.shape[-1] != layout.dim:
         raise ValueError(f"observation width must be {layout.dim}, got {observations.shape[-1]}")
-    start, size, scale, stride, count = layout.decode_columns()["obstacle_axes"]
-    cols = start + (np.arange(count) * stride)[:, None] + np.arange(size)
+    cols, scale = layout.feature_columns("obstacle_axes")
     check_semi_axes(np.maximum(observations[..., cols].astype(float) * scale, 1e-3))
 
 
