@@ -16,7 +16,7 @@ import math
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, frozen
+from uasep_env._kernels.common import _JIT, _maximum, frozen
 from uasep_env._kernels.ellipsoids import _nearest_one
 
 #: The features the APF reads, in the order of the kernel's column and scale arrays.
@@ -50,12 +50,6 @@ _GAINS = (
     "k_safe",
     "max_repulsion",
 )
-
-
-@numba.njit(inline="always", **_JIT)
-def _maximum(x, y):  # noqa: ANN001, ANN202
-    """``np.maximum``'s rule: ``x`` unless ``y`` is larger, NaN if either is."""
-    return x if (x >= y or x != x) else y
 
 
 @numba.njit(inline="always", **_JIT)
@@ -284,7 +278,6 @@ def apf_actions(
         dt: The step duration (s).
         samples: The fractions of the horizon the entry prediction checks.
         n_newton: Newton iterations of the distance solve.
-
     """
     obs = np.asarray(observations)
     dim = layout.dim  # type: ignore[attr-defined]

@@ -47,6 +47,12 @@ def frozen(a: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(inline="always", **_JIT)
+def _maximum(x, y):  # noqa: ANN001, ANN202
+    """``np.maximum``'s scalar rule: ``x`` unless ``y`` is larger, NaN if either is."""
+    return x if (x >= y or x != x) else y
+
+
+@numba.njit(inline="always", **_JIT)
 def _sq3(a, b, c):  # noqa: ANN001, ANN202
     """Squared norm in the order numpy's ``einsum("...i,...i")`` adds (two SIMD lanes)."""
     return (a * a + c * c) + b * b

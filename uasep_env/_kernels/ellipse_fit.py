@@ -1,8 +1,7 @@
 """The enclosing ellipse's search and fit: :func:`uasep_env.reachable.fit._fit_certified`.
 
 Only arithmetic and square roots (no trigonometry: the nodes' sines and cosines come in),
-so the numbers are numpy's on any CPU. ``_maximum`` is ``np.maximum``'s scalar rule (``x``
-unless ``y`` is larger, NaN if either is).
+so the numbers are numpy's on any CPU.
 """
 
 from __future__ import annotations
@@ -12,12 +11,7 @@ import math
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, frozen
-
-
-@numba.njit(inline="always", **_JIT)
-def _maximum(x, y):  # noqa: ANN001, ANN202
-    return x if (x >= y or x != x) else y
+from uasep_env._kernels.common import _JIT, _maximum, frozen
 
 
 @numba.njit(**_JIT)
