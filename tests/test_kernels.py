@@ -949,6 +949,20 @@ def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shar
     assert (fast[1]["collision"] < 0).any() and (fast[1]["separation_region"] < 0).any()
 
 
+def test_kernels_name_their_plain_tuples_with_the_references_fields():
+    """The kernels take plain tuples and name them again: the same fields, in order."""
+    from uasep_env import observation_layout
+    from uasep_env._kernels import observations as kernel_obs
+    from uasep_env._kernels import rewards as kernel_rewards
+
+    assert kernel_obs._Inputs._fields == observation._Inputs._fields
+    assert kernel_obs._Columns._fields == observation_layout.Columns._fields
+    assert kernel_rewards._Inputs._fields == rewards._Inputs._fields
+    assert kernel_rewards._Constants._fields == rewards._Constants._fields
+    assert kernel_rewards._TermIndex._fields == rewards._TERM_INDEX._fields
+    assert kernel_rewards._OutcomeConstants._fields == outcome.OutcomeConstants._fields
+
+
 def test_reward_terms_agree_between_table_numpy_kernel_and_weights():
     """A term cannot be half-added: the table, the numpy terms, the kernel's writes, the
     weights and the module's documentation name the same terms."""
@@ -974,8 +988,8 @@ def test_reward_terms_agree_between_table_numpy_kernel_and_weights():
     # At run time too: every row of a NaN-filled terms array is written.
     e, n = x.min_uav_dist.shape
     own, terms = np.full((e, n), np.nan), np.full((len(names), e, n), np.nan)
-    x = type(x)(*(np.ascontiguousarray(a) for a in x))
-    kernel._rewards_serial(x, constants, rewards._TERM_INDEX, weights, own, terms)
+    x = tuple(np.ascontiguousarray(a) for a in x)
+    kernel._rewards_serial(x, tuple(constants), tuple(rewards._TERM_INDEX), weights, own, terms)
     assert not np.isnan(terms).any() and not np.isnan(own).any()
 
 

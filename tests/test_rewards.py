@@ -186,3 +186,34 @@ def test_a_lost_uav_ends_the_episode():
 def test_lost_distance_is_validated():
     with pytest.raises(ValueError, match=r"uav\.lost_distance"):
         make_config(uav={"lost_distance": 5.0})
+
+
+def test_cores_of_different_configs_stepped_in_turn_keep_their_own_constants():
+    """The outcome's constants are looked up once per config: two cores in turn, each its own.
+
+    The second core weighs the terms otherwise and counts a UAV lost sooner; each step of
+    each core must give the rewards of its own weights (``compute_rewards``, which looks
+    them up on its own) and the lost flags of its own distance.
+    """
+    plain = make_config(scenario="random", episode_duration=30.0)
+    other = make_config(
+        scenario="random",
+        episode_duration=30.0,
+        reward={"deviation": 3.0, "control": 0.5},
+        uav={"lost_distance": 40.0},
+    )
+    actions = np.random.default_rng(3).uniform(-1, 1, size=(40, 2, 3, 3))
+    actions[:, :, 0] = 1.0  # one UAV flies off its plan
+    cores = [EnvCore(plain, n_envs=2), EnvCore(other, n_envs=2)]
+    lost = [0, 0]
+    for core in cores:
+        core.reset(seed=5)
+    for a in actions:
+        for k, core in enumerate(cores):
+            got = core.step(a)
+            w = core.world
+            np.testing.assert_array_equal(got.rewards, compute_rewards(w, core.config.reward)[0])
+            off = np.linalg.norm(w.uav_pos - w.plan_pos, axis=-1)
+            np.testing.assert_array_equal(got.safety["lost"], off > core.config.uav.lost_distance)
+            lost[k] += int(got.safety["lost"].any())
+    assert lost[1] > lost[0]  # the other lost distance shows

@@ -225,6 +225,35 @@ def test_planned_state_follows_time_and_is_read_only():
     np.testing.assert_array_equal(kept, snapshot)  # a later step does not rewrite it
 
 
+def test_kernel_input_views_stay_read_only_views_of_the_state():
+    """The views made once (World.frozen_inputs, PlannedTrajectory.frozen) show the state.
+
+    They hold only while the state arrays are written in place: a step, a full reset or a
+    partial one that put a new array in an attribute would leave a view of the old one.
+    """
+    cfg = make_config(scenario="random", n_obstacles=2)
+    w = World(cfg, 4)
+    w.reset(seed=0)
+    views, plan = w.frozen_inputs(), w.plan.frozen()
+    rng = np.random.default_rng(2)
+    for k in range(6):
+        w.step(_actions(rng, 4, cfg.n_uavs))
+        if k % 2:
+            w.reset(mask=np.array([k == 1, True, False, k == 5]))
+        if k == 4:
+            w.reset(seed=9)
+        assert w.frozen_inputs() is views and w.plan.frozen() is plan
+        pairs = [(w.plan.frozen(), w.plan, name) for name in plan._ARRAYS]
+        for name, view in views.items():
+            owner, _, attr = name.rpartition(".")
+            pairs.append((view, getattr(w, owner) if owner else w, attr))
+        for view, owner, attr in pairs:
+            view = getattr(view, attr) if view is plan else view
+            state = getattr(owner, attr)
+            assert not view.flags.writeable, attr
+            assert np.shares_memory(view, state) and view.shape == state.shape, attr
+
+
 def test_noise_drawn_on_several_threads_is_bit_identical(monkeypatch):
     """Large batches refill their noise on a thread pool: the same numbers as one thread."""
     import uasep_env.noise as noise_mod

@@ -263,6 +263,26 @@ class PlannedTrajectory:
             if speed.ndim == 0
             else np.array(np.broadcast_to(speed, (wp.shape[0],)))
         )
+        self._frozen: PlannedTrajectory | None = None
+
+    #: The arrays that hold the trajectories (written in place by :meth:`set_rows`).
+    _ARRAYS = ("waypoints", "cum", "direction", "length", "cruise_speed")
+
+    def frozen(self) -> PlannedTrajectory:
+        """This plan over read-only views of its arrays, made once (they show later writes).
+
+        What the compiled kernels read (their inputs are read-only,
+        ``uasep_env._kernels.common.frozen``), without a new view of each array every step.
+        """
+        if self._frozen is None:
+            view = object.__new__(PlannedTrajectory)
+            for name in self._ARRAYS:
+                arr = getattr(self, name).view()
+                arr.flags.writeable = False
+                setattr(view, name, arr)
+            view._frozen = view
+            self._frozen = view
+        return self._frozen
 
     def set_rows(
         self, mask: np.ndarray, waypoints: np.ndarray, cruise_speed: np.ndarray | float

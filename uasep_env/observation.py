@@ -10,6 +10,7 @@ their scales are the config's :class:`~uasep_env.observation_layout.ObservationL
 
 from __future__ import annotations
 
+import operator
 from typing import NamedTuple
 
 import numpy as np
@@ -91,6 +92,16 @@ def build_observations(
     return out
 
 
+#: The world's state arrays an observation reads (:meth:`World.frozen_inputs` names), and
+#: whether each has a row per obstacle (cut to the observed ones).
+_STATE = {
+    "est_pos": False, "est_vel": False, "slots": False, "accel_cmd": False, "time": False,
+    "obstacle_est_pos": True, "obstacle_est_vel": True, "pred_center": True,
+    "pred_axes": True, "pred_cos": True, "pred_sin": True, "pred_heading": True,
+    "obstacles.active": True, "obstacles.aircraft_class": True,
+}  # fmt: skip
+
+
 def _gather_inputs(
     world: World, layout: ObservationLayout, rows: np.ndarray | None = None
 ) -> _Inputs:
@@ -98,29 +109,38 @@ def _gather_inputs(
 
     All environments, or the ``rows`` (an index array) only.
     """
-    r = slice(None) if rows is None else rows
-    pos = world.est_pos[r]
     m = world.n_obstacles if layout.k_obstacles else 0
+    r = slice(None) if rows is None else rows
+    plan = world._plan_arrays()
+    if rows is None and m == world.n_obstacles:
+        s = world.frozen_inputs()  # every row of every array: views made once
+    else:
+        s = {}
+        for name, per_obstacle in _STATE.items():
+            a = operator.attrgetter(name)(world)
+            s[name] = a[r, :m] if per_obstacle else a[r]
+        plan = tuple(a[r] for a in plan)
+    center, direction, plan_pos, plan_vel = plan
     return _Inputs(
-        pos=pos,
-        vel=world.est_vel[r],
-        pattern=world.slots[r],
-        plan_pos=world.plan_pos[r],
-        plan_vel=world.plan_vel[r],
-        accel_cmd=world.accel_cmd[r],
-        plan_center=world.plan_center[r],
-        wp_dir=world.plan_dir[r],
+        pos=s["est_pos"],
+        vel=s["est_vel"],
+        pattern=s["slots"],
+        plan_pos=plan_pos,
+        plan_vel=plan_vel,
+        accel_cmd=s["accel_cmd"],
+        plan_center=center,
+        wp_dir=direction,
         final_wp=world.plan.waypoints[r, -1],
-        progress=np.minimum(world.time[r] / world.config.episode_duration, 1.0),
-        obstacle_pos=world.obstacle_est_pos[r, :m],
-        obstacle_vel=world.obstacle_est_vel[r, :m],
-        pred_center=world.pred_center[r, :m],
-        pred_axes=world.pred_axes[r, :m],
-        cos_h=world.pred_cos[r, :m],
-        sin_h=world.pred_sin[r, :m],
-        heading=world.pred_heading[r, :m],
-        active=world.obstacles.active[r, :m],
-        aircraft_class=world.obstacles.aircraft_class[r, :m],
+        progress=np.minimum(s["time"] / world.config.episode_duration, 1.0),
+        obstacle_pos=s["obstacle_est_pos"],
+        obstacle_vel=s["obstacle_est_vel"],
+        pred_center=s["pred_center"],
+        pred_axes=s["pred_axes"],
+        cos_h=s["pred_cos"],
+        sin_h=s["pred_sin"],
+        heading=s["pred_heading"],
+        active=s["obstacles.active"],
+        aircraft_class=s["obstacles.aircraft_class"],
     )
 
 

@@ -138,6 +138,14 @@ def compute_outcome(world: World, config: EnvConfig, region: np.ndarray) -> Outc
         config: Its configuration (the reward and cost weights, the UAVs' distances).
         region: ``(E, N, M)`` the true positions' region distances (m).
     """
-    w, c = _vectors(config.reward, config.uav, config.max_steps)
-    o = outcome_constants(config.uav.lost_distance, config.cost)
-    return step_outcome(_gather_inputs(world, region), c, w, o)
+    cached = _LAST[0]
+    if cached is None or cached[0] is not config:  # configs are frozen: one look-up each
+        w, c = _vectors(config.reward, config.uav, config.max_steps)
+        cached = (config, c, w, outcome_constants(config.uav.lost_distance, config.cost))
+        _LAST[0] = cached  # one tuple, replaced whole: a reader never sees a mix of two
+    return step_outcome(_gather_inputs(world, region), *cached[1:])
+
+
+#: The last config's constants (a config's step after step; the lru caches behind it hash
+#: each config's fields again on every call).
+_LAST: list[tuple | None] = [None]

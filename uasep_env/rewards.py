@@ -247,13 +247,14 @@ def share_rewards(own: np.ndarray, weights: RewardWeights) -> np.ndarray:
 
 def _gather_inputs(world: World, region: np.ndarray | None = None) -> _Inputs:
     """The world's arrays the terms read (``region``: precomputed true region distances)."""
+    f = world.frozen_inputs()
     return _Inputs(
-        uav_pos=world.uav_pos,
+        uav_pos=f["uav_pos"],
         plan_pos=world.plan_pos,
-        cmd=world.accel_cmd,
-        prev_cmd=world.prev_accel_cmd,
-        min_uav_dist=world.min_uav_dist,
-        min_obstacle_dist=world.min_obstacle_dist,
+        cmd=f["accel_cmd"],
+        prev_cmd=f["prev_accel_cmd"],
+        min_uav_dist=f["min_uav_dist"],
+        min_obstacle_dist=f["min_obstacle_dist"],
         region=world.region_distances() if region is None else region,
     )
 

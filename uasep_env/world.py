@@ -37,6 +37,7 @@ bit.
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
 from typing import ClassVar
 
@@ -61,6 +62,13 @@ from uasep_env.scenarios.real_traffic import check_replay_tracks, replay_samples
 from uasep_env.scenarios.spec import ScenarioBatch
 
 __all__ = ["World"]
+
+
+#: The state arrays a region distance reads (:meth:`World.frozen_inputs` names), in the
+#: order :func:`uasep_env.reachable.region_distances` takes them.
+_REGION_INPUTS = ("uav_pos", "pred_center", "pred_axes", "pred_heading", "pred_cos",
+                  "pred_sin", "obstacles.active")  # fmt: skip
+_region_views = operator.itemgetter(*_REGION_INPUTS)
 
 
 class World(RenamedAttributes):
@@ -174,6 +182,32 @@ class World(RenamedAttributes):
             self._uav_kf.gains, self._obstacle_kf.gains,
         )  # fmt: skip
         self._has_reset = False
+        self._frozen: dict[str, np.ndarray] | None = None
+
+    #: The state arrays the compiled kernels read, by attribute path: allocated once and
+    #: written in place, so that a read-only view made once shows the current state.
+    _KERNEL_INPUTS = (
+        "time", "uav_pos", "accel_cmd", "prev_accel_cmd", "est_pos", "est_vel", "slots",
+        "obstacle_est_pos", "obstacle_est_vel", "pred_center", "pred_axes", "pred_heading",
+        "pred_cos", "pred_sin", "min_uav_dist", "min_obstacle_dist", "_plan_offsets",
+        "obstacles.active", "obstacles.aircraft_class",
+    )  # fmt: skip
+
+    def frozen_inputs(self) -> dict[str, np.ndarray]:
+        """Read-only views of the state arrays the kernels read (:data:`_KERNEL_INPUTS`).
+
+        Made on first use: a kernel's inputs are read-only (one compiled signature,
+        ``uasep_env._kernels.common.frozen``), and making a view of ~40 arrays every step
+        was a tenth of a one-environment step.
+        """
+        if self._frozen is None:
+            views = {}
+            for name in self._KERNEL_INPUTS:
+                view = operator.attrgetter(name)(self).view()  # C-contiguous, as allocated
+                view.flags.writeable = False
+                views[name] = view
+            self._frozen = views
+        return self._frozen
 
     # ------------------------------------------------------------------ reset
     def reset(
@@ -347,7 +381,10 @@ class World(RenamedAttributes):
         New arrays each time, read-only: what a caller keeps stays as it was.
         """
         if self._plan_now is None:
-            center, direction, pos, vel = planned_state(self.plan, self.time, self._plan_offsets)
+            f = self.frozen_inputs()
+            center, direction, pos, vel = planned_state(
+                self.plan.frozen(), f["time"], f["_plan_offsets"]
+            )
             for arr in (center, direction, pos, vel):
                 arr.flags.writeable = False
             self._plan_now = (center, direction, pos, vel)
@@ -480,15 +517,19 @@ class World(RenamedAttributes):
             return
         est_pos, offset = self.obstacle_est_pos[r], self.pred_offset[r]
         air = self.obstacle_est_vel[r] - self.obstacles.wind[r, None, :]  # heading: airspeed's
-        heading = np.arctan2(air[..., 1], air[..., 0])
-        cos_h, sin_h = np.cos(heading), np.sin(heading)
-        self.pred_heading[r] = heading
-        self.pred_cos[r], self.pred_sin[r] = cos_h, sin_h  # distances and observations
-        center = np.empty_like(est_pos)
+        # Every environment: written in place (the same numbers, without the copies).
+        whole = rows is None
+        heading = np.arctan2(air[..., 1], air[..., 0], out=self.pred_heading if whole else None)
+        cos_h = np.cos(heading, out=self.pred_cos if whole else None)  # distances, observations
+        sin_h = np.sin(heading, out=self.pred_sin if whole else None)
+        center = self.pred_center if whole else np.empty_like(est_pos)
         center[..., 0] = est_pos[..., 0] + offset * cos_h
         center[..., 1] = est_pos[..., 1] + offset * sin_h
         center[..., 2] = est_pos[..., 2]
-        self.pred_center[r] = center
+        if not whole:
+            self.pred_heading[r] = heading
+            self.pred_cos[r], self.pred_sin[r] = cos_h, sin_h
+            self.pred_center[r] = center
 
     # ------------------------------------------------------------------ safety
     def _start_safety(self, rows: np.ndarray) -> None:
@@ -531,14 +572,14 @@ class World(RenamedAttributes):
                 or ``(len(rows), N, 3)`` with ``rows``.
             rows: Only these environments (an index array); the result has their rows.
         """
-        sel = slice(None) if rows is None else rows
-        p = self.uav_pos[sel] if pos is None else pos
+        if rows is None:
+            arrays = _region_views(self.frozen_inputs())  # the views made once
+        else:
+            arrays = [operator.attrgetter(name)(self)[rows] for name in _REGION_INPUTS]
+        p = arrays[0] if pos is None else pos
         if not self.n_obstacles:
             return np.zeros((*p.shape[:2], 0))
-        return reachable.region_distances(
-            p, self.pred_center[sel], self.pred_axes[sel], self.pred_heading[sel],
-            self.pred_cos[sel], self.pred_sin[sel], self.obstacles.active[sel],
-        )  # fmt: skip
+        return reachable.region_distances(p, *arrays[1:])
 
     def obstacle_velocities(self) -> np.ndarray:
         """``(E, M, 3)`` true obstacle ground velocities (m/s)."""

@@ -51,5 +51,5 @@ def plan_now(
     pos, vel = np.empty((e, n, 3)), np.empty((e, n, 3))
     inputs = (time, plan.cruise_speed, plan.length, plan.cum, plan.waypoints, plan.direction,
               offsets)  # fmt: skip
-    _plan_rows(*(frozen(a) for a in inputs), center, d, pos, vel)  # one compiled signature
+    _plan_rows(*map(frozen, inputs), center, d, pos, vel)  # one compiled signature
     return center, d, pos, vel

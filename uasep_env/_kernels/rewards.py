@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba
 import numpy as np
 
@@ -56,14 +58,41 @@ def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
     return d_region  # the step's outcome reports it too
 
 
+# The named tuples arrive as plain tuples and are named again here: numba reads a plain
+# tuple's type in C and a named one's in Python, about half a microsecond a tuple on every
+# call (observations.py says more). The fields are the reference's, in its order
+# (tests/test_kernels.py checks them): uasep_env.rewards._Inputs, _Constants and
+# _TERM_INDEX (the term table's names), and uasep_env.outcome.OutcomeConstants.
+_Inputs = namedtuple(
+    "_Inputs", "uav_pos plan_pos cmd prev_cmd min_uav_dist min_obstacle_dist region"
+)
+_Constants = namedtuple(
+    "_Constants",
+    "max_accel separation_distance obstacle_separation collision_distance deviation_scale "
+    "region_cap max_steps",
+)
+_TermIndex = namedtuple(
+    "_TermIndex",
+    "separation_inner separation_obstacle separation_region deviation control smoothness "
+    "collision progress",
+)
+_OutcomeConstants = namedtuple("_OutcomeConstants", "lost_sq cost_weights cost_flags")
+
+
 @numba.njit(**_JIT)
-def _rewards_serial(x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
+def _rewards_serial(xt, ct, it, weights, own, terms):  # noqa: ANN001, ANN202
+    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    c = _Constants(*ct)
+    ix = _TermIndex(*it)
     for k in range(own.size):
         _reward_agent(k, x, c, ix, weights, own, terms)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _rewards_parallel(x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
+def _rewards_parallel(xt, ct, it, weights, own, terms):  # noqa: ANN001, ANN202
+    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    c = _Constants(*ct)
+    ix = _TermIndex(*it)
     for k in numba.prange(own.size):
         _reward_agent(k, x, c, ix, weights, own, terms)
 
@@ -82,12 +111,12 @@ def reward_terms(
     Returns:
         ``(own, terms)``: ``(E, N)`` weighted sums and ``(T, E, N)`` unweighted terms.
     """
-    x = type(inputs)(*(frozen(a) for a in inputs))  # one compiled signature
-    e, n = x.min_uav_dist.shape
+    x = tuple(map(frozen, inputs))  # one compiled signature
+    e, n = inputs.min_uav_dist.shape
     own = np.empty((e, n))
     terms = np.empty((len(index), e, n))
     fn = _rewards_parallel if _parallel(own.size) else _rewards_serial
-    fn(x, constants, index, frozen(weights), own, terms)
+    fn(x, tuple(constants), tuple(index), frozen(weights), own, terms)
     return own, terms
 
 
@@ -126,9 +155,13 @@ def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, f
 
 # fmt: off
 @numba.njit(**_JIT)
-def _outcome_serial(x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
+def _outcome_serial(xt, ct, it, weights, ot, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
                     cost_terms):  # noqa: ANN001
 # fmt: on
+    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    c = _Constants(*ct)
+    ix = _TermIndex(*it)
+    o = _OutcomeConstants(*ot)
     for k in range(own.size):
         _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,
                        cost_terms)  # fmt: skip
@@ -136,9 +169,13 @@ def _outcome_serial(x, c, ix, weights, o, own, terms, d_reg, collided, lost, fla
 
 # fmt: off
 @numba.njit(parallel=True, **_JIT)
-def _outcome_parallel(x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
+def _outcome_parallel(xt, ct, it, weights, ot, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
                       cost_terms):  # noqa: ANN001
 # fmt: on
+    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    c = _Constants(*ct)
+    ix = _TermIndex(*it)
+    o = _OutcomeConstants(*ot)
     for k in numba.prange(own.size):
         _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,
                        cost_terms)  # fmt: skip
@@ -157,15 +194,15 @@ def step_outcome(
         index: :data:`uasep_env.rewards._TERM_INDEX`.
         result: :class:`uasep_env.outcome.Outcome`, filled and returned.
     """
-    x = type(inputs)(*(frozen(a) for a in inputs))  # one compiled signature
-    e, n = x.min_uav_dist.shape
+    x = tuple(map(frozen, inputs))  # one compiled signature
+    e, n = inputs.min_uav_dist.shape
     n_costs = o.cost_weights.shape[0]
     out = result(
         np.empty((e, n)), np.empty((len(index), e, n)), np.empty((e, n)),
         np.empty((e, n), np.bool_), np.empty((e, n), np.bool_), np.empty((3, e, n), np.bool_),
         np.empty((e, n)), np.empty((n_costs, e, n)),
     )  # fmt: skip
-    o = type(o)(float(o.lost_sq), frozen(o.cost_weights), frozen(o.cost_flags))
+    o = (float(o.lost_sq), frozen(o.cost_weights), frozen(o.cost_flags))
     fn = _outcome_parallel if _parallel(e * n) else _outcome_serial
-    fn(x, constants, index, frozen(weights), o, *out)
+    fn(x, tuple(constants), tuple(index), frozen(weights), o, *out)
     return out

@@ -254,6 +254,7 @@ class EnvCore:
         check_count(count_name, n_envs, self.config)  # before anything is allocated
         self.world = World(self.config, n_envs)
         self.layout = ObservationLayout.from_config(self.config)
+        self._max_steps = self.config.max_steps  # a property that computes it
         self.n_envs = n_envs
         self.n_uavs = self.config.n_uavs
         self._obs = np.zeros((n_envs, self.n_uavs, self.layout.world_dim), dtype=np.float32)
@@ -335,7 +336,7 @@ class EnvCore:
         cfg = self.config
         out = compute_outcome(w, cfg, w.region_distances())
         terminated = (out.collided | out.lost).any(axis=1)
-        truncated = ((w.steps >= cfg.max_steps) | w.plan_finished()) & ~terminated
+        truncated = ((w.steps >= self._max_steps) | w.plan_finished()) & ~terminated
         los_uav, los_obstacle, in_region = out.flags
         safety = {
             "min_uav_distance": w.min_uav_dist.copy(),

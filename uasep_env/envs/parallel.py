@@ -122,6 +122,8 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
         self.possible_agents = [f"uav_{i}" for i in range(self.config.n_uavs)]
         self.agents: list[str] = []
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
+        self._no_clips = np.zeros(len(self.possible_agents), dtype=np.int64)
+        self._no_clips.flags.writeable = False
         self._obs_space = gymnasium.spaces.Box(
             -self.config.observation.clip,
             self.config.observation.clip,
@@ -248,22 +250,23 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
             raise RuntimeError("step() called on a finished episode; call reset() first")
         if not isinstance(actions, dict):
             raise ValueError(f"actions must be a dict keyed by agent, got {type(actions).__name__}")
-        unknown = sorted(set(actions) - set(self.agents))
-        missing = sorted(set(self.agents) - set(actions))
-        if unknown or missing:
+        if actions.keys() != self._index.keys():  # every agent lives until the episode ends
+            unknown = sorted(set(actions) - set(self.agents))
+            missing = sorted(set(self.agents) - set(actions))
             raise ValueError(f"bad action keys: missing {missing}, unknown {unknown}")
         joint, clipped = self._joint_action(actions)
         res = self.core.step(joint, validate=False)
         self._last = res
         done_term = bool(res.terminated[0])
         done_trunc = bool(res.truncated[0])
-        observations = {a: res.obs[0, i] for a, i in self._index.items()}
-        rewards = {a: float(res.rewards[0, i]) for a, i in self._index.items()}
+        # Agent order is row order (_index); rows of res.obs[0] are views, as before.
+        observations = dict(zip(self._index, res.obs[0], strict=True))
+        rewards = dict(zip(self._index, res.rewards[0].tolist(), strict=True))
         terminations = dict.fromkeys(self.agents, done_term)
         truncations = dict.fromkeys(self.agents, done_trunc)
         infos = dict(zip(self._index, self.core.env_infos(res, 0), strict=True))
-        for agent, i in self._index.items():
-            infos[agent]["clipped_actions"] = int(clipped[i])
+        for info, count in zip(infos.values(), clipped.tolist(), strict=True):
+            info["clipped_actions"] = count
         if done_term or done_trunc:
             self.agents = []
         if self.render_mode == "human":
@@ -279,12 +282,16 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
         """
         strict = self.config.action.strict
         joint = np.empty((1, len(self.possible_agents), 3))
-        for agent, i in self._index.items():
+        for i, agent in enumerate(self._index):
             a = actions[agent]
             if not (isinstance(a, np.ndarray) and a.shape == (3,) and a.dtype.kind in "fiu"):
                 # lists, wrong shapes, wrong types: named by agent
                 a = action_array(a, (3,), f"action of {agent}")
             joint[0, i] = a
+        # The usual case (NaN compares false): nothing to clip or name. A few values: Python
+        # compares them sooner than numpy's reductions start.
+        if all(-1.0 <= x <= 1.0 for x in joint.ravel().tolist()):
+            return joint, self._no_clips
         try:
             out, outside = prepare_actions(joint, joint.shape, "actions", strict)
         except ValueError:
