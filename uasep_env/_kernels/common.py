@@ -42,7 +42,7 @@ def frozen(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a)
     if a.flags.writeable:
         a = a.view()
-        a.setflags(write=False)  # sooner than setting the flag: ~40 arrays a step come here
+        a.setflags(write=False)  # sooner than setting the flag
     return a
 
 

@@ -268,7 +268,7 @@ _Columns = namedtuple(
 
 @numba.njit(**_JIT)
 def _observe_serial(xt, scales, limit, ct, region, n_newton, out):  # noqa: ANN001, ANN202
-    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    x = _Inputs(*xt)
     cols = _Columns(*ct)
     for e in range(out.shape[0]):
         _observe_env(e, x, scales, limit, cols, region, n_newton, out)
@@ -276,7 +276,7 @@ def _observe_serial(xt, scales, limit, ct, region, n_newton, out):  # noqa: ANN0
 
 @numba.njit(parallel=True, **_JIT)
 def _observe_parallel(xt, scales, limit, ct, region, n_newton, out):  # noqa: ANN001, ANN202
-    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    x = _Inputs(*xt)  # one statement each: the parallel loop looks up the definitions
     cols = _Columns(*ct)
     for e in numba.prange(out.shape[0]):
         _observe_env(e, x, scales, limit, cols, region, n_newton, out)

@@ -81,7 +81,7 @@ _OutcomeConstants = namedtuple("_OutcomeConstants", "lost_sq cost_weights cost_f
 
 @numba.njit(**_JIT)
 def _rewards_serial(xt, ct, it, weights, own, terms):  # noqa: ANN001, ANN202
-    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    x = _Inputs(*xt)
     c = _Constants(*ct)
     ix = _TermIndex(*it)
     for k in range(own.size):
@@ -90,7 +90,7 @@ def _rewards_serial(xt, ct, it, weights, own, terms):  # noqa: ANN001, ANN202
 
 @numba.njit(parallel=True, **_JIT)
 def _rewards_parallel(xt, ct, it, weights, own, terms):  # noqa: ANN001, ANN202
-    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    x = _Inputs(*xt)  # one statement each: the parallel loop looks up the definitions
     c = _Constants(*ct)
     ix = _TermIndex(*it)
     for k in numba.prange(own.size):
@@ -158,7 +158,7 @@ def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, f
 def _outcome_serial(xt, ct, it, weights, ot, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
                     cost_terms):  # noqa: ANN001
 # fmt: on
-    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    x = _Inputs(*xt)
     c = _Constants(*ct)
     ix = _TermIndex(*it)
     o = _OutcomeConstants(*ot)
@@ -172,7 +172,7 @@ def _outcome_serial(xt, ct, it, weights, ot, own, terms, d_reg, collided, lost, 
 def _outcome_parallel(xt, ct, it, weights, ot, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
                       cost_terms):  # noqa: ANN001
 # fmt: on
-    x = _Inputs(*xt)  # one statement each: the parallel loop looks up their definitions
+    x = _Inputs(*xt)  # one statement each: the parallel loop looks up the definitions
     c = _Constants(*ct)
     ix = _TermIndex(*it)
     o = _OutcomeConstants(*ot)
