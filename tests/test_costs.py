@@ -238,3 +238,35 @@ def test_task_reward_preset_and_its_bounds():
         alive &= ~(res.terminated | res.truncated)
         if not alive.any():
             break
+
+
+def test_sb3_agent_infos_are_the_plain_construction_in_order_and_distinct():
+    """The written-out info maker gives what ``dict(zip(...))`` per agent gives."""
+    pytest.importorskip("stable_baselines3")
+    from uasep_env.envs import sb3
+
+    rng = np.random.default_rng(4)
+    n = 50
+    clipped = rng.integers(0, 4, n).tolist()
+    cost = rng.random(n).tolist()
+    columns = [(rng.random(n) < 0.3).astype(float).tolist() for _ in COST_TERMS]
+    infos = sb3._agent_infos(clipped, cost, *columns)
+    want = [
+        {"clipped_actions": c, "cost": k, "cost_terms": dict(zip(COST_TERMS, row, strict=True))}
+        for c, k, row in zip(clipped, cost, zip(*columns, strict=True), strict=True)
+    ]
+    assert infos == want
+    assert [list(i) for i in infos] == [list(w) for w in want]  # key order too
+    assert [list(i["cost_terms"]) for i in infos] == [list(COST_TERMS)] * n
+    assert len({id(i) for i in infos}) == n and len({id(i["cost_terms"]) for i in infos}) == n
+    names = ("x", "y's", 'z"q')  # any names of a table: written as literals
+    made = sb3._info_maker(names)([0], [1.5], [1.0], [2.0], [3.0])
+    assert made == [
+        {
+            "clipped_actions": 0,
+            "cost": 1.5,
+            "cost_terms": dict(zip(names, [1.0, 2.0, 3.0], strict=True)),
+        }
+    ]
+    with pytest.raises(ValueError, match="zip"):
+        sb3._agent_infos(clipped, cost[:-1], *columns)  # columns of unequal length
