@@ -254,6 +254,31 @@ def test_kernel_input_views_stay_read_only_views_of_the_state():
             assert np.shares_memory(view, state) and view.shape == state.shape, attr
 
 
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_env_steps_as_the_original(how):
+    """A copy makes its own kernel views: copied ones would be arrays of their own, stale."""
+    import copy
+    import pickle
+
+    import uasep_env
+
+    env = uasep_env.parallel_env(scenario="random")
+    env.reset(seed=0)
+    acts = {a: np.full(3, 0.3, np.float32) for a in env.agents}
+    for _ in range(5):
+        env.step(acts)
+    twin = copy.deepcopy(env) if how == "deepcopy" else pickle.loads(pickle.dumps(env))
+    for k in range(40):
+        if k == 20:  # a new plan, written into the plan's arrays
+            env.reset(seed=1)
+            twin.reset(seed=1)
+        obs, rewards, *_ = env.step(acts)
+        twin_obs, twin_rewards, *_ = twin.step(acts)
+        assert rewards == twin_rewards
+        for agent, o in obs.items():
+            np.testing.assert_array_equal(twin_obs[agent], o)
+
+
 def test_noise_drawn_on_several_threads_is_bit_identical(monkeypatch):
     """Large batches refill their noise on a thread pool: the same numbers as one thread."""
     import uasep_env.noise as noise_mod

@@ -268,6 +268,10 @@ class PlannedTrajectory:
     #: The arrays that hold the trajectories (written in place by :meth:`set_rows`).
     _ARRAYS = ("waypoints", "cum", "direction", "length", "cruise_speed")
 
+    def __getstate__(self) -> dict:
+        # A copy (copy.deepcopy, pickle) makes its own views (see World.__getstate__).
+        return {**self.__dict__, "_frozen": None}
+
     def frozen(self) -> PlannedTrajectory:
         """This plan over read-only views of its arrays, made once (they show later writes).
 

@@ -193,6 +193,11 @@ class World(RenamedAttributes):
         "obstacles.active", "obstacles.aircraft_class",
     )  # fmt: skip
 
+    def __getstate__(self) -> dict:
+        # A copy (copy.deepcopy, pickle) would copy the views as arrays of their own, not as
+        # views of its own state: it makes its own on first use.
+        return {**self.__dict__, "_frozen": None}
+
     def frozen_inputs(self) -> dict[str, np.ndarray]:
         """Read-only views of the state arrays the kernels read (:data:`_KERNEL_INPUTS`).
 
