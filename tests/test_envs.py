@@ -237,6 +237,24 @@ def test_gym_clips_and_counts_and_strict_raises():
         strict.step(act)
 
 
+def test_gym_reward_and_info_means_are_each_rows_numpy_mean():
+    """The single-agent view's means over the UAVs: the same bits as ``row.mean()``."""
+    env = gymnasium.make("uasep/Formation-v2", scenario="random", n_uavs=5).unwrapped
+    env.reset(seed=2)
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        _, reward, term, trunc, info = env.step(rng.uniform(-1, 1, 15).astype(np.float32))
+        assert type(reward) is float and reward == float(info["rewards"].mean())
+        assert info["cost"] == float(info["costs"].mean())
+        world = env.core.world
+        _, terms = uasep_env.rewards.compute_rewards(world, env.config.reward)
+        for k, v in terms.items():
+            got = info["reward_" + k]
+            assert type(got) is float and np.float64(got).tobytes() == v[0].mean().tobytes(), k
+        if term or trunc:
+            env.reset()
+
+
 def test_gym_stepping_a_finished_episode_raises():
     """Issue 13 item 1: the Gymnasium view kept stepping after its episode ended."""
     g = gymnasium.make("uasep/Formation-v2", formation_spacing=0.5)
