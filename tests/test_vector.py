@@ -246,3 +246,34 @@ def test_reset_some_builds_only_the_reset_rows_exactly(monkeypatch, numba_on):
     got = core.reset_some(mask)
     assert got.shape == (3, 3, core.obs_dim)
     np.testing.assert_array_equal(got, core.observations()[mask])
+
+
+@pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
+def test_vector_info_masks_are_right_and_each_its_own_array(mode):
+    """Each info key's mask is its own array (as ``SyncVectorEnv``'s), with its rows."""
+    # Environment 0's UAVs fly off their plan and get lost: it ends while the others fly on.
+    config = {**SHORT, "episode_duration": 30.0, "uav": {"lost_distance": 40.0}}
+    vec = FormationVectorEnv(4, autoreset_mode=mode, **config)
+    vec.reset(seed=3)
+    act = np.zeros(vec.action_space.shape, np.float32)
+    act[0] = 1.0
+    seen_partial = False
+    done = np.zeros(4, dtype=bool)
+    for _ in range(60):
+        _, _, term, trunc, infos = vec.step(act)
+        parts = [infos] + ([infos["final_info"]] if "final_info" in infos else [])
+        for part in parts:
+            masks = [v for k, v in part.items() if k.startswith("_") and k[1:] in part]
+            for i, a in enumerate(masks):
+                assert not any(np.shares_memory(a, b) for b in masks[i + 1 :])
+        # NextStep: the rows reset this step have the reset's (empty) info; SameStep: the
+        # rows that ended, whose info is in final_info.
+        want = ~done if mode == "NextStep" else ~(term | trunc)
+        seen_partial |= not want.all() and bool(want.any())
+        for k in ("rewards", "cost", "min_uav_distance"):
+            if want.any():
+                np.testing.assert_array_equal(infos["_" + k], want)
+            else:  # no row has this step's info: no key (as SyncVectorEnv)
+                assert "_" + k not in infos
+        done = term | trunc
+    assert seen_partial
