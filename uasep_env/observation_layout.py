@@ -218,12 +218,14 @@ class ObservationLayout:
         """Width of one ``name`` block (one neighbour's, for ``"uav"`` and ``"obstacle"``)."""
         return sum(f.size for f in self.block(name))
 
-    @property
+    # The widths are computed once per layout (it is frozen): the APF asks for them at
+    # every decision, and summing the blocks' sizes was a third of a one-environment one.
+    @functools.cached_property
     def self_dim(self) -> int:
         """Width of the own-state block."""
         return self.width("self")
 
-    @property
+    @functools.cached_property
     def world_dim(self) -> int:
         """Width of what is observed of the world (everything but ``base_action``)."""
         return (
@@ -232,7 +234,7 @@ class ObservationLayout:
             + self.k_obstacles * self.width("obstacle")
         )
 
-    @property
+    @functools.cached_property
     def dim(self) -> int:
         """Width of the whole observation vector."""
         return self.world_dim + (3 if self.base_action else 0)
