@@ -259,14 +259,5 @@ def test_sb3_agent_infos_are_the_plain_construction_in_order_and_distinct():
     assert [list(i) for i in infos] == [list(w) for w in want]  # key order too
     assert [list(i["cost_terms"]) for i in infos] == [list(COST_TERMS)] * n
     assert len({id(i) for i in infos}) == n and len({id(i["cost_terms"]) for i in infos}) == n
-    names = ("x", "y's", 'z"q')  # any names of a table: written as literals
-    made = sb3._info_maker(names)([0], [1.5], [1.0], [2.0], [3.0])
-    assert made == [
-        {
-            "clipped_actions": 0,
-            "cost": 1.5,
-            "cost_terms": dict(zip(names, [1.0, 2.0, 3.0], strict=True)),
-        }
-    ]
     with pytest.raises(ValueError, match="zip"):
         sb3._agent_infos(clipped, cost[:-1], *columns)  # columns of unequal length

@@ -417,3 +417,42 @@ def test_observation_decodes_to_si_quantities():
     assert o["uav_mask"].all() and o["obstacle_mask"][0]
     np.testing.assert_allclose(o["obstacle_axes"][0], w.pred_axes[0, 0], rtol=1e-5)
     assert len(env.layout.feature_names()) == env.layout.dim
+
+
+def test_row_dicts_writes_any_layout_as_the_plain_construction():
+    from uasep_env.envs._infos import row_dicts
+
+    names = ("x", "y's", 'z"q', "w\\n")  # any text is a name: written as literals
+    make = row_dicts(("a", ("nested", names), "b"))
+    cols = [[1, 2], [3.0, 4.0], [5.0, 6.0], [True, False], [None, "s"], [7, 8]]
+    got = make(*cols)
+    want = [
+        {"a": a, "nested": dict(zip(names, (x, y, z, w), strict=True)), "b": b}
+        for a, x, y, z, w, b in zip(*cols, strict=True)
+    ]
+    assert got == want and [list(d) for d in got] == [list(d) for d in want]
+    assert got[0]["nested"] is not got[1]["nested"]
+    assert row_dicts(("only",))([1, 2]) == [{"only": 1}, {"only": 2}]
+    with pytest.raises(ValueError, match="zip"):
+        make(*cols[:-1], [7])
+    with pytest.raises(TypeError, match="a name or"):
+        row_dicts((("a", "b", "c"),))
+
+
+def test_parallel_infos_have_the_steps_safety_keys_in_order():
+    """The infos' keys: the reward terms, then every safety figure of the step, in order."""
+    from uasep_env.envs.core import SAFETY_KEYS
+
+    env = uasep_env.parallel_env(scenario="random")
+    env.reset(seed=0)
+    _, _, _, _, infos = env.step(_zero(env))
+    res = env._last
+    assert tuple(res.safety) == SAFETY_KEYS
+    for i, agent in enumerate(env.possible_agents):
+        info = infos[agent]
+        assert list(info) == ["reward_terms", *SAFETY_KEYS, "cost", "cost_terms", "clipped_actions"]
+        for k in SAFETY_KEYS:
+            want = res.safety[k][0, i].item()
+            assert info[k] == want and type(info[k]) is type(want), k
+        assert info["reward_terms"] == {k: res.terms[k][0, i].item() for k in res.terms}
+        assert info["cost_terms"] == {k: v[0, i].item() for k, v in res.cost_terms.items()}

@@ -22,6 +22,7 @@ from uasep_env.capacity import check_count
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import is_real
 from uasep_env.costs import COST_TERMS
+from uasep_env.envs._infos import row_dicts
 from uasep_env.observation import ObservationLayout, build_observations, global_state
 from uasep_env.outcome import compute_outcome
 from uasep_env.rewards import REWARD_TERMS, share_rewards
@@ -29,6 +30,7 @@ from uasep_env.world import World
 
 __all__ = [
     "ACTION_TOLERANCE",
+    "SAFETY_KEYS",
     "ActionTypeError",
     "EnvCore",
     "StepResult",
@@ -37,6 +39,21 @@ __all__ = [
     "prepare_actions",
     "validate_actions",
 ]
+
+#: The per-step safety figures of :attr:`StepResult.safety`, in order: the minimum
+#: distances to another UAV, an obstacle and a region over the step (m), the loss of
+#: separation flags (UAV, obstacle), inside a region, a collision, lost.
+SAFETY_KEYS = (
+    "min_uav_distance", "min_obstacle_distance", "min_region_distance",
+    "loss_of_separation_uav", "loss_of_separation_obstacle", "in_reachable_region",
+    "collision", "lost",
+)  # fmt: skip
+#: An agent's info dict from its columns: the reward terms, the safety figures, the cost
+#: and the cost terms, the keys written out once (:func:`uasep_env.envs._infos.row_dicts`).
+_agent_infos = row_dicts(
+    (("reward_terms", REWARD_TERMS), *SAFETY_KEYS, "cost", ("cost_terms", COST_TERMS))
+)
+
 
 #: Actions may exceed ``[-1, 1]`` by this much (rounding) before strict checks reject them.
 ACTION_TOLERANCE = 1e-6
@@ -338,16 +355,14 @@ class EnvCore:
         terminated = (out.collided | out.lost).any(axis=1)
         truncated = ((w.steps >= self._max_steps) | w.plan_finished()) & ~terminated
         los_uav, los_obstacle, in_region = out.flags
-        safety = {
-            "min_uav_distance": w.min_uav_dist.copy(),
-            "min_obstacle_distance": w.min_obstacle_dist.copy(),
-            "min_region_distance": out.d_region,
-            "loss_of_separation_uav": los_uav,
-            "loss_of_separation_obstacle": los_obstacle,
-            "in_reachable_region": in_region,
-            "collision": out.collided,
-            "lost": out.lost,
-        }
+        safety = dict(
+            zip(
+                SAFETY_KEYS,
+                (w.min_uav_dist.copy(), w.min_obstacle_dist.copy(), out.d_region, los_uav,
+                 los_obstacle, in_region, out.collided, out.lost),
+                strict=True,
+            )
+        )  # fmt: skip
         rewards = share_rewards(out.own, cfg.reward)
         terms = dict(zip(REWARD_TERMS, out.terms, strict=True))
         cost_terms = dict(zip(COST_TERMS, out.cost_terms, strict=True))
@@ -361,16 +376,9 @@ class EnvCore:
         Reward terms as floats, safety figures as Python floats and bools, the ``cost`` and
         its ``cost_terms`` as floats.
         """
-        terms = {k: result.terms[k][env].tolist() for k in REWARD_TERMS}
-        safety = {k: v[env].tolist() for k, v in result.safety.items()}
-        cost = result.cost[env].tolist()
-        cost_terms = {k: result.cost_terms[k][env].tolist() for k in COST_TERMS}
-        return [
-            {
-                "reward_terms": {k: v[i] for k, v in terms.items()},
-                **{k: v[i] for k, v in safety.items()},
-                "cost": cost[i],
-                "cost_terms": {k: v[i] for k, v in cost_terms.items()},
-            }
-            for i in range(result.rewards.shape[1])
-        ]
+        return _agent_infos(
+            *(result.terms[k][env].tolist() for k in REWARD_TERMS),
+            *(result.safety[k][env].tolist() for k in SAFETY_KEYS),
+            result.cost[env].tolist(),
+            *(result.cost_terms[k][env].tolist() for k in COST_TERMS),
+        )

@@ -29,37 +29,16 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_seed
 from uasep_env.costs import COST_TERMS
+from uasep_env.envs._infos import row_dicts
 from uasep_env.envs.core import EnvCore, prepare_actions
 from uasep_env.rollout import DEFAULT_SETTLE_TIME_S
 
 __all__ = ["UAVSharedVecEnv"]
 
 
-def _info_maker(names: Sequence[str]) -> Any:
-    """A function of the agents' columns that returns their info dicts, in agent order.
-
-    ``maker(clipped, cost, *terms)`` (one list per column, the cost terms in ``names``'
-    order) returns ``[{"clipped_actions": c, "cost": k, "cost_terms": {name: x, ...}}]``.
-    Its source is written once for the cost table's names (as ``collections.namedtuple``
-    writes its class): a training step makes two dicts per agent (768 at 128 environments
-    of 3 UAVs), and a dict display with its keys written out costs half of
-    ``dict(zip(names, row))`` (``docs/speed.md``).
-    """
-    args = [f"t{i}" for i in range(len(names))]
-    terms = ", ".join(f"{name!r}: {a}" for name, a in zip(names, args, strict=True))
-    source = (
-        f"def maker(clipped, cost, {''.join(a + ', ' for a in args)}):\n"
-        f"    return [{{'clipped_actions': c, 'cost': k, 'cost_terms': {{{terms}}}}}\n"
-        f"            for c, k, {''.join(a + ', ' for a in args)}"
-        f"in zip(clipped, cost, {''.join(a + ', ' for a in args)}strict=True)]\n"
-    )
-    namespace: dict[str, Any] = {}
-    exec(source, namespace)  # the source is made of the cost table's names only
-    return namespace["maker"]
-
-
-#: The agents' info dicts from their columns (:func:`_info_maker` of the cost table).
-_agent_infos = _info_maker(COST_TERMS)
+#: An agent's info dict from its columns (clipped action components, cost, cost terms): the
+#: keys written out once (:func:`uasep_env.envs._infos.row_dicts`).
+_agent_infos = row_dicts(("clipped_actions", "cost", ("cost_terms", COST_TERMS)))
 
 
 class UAVSharedVecEnv(VecEnv):
