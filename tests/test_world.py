@@ -1,5 +1,7 @@
 """The batched world: determinism, batch invariance, per-env reset, bounds, extremes."""
 
+import operator
+
 import numpy as np
 import pytest
 from conftest import HANG_GUARD_S
@@ -243,15 +245,11 @@ def test_kernel_input_views_stay_read_only_views_of_the_state():
         if k == 4:
             w.reset(seed=9)
         assert w.frozen_inputs() is views and w.plan.frozen() is plan
-        pairs = [(w.plan.frozen(), w.plan, name) for name in plan._ARRAYS]
-        for name, view in views.items():
-            owner, _, attr = name.rpartition(".")
-            pairs.append((view, getattr(w, owner) if owner else w, attr))
-        for view, owner, attr in pairs:
-            view = getattr(view, attr) if view is plan else view
-            state = getattr(owner, attr)
-            assert not view.flags.writeable, attr
-            assert np.shares_memory(view, state) and view.shape == state.shape, attr
+        pairs = [(getattr(plan, n), getattr(w.plan, n), n) for n in plan._ARRAYS]
+        pairs += [(view, operator.attrgetter(n)(w), n) for n, view in views.items()]
+        for view, state, name in pairs:
+            assert not view.flags.writeable, name
+            assert np.shares_memory(view, state) and view.shape == state.shape, name
 
 
 @pytest.mark.parametrize("how", ["deepcopy", "pickle"])
