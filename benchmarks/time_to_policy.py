@@ -307,8 +307,37 @@ def _train_skrl(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
     return hooks.steps
 
 
+def _train_lean(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
+    """Train a PPO recipe with the lean loop (:mod:`uasep_env.training.ppo_lean`)."""
+    from uasep_env.training import ppo_lean
+
+    clock = checker.clock
+
+    class Hooks(ppo_lean.Hooks):
+        def start(self, nets: Any, norm: Any) -> None:
+            self.nets, self.norm = nets, norm
+            checker.t0 = time.perf_counter()
+
+        def rollout_end(self, agent_steps: int) -> None:
+            export = functools.partial(ppo_lean.export_policy, self.nets, self.norm, config,
+                                       args, run_dir / "check.zip", {})  # fmt: skip
+            checker.maybe_check(agent_steps, export)
+
+        def stop(self) -> bool:
+            return checker.spent()
+
+    _, _, facts = ppo_lean.train(args, config, Hooks())
+    # The loop times its own parts (the checks in none of them); the rollout's figure holds
+    # the environment, as SB3's collect_rollouts does.
+    clock.env_s, clock.learner_s = facts["env_s"], facts["learner_s"]
+    clock.rollout_s = facts["env_s"] + facts["rollout_s"]
+    return int(facts["agent_steps"])
+
+
 #: Each recipe's training loop, by :attr:`Recipe.reader`.
 TRAINERS = {_PPO: _train_sb3, _MAPPO: _train_skrl}
+#: ``--trainer lean``: the PPO recipes' lean loop in place of SB3's.
+LEAN = {_PPO: _train_lean}
 
 
 def run(
@@ -319,8 +348,17 @@ def run(
     run_dir: Path,
     extra: list[str],
     overwrite: bool = False,
+    trainer: str = "default",
 ) -> dict[str, Any]:
-    """Train until the bar is reached or the budget is spent; the record (see the module)."""
+    """Train until the bar is reached or the budget is spent; the record (see the module).
+
+    ``trainer``: ``"default"`` (SB3's PPO, or skrl's MAPPO) or ``"lean"`` (the PPO recipes
+    on :mod:`uasep_env.training.ppo_lean`).
+    """
+    reader = RECIPES[recipe].reader
+    loops = LEAN if trainer == "lean" else TRAINERS
+    if reader not in loops:
+        raise ValueError(f"trainer {trainer!r}: not for the {recipe!r} recipe (PPO recipes only)")
     import torch
 
     from uasep_env.policies import load_policy
@@ -349,12 +387,13 @@ def run(
     clock = Clock()
     checker = Checker(bar=bar, seeds=seeds, eval_cfg=eval_cfg, check_every=check_every,
                       max_minutes=max_minutes, clock=clock)  # fmt: skip
-    steps = TRAINERS[RECIPES[recipe].reader](args, config, run_dir, checker)
+    steps = loops[reader](args, config, run_dir, checker)
     train_s = checker.training_s()
     checks = checker.checks
     hit = next((c for c in checks if c["reached"]), None)
     return {
         "recipe": recipe,
+        "trainer": trainer,
         "shipped": f"baselines/checkpoints/{shipped.name}",
         "bar": asdict(bar),
         "apf": apf,
@@ -508,6 +547,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                    help="then play the first N held-out encounters (see above)")  # fmt: skip
     p.add_argument("--of", type=Path, default=None, metavar="RECORD",
                    help="add --held-out figures to this earlier record (no training)")  # fmt: skip
+    p.add_argument("--trainer", choices=("default", "lean"), default="default",
+                   help="lean: the PPO recipes on uasep_env.training.ppo_lean")  # fmt: skip
     p.add_argument("--workers", type=positive_int, default=1,
                    help="held-out evaluation processes")  # fmt: skip
     a = p.parse_args(argv)
@@ -529,12 +570,15 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         return record
     if a.recipe is None:
         p.error("the following arguments are required: --recipe")
+    if a.trainer == "lean" and RECIPES[a.recipe].reader not in LEAN:
+        p.error(f"argument --trainer: lean trains the PPO recipes, not {a.recipe!r}")
     out = a.out or ROOT / "benchmarks" / "results" / f"time_to_policy_{a.recipe}.json"
     if out.exists() and not a.force:
         p.error(f"argument --out: {out} exists (--force replaces it)")
     # Absolute: a later --of finds the policy from any folder.
     run_dir = (a.run_dir or ROOT / "runs" / "time_to_policy" / a.recipe).resolve()
-    record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra, a.overwrite)
+    record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra, a.overwrite,
+                 a.trainer)  # fmt: skip
     record["command"] = "python benchmarks/time_to_policy.py " + " ".join(
         [*argv, *(["--", *extra] if extra else [])]
     )

@@ -37,19 +37,23 @@ def test_the_bar_is_the_shipped_intervals_upper_ends():
     assert not ttp.reached(ttp.figures(_agg(0.015, 0.2, 0, 30.0, 0)), bar)
 
 
-@pytest.mark.parametrize("recipe", ["residual_apf", "mappo"])
+@pytest.mark.parametrize(
+    ("recipe", "trainer"),
+    [("residual_apf", "default"), ("mappo", "default"), ("residual_apf", "lean")],
+)
 def test_a_run_stops_at_the_bar_and_records_where_the_time_went(
-    tmp_path, recipe, monkeypatch, capsys
+    tmp_path, recipe, trainer, monkeypatch, capsys
 ):
     if recipe == "mappo":
         pytest.importorskip("skrl")
     out = tmp_path / "ttp.json"
     tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
             "--hidden", "16", "--total-timesteps", "1200", "--episode-duration", "20"]  # fmt: skip
-    flags = ["--recipe", recipe, "--episodes", "2", "--check-every", "384"]
+    flags = ["--recipe", recipe, "--trainer", trainer, "--episodes", "2", "--check-every", "384"]
     monkeypatch.chdir(tmp_path)  # a relative run folder is recorded absolute (for --of)
     rec = ttp.main([*flags, "--out", str(out), "--run-dir", "run", "--held-out", "2", "--", *tiny])
     assert json.loads(out.read_text())["agent_steps"] == rec["agent_steps"]
+    assert rec["trainer"] == trainer
     assert rec["recipe_args"]["out_dir"] == str(tmp_path.resolve() / "run")
     # --held-out plays a reached policy, or says that there is none.
     said = "no policy to play" in capsys.readouterr().out
@@ -74,6 +78,14 @@ def test_a_run_stops_at_the_bar_and_records_where_the_time_went(
     with pytest.raises(SystemExit, match="is not empty"):
         ttp.main([*flags, "--out", str(other), "--run-dir", str(tmp_path / "run"), "--", *tiny])
     assert not other.exists()
+
+
+def test_the_lean_trainer_is_refused_for_mappo(tmp_path):
+    with pytest.raises(SystemExit):
+        ttp.main(["--recipe", "mappo", "--trainer", "lean", "--out", str(tmp_path / "x.json")])
+    with pytest.raises(ValueError, match="PPO recipes only"):
+        ttp.run("mappo", 2, 384, 1.0, tmp_path / "run", [], trainer="lean")
+    assert not (tmp_path / "x.json").exists() and not (tmp_path / "run").exists()
 
 
 def test_of_names_a_file_that_is_not_a_record(tmp_path):

@@ -1,0 +1,150 @@
+"""uasep_env.training.ppo_lean: SB3's PPO arithmetic without SB3's per-step layers."""
+
+import gymnasium
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+torch = pytest.importorskip("torch")
+
+from uasep_env.training import ppo_lean, ppo_shared  # noqa: E402
+
+
+def test_gae_is_sb3s_rollout_buffer():
+    """Advantages and returns as SB3's buffer computes them, episode ends included."""
+    from stable_baselines3.common.buffers import RolloutBuffer
+
+    rng = np.random.default_rng(0)
+    steps, rows, gamma, lam = 7, 5, 0.97, 0.9
+    rewards = rng.normal(size=(steps, rows)).astype(np.float32)
+    values = rng.normal(size=(steps, rows)).astype(np.float32)
+    starts = (rng.random((steps, rows)) < 0.3).astype(np.float32)
+    last_value = rng.normal(size=rows).astype(np.float32)
+    last_done = np.array([1, 0, 1, 0, 0], dtype=np.float32)
+    space = gymnasium.spaces.Box(-1, 1, (2,), np.float32)
+    buf = RolloutBuffer(steps, space, space, gamma=gamma, gae_lambda=lam, n_envs=rows)
+    for t in range(steps):
+        buf.add(np.zeros((rows, 2)), np.zeros((rows, 2)), rewards[t], starts[t],
+                torch.from_numpy(values[t]), torch.zeros(rows))  # fmt: skip
+    buf.compute_returns_and_advantage(torch.from_numpy(last_value), last_done)
+    adv, ret = ppo_lean.gae(rewards, values, starts, last_value, last_done, gamma, lam)
+    np.testing.assert_allclose(adv, buf.advantages, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(ret, buf.returns, rtol=1e-6, atol=1e-6)
+
+
+class _Scripted(gymnasium.Env):
+    """Random observations far from zero mean and unit scale; an episode ends every 3 steps."""
+
+    observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (4,), np.float32)
+    action_space = gymnasium.spaces.Box(-1, 1, (1,), np.float32)
+
+    def __init__(self, k: int) -> None:
+        self.rng, self.t, self.final = np.random.default_rng(k), 0, None
+
+    def _obs(self) -> np.ndarray:
+        return self.rng.normal(30.0, 40.0, 4).astype(np.float32)
+
+    def reset(self, seed=None, options=None):
+        self.t = 0
+        return self._obs(), {}
+
+    def step(self, action):
+        self.t += 1
+        obs = self._obs()
+        done = self.t % 3 == 0
+        if done:
+            self.final = obs
+        return obs, float(self.rng.normal(5.0, 3.0)), done, False, {}
+
+
+@pytest.mark.parametrize("norm_reward", [False, True])
+def test_the_normaliser_is_vecnormalize(norm_reward):
+    """The same observations, rewards and terminal observations as SB3's VecNormalize."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    inner = [_Scripted(k) for k in range(3)]
+    vn = VecNormalize(DummyVecEnv([lambda e=e: e for e in inner]), norm_reward=norm_reward,
+                      gamma=0.9)  # fmt: skip
+    norm = ppo_lean.Normaliser(4, 3, norm_obs=True, norm_reward=norm_reward, gamma=0.9)
+    first = vn.reset()
+    np.testing.assert_allclose(norm.observe(vn.get_original_obs(), update=True), first, 1e-6)
+    for _ in range(8):
+        obs, rew, dones, infos = vn.step(np.zeros((3, 1), np.float32))
+        got = norm.observe(vn.get_original_obs(), update=True)
+        np.testing.assert_allclose(got, obs, rtol=1e-6)
+        np.testing.assert_allclose(norm.reward(vn.get_original_reward(), dones), rew, 1e-6)
+        for k in np.flatnonzero(dones):  # normalised after the new observations' update
+            want = infos[k]["terminal_observation"]
+            np.testing.assert_allclose(norm.normalise(inner[k].final[None])[0], want, 1e-6)
+    np.testing.assert_allclose(norm.obs_rms.mean, vn.obs_rms.mean)
+    assert np.abs(got).max() <= ppo_lean.CLIP_OBS
+
+
+def _tiny(**extra: object) -> object:
+    flags = ["--n-envs", "2", "--n-steps", "16", "--batch-size", "32", "--n-epochs", "2",
+             "--hidden", "8", "--total-timesteps", "288", "--episode-duration", "4"]  # fmt: skip
+    for k, v in extra.items():
+        flags += [f"--{k.replace('_', '-')}", str(v)]
+    return ppo_shared.parse_args(["--out-dir", "unused", "--no-progress", *flags])
+
+
+def _update_once(args: object, advantage_sign: float) -> tuple:
+    """One update on one repeated observation whose +x actions have advantage ``sign``."""
+    torch.manual_seed(0)
+    nets = ppo_lean._ActorCritic(4, args)
+    opt = torch.optim.Adam(nets.params, lr=1e-2, eps=1e-5)
+    steps, rows = 4, 8
+    x = torch.ones((steps, rows, 4))
+    with torch.no_grad():
+        mean = nets.mu(nets.pi(x))
+        up = torch.zeros_like(mean)
+        up[..., 0] = torch.tensor([0.3, -0.3]).repeat(rows // 2)
+        act = mean + up
+        logp = nets.log_prob(mean, act)
+    adv = np.sign(up[..., 0].numpy()) * advantage_sign
+    before = [p.detach().clone() for p in nets.params]
+    ppo_lean._update(nets, opt, args, 0, x, act, logp, adv.astype(np.float32),
+                     np.ones((steps, rows), np.float32))  # fmt: skip
+    with torch.no_grad():
+        moved = (nets.mu(nets.pi(x[0, :1])) - mean[0, :1])[0, 0].item()
+    return nets, before, moved
+
+
+def test_an_update_moves_the_actor_towards_actions_with_positive_advantage():
+    args = _tiny()
+    assert _update_once(args, +1.0)[2] > 0 > _update_once(args, -1.0)[2]
+
+
+def test_the_critic_warmup_freezes_the_actor():
+    # SB3's recipes count the rollout before its update: a warm-up of 2 is one critic-only update.
+    assert _update_once(_tiny(critic_warmup=1), +1.0)[2] > 0
+    nets, before, _ = _update_once(_tiny(critic_warmup=2), +1.0)
+    n = len(nets.actor)
+    after = nets.params
+    assert all(torch.equal(a, b) for a, b in zip(before[:n], after[:n], strict=True))
+    assert any(not torch.equal(a, b) for a, b in zip(before[n:], after[n:], strict=True))
+
+
+def test_a_run_counts_its_steps_is_reproducible_and_exports_a_loadable_policy(tmp_path):
+    from uasep_env.policies import load_policy
+
+    args = _tiny()
+    config = ppo_shared.make_env_config(args)
+    runs = [ppo_lean.train(args, config) for _ in range(2)]
+    (nets, norm, facts), (nets2, norm2, _) = runs
+    assert facts["agent_steps"] == 288 == facts["updates"] * 16 * 2 * config.n_uavs
+    assert facts["episodes"] > 0  # 4 s episodes: ends and resets inside the run
+    assert all(facts[k] > 0 for k in ("env_s", "rollout_s", "learner_s"))
+    assert facts["env_s"] + facts["rollout_s"] + facts["learner_s"] <= facts["wall_s"]
+    # Same seed, same training: the weights and the statistics bit for bit.
+    assert all(torch.equal(a, b) for a, b in zip(nets.params, nets2.params, strict=True))
+    assert np.array_equal(norm.obs_rms.mean, norm2.obs_rms.mean)
+    other = ppo_lean.train(_tiny(seed=7), config)[0]
+    assert not all(torch.equal(a, b) for a, b in zip(nets.params, other.params, strict=True))
+    path = ppo_lean.export_policy(nets, norm, config, args, tmp_path / "p.zip", {})
+    policy = load_policy(path, config.replace(action={"mode": "direct"}))
+    # The checkpoint's actor is the trained one: its mean on a normalised observation.
+    raw = np.random.default_rng(0).normal(size=(1, norm.obs_rms.mean.shape[0]))
+    with torch.no_grad():
+        want = nets.mu(nets.pi(torch.from_numpy(norm.normalise(raw)))).numpy()
+    np.testing.assert_allclose(policy.network(raw), want, rtol=1e-4, atol=1e-6)

@@ -1,0 +1,391 @@
+"""PPO in one loop on the batched core: the SB3 recipes' algorithm without SB3's per-step layers.
+
+Issue 30's lever "a leaner PPO loop on the native vector env": CleanRL's layout (the whole
+loop in plain sight, arrays batch-first) over :class:`~uasep_env.envs.core.EnvCore`, with
+the settings of :mod:`~uasep_env.training.ppo_shared` (its :class:`~.args.Args`, so the
+residual recipe's defaults apply as they are). What SB3 pays for every step and this loop
+does not: an info dict per agent (built by the SB3 view, read by ``VecMonitor`` and PPO's
+info buffer), ``VecNormalize``'s and ``VecMonitor``'s wrappers, the policy's distribution
+objects and the rollout buffer's per-step copies. The algorithm is SB3's PPO as the recipes
+configure it, step for step:
+
+* observations normalised by running statistics updated with every step's batch
+  (SB3's :class:`~stable_baselines3.common.running_mean_std.RunningMeanStd`, ``VecNormalize``'s
+  clip and epsilon); returns normalised too under ``--norm-reward``;
+* a Gaussian actor MLP (state-independent log-std) and a critic MLP of the same widths,
+  orthogonal initialisation (gains sqrt(2), 0.01 for the mean, 1 for the value), Adam with
+  ``eps=1e-5``; actions clipped to the box for the environment, stored unclipped;
+* a time limit bootstraps the reward with the value of the terminal observation; GAE;
+  ``n_epochs`` epochs of shuffled minibatches of ``batch_size``, advantages normalised per
+  minibatch, clipped ratio, value loss weight 0.5, entropy weight ``ent_coef``, gradient
+  norm clipped at 0.5, the epochs stopped when the approximate KL passes
+  ``1.5 * target_kl``; the actor frozen for the first ``critic_warmup - 1`` updates (the
+  SB3 recipes' count).
+
+It is not SB3 bit for bit (torch draws its numbers in another order), so a run is another
+training of the same recipe. The exported policy is the recipes' checkpoint
+(:func:`~uasep_env.training.ppo_shared.export_actor`): ``uasep-eval --policy`` and the
+selection scripts run it as any other. ``benchmarks/time_to_policy.py --trainer lean``
+measures it against SB3; there is no ``uasep-train`` recipe and no ``--resume`` here (a
+run is one process; ``docs/speed.md`` says what it measured).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from uasep_env.training.args import Args, hidden
+
+__all__ = ["CLIP_OBS", "Hooks", "Normaliser", "export_policy", "gae", "train"]
+
+#: ``VecNormalize``'s defaults: the clip of normalised observations (and returns), and the
+#: epsilon under the square root.
+CLIP_OBS, EPSILON = 10.0, 1e-8
+_VF_COEF, _MAX_GRAD_NORM = 0.5, 0.5  # SB3 PPO's defaults, which the recipes keep
+
+
+class Normaliser:
+    """``VecNormalize``'s arithmetic on arrays: running observation (and return) statistics.
+
+    Args:
+        obs_dim: Observation width.
+        n_rows: Rows per step (every agent of every environment).
+        norm_obs: Normalise observations.
+        norm_reward: Scale rewards by the running standard deviation of the discounted return.
+        gamma: The return's discount.
+    """
+
+    def __init__(
+        self, obs_dim: int, n_rows: int, *, norm_obs: bool, norm_reward: bool, gamma: float
+    ) -> None:
+        from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+        self.obs_rms = RunningMeanStd(shape=(obs_dim,))
+        self.ret_rms = RunningMeanStd(shape=())
+        self.norm_obs, self.norm_reward, self.gamma = norm_obs, norm_reward, gamma
+        self.returns = np.zeros(n_rows)
+        # What export_actor reads of a VecNormalize.
+        self.clip_obs, self.epsilon = CLIP_OBS, EPSILON
+        self.observation_space = SimpleNamespace(shape=(obs_dim,))
+
+    def observe(self, obs: np.ndarray, *, update: bool) -> np.ndarray:
+        """``obs`` ``(rows, obs_dim)`` normalised (float32); the statistics first updated."""
+        if not self.norm_obs:
+            return obs.astype(np.float32)
+        if update:
+            self.obs_rms.update(obs)
+        return self.normalise(obs)
+
+    def normalise(self, obs: np.ndarray) -> np.ndarray:
+        """``obs`` with the current statistics, as ``VecNormalize.normalize_obs``."""
+        if not self.norm_obs:
+            return obs.astype(np.float32)
+        rms = self.obs_rms
+        z = (obs - rms.mean) / np.sqrt(rms.var + self.epsilon)
+        return np.clip(z, -self.clip_obs, self.clip_obs).astype(np.float32)
+
+    def reward(self, rewards: np.ndarray, dones: np.ndarray) -> np.ndarray:
+        """``rewards`` ``(rows,)`` scaled as ``VecNormalize`` does (unchanged when off)."""
+        if not self.norm_reward:
+            return rewards
+        self.returns = self.returns * self.gamma + rewards
+        self.ret_rms.update(self.returns)
+        scaled = np.clip(rewards / np.sqrt(self.ret_rms.var + self.epsilon), -CLIP_OBS, CLIP_OBS)
+        self.returns[dones] = 0.0
+        return scaled
+
+
+def gae(
+    rewards: np.ndarray,
+    values: np.ndarray,
+    starts: np.ndarray,
+    last_value: np.ndarray,
+    last_done: np.ndarray,
+    gamma: float,
+    lam: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Advantages and returns of one rollout, as SB3's ``compute_returns_and_advantage``.
+
+    Args:
+        rewards: ``(T, rows)`` rewards (a time limit's bootstrap included).
+        values: ``(T, rows)`` the critic's values of the observations acted on.
+        starts: ``(T, rows)`` 1 where the observation began an episode.
+        last_value: ``(rows,)`` the value of the observation after the rollout.
+        last_done: ``(rows,)`` 1 where that observation began an episode.
+        gamma: Discount.
+        lam: GAE's lambda.
+
+    Returns:
+        ``(advantages, returns)``, each ``(T, rows)``.
+    """
+    adv = np.zeros_like(rewards)
+    running = np.zeros(rewards.shape[1], dtype=rewards.dtype)
+    for t in reversed(range(len(rewards))):
+        if t == len(rewards) - 1:
+            alive, nxt = 1.0 - last_done, last_value
+        else:
+            alive, nxt = 1.0 - starts[t + 1], values[t + 1]
+        delta = rewards[t] + gamma * nxt * alive - values[t]
+        running = delta + gamma * lam * alive * running
+        adv[t] = running
+    return adv, adv + values
+
+
+def _mlp(n_in: int, sizes: list[int], act: type, torch: Any) -> Any:
+    layers: list = []
+    for width in sizes:
+        layers += [torch.nn.Linear(n_in, width), act()]
+        n_in = width
+    return torch.nn.Sequential(*layers)
+
+
+def _init(module: Any, gain: float, torch: Any) -> None:
+    """SB3's orthogonal initialisation (zero biases) of every linear layer of ``module``."""
+    for m in module.modules():
+        if isinstance(m, torch.nn.Linear):
+            torch.nn.init.orthogonal_(m.weight, gain=gain)
+            m.bias.data.fill_(0.0)
+
+
+class _ActorCritic:
+    """The recipes' networks: SB3's ``MlpPolicy`` with separate actor and critic MLPs."""
+
+    def __init__(self, obs_dim: int, args: Args) -> None:
+        import torch
+
+        sizes = hidden(args)
+        act = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[args.activation]
+        self.pi, self.vf = _mlp(obs_dim, sizes, act, torch), _mlp(obs_dim, sizes, act, torch)
+        self.mu, self.v = torch.nn.Linear(sizes[-1], 3), torch.nn.Linear(sizes[-1], 1)
+        for body in (self.pi, self.vf):
+            _init(body, math.sqrt(2.0), torch)
+        _init(self.mu, 0.01, torch)
+        _init(self.v, 1.0, torch)
+        self.log_std = torch.nn.Parameter(torch.full((3,), float(args.log_std_init)))
+        self.actor = [*self.pi.parameters(), *self.mu.parameters(), self.log_std]
+        self.params = [*self.actor, *self.vf.parameters(), *self.v.parameters()]
+
+    def value(self, obs: Any) -> Any:
+        return self.v(self.vf(obs)).squeeze(-1)
+
+    def log_prob(self, mean: Any, actions: Any) -> Any:
+        """Sum over the action's components of the Gaussian's log-density."""
+        z = (actions - mean) / self.log_std.exp()
+        return (-0.5 * z * z - self.log_std - 0.5 * math.log(2.0 * math.pi)).sum(-1)
+
+    def linears(self) -> list:
+        """The actor's linear layers in order (what the policy checkpoint holds)."""
+        import torch
+
+        return [*(m for m in self.pi if isinstance(m, torch.nn.Linear)), self.mu]
+
+
+class Hooks:
+    """What a caller (``benchmarks/time_to_policy.py``) may do around the loop; no-ops here."""
+
+    def start(self, nets: _ActorCritic, norm: Normaliser) -> None:
+        """Before the first rollout."""
+
+    def rollout_end(self, agent_steps: int) -> None:
+        """After each rollout, before its update."""
+
+    def stop(self) -> bool:
+        """Whether to stop before the next rollout."""
+        return False
+
+
+@dataclass(kw_only=True)
+class Timing:
+    """Seconds in each part of a run: the core's steps, the rest of the rollouts, the updates."""
+
+    env_s: float = 0.0
+    rollout_s: float = 0.0
+    learner_s: float = 0.0
+
+
+def train(
+    args: Args, config: Any, hooks: Hooks | None = None
+) -> tuple[_ActorCritic, Normaliser, dict[str, Any]]:
+    """Train until ``args.total_timesteps`` agent-steps, ``args.max_minutes`` or ``hooks.stop()``.
+
+    Args:
+        args: The recipe's settings (:class:`~uasep_env.training.args.Args`).
+        config: Its :class:`~uasep_env.config.EnvConfig`
+            (:func:`~uasep_env.training.args.make_env_config`).
+        hooks: Called at the start, at each rollout's end and before each rollout.
+
+    Returns:
+        ``(networks, normaliser, facts)``: facts hold ``agent_steps``, ``updates``,
+        ``wall_s``, ``episodes`` and the time split (``env_s``, ``rollout_s``,
+        ``learner_s``; the hooks' time is in none of them).
+    """
+    import torch
+
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.scenarios import check_training_seeds
+
+    hooks = hooks or Hooks()
+    check_training_seeds(args.seed, args.n_envs)
+    torch.manual_seed(args.seed)
+    core = EnvCore(config, n_envs=args.n_envs)
+    n_envs, n = args.n_envs, config.n_uavs
+    rows, steps_t = n_envs * n, args.n_steps
+    obs_dim = core.obs_dim
+    nets = _ActorCritic(obs_dim, args)
+    opt = torch.optim.Adam(nets.params, lr=args.learning_rate, eps=1e-5)
+    norm = Normaliser(
+        obs_dim, rows, norm_obs=args.norm_obs, norm_reward=args.norm_reward, gamma=args.gamma
+    )
+    buf_obs = torch.zeros((steps_t, rows, obs_dim))
+    buf_act = torch.zeros((steps_t, rows, 3))
+    buf_logp = torch.zeros((steps_t, rows))
+    rewards = np.zeros((steps_t, rows), dtype=np.float32)
+    values = np.zeros((steps_t, rows), dtype=np.float32)
+    starts = np.zeros((steps_t, rows), dtype=np.float32)
+    timing = Timing()
+    obs = norm.observe(core.reset(seed=args.seed).reshape(rows, -1), update=True)
+    start = np.ones(rows, dtype=np.float32)
+    agent_steps = updates = episodes = 0
+    hooks.start(nets, norm)
+    t0 = time.perf_counter()
+    hook_s = 0.0
+
+    def clock() -> float:
+        return time.perf_counter() - t0 - hook_s
+
+    while agent_steps < args.total_timesteps and clock() < args.max_minutes * 60.0:
+        h0 = time.perf_counter()
+        stop = hooks.stop()
+        hook_s += time.perf_counter() - h0
+        if stop:
+            break
+        r0 = time.perf_counter()
+        env_s = 0.0
+        with torch.no_grad():
+            for t in range(steps_t):
+                x = torch.from_numpy(obs)
+                mean = nets.mu(nets.pi(x))
+                act = mean + nets.log_std.exp() * torch.randn_like(mean)
+                buf_obs[t] = x
+                buf_act[t] = act
+                buf_logp[t] = nets.log_prob(mean, act)
+                values[t] = nets.value(x).numpy()
+                starts[t] = start
+                e0 = time.perf_counter()
+                res = core.step(np.clip(act.numpy(), -1.0, 1.0).reshape(n_envs, n, 3))
+                env_s += time.perf_counter() - e0
+                done_env = res.terminated | res.truncated
+                dones = np.repeat(done_env, n)
+                reward = norm.reward(res.rewards.reshape(-1).astype(np.float32), dones)
+                raw = res.obs.reshape(rows, -1)
+                if not done_env.any():
+                    obs = norm.observe(raw, update=True)
+                else:
+                    final = raw[dones]  # a copy: the resets below write into raw
+                    e0 = time.perf_counter()
+                    raw[dones] = core.reset_some(done_env).reshape(-1, obs_dim)
+                    env_s += time.perf_counter() - e0
+                    episodes += int(done_env.sum())
+                    # VecNormalize's order: the statistics take the new observations
+                    # first, then the finished episodes' last ones are normalised.
+                    obs = norm.observe(raw, update=True)
+                    timeout = np.repeat(res.truncated & ~res.terminated, n)[dones]
+                    if timeout.any():  # a time limit: bootstrap from the terminal state
+                        last = torch.from_numpy(norm.normalise(final[timeout]))
+                        rows_out = np.flatnonzero(dones)[timeout]
+                        reward[rows_out] += args.gamma * nets.value(last).numpy()
+                rewards[t] = reward
+                start = dones.astype(np.float32)
+            last_value = nets.value(torch.from_numpy(obs)).numpy()
+        agent_steps += steps_t * rows
+        timing.env_s += env_s
+        timing.rollout_s += time.perf_counter() - r0 - env_s
+        h0 = time.perf_counter()
+        hooks.rollout_end(agent_steps)
+        hook_s += time.perf_counter() - h0
+        u0 = time.perf_counter()
+        adv, ret = gae(rewards, values, starts, last_value, start, args.gamma, args.gae_lambda)
+        _update(nets, opt, args, updates, buf_obs, buf_act, buf_logp, adv, ret)
+        updates += 1
+        timing.learner_s += time.perf_counter() - u0
+    facts = {
+        "agent_steps": agent_steps,
+        "updates": updates,
+        "wall_s": clock(),
+        "episodes": episodes,
+        "env_s": timing.env_s,
+        "rollout_s": timing.rollout_s,
+        "learner_s": timing.learner_s,
+    }
+    return nets, norm, facts
+
+
+def _update(
+    nets: _ActorCritic,
+    opt: Any,
+    args: Args,
+    updates: int,
+    buf_obs: Any,
+    buf_act: Any,
+    buf_logp: Any,
+    adv: np.ndarray,
+    ret: np.ndarray,
+) -> None:
+    """One PPO update (SB3's ``PPO.train`` as the recipes configure it)."""
+    import torch
+
+    # The actor frozen, only the critic learns: as the SB3 recipes' callback, which counts
+    # the rollout before its update, so the warm-up's last update trains the actor already.
+    warm = updates + 1 < args.critic_warmup
+    for p in nets.actor:
+        p.requires_grad_(not warm)
+    obs, act, old = buf_obs.flatten(0, 1), buf_act.flatten(0, 1), buf_logp.flatten(0, 1)
+    adv_t, ret_t = torch.from_numpy(adv.reshape(-1)), torch.from_numpy(ret.reshape(-1))
+    size = len(obs)
+    for _ in range(args.n_epochs):
+        stop = False
+        order = torch.randperm(size)
+        for s in range(0, size, args.batch_size):
+            idx = order[s : s + args.batch_size]
+            x, a = obs[idx], act[idx]
+            mean = nets.mu(nets.pi(x))
+            logp = nets.log_prob(mean, a)
+            value = nets.value(x)
+            entropy = (nets.log_std + 0.5 + 0.5 * math.log(2.0 * math.pi)).sum().expand(len(idx))
+            b = adv_t[idx]
+            if len(idx) > 1:
+                b = (b - b.mean()) / (b.std() + 1e-8)
+            log_ratio = logp - old[idx]
+            ratio = log_ratio.exp()
+            lo, hi = 1.0 - args.clip_range, 1.0 + args.clip_range
+            policy_loss = -torch.min(b * ratio, b * ratio.clamp(lo, hi)).mean()
+            value_loss = torch.nn.functional.mse_loss(ret_t[idx], value)
+            loss = policy_loss - args.ent_coef * entropy.mean() + _VF_COEF * value_loss
+            with torch.no_grad():
+                kl = ((ratio - 1.0) - log_ratio).mean().item()
+            if args.target_kl and kl > 1.5 * args.target_kl:
+                stop = True
+                break
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(nets.params, _MAX_GRAD_NORM)
+            opt.step()
+        if stop:
+            break
+
+
+def export_policy(
+    nets: _ActorCritic, norm: Normaliser, config: Any, args: Args, path: Path, info: dict
+) -> Path:
+    """Write the actor and the normalisation as the recipes' policy checkpoint."""
+    from uasep_env.training.ppo_shared import export_actor
+
+    info = {**info, "implementation": "uasep_env.training.ppo_lean"}
+    return export_actor(nets.linears(), norm, config, args, path, "PPO", info)
