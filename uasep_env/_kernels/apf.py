@@ -52,6 +52,33 @@ _GAINS = (
 )
 
 
+# Positions in those arrays, by name (numba reads module integers as constants).
+_GOAL = _KEYS.index("goal_offset")
+_SLOT = _KEYS.index("slot_offset")
+_PLAN_VEL = _KEYS.index("plan_velocity")
+_VEL = _KEYS.index("velocity")
+_FORMATION_VEL = _KEYS.index("formation_velocity")
+_UAV_POS = _KEYS.index("uav_rel_pos")
+_UAV_VEL = _KEYS.index("uav_rel_vel")
+_UAV_MASK = _KEYS.index("uav_mask")
+_CENTER = _KEYS.index("obstacle_center")
+_AXES = _KEYS.index("obstacle_axes")
+_OBSTACLE_MASK = _KEYS.index("obstacle_mask")
+_K_GOAL = _GAINS.index("k_goal")
+_GOAL_SAT = _GAINS.index("goal_saturation")
+_K_SLOT = _GAINS.index("k_slot")
+_K_VEL = _GAINS.index("k_vel")
+_K_DAMP = _GAINS.index("k_damp")
+_K_OBSTACLE = _GAINS.index("k_obstacle")
+_OBSTACLE_SAFE_MIN = _GAINS.index("obstacle_safe_min")
+_OBSTACLE_TIME = _GAINS.index("obstacle_time")
+_ALPHA = _GAINS.index("alpha")
+_BETA = _GAINS.index("beta")
+_INNER_SAFE_MIN = _GAINS.index("inner_safe_min")
+_K_SAFE = _GAINS.index("k_safe")
+_MAX_REPULSION = _GAINS.index("max_repulsion")
+
+
 @numba.njit(inline="always", **_JIT)
 def _max0(y):  # noqa: ANN001, ANN202
     """``np.maximum(0.0, y)``: NaN stays NaN."""
@@ -116,10 +143,10 @@ def _obstacles(obs, b, cols, scales, n_obs, stride, cos_h, sin_h, v, vh, speed, 
     """The obstacle repulsion of row ``b`` (eqs. 23-25), summed over the obstacles."""
     t0 = t1 = t2 = 0.0
     for k in range(n_obs):
-        c0, c1, c2 = _read3(obs, b, cols[8], k, stride, scales[8])
-        a0, a1, a2 = _read3(obs, b, cols[9], k, stride, scales[9])
+        c0, c1, c2 = _read3(obs, b, cols[_CENTER], k, stride, scales[_CENTER])
+        a0, a1, a2 = _read3(obs, b, cols[_AXES], k, stride, scales[_AXES])
         a0, a1, a2 = _maximum(a0, 1e-3), _maximum(a1, 1e-3), _maximum(a2, 1e-3)
-        present = obs[b, cols[11] + k * stride] * scales[11] > 0.5
+        present = obs[b, cols[_OBSTACLE_MASK] + k * stride] * scales[_OBSTACLE_MASK] > 0.5
         cp, sp = cos_h[b, k], sin_h[b, k]
         # The UAV at the origin: its distance to the region and the outward normal.
         d0, d1, d2 = 0.0 - c0, 0.0 - c1, 0.0 - c2
@@ -131,14 +158,14 @@ def _obstacles(obs, b, cols, scales, n_obs, stride, cos_h, sin_h, v, vh, speed, 
         n2 = m2
         cos_delta = _dot3(-n0, -n1, -n2, vh[0], vh[1], vh[2])
         approach = speed * cos_delta if cos_delta > 0.0 else 0.0
-        r_safe = g[6] + g[7] * approach
+        r_safe = g[_OBSTACLE_SAFE_MIN] + g[_OBSTACLE_TIME] * approach
         dd = _maximum(dist, 0.5)
         active = present and dist < r_safe
         if active:
             active = _will_enter(v[0], v[1], v[2], c0, c1, c2, a0, a1, a2, cp, sp, times,
-                                 g[6], n_newton)  # fmt: skip
-        mag = g[5] * (1.0 / dd - 1.0 / r_safe) if active else 0.0
-        f0, f1, f2 = _capped(mag * n0, mag * n1, mag * n2, g[12])
+                                 g[_OBSTACLE_SAFE_MIN], n_newton)  # fmt: skip
+        mag = g[_K_OBSTACLE] * (1.0 / dd - 1.0 / r_safe) if active else 0.0
+        f0, f1, f2 = _capped(mag * n0, mag * n1, mag * n2, g[_MAX_REPULSION])
         t0, t1, t2 = _summed(k, t0, t1, t2, f0, f1, f2)
     return t0, t1, t2
 
@@ -148,24 +175,24 @@ def _inner(obs, b, cols, scales, n_uav, stride, g):  # noqa: ANN001, ANN202
     """The inner repulsion of row ``b`` (eqs. 26-30), summed over the neighbours."""
     t0 = t1 = t2 = 0.0
     for k in range(n_uav):
-        r0, r1, r2 = _read3(obs, b, cols[5], k, stride, scales[5])
-        w0, w1, w2 = _read3(obs, b, cols[6], k, stride, scales[6])
-        present = obs[b, cols[7] + k * stride] * scales[7] > 0.5
+        r0, r1, r2 = _read3(obs, b, cols[_UAV_POS], k, stride, scales[_UAV_POS])
+        w0, w1, w2 = _read3(obs, b, cols[_UAV_VEL], k, stride, scales[_UAV_VEL])
+        present = obs[b, cols[_UAV_MASK] + k * stride] * scales[_UAV_MASK] > 0.5
         r0, r1, r2 = -r0, -r1, -r2  # from the neighbour towards this UAV
         d = math.sqrt(_dot3(r0, r1, r2, r0, r1, r2))
         inv = _maximum(d, 1e-9)
         u0, u1, u2 = r0 / inv, r1 / inv, r2 / inv
         closing = _max0(_dot3(w0, w1, w2, u0, u1, u2))
-        r_inner = 2.0 * g[10] + g[11] * closing
+        r_inner = 2.0 * g[_INNER_SAFE_MIN] + g[_K_SAFE] * closing
         dd = _maximum(d, 0.1)
         mag = 1.0 / dd - 1.0 / r_inner if (d < r_inner and present) else 0.0
         if not closing > 0.0:
             w0 = w1 = w2 = 0.0
         f0, f1, f2 = _capped(
-            mag * (g[8] * u0 + g[9] * w0),
-            mag * (g[8] * u1 + g[9] * w1),
-            mag * (g[8] * u2 + g[9] * w2),
-            g[12],
+            mag * (g[_ALPHA] * u0 + g[_BETA] * w0),
+            mag * (g[_ALPHA] * u1 + g[_BETA] * w1),
+            mag * (g[_ALPHA] * u2 + g[_BETA] * w2),
+            g[_MAX_REPULSION],
         )
         t0, t1, t2 = _summed(k, t0, t1, t2, f0, f1, f2)
     return t0, t1, t2
@@ -204,15 +231,16 @@ def _apf_rows(
 ) -> None:
     for b in range(obs.shape[0]):
         # Eqs. 19-22 (policies.nominal.plan_tracking).
-        x0, x1, x2 = _read3(obs, b, cols[0], 0, 0, scales[0])
-        x0, x1, x2 = _capped(x0, x1, x2, g[1])
-        s0, s1, s2 = _read3(obs, b, cols[1], 0, 0, scales[1])
-        p0, p1, p2 = _read3(obs, b, cols[2], 0, 0, scales[2])
-        v[0], v[1], v[2] = _read3(obs, b, cols[3], 0, 0, scales[3])
-        f0, f1, f2 = _read3(obs, b, cols[4], 0, 0, scales[4])
-        a0 = ((g[0] * x0 + g[2] * s0) + g[3] * (p0 - v[0])) - g[4] * (v[0] - f0)
-        a1 = ((g[0] * x1 + g[2] * s1) + g[3] * (p1 - v[1])) - g[4] * (v[1] - f1)
-        a2 = ((g[0] * x2 + g[2] * s2) + g[3] * (p2 - v[2])) - g[4] * (v[2] - f2)
+        x0, x1, x2 = _read3(obs, b, cols[_GOAL], 0, 0, scales[_GOAL])
+        x0, x1, x2 = _capped(x0, x1, x2, g[_GOAL_SAT])
+        s0, s1, s2 = _read3(obs, b, cols[_SLOT], 0, 0, scales[_SLOT])
+        p0, p1, p2 = _read3(obs, b, cols[_PLAN_VEL], 0, 0, scales[_PLAN_VEL])
+        v[0], v[1], v[2] = _read3(obs, b, cols[_VEL], 0, 0, scales[_VEL])
+        f0, f1, f2 = _read3(obs, b, cols[_FORMATION_VEL], 0, 0, scales[_FORMATION_VEL])
+        kg, ks, kv, kd = g[_K_GOAL], g[_K_SLOT], g[_K_VEL], g[_K_DAMP]
+        a0 = ((kg * x0 + ks * s0) + kv * (p0 - v[0])) - kd * (v[0] - f0)
+        a1 = ((kg * x1 + ks * s1) + kv * (p1 - v[1])) - kd * (v[1] - f1)
+        a2 = ((kg * x2 + ks * s2) + kv * (p2 - v[2])) - kd * (v[2] - f2)
         speed = math.sqrt(_dot3(v[0], v[1], v[2], v[0], v[1], v[2]))
         den = _maximum(speed, 1e-9)
         vh[0], vh[1], vh[2] = v[0] / den, v[1] / den, v[2] / den
