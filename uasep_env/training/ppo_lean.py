@@ -202,7 +202,7 @@ class Hooks:
 
 
 @dataclass(kw_only=True)
-class Timing:
+class _Timing:
     """Seconds in each part of a run: the core's steps, the rest of the rollouts, the updates."""
 
     env_s: float = 0.0
@@ -249,7 +249,7 @@ def train(
     rewards = np.zeros((steps_t, rows), dtype=np.float32)
     values = np.zeros((steps_t, rows), dtype=np.float32)
     starts = np.zeros((steps_t, rows), dtype=np.float32)
-    timing = Timing()
+    timing = _Timing()
     obs = norm.observe(core.reset(seed=args.seed).reshape(rows, -1), update=True)
     start = np.ones(rows, dtype=np.float32)
     agent_steps = updates = episodes = 0
