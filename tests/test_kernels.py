@@ -1051,6 +1051,7 @@ def test_world_region_distances_from_kept_cosines_match_numpy(monkeypatch):
         world.obstacles.active[::4, 1] = False
         fast = world.region_distances()
         est = world.region_distances(world.est_pos[5:9], rows=np.arange(5, 9))
+        _assert_bits(est, world.region_distances(world.est_pos)[5:9])  # the rows' own regions
         monkeypatch.setitem(_numba._state, "numba", None)
         _assert_bits(fast, world.region_distances())
         _assert_bits(est, world.region_distances(world.est_pos[5:9], rows=np.arange(5, 9)))

@@ -579,8 +579,10 @@ class World(RenamedAttributes):
         """
         if rows is None:
             arrays = _region_views(self.frozen_inputs())  # the views made once
-        else:
-            arrays = [operator.attrgetter(name)(self)[rows] for name in _REGION_INPUTS]
+        else:  # the rows' own inputs (their positions only when none are given)
+            names = _REGION_INPUTS if pos is None else _REGION_INPUTS[1:]
+            arrays = [operator.attrgetter(n)(self)[rows] for n in names]
+            arrays = arrays if pos is None else [pos, *arrays]
         p = arrays[0] if pos is None else pos
         if not self.n_obstacles:
             return np.zeros((*p.shape[:2], 0))
