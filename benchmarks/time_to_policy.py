@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/time_to_policy.py --recipe residual_apf [--max-minutes 60]
         [--episodes 100] [--check-every 2000000] [--out FILE] [--force] [--overwrite]
-        [--held-out N] [-- recipe flags]
+        [--held-out N] [--trainer default|lean] [-- recipe flags]
     python benchmarks/time_to_policy.py --held-out N --of RECORD.json [--workers W]
 
 The shipped checkpoint of the recipe (``baselines/checkpoints/<name>.zip``) plays the first
@@ -38,8 +38,10 @@ unless ``--overwrite`` (which replaces those files).
 Recipes: ``residual_apf`` (shipped ``ppo_residual_apf.zip``) and ``shared``
 (``ppo_shared.zip``), the SB3 recipes of :mod:`uasep_env.training`, and ``mappo``
 (``mappo.zip``, skrl's MAPPO; its rollout time is the training less the env, the learner and
-the checks, skrl having no rollout method to time). Needs the ``train`` extra. Speed figures
-are machine-dependent: the file records the machine.
+the checks, skrl having no rollout method to time). ``--trainer lean`` trains a PPO recipe
+with :mod:`uasep_env.training.ppo_lean` (SB3's PPO arithmetic without SB3's per-step layers)
+in place of SB3; the record says which (``trainer``). Needs the ``train`` extra. Speed
+figures are machine-dependent: the file records the machine.
 """
 
 from __future__ import annotations
