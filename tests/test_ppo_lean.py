@@ -148,3 +148,75 @@ def test_a_run_counts_its_steps_is_reproducible_and_exports_a_loadable_policy(tm
     with torch.no_grad():
         want = nets.mu(nets.pi(torch.from_numpy(norm.normalise(raw)))).numpy()
     np.testing.assert_allclose(policy.network(raw), want, rtol=1e-4, atol=1e-6)
+
+
+def _pairs(nets: object, p: object) -> list:
+    """Each lean parameter with its SB3 counterpart."""
+    out = [(nets.log_std, p.log_std)]
+    ext = p.mlp_extractor
+    for mine, theirs in ((nets.pi, ext.policy_net), (nets.vf, ext.value_net),
+                         (nets.mu, p.action_net), (nets.v, p.value_net)):  # fmt: skip
+        out += list(zip(mine.parameters(), theirs.parameters(), strict=True))
+    return out
+
+
+@pytest.mark.parametrize("target_kl", [0.0, 1e-9])
+def test_an_update_is_sb3s_ppo_train(target_kl):
+    """One update on the same rollout from the same weights: SB3's ``PPO.train``'s weights.
+
+    One minibatch per epoch (its order then only reorders sums), so the two differ by float
+    rounding only; with a tiny ``target_kl`` both stop at the second epoch's KL check.
+    """
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    steps, rows, dim = 6, 4, 5
+    args = _tiny(hidden="16,16", n_epochs=3, batch_size=steps * rows, ent_coef=0.01,
+                 target_kl=target_kl, learning_rate=3e-3, log_std_init=-0.7)  # fmt: skip
+
+    class Flat(gymnasium.Env):
+        observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (dim,), np.float32)
+        action_space = gymnasium.spaces.Box(-1, 1, (3,), np.float32)
+
+    model = PPO("MlpPolicy", DummyVecEnv([Flat] * rows), n_steps=steps, batch_size=steps * rows,
+                n_epochs=args.n_epochs, learning_rate=args.learning_rate, ent_coef=args.ent_coef,
+                gamma=args.gamma, gae_lambda=args.gae_lambda, target_kl=target_kl or None,
+                device="cpu", seed=0,
+                policy_kwargs={"net_arch": {"pi": [16, 16], "vf": [16, 16]},
+                               "activation_fn": torch.nn.Tanh, "log_std_init": -0.7})  # fmt: skip
+    model.set_logger(configure(None, []))
+    p = model.policy
+    nets = ppo_lean._ActorCritic(dim, args)
+    with torch.no_grad():  # SB3's initial weights into the lean networks
+        for a, b in _pairs(nets, p):
+            a.copy_(b)
+    before = [a.detach().clone() for a, _ in _pairs(nets, p)]
+    rng = np.random.default_rng(3)
+    torch.manual_seed(1)
+    obs = torch.from_numpy(rng.normal(size=(steps, rows, dim)).astype(np.float32))
+    with torch.no_grad():
+        mean = nets.mu(nets.pi(obs))
+        act = mean + nets.log_std.exp() * torch.randn_like(mean)
+        logp = nets.log_prob(mean, act)
+        values = nets.value(obs).numpy()
+    rewards = rng.normal(size=(steps, rows)).astype(np.float32)
+    starts = (rng.random((steps, rows)) < 0.2).astype(np.float32)
+    last_value, last_done = rng.normal(size=rows).astype(np.float32), np.zeros(rows, np.float32)
+    buf = model.rollout_buffer
+    for t in range(steps):
+        buf.add(obs[t].numpy(), act[t].numpy(), rewards[t], starts[t],
+                torch.from_numpy(values[t]), logp[t])  # fmt: skip
+    buf.compute_returns_and_advantage(torch.from_numpy(last_value), last_done)
+    model.train()
+    adv, ret = ppo_lean.gae(rewards, values, starts, last_value, last_done, args.gamma,
+                            args.gae_lambda)  # fmt: skip
+    opt = torch.optim.Adam(nets.params, lr=args.learning_rate, eps=1e-5)
+    ppo_lean._update(nets, opt, args, 0, obs, act, logp, adv, ret)
+    pairs = _pairs(nets, p)
+    assert max(float((a - b).detach().abs().max()) for a, b in pairs) < 1e-5
+    # Both moved (else the comparison says nothing), by as many steps.
+    assert (
+        min(float((a.detach() - b0).abs().max()) for (a, _), b0 in zip(pairs, before, strict=True))
+        > 1e-4
+    )
