@@ -220,3 +220,47 @@ def test_an_update_is_sb3s_ppo_train(target_kl):
         min(float((a.detach() - b0).abs().max()) for (a, _), b0 in zip(pairs, before, strict=True))
         > 1e-4
     )
+
+
+@pytest.mark.parametrize("mode", ["direct", "residual_apf"])
+def test_a_rollout_is_sb3s_collect_rollouts(mode):
+    """The recipes' SB3 stack and the lean loop, same weights and torch seed: the same rollout.
+
+    Episodes of 4 s end inside it, so the time limit's bootstrap from the terminal
+    observation (normalised after the statistics take the new batch) is compared too.
+    """
+    from stable_baselines3.common.logger import configure
+
+    from uasep_env.envs.core import EnvCore
+
+    args = _tiny(action_mode=mode, n_steps=48, total_timesteps=10**6)
+    config = ppo_shared.make_env_config(args)
+    venv, model = ppo_shared.build(args, config)
+    model.set_logger(configure(None, []))
+    _, callback = model._setup_learn(10**6)  # resets the envs: environment e gets seed + e
+    core = EnvCore(config, n_envs=args.n_envs)
+    nets = ppo_lean._ActorCritic(core.obs_dim, args)
+    with torch.no_grad():
+        for a, b in _pairs(nets, model.policy):
+            a.copy_(b)
+    norm = ppo_lean.Normaliser(core.obs_dim, args.n_envs * config.n_uavs, norm_obs=True,
+                               norm_reward=False, gamma=args.gamma)  # fmt: skip
+    roll = ppo_lean._Rollout(core, nets, norm, args.n_steps)
+    roll.reset(args.seed)
+    torch.manual_seed(5)
+    model.collect_rollouts(model.env, callback, model.rollout_buffer, args.n_steps)
+    torch.manual_seed(5)
+    roll.collect(args.gamma)
+    buf = model.rollout_buffer
+    assert roll.episodes > 0 and buf.episode_starts[1:].any()  # episodes ended inside it
+    np.testing.assert_array_equal(roll.starts, buf.episode_starts)
+    np.testing.assert_array_equal(roll.obs_t.numpy(), buf.observations)
+    np.testing.assert_array_equal(roll.act.numpy(), buf.actions)
+    np.testing.assert_allclose(roll.values, buf.values, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(roll.logp.numpy(), buf.log_probs, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(roll.rewards, buf.rewards, rtol=1e-6, atol=1e-5)
+    adv, ret = ppo_lean.gae(roll.rewards, roll.values, roll.starts, roll.last_value, roll.start,
+                            args.gamma, args.gae_lambda)  # fmt: skip
+    np.testing.assert_allclose(adv, buf.advantages, rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(ret, buf.returns, rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(norm.obs_rms.mean, venv.obs_rms.mean)

@@ -210,6 +210,77 @@ class _Timing:
     learner_s: float = 0.0
 
 
+class _Rollout:
+    """The rollout's state and buffers: ``n_steps`` steps of every agent of the core."""
+
+    def __init__(self, core: Any, nets: _ActorCritic, norm: Normaliser, n_steps: int) -> None:
+        import torch
+
+        self.core, self.nets, self.norm = core, nets, norm
+        self.n_envs, self.n = core.n_envs, core.n_uavs
+        rows, dim = self.n_envs * self.n, core.obs_dim
+        self.obs_t = torch.zeros((n_steps, rows, dim))
+        self.act = torch.zeros((n_steps, rows, 3))
+        self.logp = torch.zeros((n_steps, rows))
+        self.rewards = np.zeros((n_steps, rows), dtype=np.float32)
+        self.values = np.zeros((n_steps, rows), dtype=np.float32)
+        self.starts = np.zeros((n_steps, rows), dtype=np.float32)
+        self.last_value = np.zeros(rows, dtype=np.float32)
+        self.obs = np.zeros((rows, dim), dtype=np.float32)  # the next observation, normalised
+        self.start = np.ones(rows, dtype=np.float32)  # 1 where it begins an episode
+        self.episodes = 0
+
+    def reset(self, seed: int) -> None:
+        """Reset every environment (environment ``e`` gets ``seed + e``)."""
+        raw = self.core.reset(seed=seed).reshape(len(self.obs), -1)
+        self.obs = self.norm.observe(raw, update=True)
+        self.start[:] = 1.0
+
+    def collect(self, gamma: float) -> float:
+        """Fill the buffers (SB3's ``collect_rollouts``); returns the seconds in the core."""
+        import torch
+
+        nets, norm, core, n = self.nets, self.norm, self.core, self.n
+        env_s = 0.0
+        with torch.no_grad():
+            for t in range(len(self.rewards)):
+                x = torch.from_numpy(self.obs)
+                mean = nets.mu(nets.pi(x))
+                act = mean + nets.log_std.exp() * torch.randn_like(mean)
+                self.obs_t[t] = x
+                self.act[t] = act
+                self.logp[t] = nets.log_prob(mean, act)
+                self.values[t] = nets.value(x).numpy()
+                self.starts[t] = self.start
+                e0 = time.perf_counter()
+                res = core.step(np.clip(act.numpy(), -1.0, 1.0).reshape(self.n_envs, n, 3))
+                env_s += time.perf_counter() - e0
+                done_env = res.terminated | res.truncated
+                dones = np.repeat(done_env, n)
+                reward = norm.reward(res.rewards.reshape(-1).astype(np.float32), dones)
+                raw = res.obs.reshape(len(self.obs), -1)
+                if not done_env.any():
+                    self.obs = norm.observe(raw, update=True)
+                else:
+                    final = raw[dones]  # a copy: the resets below write into raw
+                    e0 = time.perf_counter()
+                    raw[dones] = core.reset_some(done_env).reshape(-1, raw.shape[1])
+                    env_s += time.perf_counter() - e0
+                    self.episodes += int(done_env.sum())
+                    # VecNormalize's order: the statistics take the new observations
+                    # first, then the finished episodes' last ones are normalised.
+                    self.obs = norm.observe(raw, update=True)
+                    timeout = np.repeat(res.truncated & ~res.terminated, n)[dones]
+                    if timeout.any():  # a time limit: bootstrap from the terminal state
+                        last = torch.from_numpy(norm.normalise(final[timeout]))
+                        rows_out = np.flatnonzero(dones)[timeout]
+                        reward[rows_out] += gamma * nets.value(last).numpy()
+                self.rewards[t] = reward
+                self.start = dones.astype(np.float32)
+            self.last_value = nets.value(torch.from_numpy(self.obs)).numpy()
+        return env_s
+
+
 def train(
     args: Args, config: Any, hooks: Hooks | None = None
 ) -> tuple[_ActorCritic, Normaliser, dict[str, Any]]:
@@ -235,24 +306,16 @@ def train(
     check_training_seeds(args.seed, args.n_envs)
     torch.manual_seed(args.seed)
     core = EnvCore(config, n_envs=args.n_envs)
-    n_envs, n = args.n_envs, config.n_uavs
-    rows, steps_t = n_envs * n, args.n_steps
-    obs_dim = core.obs_dim
-    nets = _ActorCritic(obs_dim, args)
+    rows = args.n_envs * config.n_uavs
+    nets = _ActorCritic(core.obs_dim, args)
     opt = torch.optim.Adam(nets.params, lr=args.learning_rate, eps=1e-5)
     norm = Normaliser(
-        obs_dim, rows, norm_obs=args.norm_obs, norm_reward=args.norm_reward, gamma=args.gamma
+        core.obs_dim, rows, norm_obs=args.norm_obs, norm_reward=args.norm_reward, gamma=args.gamma
     )
-    buf_obs = torch.zeros((steps_t, rows, obs_dim))
-    buf_act = torch.zeros((steps_t, rows, 3))
-    buf_logp = torch.zeros((steps_t, rows))
-    rewards = np.zeros((steps_t, rows), dtype=np.float32)
-    values = np.zeros((steps_t, rows), dtype=np.float32)
-    starts = np.zeros((steps_t, rows), dtype=np.float32)
+    roll = _Rollout(core, nets, norm, args.n_steps)
+    roll.reset(args.seed)
     timing = _Timing()
-    obs = norm.observe(core.reset(seed=args.seed).reshape(rows, -1), update=True)
-    start = np.ones(rows, dtype=np.float32)
-    agent_steps = updates = episodes = 0
+    agent_steps = updates = 0
     hooks.start(nets, norm)
     t0 = time.perf_counter()
     hook_s = 0.0
@@ -267,59 +330,24 @@ def train(
         if stop:
             break
         r0 = time.perf_counter()
-        env_s = 0.0
-        with torch.no_grad():
-            for t in range(steps_t):
-                x = torch.from_numpy(obs)
-                mean = nets.mu(nets.pi(x))
-                act = mean + nets.log_std.exp() * torch.randn_like(mean)
-                buf_obs[t] = x
-                buf_act[t] = act
-                buf_logp[t] = nets.log_prob(mean, act)
-                values[t] = nets.value(x).numpy()
-                starts[t] = start
-                e0 = time.perf_counter()
-                res = core.step(np.clip(act.numpy(), -1.0, 1.0).reshape(n_envs, n, 3))
-                env_s += time.perf_counter() - e0
-                done_env = res.terminated | res.truncated
-                dones = np.repeat(done_env, n)
-                reward = norm.reward(res.rewards.reshape(-1).astype(np.float32), dones)
-                raw = res.obs.reshape(rows, -1)
-                if not done_env.any():
-                    obs = norm.observe(raw, update=True)
-                else:
-                    final = raw[dones]  # a copy: the resets below write into raw
-                    e0 = time.perf_counter()
-                    raw[dones] = core.reset_some(done_env).reshape(-1, obs_dim)
-                    env_s += time.perf_counter() - e0
-                    episodes += int(done_env.sum())
-                    # VecNormalize's order: the statistics take the new observations
-                    # first, then the finished episodes' last ones are normalised.
-                    obs = norm.observe(raw, update=True)
-                    timeout = np.repeat(res.truncated & ~res.terminated, n)[dones]
-                    if timeout.any():  # a time limit: bootstrap from the terminal state
-                        last = torch.from_numpy(norm.normalise(final[timeout]))
-                        rows_out = np.flatnonzero(dones)[timeout]
-                        reward[rows_out] += args.gamma * nets.value(last).numpy()
-                rewards[t] = reward
-                start = dones.astype(np.float32)
-            last_value = nets.value(torch.from_numpy(obs)).numpy()
-        agent_steps += steps_t * rows
+        env_s = roll.collect(args.gamma)
+        agent_steps += args.n_steps * rows
         timing.env_s += env_s
         timing.rollout_s += time.perf_counter() - r0 - env_s
         h0 = time.perf_counter()
         hooks.rollout_end(agent_steps)
         hook_s += time.perf_counter() - h0
         u0 = time.perf_counter()
-        adv, ret = gae(rewards, values, starts, last_value, start, args.gamma, args.gae_lambda)
-        _update(nets, opt, args, updates, buf_obs, buf_act, buf_logp, adv, ret)
+        adv, ret = gae(roll.rewards, roll.values, roll.starts, roll.last_value, roll.start,
+                       args.gamma, args.gae_lambda)  # fmt: skip
+        _update(nets, opt, args, updates, roll.obs_t, roll.act, roll.logp, adv, ret)
         updates += 1
         timing.learner_s += time.perf_counter() - u0
     facts = {
         "agent_steps": agent_steps,
         "updates": updates,
         "wall_s": clock(),
-        "episodes": episodes,
+        "episodes": roll.episodes,
         "env_s": timing.env_s,
         "rollout_s": timing.rollout_s,
         "learner_s": timing.learner_s,
