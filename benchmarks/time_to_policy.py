@@ -342,6 +342,19 @@ TRAINERS = {_PPO: _train_sb3, _MAPPO: _train_skrl}
 LEAN = {_PPO: _train_lean}
 
 
+def _loop(recipe: str, trainer: str) -> Any:
+    """The training loop of ``recipe`` under ``trainer`` (``"default"`` or ``"lean"``).
+
+    Raises:
+        ValueError: ``trainer`` does not train ``recipe`` (lean: the PPO recipes only).
+    """
+    reader = RECIPES[recipe].reader
+    loops = LEAN if trainer == "lean" else TRAINERS
+    if reader not in loops:
+        raise ValueError(f"trainer {trainer!r}: not for the {recipe!r} recipe (PPO recipes only)")
+    return loops[reader]
+
+
 def run(
     recipe: str,
     episodes: int,
@@ -357,10 +370,7 @@ def run(
     ``trainer``: ``"default"`` (SB3's PPO, or skrl's MAPPO) or ``"lean"`` (the PPO recipes
     on :mod:`uasep_env.training.ppo_lean`).
     """
-    reader = RECIPES[recipe].reader
-    loops = LEAN if trainer == "lean" else TRAINERS
-    if reader not in loops:
-        raise ValueError(f"trainer {trainer!r}: not for the {recipe!r} recipe (PPO recipes only)")
+    train = _loop(recipe, trainer)
     import torch
 
     from uasep_env.policies import load_policy
@@ -389,7 +399,7 @@ def run(
     clock = Clock()
     checker = Checker(bar=bar, seeds=seeds, eval_cfg=eval_cfg, check_every=check_every,
                       max_minutes=max_minutes, clock=clock)  # fmt: skip
-    steps = loops[reader](args, config, run_dir, checker)
+    steps = train(args, config, run_dir, checker)
     train_s = checker.training_s()
     checks = checker.checks
     hit = next((c for c in checks if c["reached"]), None)
@@ -572,8 +582,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         return record
     if a.recipe is None:
         p.error("the following arguments are required: --recipe")
-    if a.trainer == "lean" and RECIPES[a.recipe].reader not in LEAN:
-        p.error(f"argument --trainer: lean trains the PPO recipes, not {a.recipe!r}")
+    try:
+        _loop(a.recipe, a.trainer)
+    except ValueError as err:
+        p.error(f"argument --trainer: {err}")
     out = a.out or ROOT / "benchmarks" / "results" / f"time_to_policy_{a.recipe}.json"
     if out.exists() and not a.force:
         p.error(f"argument --out: {out} exists (--force replaces it)")

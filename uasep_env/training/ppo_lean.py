@@ -77,9 +77,7 @@ class Normaliser:
 
     def observe(self, obs: np.ndarray, *, update: bool) -> np.ndarray:
         """``obs`` ``(rows, obs_dim)`` normalised (float32); the statistics first updated."""
-        if not self.norm_obs:
-            return obs.astype(np.float32)
-        if update:
+        if update and self.norm_obs:
             self.obs_rms.update(obs)
         return self.normalise(obs)
 
