@@ -37,7 +37,7 @@ $(VENV)/.core: pyproject.toml | $(BIN)/python
 # again so that no client upgrades it to a CUDA build).
 $(VENV)/.all: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet $(TORCH)
-	$(BIN)/python -m pip install --quiet -e ".[dev,train,viz,fast,clients]" "$(TORCH)"
+	$(BIN)/python -m pip install --quiet -e ".[dev,train,viz,fast,clients,tune]" "$(TORCH)"
 	$(BIN)/python -m uasep_env.precompile
 	touch $@ $(VENV)/.core
 
