@@ -219,3 +219,34 @@ def test_a_study_another_process_runs_is_refused(tmp_path, monkeypatch, capsys):
         os.close(fd)
     assert "in use by another run (pid 4242" in capsys.readouterr().err
     assert not calls and not (folder / "journal.log").exists()
+
+
+STUDIES = sorted((ROOT / "benchmarks" / "results").glob("tune_*.json"))
+
+
+def test_the_residual_recipe_has_a_committed_study():
+    assert ROOT / "benchmarks/results/tune_residual_apf_lean.json" in STUDIES
+
+
+@pytest.mark.parametrize("path", STUDIES, ids=lambda p: p.stem)
+def test_a_committed_study_is_consistent(path):
+    """A committed study: its values follow its rule, its budgets its best, its best its trials."""
+    res = json.loads(path.read_text())
+    s = res["settings"]
+    done = [t for t in res["trials"] if t["state"] == "COMPLETE"]
+    assert done[0]["params"] == s["baseline"]  # the study starts from what it must beat
+    best = None
+    for t in done:
+        assert t["flags"] == tune.to_flags(t["params"], 3)
+        capped = s["stop_at_best"] and best is not None
+        assert t["budget_minutes"] == (min(s["max_minutes"], best) if capped else s["max_minutes"])
+        if t["reached"]:  # stopped at the bar, inside the trial's budget
+            assert t["value"] == t["training_minutes"] <= t["budget_minutes"]
+            best = t["value"] if best is None else min(best, t["value"])
+        else:
+            assert t["value"] == 2.0 * s["max_minutes"]
+            assert t["training_minutes"] >= t["budget_minutes"]
+        parts = sum(t["time_s"][k] for k in ("env", "rollout_other", "learner"))
+        assert 0.99 * t["time_s"]["training"] <= parts <= t["time_s"]["training"]
+    assert res["best"]["value"] == best and res["best"]["reached"]
+    assert len(done) == int(res["command"].split("--trials ")[1].split()[0])
