@@ -160,6 +160,13 @@ def _pairs(nets: object, p: object) -> list:
     return out
 
 
+def _sb3_weights_into(nets: object, p: object) -> None:
+    """SB3's weights (its initial ones) into the lean networks."""
+    with torch.no_grad():
+        for a, b in _pairs(nets, p):
+            a.copy_(b)
+
+
 @pytest.mark.parametrize("target_kl", [0.0, 1e-9])
 def test_an_update_is_sb3s_ppo_train(target_kl):
     """One update on the same rollout from the same weights: SB3's ``PPO.train``'s weights.
@@ -188,9 +195,7 @@ def test_an_update_is_sb3s_ppo_train(target_kl):
     model.set_logger(configure(None, []))
     p = model.policy
     nets = ppo_lean._ActorCritic(dim, args)
-    with torch.no_grad():  # SB3's initial weights into the lean networks
-        for a, b in _pairs(nets, p):
-            a.copy_(b)
+    _sb3_weights_into(nets, p)
     before = [a.detach().clone() for a, _ in _pairs(nets, p)]
     rng = np.random.default_rng(3)
     torch.manual_seed(1)
@@ -240,9 +245,7 @@ def test_a_rollout_is_sb3s_collect_rollouts(mode):
     _, callback = model._setup_learn(10**6)  # resets the envs: environment e gets seed + e
     core = EnvCore(config, n_envs=args.n_envs)
     nets = ppo_lean._ActorCritic(core.obs_dim, args)
-    with torch.no_grad():
-        for a, b in _pairs(nets, model.policy):
-            a.copy_(b)
+    _sb3_weights_into(nets, model.policy)
     norm = ppo_lean.Normaliser(core.obs_dim, args.n_envs * config.n_uavs, norm_obs=True,
                                norm_reward=False, gamma=args.gamma)  # fmt: skip
     roll = ppo_lean._Rollout(core, nets, norm, args.n_steps)
