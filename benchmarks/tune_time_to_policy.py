@@ -177,12 +177,6 @@ def open_study(study_dir: Path, settings: dict[str, Any]) -> Any:
     return study
 
 
-def _finished(study: Any) -> int:
-    from optuna.trial import TrialState
-
-    return len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
-
-
 def objective_for(study_dir: Path, a: argparse.Namespace, fixed: list[str], n_uavs: int) -> Any:
     """The objective of a study: one time-to-policy run per trial (see the module)."""
     from uasep_env.atomic import atomic_write
@@ -219,6 +213,7 @@ def objective_for(study_dir: Path, a: argparse.Namespace, fixed: list[str], n_ua
 
 
 def _values(study: Any) -> list[float]:
+    """The values of the study's finished trials."""
     from optuna.trial import TrialState
 
     return [t.value for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))]
@@ -258,7 +253,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         i = argv.index("--")
         argv, fixed = argv[:i], argv[i + 1 :]
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--recipe", choices=sorted(RECIPES := ttp.RECIPES), required=True)
+    p.add_argument("--recipe", choices=sorted(ttp.RECIPES), required=True)
     p.add_argument("--trials", type=positive_int, required=True, help="finished trials wanted")
     p.add_argument("--max-minutes", type=positive_float, required=True,
                    help="a trial's training-time budget (evaluations excluded)")  # fmt: skip
@@ -278,7 +273,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         ttp._loop(a.recipe, a.trainer)
     except ValueError as err:
         p.error(f"argument --trainer: {err}")
-    if RECIPES[a.recipe].reader != ttp._PPO:
+    if ttp.RECIPES[a.recipe].reader != ttp._PPO:
         p.error(f"argument --recipe: {a.recipe!r} is not a PPO recipe (the space is PPO's flags)")
     if clash := tuned_in(fixed):
         p.error(f"fixed flags {clash}: a trial sets these itself ({', '.join(TUNED_FLAGS)})")
@@ -298,7 +293,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     except (ValueError, RunFolderBusy) as err:
         p.error(f"argument --study-dir: {err}")
     t0 = time.perf_counter()
-    left = a.trials - _finished(study)
+    left = a.trials - len(_values(study))
     if left > 0:
         study.optimize(objective_for(study_dir, a, fixed, n_uavs), n_trials=left)
     result = summary(study)
