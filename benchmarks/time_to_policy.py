@@ -534,16 +534,21 @@ def _print_held_out(h: dict[str, Any]) -> None:
               f"[{dev['ci_low']:.1f}, {dev['ci_high']:.1f}]")  # fmt: skip
 
 
+def split_argv(argv: list[str] | None) -> tuple[list[str], list[str]]:
+    """The script's own arguments and the recipe flags after ``--`` (``sys.argv`` if None)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--" not in argv:
+        return argv, []
+    i = argv.index("--")
+    return argv[:i], argv[i + 1 :]
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Parse, run, print the summary and write the record."""
     from uasep_env.atomic import atomic_write
     from uasep_env.training.args import non_negative_float, positive_int
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    extra: list[str] = []
-    if "--" in argv:
-        i = argv.index("--")
-        argv, extra = argv[:i], argv[i + 1 :]
+    argv, extra = split_argv(argv)
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--recipe", choices=sorted(RECIPES))
     p.add_argument("--episodes", type=positive_int, default=100, help="validation encounters")

@@ -247,11 +247,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     from uasep_env.atomic import atomic_write
     from uasep_env.training.args import non_negative_int, positive_float, positive_int
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    fixed: list[str] = []
-    if "--" in argv:
-        i = argv.index("--")
-        argv, fixed = argv[:i], argv[i + 1 :]
+    argv, fixed = ttp.split_argv(argv)
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--recipe", choices=sorted(ttp.RECIPES), required=True)
     p.add_argument("--trials", type=positive_int, required=True, help="finished trials wanted")
