@@ -460,6 +460,15 @@ def machine(torch_version: str) -> dict[str, Any]:
     }
 
 
+def seeds_driver() -> Any:
+    """``train/seeds.py``, the three-seed driver (its held-out stage, its argument split)."""
+    if str(ROOT / "train") not in sys.path:
+        sys.path.insert(0, str(ROOT / "train"))
+    import seeds
+
+    return seeds
+
+
 #: The held-out figures recorded, with their intervals.
 HELD_OUT_KEYS = ("episode.collision", "episode.loss_of_separation", "episode.max_deviation")
 
@@ -489,11 +498,7 @@ def held_out(record: dict[str, Any], episodes: int, workers: int = 1) -> dict[st
         raise ValueError(f"{policy} is gone: the run folder no longer holds the policy")
     # train/seeds.py's own held-out stage (its config and encounters), so that the figures
     # compare with the published seeds reports.
-    if str(ROOT / "train") not in sys.path:
-        sys.path.insert(0, str(ROOT / "train"))
-    import seeds as seeds_driver
-
-    res = seeds_driver.held_out([ROOT / record["shipped"], policy], episodes, workers)
+    res = seeds_driver().held_out([ROOT / record["shipped"], policy], episodes, workers)
     figs = {}
     for label, theirs in (("apf", "apf"), ("shipped", "seed_0"), ("reached", "seed_1")):
         agg = res.results[theirs].aggregate
@@ -534,21 +539,12 @@ def _print_held_out(h: dict[str, Any]) -> None:
               f"[{dev['ci_low']:.1f}, {dev['ci_high']:.1f}]")  # fmt: skip
 
 
-def split_argv(argv: list[str] | None) -> tuple[list[str], list[str]]:
-    """The script's own arguments and the recipe flags after ``--`` (``sys.argv`` if None)."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if "--" not in argv:
-        return argv, []
-    i = argv.index("--")
-    return argv[:i], argv[i + 1 :]
-
-
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Parse, run, print the summary and write the record."""
     from uasep_env.atomic import atomic_write
     from uasep_env.training.args import non_negative_float, positive_int
 
-    argv, extra = split_argv(argv)
+    argv, extra = seeds_driver().split_recipe_args(argv)
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--recipe", choices=sorted(RECIPES))
     p.add_argument("--episodes", type=positive_int, default=100, help="validation encounters")

@@ -247,7 +247,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     from uasep_env.atomic import atomic_write
     from uasep_env.training.args import non_negative_int, positive_float, positive_int
 
-    argv, fixed = ttp.split_argv(argv)
+    argv, fixed = ttp.seeds_driver().split_recipe_args(argv)
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--recipe", choices=sorted(ttp.RECIPES), required=True)
     p.add_argument("--trials", type=positive_int, required=True, help="finished trials wanted")
