@@ -400,6 +400,7 @@ def run(
     checker = Checker(bar=bar, seeds=seeds, eval_cfg=eval_cfg, check_every=check_every,
                       max_minutes=max_minutes, clock=clock)  # fmt: skip
     steps = train(args, config, run_dir, checker)
+    gpu = gpu_name(args.device)
     train_s = checker.training_s()
     checks = checker.checks
     hit = next((c for c in checks if c["reached"]), None)
@@ -422,7 +423,7 @@ def run(
         },
         "checks": checks,
         "recipe_args": asdict(args),
-        "machine": machine(torch.__version__),
+        "machine": machine(torch.__version__, gpu),
     }
 
 
@@ -442,8 +443,20 @@ def cpu_model(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
     return platform.processor() or platform.machine()
 
 
-def machine(torch_version: str) -> dict[str, Any]:
-    """Where a record was measured: the cores, the processor and the versions that set speed."""
+def gpu_name(device: str) -> str | None:
+    """The name of the GPU ``device`` (a recipe's ``--device``), None for the CPU."""
+    if device == "cpu":
+        return None
+    import torch
+
+    return torch.cuda.get_device_name(torch.device(device))
+
+
+def machine(torch_version: str, gpu: str | None = None) -> dict[str, Any]:
+    """Where a record was measured: the cores, the processor and the versions that set speed.
+
+    ``gpu``: the name of the GPU the learner ran on (``--device cuda``); None on the CPU.
+    """
     try:
         from numba import __version__ as numba_version
     except ImportError:  # numba is optional (the numpy references run)
@@ -457,6 +470,7 @@ def machine(torch_version: str) -> dict[str, Any]:
         "numpy": np.__version__,
         "numba": numba_version,
         "torch": torch_version,
+        "gpu": gpu,
     }
 
 

@@ -277,7 +277,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if out.exists() and not a.force:
         p.error(f"argument --out: {out} exists (--force replaces it)")
     study_dir = a.study_dir.resolve()
-    n_uavs = ttp._recipe_args(a.recipe, study_dir, fixed).n_uavs  # the fixed flags checked
+    recipe_args = ttp._recipe_args(a.recipe, study_dir, fixed)  # the fixed flags checked
+    n_uavs = recipe_args.n_uavs
     import optuna
 
     from uasep_env.runlock import RunFolderBusy, claim_run_folder
@@ -298,7 +299,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     )
     import torch
 
-    result["machine"] = ttp.machine(torch.__version__)
+    result["machine"] = ttp.machine(torch.__version__, ttp.gpu_name(recipe_args.device))
     result["this_call_minutes"] = (time.perf_counter() - t0) / 60.0
     for t in result["trials"]:
         mark = "reached" if t.get("reached") else "-"

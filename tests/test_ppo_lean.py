@@ -267,3 +267,52 @@ def test_a_rollout_is_sb3s_collect_rollouts(mode):
     np.testing.assert_allclose(adv, buf.advantages, rtol=1e-5, atol=1e-4)
     np.testing.assert_allclose(ret, buf.returns, rtol=1e-5, atol=1e-4)
     np.testing.assert_allclose(norm.obs_rms.mean, venv.obs_rms.mean)
+
+
+def _same(a: object, b: object) -> bool:
+    return all(torch.equal(x, y.cpu()) for x, y in zip(a.params, b.params, strict=True))
+
+
+def test_a_learner_on_its_own_copy_trains_what_the_shared_networks_train(monkeypatch):
+    # --device cuda: the update trains a copy there and the rollout's networks take its
+    # weights after each update. On the CPU that copy must change nothing, bit for bit.
+    args = _tiny()
+    config = ppo_shared.make_env_config(args)
+    nets, norm, _ = ppo_lean.train(args, config)
+    copies = []
+
+    def copied(nets: object, device: object) -> object:
+        copies.append(nets.copy_to(device))
+        return copies[-1]
+
+    monkeypatch.setattr(ppo_lean, "_learner", copied)
+    nets2, norm2, _ = ppo_lean.train(args, config)
+    (learner,) = copies
+    assert learner is not nets2 and learner.params[0] is not nets2.params[0]
+    assert _same(nets, nets2) and _same(nets2, learner)
+    assert np.array_equal(norm.obs_rms.mean, norm2.obs_rms.mean)
+
+
+def test_a_copy_of_the_networks_is_independent_until_it_loads_the_weights():
+    nets = ppo_lean._ActorCritic(4, _tiny())
+    twin = nets.copy_to(torch.device("cpu"))
+    assert _same(nets, twin) and len(twin.params) == len(nets.params)
+    with torch.no_grad():
+        for p in twin.params:
+            p.add_(1.0)
+    assert not any(torch.equal(a, b) for a, b in zip(nets.params, twin.params, strict=True))
+    assert isinstance(twin.log_std, torch.nn.Parameter) and twin.log_std is twin.actor[-1]
+    nets.load_from(twin)
+    assert _same(nets, twin)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_the_update_on_a_gpu_trains_what_the_cpu_trains():
+    # The draws are the CPU's either way; only the GPU's float arithmetic differs, so the two
+    # runs part by rounding alone over a short run.
+    cpu = ppo_lean.train(_tiny(), ppo_shared.make_env_config(_tiny()))
+    gpu = ppo_lean.train(_tiny(device="cuda"), ppo_shared.make_env_config(_tiny()))
+    for a, b in zip(cpu[0].params, gpu[0].params, strict=True):
+        assert b.device.type == "cpu"  # the rollout's copy, which the export reads
+        torch.testing.assert_close(a, b, rtol=1e-3, atol=1e-4)
+    assert cpu[2]["agent_steps"] == gpu[2]["agent_steps"]

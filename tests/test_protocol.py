@@ -397,7 +397,11 @@ def test_the_fast_residual_report_is_what_its_command_and_checkpoints_say():
     main = json.loads((results / "seeds_residual_apf.json").read_text())
     flags = fast["command"].split(" -- ", 1)[1].split()
     args = vars(ppo_shared.parse_args(flags, RESIDUAL_DEFAULTS))
-    assert fast["recipe_args"] == {k: v for k, v in args.items() if k not in PER_RUN}
+    now = {k: v for k, v in args.items() if k not in PER_RUN}
+    # Options the recipes gained after the report (--device): at their defaults in its command.
+    added = set(now) - set(fast["recipe_args"])
+    assert added <= {"device"} and all(now[k] == getattr(RESIDUAL_DEFAULTS, k) for k in added)
+    assert fast["recipe_args"] == {k: now[k] for k in fast["recipe_args"]}
     for k in range(3):
         meta = read_checkpoint(ROOT / f"baselines/seeds/residual_apf_fast/seed_{k}/selected.zip")[0]
         trained = {n: v for n, v in meta.info["args"].items() if n not in PER_RUN}

@@ -159,6 +159,10 @@ def test_a_committed_record_is_consistent(path):
     assert 0.99 * t["training"] <= parts <= t["training"]
     if rec["recipe"] == "residual_apf":  # it starts at the APF: else the bar measures nothing
         assert not rec["apf_clears_bar"]
+    # A GPU figure names its GPU, and only a run with its learner there has one.
+    on_gpu = rec["recipe_args"].get("device", "cpu") != "cpu"
+    assert bool(rec["machine"].get("gpu")) == on_gpu
+    assert ("--device cuda" in rec["command"]) == on_gpu
 
 
 def test_held_out_figures_are_played_on_the_same_encounters():

@@ -51,6 +51,10 @@ BAD = [
     ("--seed", "99999999"),
     ("--eval-episodes", "-1"),
     ("--torch-threads", "0"),
+    ("--device", "gpu"),
+    ("--device", "cuda:x"),
+    ("--device", "cpu:0"),
+    ("--device", "cuda:"),
     ("--config", "nokey"),
     ("--config", "dt=-1"),
 ]
@@ -87,7 +91,8 @@ def test_an_out_dir_that_is_a_file_is_refused(recipe, capsys, tmp_path):
 
 @pytest.mark.parametrize(("flag", "value"), [("--value-loss-scale", "-1"),
                                              ("--grad-norm-clip", "nan"),
-                                             ("--batch-size", "3000")])  # fmt: skip
+                                             ("--batch-size", "3000"),
+                                             ("--device", "cuda")])  # fmt: skip
 def test_mappo_refuses_its_own_bad_values(flag, value, capsys, tmp_path):
     _refused(mappo.parse_args, [flag, value, "--out-dir", str(tmp_path)], capsys, flag)
 
@@ -100,6 +105,21 @@ def test_good_values_are_accepted(tmp_path):
     assert ppo_shared.parse_args([]) == ppo_shared.Args()  # the defaults pass their own checks
     assert mappo.parse_args([]) == mappo.Args()
     assert ppo_shared.parse_args([], RESIDUAL_DEFAULTS) == RESIDUAL_DEFAULTS
+
+
+def test_a_device_torch_cannot_see_is_refused_in_one_line(monkeypatch, capsys, tmp_path):
+    torch = pytest.importorskip("torch")
+    argv = ["--out-dir", str(tmp_path), "--device"]
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    err = _refused(ppo_shared.parse_args, [*argv, "cuda"], capsys, "--device")
+    assert "cuda: torch" in err and "sees no CUDA device" in err
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    err = _refused(ppo_shared.parse_args, [*argv, "cuda:2"], capsys, "--device")
+    assert "cuda:2: torch sees 2 CUDA device(s) here (cuda:0 to cuda:1)" in err
+    assert ppo_shared.parse_args([*argv, "cuda:1"]).device == "cuda:1"
+    assert ppo_shared.parse_args([*argv, "cuda"], RESIDUAL_DEFAULTS).device == "cuda"
+    assert ppo_shared.parse_args(argv[:2]).device == "cpu"  # the default asks nothing of torch
 
 
 @pytest.mark.parametrize(

@@ -29,6 +29,7 @@ __all__ = [
     "OneLineParser",
     "build_parser",
     "choice",
+    "device_problem",
     "finite_float",
     "hidden_sizes",
     "non_negative_float",
@@ -38,6 +39,7 @@ __all__ = [
     "positive_float",
     "positive_int",
     "to_argv",
+    "torch_device",
     "unit_interval",
 ]
 
@@ -121,6 +123,35 @@ def hidden_sizes(text: str) -> str:
     return text
 
 
+def torch_device(text: str) -> str:
+    """An argparse type: a torch device name, ``cpu``, ``cuda`` or ``cuda:N`` (not checked here).
+
+    Whether torch sees that device is :func:`device_problem`'s question, asked once the
+    options are parsed (it imports torch).
+    """
+    kind, _, index = text.partition(":")
+    if text in ("cpu", "cuda") or (kind == "cuda" and index.isdigit()):
+        return text
+    raise argparse.ArgumentTypeError(f"must be cpu, cuda or cuda:N, got {text!r}")
+
+
+def device_problem(name: str) -> str | None:
+    """Why torch cannot compute on the device ``name`` here (a message), or None when it can."""
+    if name == "cpu":
+        return None
+    try:
+        import torch
+    except ImportError:
+        return f"{name}: torch is not installed (the train extra)"
+    count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    _, _, index = name.partition(":")
+    if count == 0:
+        return f"{name}: torch {torch.__version__} sees no CUDA device here"
+    if index and int(index) >= count:
+        return f"{name}: torch sees {count} CUDA device(s) here (cuda:0 to cuda:{count - 1})"
+    return None
+
+
 def out_path(text: str) -> str:
     """An argparse type: a folder to write to (not empty, not an existing file)."""
     if not text.strip():
@@ -182,6 +213,7 @@ class Args:
     overwrite: bool = False  # replace a previous run's files in out_dir (else: refused)
     tensorboard: bool = False
     torch_threads: int = 1
+    device: str = "cpu"  # where torch computes: SB3's whole policy, or the lean loop's update
     progress: bool = True
 
 
@@ -230,6 +262,7 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "overwrite": (None, "replace a previous run's files in --out-dir"),
     "tensorboard": (None, "also write TensorBoard logs (out_dir/tb)"),
     "torch_threads": (positive_int, "torch CPU threads"),
+    "device": (torch_device, "torch device: cpu, cuda or cuda:N (SB3: all; lean loop: update)"),
     "progress": (None, "progress bar on stderr"),
     # MAPPO's own (uasep_env.training.mappo.Args).
     "value_loss_scale": (non_negative_float, "weight of the critic's loss"),
@@ -319,6 +352,9 @@ def parse_args(
     problem = check(args) if check is not None else None
     if problem:
         parser.error(problem)
+    problem = device_problem(args.device)
+    if problem:
+        parser.error(f"argument --device: {problem}")
     return args
 
 

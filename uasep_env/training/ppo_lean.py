@@ -27,11 +27,14 @@ training of the same recipe. The exported policy is the recipes' checkpoint
 (:func:`~uasep_env.training.ppo_shared.export_actor`): ``uasep-eval --policy`` and the
 selection scripts run it as any other. ``benchmarks/time_to_policy.py --trainer lean``
 measures it against SB3; there is no ``uasep-train`` recipe and no ``--resume`` here (a
-run is one process; ``docs/speed.md`` says what it measured).
+run is one process; ``docs/speed.md`` says what it measured). ``--device cuda`` runs the
+update on a GPU, on a copy of the networks whose weights the rollout's CPU copy takes after
+each update; the rollout acts on the CPU (its draws are the CPU's in either case).
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import dataclass
@@ -167,8 +170,30 @@ class _ActorCritic:
         _init(self.mu, 0.01, torch)
         _init(self.v, 1.0, torch)
         self.log_std = torch.nn.Parameter(torch.full((3,), float(args.log_std_init)))
+        self._list_params()
+
+    def _list_params(self) -> None:
         self.actor = [*self.pi.parameters(), *self.mu.parameters(), self.log_std]
         self.params = [*self.actor, *self.vf.parameters(), *self.v.parameters()]
+
+    def copy_to(self, device: Any) -> _ActorCritic:
+        """A copy of the networks on ``device`` (the learner's, beside the rollout's CPU copy)."""
+        import torch
+
+        twin = copy.deepcopy(self)
+        for module in (twin.pi, twin.vf, twin.mu, twin.v):
+            module.to(device)
+        twin.log_std = torch.nn.Parameter(twin.log_std.detach().to(device))
+        twin._list_params()
+        return twin
+
+    def load_from(self, other: _ActorCritic) -> None:
+        """Take ``other``'s weights (same shapes, any device)."""
+        import torch
+
+        with torch.no_grad():
+            for mine, theirs in zip(self.params, other.params, strict=True):
+                mine.copy_(theirs)
 
     def value(self, obs: Any) -> Any:
         return self.v(self.vf(obs)).squeeze(-1)
@@ -306,7 +331,10 @@ def train(
     core = EnvCore(config, n_envs=args.n_envs)
     rows = args.n_envs * config.n_uavs
     nets = _ActorCritic(core.obs_dim, args)
-    opt = torch.optim.Adam(nets.params, lr=args.learning_rate, eps=1e-5)
+    # The rollout acts on the CPU (a few hundred rows a step: a GPU's launches and copies
+    # would cost more than they save); the update runs on args.device, on its own copy.
+    learner = _learner(nets, torch.device(args.device))
+    opt = torch.optim.Adam(learner.params, lr=args.learning_rate, eps=1e-5)
     norm = Normaliser(
         core.obs_dim, rows, norm_obs=args.norm_obs, norm_reward=args.norm_reward, gamma=args.gamma
     )
@@ -338,7 +366,9 @@ def train(
         u0 = time.perf_counter()
         adv, ret = gae(roll.rewards, roll.values, roll.starts, roll.last_value, roll.start,
                        args.gamma, args.gae_lambda)  # fmt: skip
-        _update(nets, opt, args, updates, roll.obs_t, roll.act, roll.logp, adv, ret)
+        _update(learner, opt, args, updates, roll.obs_t, roll.act, roll.logp, adv, ret)
+        if learner is not nets:
+            nets.load_from(learner)
         updates += 1
         timing.learner_s += time.perf_counter() - u0
     facts = {
@@ -353,6 +383,11 @@ def train(
     return nets, norm, facts
 
 
+def _learner(nets: _ActorCritic, device: Any) -> _ActorCritic:
+    """The networks the update trains: ``nets`` themselves on the CPU, else a copy there."""
+    return nets if device.type == "cpu" else nets.copy_to(device)
+
+
 def _update(
     nets: _ActorCritic,
     opt: Any,
@@ -364,20 +399,27 @@ def _update(
     adv: np.ndarray,
     ret: np.ndarray,
 ) -> None:
-    """One PPO update (SB3's ``PPO.train`` as the recipes configure it)."""
+    """One PPO update (SB3's ``PPO.train`` as the recipes configure it), where ``nets`` are.
+
+    The rollout's buffers are on the CPU; they go to ``nets``' device here. The minibatches'
+    order is drawn on the CPU wherever the update runs, so a run draws the same numbers.
+    """
     import torch
+
+    device = nets.log_std.device
 
     # The actor frozen, only the critic learns: as the SB3 recipes' callback, which counts
     # the rollout before its update, so the warm-up's last update trains the actor already.
     warm = updates + 1 < args.critic_warmup
     for p in nets.actor:
         p.requires_grad_(not warm)
-    obs, act, old = buf_obs.flatten(0, 1), buf_act.flatten(0, 1), buf_logp.flatten(0, 1)
-    adv_t, ret_t = torch.from_numpy(adv.reshape(-1)), torch.from_numpy(ret.reshape(-1))
+    obs, act, old = (b.flatten(0, 1).to(device) for b in (buf_obs, buf_act, buf_logp))
+    adv_t = torch.from_numpy(adv.reshape(-1)).to(device)
+    ret_t = torch.from_numpy(ret.reshape(-1)).to(device)
     size = len(obs)
     for _ in range(args.n_epochs):
         stop = False
-        order = torch.randperm(size)
+        order = torch.randperm(size).to(device)
         for s in range(0, size, args.batch_size):
             idx = order[s : s + args.batch_size]
             x, a = obs[idx], act[idx]

@@ -135,7 +135,7 @@ def build(args: Args, config: Any) -> tuple[Any, Any]:
             "log_std_init": args.log_std_init,
         },
         seed=args.seed,
-        device="cpu",
+        device=args.device,
         verbose=0,
         tensorboard_log=str(Path(args.out_dir) / "tb") if args.tensorboard else None,
     )
@@ -208,15 +208,15 @@ def _write_checkpoint(
     from uasep_env.atomic import atomic_write
     from uasep_env.jsonio import dumps
 
+    state = {
+        "policy": model.policy.state_dict(),
+        "optimizer": model.policy.optimizer.state_dict(),
+        "torch_rng": torch.get_rng_state(),
+    }
+    if model.device.type == "cuda":  # SB3 draws the actions' noise there
+        state["cuda_rng"] = torch.cuda.get_rng_state(model.device)
     buf = io.BytesIO()
-    torch.save(
-        {
-            "policy": model.policy.state_dict(),
-            "optimizer": model.policy.optimizer.state_dict(),
-            "torch_rng": torch.get_rng_state(),
-        },
-        buf,
-    )
+    torch.save(state, buf)
     atomic_write(tmp / "state.pt", buf.getvalue())
     o, r = venv.obs_rms, venv.ret_rms
     buf = io.BytesIO()
@@ -243,6 +243,8 @@ def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
     model.policy.optimizer.load_state_dict(state["optimizer"])
     if "torch_rng" in state:
         torch.set_rng_state(state["torch_rng"])
+    if "cuda_rng" in state and model.device.type == "cuda":
+        torch.cuda.set_rng_state(state["cuda_rng"], model.device)
     with np.load(directory / "normalization.npz", allow_pickle=False) as z:
         venv.obs_rms.mean, venv.obs_rms.var = z["obs_mean"], z["obs_var"]
         venv.obs_rms.count = float(z["obs_count"])
