@@ -107,6 +107,14 @@ def test_good_values_are_accepted(tmp_path):
     assert ppo_shared.parse_args([], RESIDUAL_DEFAULTS) == RESIDUAL_DEFAULTS
 
 
+@pytest.mark.parametrize("value", ["gpu", "cuda:x", "cpu:0", "cuda:", "CUDA"])
+def test_a_device_that_is_no_torch_device_name_is_refused_by_its_type(value, capsys, tmp_path):
+    # Refused as a name, before torch is asked (which would see a GPU on a GPU machine).
+    err = _refused(ppo_shared.parse_args, ["--out-dir", str(tmp_path), "--device", value],
+                   capsys, "--device")  # fmt: skip
+    assert f"must be cpu, cuda or cuda:N, got {value!r}" in err
+
+
 def test_a_device_torch_cannot_see_is_refused_in_one_line(monkeypatch, capsys, tmp_path):
     torch = pytest.importorskip("torch")
     argv = ["--out-dir", str(tmp_path), "--device"]
