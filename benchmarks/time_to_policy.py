@@ -53,7 +53,7 @@ import os
 import platform
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -370,7 +370,6 @@ def run(
     ``trainer``: ``"default"`` (SB3's PPO, or skrl's MAPPO) or ``"lean"`` (the PPO recipes
     on :mod:`uasep_env.training.ppo_lean`).
     """
-    train = _loop(recipe, trainer)
     import torch
 
     from uasep_env.policies import load_policy
@@ -379,6 +378,10 @@ def run(
     from uasep_env.training.rundir import prepare_out_dir
 
     args = _recipe_args(recipe, run_dir, extra)
+    # The script's --trainer and the recipe's (after --) say the same thing.
+    if "lean" in (trainer, args.trainer):
+        trainer, args = "lean", replace(args, trainer="lean")
+    train = _loop(recipe, trainer)
     prepare_out_dir(run_dir, "", overwrite)  # before the bar's evaluation: refused at once
     torch.set_num_threads(args.torch_threads)
     config = ppo_shared.make_env_config(args)

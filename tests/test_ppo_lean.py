@@ -248,14 +248,15 @@ def test_a_rollout_is_sb3s_collect_rollouts(mode):
     _sb3_weights_into(nets, model.policy)
     norm = ppo_lean.Normaliser(core.obs_dim, args.n_envs * config.n_uavs, norm_obs=True,
                                norm_reward=False, gamma=args.gamma)  # fmt: skip
-    roll = ppo_lean._Rollout(core, nets, norm, args.n_steps)
+    state = ppo_lean.State(nets=nets, learner=nets, opt=None, norm=norm)
+    roll = ppo_lean._Rollout(core, state, args.n_steps)
     roll.reset(args.seed)
     torch.manual_seed(5)
     model.collect_rollouts(model.env, callback, model.rollout_buffer, args.n_steps)
     torch.manual_seed(5)
     roll.collect(args.gamma)
     buf = model.rollout_buffer
-    assert roll.episodes > 0 and buf.episode_starts[1:].any()  # episodes ended inside it
+    assert state.episodes > 0 and buf.episode_starts[1:].any()  # episodes ended inside it
     np.testing.assert_array_equal(roll.starts, buf.episode_starts)
     np.testing.assert_array_equal(roll.obs_t.numpy(), buf.observations)
     np.testing.assert_array_equal(roll.act.numpy(), buf.actions)

@@ -383,8 +383,9 @@ def test_compare_recipes_at_equal_wall_time(tmp_path, capsys):
     assert "different --max-minutes" in capsys.readouterr().err
 
 
-def test_the_fast_residual_report_is_what_its_command_and_checkpoints_say():
-    """``seeds_residual_apf_fast``: its recorded options are its command's flags over the
+@pytest.mark.parametrize("name", ["fast", "lean"])
+def test_a_fast_residual_report_is_what_its_command_and_checkpoints_say(name):
+    """``seeds_residual_apf_<name>``: its recorded options are its command's flags over the
     recipe's defaults, every kept checkpoint was trained with them, and its APF row is the
     main report's (the same held-out encounters)."""
     from uasep_env.policies.checkpoint_reader import read_checkpoint
@@ -393,18 +394,22 @@ def test_the_fast_residual_report_is_what_its_command_and_checkpoints_say():
     from uasep_env.training.ppo_residual_apf import RESIDUAL_DEFAULTS
 
     results = ROOT / "baselines" / "results"
-    fast = json.loads((results / "seeds_residual_apf_fast.json").read_text())
+    fast = json.loads((results / f"seeds_residual_apf_{name}.json").read_text())
     main = json.loads((results / "seeds_residual_apf.json").read_text())
     flags = fast["command"].split(" -- ", 1)[1].split()
     args = vars(ppo_shared.parse_args(flags, RESIDUAL_DEFAULTS))
     now = {k: v for k, v in args.items() if k not in PER_RUN}
-    # Options the recipes gained after the report (--device): at their defaults in its command.
+    # Options the recipes gained after a report (--device, --trainer): at their defaults.
     added = set(now) - set(fast["recipe_args"])
-    assert added <= {"device"} and all(now[k] == getattr(RESIDUAL_DEFAULTS, k) for k in added)
+    assert added <= {"device", "trainer"}
+    assert all(now[k] == getattr(RESIDUAL_DEFAULTS, k) for k in added)
     assert fast["recipe_args"] == {k: now[k] for k in fast["recipe_args"]}
     for k in range(3):
-        meta = read_checkpoint(ROOT / f"baselines/seeds/residual_apf_fast/seed_{k}/selected.zip")[0]
+        path = ROOT / f"baselines/seeds/residual_apf_{name}/seed_{k}/selected.zip"
+        meta = read_checkpoint(path)[0]
         trained = {n: v for n, v in meta.info["args"].items() if n not in PER_RUN}
         assert trained == fast["recipe_args"] and meta.info["args"]["seed"] == 1000 * k
+        lean = meta.info.get("implementation") == "uasep_env.training.ppo_lean"
+        assert lean == (fast["recipe_args"].get("trainer") == "lean")
     assert fast["held_out_seeds"] == main["held_out_seeds"]
     assert fast["per_seed"]["apf"] == main["per_seed"]["apf"]

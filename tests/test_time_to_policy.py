@@ -53,7 +53,7 @@ def test_a_run_stops_at_the_bar_and_records_where_the_time_went(
     monkeypatch.chdir(tmp_path)  # a relative run folder is recorded absolute (for --of)
     rec = ttp.main([*flags, "--out", str(out), "--run-dir", "run", "--held-out", "2", "--", *tiny])
     assert json.loads(out.read_text())["agent_steps"] == rec["agent_steps"]
-    assert rec["trainer"] == trainer
+    assert rec["trainer"] == trainer and rec["recipe_args"]["trainer"] == trainer
     assert rec["recipe_args"]["out_dir"] == str(tmp_path.resolve() / "run")
     # --held-out plays a reached policy, or says that there is none.
     said = "no policy to play" in capsys.readouterr().out
@@ -78,6 +78,17 @@ def test_a_run_stops_at_the_bar_and_records_where_the_time_went(
     with pytest.raises(SystemExit, match="is not empty"):
         ttp.main([*flags, "--out", str(other), "--run-dir", str(tmp_path / "run"), "--", *tiny])
     assert not other.exists()
+
+
+def test_the_recipes_trainer_flag_is_the_scripts(tmp_path):
+    # --trainer lean after -- (the recipe's flag) trains on the lean loop, as the script's
+    # own --trainer lean does: the record never says one trainer and trains with another.
+    tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
+            "--hidden", "16", "--total-timesteps", "400", "--trainer", "lean"]  # fmt: skip
+    rec = ttp.main(["--recipe", "residual_apf", "--episodes", "2", "--check-every", "384",
+                    "--out", str(tmp_path / "r.json"), "--run-dir", str(tmp_path / "run"),
+                    "--", *tiny])  # fmt: skip
+    assert rec["trainer"] == "lean" and rec["recipe_args"]["trainer"] == "lean"
 
 
 def test_the_lean_trainer_is_refused_for_mappo(tmp_path):

@@ -31,7 +31,7 @@ from uasep_env.config.checks import check_seed
 from uasep_env.costs import COST_TERMS
 from uasep_env.envs._infos import row_dicts
 from uasep_env.envs.core import EnvCore, prepare_actions
-from uasep_env.rollout import DEFAULT_SETTLE_TIME_S
+from uasep_env.envs.episode_safety import EpisodeSafety
 
 __all__ = ["UAVSharedVecEnv"]
 
@@ -70,10 +70,7 @@ class UAVSharedVecEnv(VecEnv):
         super().__init__(n_envs * self.n_uavs, obs_space, act_space)
         self._seed = seed
         self._actions: np.ndarray | None = None
-        # Per-environment safety of the running episode (for ``episode_safety``).
-        self._collided = np.zeros(n_envs, dtype=bool)
-        self._lost_sep = np.zeros(n_envs, dtype=bool)
-        self._max_dev = np.zeros(n_envs)
+        self._episodes = EpisodeSafety(n_envs)  # the running episodes (``episode_safety``)
         self._clipped = np.zeros(self.num_envs, dtype=np.int64)
         self._started = False
         self._closed = False
@@ -94,8 +91,7 @@ class UAVSharedVecEnv(VecEnv):
         self._check_open("reset")
         obs = self.core.reset(seed=self._seed)
         self._seed = None
-        self._collided[:] = self._lost_sep[:] = False
-        self._max_dev[:] = 0.0
+        self._episodes.clear()
         self._started = True
         return obs.reshape(self.num_envs, -1)
 
@@ -134,7 +130,7 @@ class UAVSharedVecEnv(VecEnv):
         rewards = res.rewards.reshape(-1).astype(np.float32)
         done_env = res.terminated | res.truncated
         dones = np.repeat(done_env, self.n_uavs)
-        self._track(res.safety)
+        self._episodes.track(self.core.world, res.safety)
         infos = _agent_infos(
             self._clipped.tolist(),
             res.cost.reshape(-1).tolist(),
@@ -143,32 +139,15 @@ class UAVSharedVecEnv(VecEnv):
         if done_env.any():
             for e in np.flatnonzero(done_env):
                 trunc = bool(res.truncated[e] and not res.terminated[e])
-                safety = {
-                    "collision": bool(self._collided[e]),
-                    "loss_of_separation": bool(self._lost_sep[e]),
-                    "max_deviation": float(self._max_dev[e]),
-                }
+                safety = self._episodes.summary(e)
                 for i in range(self.n_uavs):
                     k = e * self.n_uavs + i
                     infos[k]["terminal_observation"] = obs[k].copy()
                     infos[k]["TimeLimit.truncated"] = trunc
                     infos[k]["episode_safety"] = safety
             obs[dones] = self.core.reset_some(done_env).reshape(-1, obs.shape[1])
-            self._collided[done_env] = self._lost_sep[done_env] = False
-            self._max_dev[done_env] = 0.0
+            self._episodes.clear(done_env)
         return obs, rewards, dones, infos
-
-    def _track(self, safety: dict[str, np.ndarray]) -> None:
-        """Fold one step's safety figures into the running episodes' summaries."""
-        w = self.core.world
-        self._collided |= safety["collision"].any(axis=1)
-        self._lost_sep |= (
-            safety["loss_of_separation_uav"] | safety["loss_of_separation_obstacle"]
-        ).any(axis=1)
-        d = w.uav_pos - w.plan_pos
-        dev = np.sqrt(np.einsum("eni,eni->en", d, d)).max(axis=1)
-        settled = w.time >= DEFAULT_SETTLE_TIME_S
-        np.maximum(self._max_dev, np.where(settled, dev, 0.0), out=self._max_dev)
 
     def close(self) -> None:
         """Mark the env closed: later ``reset``/``step`` calls raise (Gymnasium's rule)."""

@@ -214,6 +214,7 @@ class Args:
     tensorboard: bool = False
     torch_threads: int = 1
     device: str = "cpu"  # where torch computes: SB3's whole policy, or the lean loop's update
+    trainer: str = "default"  # "default" (SB3's PPO; skrl's MAPPO) or "lean" (ppo_lean)
     progress: bool = True
 
 
@@ -263,6 +264,10 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "tensorboard": (None, "also write TensorBoard logs (out_dir/tb)"),
     "torch_threads": (positive_int, "torch CPU threads"),
     "device": (torch_device, "torch device: cpu, cuda or cuda:N (SB3: all; lean loop: update)"),
+    "trainer": (
+        choice("default", "lean"),
+        "default (SB3's PPO) or lean (uasep_env.training.ppo_lean: PPO recipes)",
+    ),
     "progress": (None, "progress bar on stderr"),
     # MAPPO's own (uasep_env.training.mappo.Args).
     "value_loss_scale": (non_negative_float, "weight of the critic's loss"),

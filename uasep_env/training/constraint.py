@@ -121,6 +121,11 @@ def check(args: Any) -> str | None:
     """What the Lagrangian recipes refuse beyond each flag's range (a message), or None."""
     from uasep_env.scenarios import VALIDATION_SEEDS
 
+    if args.trainer != "default":
+        return (
+            f"argument --trainer: {args.trainer!r} is not for a Lagrangian recipe (its "
+            "constraint runs in SB3's or skrl's loop)"
+        )
     if args.norm_reward:
         return (
             "argument --norm-reward: rescales the reward but not the cost; a Lagrangian "

@@ -74,7 +74,7 @@ def _hidden(args: Args) -> list[int]:
 def _check(args: Args) -> str | None:
     """What MAPPO refuses of the shared flags (one message naming the flag), or None."""
     for name, default in (("critic_warmup", 0), ("norm_reward", False), ("tensorboard", False),
-                          ("device", "cpu")):  # fmt: skip
+                          ("device", "cpu"), ("trainer", "default")):  # fmt: skip
         if getattr(args, name) != default:
             return f"argument --{name.replace('_', '-')}: not supported by the MAPPO recipe"
     if (args.n_envs * args.n_steps) % args.batch_size:

@@ -24,10 +24,12 @@ configure it, step for step:
 
 It is not SB3 bit for bit (torch draws its numbers in another order), so a run is another
 training of the same recipe. The exported policy is the recipes' checkpoint
-(:func:`~uasep_env.training.ppo_shared.export_actor`): ``uasep-eval --policy`` and the
-selection scripts run it as any other. ``benchmarks/time_to_policy.py --trainer lean``
-measures it against SB3; there is no ``uasep-train`` recipe and no ``--resume`` here (a
-run is one process; ``docs/speed.md`` says what it measured). ``--device cuda`` runs the
+(:func:`~uasep_env.training.rundir.export_actor`): ``uasep-eval --policy`` and the
+selection scripts run it as any other. ``uasep-train ppo_residual_apf --trainer lean`` (any
+PPO recipe but the Lagrangian ones) trains a recipe's run with it, checkpoints and
+``--resume`` included (:mod:`~uasep_env.training.lean_recipe`);
+``benchmarks/time_to_policy.py --trainer lean`` measures it against SB3 (``docs/speed.md``
+says what it measured). ``--device cuda`` runs the
 update on a GPU, on a copy of the networks whose weights the rollout's CPU copy takes after
 each update; the rollout acts on the CPU (its draws are the CPU's in either case).
 """
@@ -37,7 +39,8 @@ from __future__ import annotations
 import copy
 import math
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -46,7 +49,7 @@ import numpy as np
 
 from uasep_env.training.args import Args, hidden
 
-__all__ = ["CLIP_OBS", "Hooks", "Normaliser", "export_policy", "gae", "train"]
+__all__ = ["CLIP_OBS", "Hooks", "Normaliser", "State", "export_policy", "gae", "train"]
 
 #: ``VecNormalize``'s defaults: the clip of normalised observations (and returns), and the
 #: epsilon under the square root.
@@ -211,7 +214,11 @@ class _ActorCritic:
 
 
 class Hooks:
-    """What a caller (``benchmarks/time_to_policy.py``) may do around the loop; no-ops here."""
+    """What a caller may do around the loop; no-ops here.
+
+    ``benchmarks/time_to_policy.py`` checks the policy as it trains; the recipe's run
+    (:mod:`uasep_env.training.lean_recipe`) writes its learning curve and checkpoints.
+    """
 
     def start(self, nets: _ActorCritic, norm: Normaliser) -> None:
         """Before the first rollout."""
@@ -219,9 +226,45 @@ class Hooks:
     def rollout_end(self, agent_steps: int) -> None:
         """After each rollout, before its update."""
 
+    def update_end(self, state: State) -> None:
+        """After each update; ``state.finished`` holds the episodes ended since the last one."""
+
     def stop(self) -> bool:
         """Whether to stop before the next rollout."""
         return False
+
+
+@dataclass(kw_only=True)
+class State:
+    """What a run has learnt and counted: what a checkpoint saves and a resume restores.
+
+    Attributes:
+        nets: The networks the rollout acts with (on the CPU).
+        learner: The networks the update trains (``nets`` themselves on the CPU, else a
+            copy on ``args.device`` whose weights ``nets`` take after each update).
+        opt: The learner's Adam optimiser.
+        norm: The observation (and return) normalisation.
+        agent_steps: Agent-steps trained so far.
+        updates: PPO updates so far (the critic warm-up counts them).
+        episodes: Episodes finished so far.
+        wall_s: Training seconds so far (a resumed run's earlier ones included; hooks'
+            time excluded).
+        finished: ``(return, collision, loss_of_separation, max_deviation, length)`` of
+            each episode ended since the last update (emptied after
+            :meth:`Hooks.update_end`): the return and length
+            of its first UAV (as SB3's ``VecMonitor`` counts each agent), the safety
+            figures of :class:`~uasep_env.envs.episode_safety.EpisodeSafety`.
+    """
+
+    nets: _ActorCritic
+    learner: _ActorCritic
+    opt: Any
+    norm: Normaliser
+    agent_steps: int = 0
+    updates: int = 0
+    episodes: int = 0
+    wall_s: float = 0.0
+    finished: list[tuple[float, bool, bool, float, int]] = field(default_factory=list)
 
 
 @dataclass(kw_only=True)
@@ -236,10 +279,12 @@ class _Timing:
 class _Rollout:
     """The rollout's state and buffers: ``n_steps`` steps of every agent of the core."""
 
-    def __init__(self, core: Any, nets: _ActorCritic, norm: Normaliser, n_steps: int) -> None:
+    def __init__(self, core: Any, state: State, n_steps: int) -> None:
         import torch
 
-        self.core, self.nets, self.norm = core, nets, norm
+        from uasep_env.envs.episode_safety import EpisodeSafety
+
+        self.core, self.nets, self.norm, self.state = core, state.nets, state.norm, state
         self.n_envs, self.n = core.n_envs, core.n_uavs
         rows, dim = self.n_envs * self.n, core.obs_dim
         self.obs_t = torch.zeros((n_steps, rows, dim))
@@ -251,13 +296,19 @@ class _Rollout:
         self.last_value = np.zeros(rows, dtype=np.float32)
         self.obs = np.zeros((rows, dim), dtype=np.float32)  # the next observation, normalised
         self.start = np.ones(rows, dtype=np.float32)  # 1 where it begins an episode
-        self.episodes = 0
+        # The running episodes: safety, and the first UAV's return and length (raw rewards).
+        self.safety = EpisodeSafety(self.n_envs)
+        self.ep_return = np.zeros(self.n_envs)
+        self.ep_length = np.zeros(self.n_envs, dtype=np.int64)
 
     def reset(self, seed: int) -> None:
         """Reset every environment (environment ``e`` gets ``seed + e``)."""
         raw = self.core.reset(seed=seed).reshape(len(self.obs), -1)
         self.obs = self.norm.observe(raw, update=True)
         self.start[:] = 1.0
+        self.safety.clear()
+        self.ep_return[:] = 0.0
+        self.ep_length[:] = 0
 
     def collect(self, gamma: float) -> float:
         """Fill the buffers (SB3's ``collect_rollouts``); returns the seconds in the core."""
@@ -279,6 +330,7 @@ class _Rollout:
                 res = core.step(np.clip(act.numpy(), -1.0, 1.0).reshape(self.n_envs, n, 3))
                 env_s += time.perf_counter() - e0
                 done_env = res.terminated | res.truncated
+                self._track(res, done_env)
                 dones = np.repeat(done_env, n)
                 reward = norm.reward(res.rewards.reshape(-1).astype(np.float32), dones)
                 raw = res.obs.reshape(len(self.obs), -1)
@@ -289,7 +341,6 @@ class _Rollout:
                     e0 = time.perf_counter()
                     raw[dones] = core.reset_some(done_env).reshape(-1, raw.shape[1])
                     env_s += time.perf_counter() - e0
-                    self.episodes += int(done_env.sum())
                     # VecNormalize's order: the statistics take the new observations
                     # first, then the finished episodes' last ones are normalised.
                     self.obs = norm.observe(raw, update=True)
@@ -303,9 +354,30 @@ class _Rollout:
             self.last_value = nets.value(torch.from_numpy(self.obs)).numpy()
         return env_s
 
+    def _track(self, res: Any, done_env: np.ndarray) -> None:
+        """Fold a step into the running episodes; record and clear those that ended."""
+        self.safety.track(self.core.world, res.safety)
+        self.ep_return += res.rewards[:, 0]
+        self.ep_length += 1
+        if not done_env.any():
+            return
+        for e in np.flatnonzero(done_env).tolist():
+            s = self.safety.summary(e)
+            self.state.finished.append((
+                float(self.ep_return[e]), s["collision"], s["loss_of_separation"],
+                s["max_deviation"], int(self.ep_length[e]),
+            ))  # fmt: skip
+        self.state.episodes += int(done_env.sum())
+        self.safety.clear(done_env)
+        self.ep_return[done_env] = 0.0
+        self.ep_length[done_env] = 0
+
 
 def train(
-    args: Args, config: Any, hooks: Hooks | None = None
+    args: Args,
+    config: Any,
+    hooks: Hooks | None = None,
+    prepare: Callable[[State], None] | None = None,
 ) -> tuple[_ActorCritic, Normaliser, dict[str, Any]]:
     """Train until ``args.total_timesteps`` agent-steps, ``args.max_minutes`` or ``hooks.stop()``.
 
@@ -313,12 +385,17 @@ def train(
         args: The recipe's settings (:class:`~uasep_env.training.args.Args`).
         config: Its :class:`~uasep_env.config.EnvConfig`
             (:func:`~uasep_env.training.args.make_env_config`).
-        hooks: Called at the start, at each rollout's end and before each rollout.
+        hooks: Called at the start, at each rollout's end, after each update and before
+            each rollout.
+        prepare: Called with the fresh :class:`State` before the environments are reset:
+            a resume restores a checkpoint into it (weights, optimiser, normalisation,
+            counters, random state); the wall budget counts ``state.wall_s`` as spent.
 
     Returns:
         ``(networks, normaliser, facts)``: facts hold ``agent_steps``, ``updates``,
         ``wall_s``, ``episodes`` and the time split (``env_s``, ``rollout_s``,
-        ``learner_s``; the hooks' time is in none of them).
+        ``learner_s``; the hooks' time is in none of them, nor a resumed run's earlier
+        time).
     """
     import torch
 
@@ -338,18 +415,26 @@ def train(
     norm = Normaliser(
         core.obs_dim, rows, norm_obs=args.norm_obs, norm_reward=args.norm_reward, gamma=args.gamma
     )
-    roll = _Rollout(core, nets, norm, args.n_steps)
-    roll.reset(args.seed)
+    state = State(nets=nets, learner=learner, opt=opt, norm=norm)
+    if prepare is not None:
+        prepare(state)
+        if learner is not nets:
+            nets.load_from(learner)
+    roll = _Rollout(core, state, args.n_steps)
+    if state.agent_steps < args.total_timesteps and state.wall_s < args.max_minutes * 60.0:
+        # Not when nothing is left to train: the reset's observations would move the
+        # normalisation a resumed run exports unchanged.
+        roll.reset(args.seed)
     timing = _Timing()
-    agent_steps = updates = 0
     hooks.start(nets, norm)
     t0 = time.perf_counter()
+    spent = state.wall_s
     hook_s = 0.0
 
     def clock() -> float:
-        return time.perf_counter() - t0 - hook_s
+        return spent + time.perf_counter() - t0 - hook_s
 
-    while agent_steps < args.total_timesteps and clock() < args.max_minutes * 60.0:
+    while state.agent_steps < args.total_timesteps and clock() < args.max_minutes * 60.0:
         h0 = time.perf_counter()
         stop = hooks.stop()
         hook_s += time.perf_counter() - h0
@@ -357,25 +442,31 @@ def train(
             break
         r0 = time.perf_counter()
         env_s = roll.collect(args.gamma)
-        agent_steps += args.n_steps * rows
+        state.agent_steps += args.n_steps * rows
         timing.env_s += env_s
         timing.rollout_s += time.perf_counter() - r0 - env_s
         h0 = time.perf_counter()
-        hooks.rollout_end(agent_steps)
+        hooks.rollout_end(state.agent_steps)
         hook_s += time.perf_counter() - h0
         u0 = time.perf_counter()
         adv, ret = gae(roll.rewards, roll.values, roll.starts, roll.last_value, roll.start,
                        args.gamma, args.gae_lambda)  # fmt: skip
-        _update(learner, opt, args, updates, roll.obs_t, roll.act, roll.logp, adv, ret)
+        _update(learner, opt, args, state.updates, roll.obs_t, roll.act, roll.logp, adv, ret)
         if learner is not nets:
             nets.load_from(learner)
-        updates += 1
+        state.updates += 1
         timing.learner_s += time.perf_counter() - u0
+        state.wall_s = clock()
+        h0 = time.perf_counter()
+        hooks.update_end(state)
+        state.finished.clear()  # the hook has had them
+        hook_s += time.perf_counter() - h0
+    state.wall_s = clock()
     facts = {
-        "agent_steps": agent_steps,
-        "updates": updates,
-        "wall_s": clock(),
-        "episodes": roll.episodes,
+        "agent_steps": state.agent_steps,
+        "updates": state.updates,
+        "wall_s": state.wall_s,
+        "episodes": state.episodes,
         "env_s": timing.env_s,
         "rollout_s": timing.rollout_s,
         "learner_s": timing.learner_s,
@@ -453,7 +544,7 @@ def export_policy(
     nets: _ActorCritic, norm: Normaliser, config: Any, args: Args, path: Path, info: dict
 ) -> Path:
     """Write the actor and the normalisation as the recipes' policy checkpoint."""
-    from uasep_env.training.ppo_shared import export_actor
+    from uasep_env.training.rundir import export_actor
 
     info = {**info, "implementation": "uasep_env.training.ppo_lean"}
     return export_actor(nets.linears(), norm, config, args, path, "PPO", info)

@@ -6,6 +6,7 @@ A single-file recipe in the CleanRL style: every option is a field of
     uasep-train ppo_shared                                     # pure policy
     uasep-train ppo_shared --action-mode residual_apf          # = uasep-train ppo_residual_apf
     uasep-train ppo_shared --resume runs/ppo_shared/checkpoints/latest
+    uasep-train ppo_residual_apf --trainer lean   # the lean PPO loop in place of SB3's
 
 (``python train/ppo_shared.py`` in a checkout is the same command.)
 
@@ -36,6 +37,9 @@ state; it is not bit-exact with an uninterrupted run: the episodes and the rollo
 progress at the checkpoint are dropped, and the environments restart their episodes from
 their seeds (see ``docs/robustness.md``).
 
+``--trainer lean`` trains the same recipe with :mod:`~uasep_env.training.ppo_lean` in place
+of SB3 (:mod:`~uasep_env.training.lean_recipe`: the same files and ``--resume``).
+
 Seeds: training environments are seeded ``seed + e`` inside
 :data:`uasep_env.scenarios.TRAINING_SEEDS`; validation uses
 :data:`~uasep_env.scenarios.VALIDATION_SEEDS`; neither meets the held-out bank
@@ -61,12 +65,22 @@ import numpy as np
 from uasep_env.training.args import Args, hidden, make_env_config
 from uasep_env.training.args import parse_args as _parse_args
 
+# What every trainer writes the same way (rundir); mappo and the scripts read it from here too.
+from uasep_env.training.rundir import (
+    CSV_FIELDS,
+    bar_postfix,
+    check_trainer,
+    export_actor,
+    load_normalization,
+    normalization_bytes,
+    window_summary,
+    write_validation,
+)
+
 __all__ = [
-    "CSV_FIELDS",
     "Args",
     "build",
     "cli",
-    "export_actor",
     "export_policy",
     "load_checkpoint",
     "main",
@@ -76,7 +90,6 @@ __all__ = [
     "run",
     "save_checkpoint",
     "train",
-    "write_validation",
 ]
 
 
@@ -85,7 +98,16 @@ def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> A
 
     A bad value exits with one line naming the flag (:mod:`uasep_env.training.args`).
     """
-    return _parse_args(argv, defaults, prog=_prog(), description=_PROG.get("doc", __doc__))
+    return _parse_args(
+        argv, defaults, prog=_prog(), description=_PROG.get("doc", __doc__), check=_check
+    )
+
+
+def _check(args: Args) -> str | None:
+    """What the PPO recipes refuse beyond each flag's range (one message naming the flag)."""
+    if args.trainer == "lean" and args.tensorboard:
+        return "argument --tensorboard: SB3's logger; not with --trainer lean"
+    return None
 
 
 def _prog() -> str | None:
@@ -151,32 +173,6 @@ def export_policy(model: Any, venv: Any, config: Any, args: Args, path: Path, in
     return export_actor(linears, venv, config, args, path, "PPO", info)
 
 
-def export_actor(
-    linears: list, venv: Any, config: Any, args: Args, path: Path, algorithm: str, info: dict
-) -> Path:
-    """Write an MLP actor and its observation normalisation as a policy checkpoint.
-
-    Every recipe exports through here: ``linears`` are the actor's ``torch.nn.Linear``
-    layers in order, the normalisation is ``venv``'s; the file is pickle-free.
-    """
-    from uasep_env.policies.learned import PolicyCheckpoint, save_policy
-
-    weights = [(m.weight.detach().cpu().numpy(), m.bias.detach().cpu().numpy()) for m in linears]
-    meta = PolicyCheckpoint(
-        config=config.to_dict(),
-        obs_dim=int(venv.observation_space.shape[0]),
-        activation=args.activation,
-        hidden=tuple(_hidden(args)),
-        obs_norm=bool(venv.norm_obs),
-        clip_obs=float(venv.clip_obs),
-        obs_epsilon=float(venv.epsilon),
-        algorithm=algorithm,
-        info={**info, "args": dataclasses.asdict(args)},
-    )
-    rms = venv.obs_rms
-    return save_policy(path, meta, weights, rms.mean, rms.var)
-
-
 def save_checkpoint(
     model: Any, venv: Any, config: Any, args: Args, directory: Path, info: dict
 ) -> None:
@@ -218,14 +214,7 @@ def _write_checkpoint(
     buf = io.BytesIO()
     torch.save(state, buf)
     atomic_write(tmp / "state.pt", buf.getvalue())
-    o, r = venv.obs_rms, venv.ret_rms
-    buf = io.BytesIO()
-    np.savez(
-        buf,
-        obs_mean=o.mean, obs_var=o.var, obs_count=o.count,
-        ret_mean=r.mean, ret_var=r.var, ret_count=r.count,
-    )  # fmt: skip
-    atomic_write(tmp / "normalization.npz", buf.getvalue())
+    atomic_write(tmp / "normalization.npz", normalization_bytes(venv))
     export_policy(model, venv, config, args, tmp / "policy.zip", info)
     state = dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
     atomic_write(tmp / "state.json", state)
@@ -245,26 +234,10 @@ def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
         torch.set_rng_state(state["torch_rng"])
     if "cuda_rng" in state and model.device.type == "cuda":
         torch.cuda.set_rng_state(state["cuda_rng"], model.device)
-    with np.load(directory / "normalization.npz", allow_pickle=False) as z:
-        venv.obs_rms.mean, venv.obs_rms.var = z["obs_mean"], z["obs_var"]
-        venv.obs_rms.count = float(z["obs_count"])
-        venv.ret_rms.mean, venv.ret_rms.var = z["ret_mean"], z["ret_var"]
-        venv.ret_rms.count = float(z["ret_count"])
+    load_normalization(venv, directory / "normalization.npz")
     info = json.loads((directory / "state.json").read_text())
     model.num_timesteps = int(info["agent_steps"])
     return info
-
-
-CSV_FIELDS = (
-    "agent_steps",
-    "wall_s",
-    "episodes",
-    "return_mean",
-    "collision_rate",
-    "loss_of_separation_rate",
-    "max_deviation_mean",
-    "episode_length_mean",
-)
 
 
 def make_callback(
@@ -326,16 +299,7 @@ def make_callback(
             return time.perf_counter() - self.t0
 
         def summary(self) -> dict:
-            w = list(self.window)
-            if not w:
-                return {}
-            return {
-                "return_mean": float(np.mean([e[0] for e in w])),
-                "collision_rate": float(np.mean([e[1] for e in w])),
-                "loss_of_separation_rate": float(np.mean([e[2] for e in w])),
-                "max_deviation_mean": float(np.mean([e[3] for e in w])),
-                "episode_length_mean": float(np.mean([e[4] for e in w])),
-            }
+            return window_summary(self.window)
 
         def _on_step(self) -> bool:
             for k, info in enumerate(self.locals["infos"]):
@@ -363,12 +327,7 @@ def make_callback(
                    "episodes": self.episodes, **s}  # fmt: skip
             self.csv.write(row)
             if self.bar is not None and s:
-                self.bar.set_postfix(
-                    ret=f"{s['return_mean']:.0f}",
-                    coll=f"{s['collision_rate']:.1%}",
-                    los=f"{s['loss_of_separation_rate']:.1%}",
-                    dev=f"{s['max_deviation_mean']:.1f}m",
-                )
+                self.bar.set_postfix(**bar_postfix(s))
             if args.tensorboard and s:
                 for k, v in s.items():
                     self.logger.record(f"uasep/{k}", v)
@@ -410,6 +369,10 @@ def train(args: Args, plugin: Any = None) -> dict:
             ``{}`` for a fresh run), ``facts() -> dict`` (saved in every checkpoint and in
             ``validation.json``), ``finish(out)`` and ``title``.
     """
+    if args.trainer == "lean":
+        from uasep_env.training import lean_recipe
+
+        return lean_recipe.train(args, plugin)
     import torch  # lazy: the training extra
     from stable_baselines3.common.callbacks import CallbackList
 
@@ -419,6 +382,8 @@ def train(args: Args, plugin: Any = None) -> dict:
     config = make_env_config(args)
     out = Path(args.out_dir)
     resume = check_checkpoint(Path(args.resume)) if args.resume else None
+    if resume is not None:
+        check_trainer(resume, args)
     prepare_out_dir(out, args.resume, args.overwrite)
     venv, model = build(args, config)
     resumed: dict = {}
@@ -449,34 +414,6 @@ def train(args: Args, plugin: Any = None) -> dict:
     if plugin is not None:
         plugin.finish(out)
     return write_validation(out, config, policy_path, info, args.eval_episodes)
-
-
-def write_validation(out: Path, config: Any, policy_path: Path, info: dict, episodes: int) -> dict:
-    """The policy and the APF on ``episodes`` validation encounters: ``validation.json``."""
-    from uasep_env.atomic import atomic_write
-    from uasep_env.evaluation import evaluate
-    from uasep_env.jsonio import dumps
-    from uasep_env.policies import load_policy
-    from uasep_env.scenarios import VALIDATION_SEEDS
-
-    eval_cfg = config.replace(action={"mode": "direct"})
-    seeds = list(VALIDATION_SEEDS)[:episodes]
-    summary: dict = {"training": info, "policy": str(policy_path), "validation": {}}
-    if seeds:
-        policies = {"learned": load_policy(policy_path, eval_cfg), "apf": "apf"}
-        result = evaluate(policies, eval_cfg, seeds)
-        keys = ("collision", "loss_of_separation", "max_deviation")
-        for label, res in result.results.items():
-            agg = res.aggregate
-            summary["validation"][label] = {
-                k: agg[f"episode.{k}"].get("mean", agg[f"episode.{k}"].get("rate"))
-                for k in keys
-                if f"episode.{k}" in agg
-            }
-    text = dumps(summary, indent=2, default=str)
-    atomic_write(out / "validation.json", text + "\n")
-    print(text)
-    return summary
 
 
 def cli(defaults: Args | None = None, argv: list[str] | None = None, entry: Any = None) -> None:

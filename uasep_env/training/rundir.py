@@ -18,12 +18,20 @@ claimed and created. The rules:
   to the rows up to the checkpoint, and deletes the checkpoints saved after it: the resumed
   run continues from exactly the checkpoint's progress (agent-steps, episodes, the window of
   the last 200 episodes, wall time), not from where the killed process happened to stop.
+
+It also holds what every trainer (SB3's, skrl's, the lean loop's) writes the same way: the
+learning curve's columns (:data:`CSV_FIELDS`) and figures (:func:`window_summary`), a
+checkpoint's normalisation (:func:`normalization_bytes`) and policy (:func:`export_actor`),
+the check that a checkpoint resumes under the trainer that wrote it (:func:`check_trainer`),
+and ``validation.json`` (:func:`write_validation`).
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
+import json
 import os
 import shutil
 import sys
@@ -34,6 +42,7 @@ import numpy as np
 
 from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write, fsync_dir
 from uasep_env.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder
+from uasep_env.training.args import Args, hidden
 
 #: What a run writes in its folder (``--overwrite`` deletes these, and only these).
 RUN_FILES = ("progress.csv", "curves.png", "policy.zip", "validation.json")
@@ -246,3 +255,141 @@ def plot_curves(
         fig.savefig(fh, format="png", dpi=90)
     plt.close(fig)
     return png_path
+
+
+# What every trainer writes the same way: the learning curve's columns and figures, the
+# normalisation and policy files of a checkpoint, and validation.json.
+
+CSV_FIELDS = (
+    "agent_steps",
+    "wall_s",
+    "episodes",
+    "return_mean",
+    "collision_rate",
+    "loss_of_separation_rate",
+    "max_deviation_mean",
+    "episode_length_mean",
+)
+
+
+def normalization_bytes(norm: Any) -> bytes:
+    """A checkpoint's ``normalization.npz``: ``norm``'s running statistics.
+
+    ``norm`` is a ``VecNormalize`` or the lean loop's
+    :class:`~uasep_env.training.ppo_lean.Normaliser`.
+    """
+    o, r = norm.obs_rms, norm.ret_rms
+    buf = io.BytesIO()
+    np.savez(
+        buf,
+        obs_mean=o.mean, obs_var=o.var, obs_count=o.count,
+        ret_mean=r.mean, ret_var=r.var, ret_count=r.count,
+    )  # fmt: skip
+    return buf.getvalue()
+
+
+def load_normalization(norm: Any, path: Path) -> None:
+    """Restore :func:`normalization_bytes`' statistics into ``norm`` (no unpickling)."""
+    with np.load(path, allow_pickle=False) as z:
+        norm.obs_rms.mean, norm.obs_rms.var = z["obs_mean"], z["obs_var"]
+        norm.obs_rms.count = float(z["obs_count"])
+        norm.ret_rms.mean, norm.ret_rms.var = z["ret_mean"], z["ret_var"]
+        norm.ret_rms.count = float(z["ret_count"])
+
+
+def check_trainer(directory: Path, args: Args) -> dict:
+    """``directory``'s ``state.json``, once its trainer is ``args.trainer``'s.
+
+    Raises:
+        RunError: The checkpoint was written by the other trainer (one line).
+    """
+    info = json.loads((directory / "state.json").read_text())
+    theirs = info.get("args", {}).get("trainer", "default")
+    if theirs != args.trainer:
+        raise RunError(
+            f"--resume {directory}: a checkpoint of --trainer {theirs}; resume it with "
+            f"--trainer {theirs}"
+        )
+    return info
+
+
+def window_summary(window: Any) -> dict:
+    """The learning curve's figures over the finished episodes of ``window``.
+
+    ``window`` holds ``(return, collision, loss_of_separation, max_deviation, length)``
+    tuples; ``{}`` when it is empty.
+    """
+    w = list(window)
+    if not w:
+        return {}
+    return {
+        "return_mean": float(np.mean([e[0] for e in w])),
+        "collision_rate": float(np.mean([e[1] for e in w])),
+        "loss_of_separation_rate": float(np.mean([e[2] for e in w])),
+        "max_deviation_mean": float(np.mean([e[3] for e in w])),
+        "episode_length_mean": float(np.mean([e[4] for e in w])),
+    }
+
+
+def bar_postfix(summary: dict) -> dict:
+    """The progress bar's figures of a :func:`window_summary`."""
+    return {
+        "ret": f"{summary['return_mean']:.0f}",
+        "coll": f"{summary['collision_rate']:.1%}",
+        "los": f"{summary['loss_of_separation_rate']:.1%}",
+        "dev": f"{summary['max_deviation_mean']:.1f}m",
+    }
+
+
+def export_actor(
+    linears: list, venv: Any, config: Any, args: Args, path: Path, algorithm: str, info: dict
+) -> Path:
+    """Write an MLP actor and its observation normalisation as a policy checkpoint.
+
+    Every recipe exports through here: ``linears`` are the actor's ``torch.nn.Linear``
+    layers in order, the normalisation is ``venv``'s; the file is pickle-free.
+    """
+    from uasep_env.policies.learned import PolicyCheckpoint, save_policy
+
+    weights = [(m.weight.detach().cpu().numpy(), m.bias.detach().cpu().numpy()) for m in linears]
+    meta = PolicyCheckpoint(
+        config=config.to_dict(),
+        obs_dim=int(venv.observation_space.shape[0]),
+        activation=args.activation,
+        hidden=tuple(hidden(args)),
+        obs_norm=bool(venv.norm_obs),
+        clip_obs=float(venv.clip_obs),
+        obs_epsilon=float(venv.epsilon),
+        algorithm=algorithm,
+        info={**info, "args": dataclasses.asdict(args)},
+    )
+    rms = venv.obs_rms
+    return save_policy(path, meta, weights, rms.mean, rms.var)
+
+
+def write_validation(out: Path, config: Any, policy_path: Path, info: dict, episodes: int) -> dict:
+    """The policy and the APF on ``episodes`` validation encounters: ``validation.json``."""
+    from uasep_env.atomic import atomic_write
+    from uasep_env.evaluation import evaluate
+    from uasep_env.jsonio import dumps
+    from uasep_env.policies import load_policy
+    from uasep_env.scenarios import VALIDATION_SEEDS
+
+    eval_cfg = config.replace(action={"mode": "direct"})
+    seeds = list(VALIDATION_SEEDS)[:episodes]
+    summary: dict = {"training": info, "policy": str(policy_path), "validation": {}}
+    if seeds:
+        policies = {"learned": load_policy(policy_path, eval_cfg), "apf": "apf"}
+        result = evaluate(policies, eval_cfg, seeds)
+        keys = ("collision", "loss_of_separation", "max_deviation")
+        for label, res in result.results.items():
+            agg = res.aggregate
+            summary["validation"][label] = {
+                k: agg[f"episode.{k}"].get("mean", agg[f"episode.{k}"].get("rate"))
+                for k in keys
+                if f"episode.{k}" in agg
+            }
+    text = dumps(summary, indent=2, default=str)
+    atomic_write(out / "validation.json", text + "\n")
+    print(text)
+    return summary

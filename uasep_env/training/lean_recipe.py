@@ -1,0 +1,256 @@
+"""A PPO recipe trained by the lean loop: ``uasep-train ppo_residual_apf --trainer lean``.
+
+:mod:`~uasep_env.training.ppo_lean` is the SB3 recipes' algorithm in one loop on the batched
+core (1.3x SB3's agent-steps a minute on the residual recipe, ``docs/speed.md``). This
+module gives it what a recipe's run has under SB3 (:func:`uasep_env.training.ppo_shared.train`),
+in the same files, so that ``train/seeds.py``, the checkpoint selection, ``uasep-eval`` and
+``train/reproduce.py`` take its runs as they take SB3's:
+
+* ``progress.csv`` (the same columns: the last 200 finished episodes' return of the first
+  UAV, collision and loss-of-separation rates, mean max deviation and length, one row per
+  update) and ``curves.png``;
+* ``checkpoints/step_<agent-steps>/`` every ``checkpoint_every`` agent-steps and
+  ``checkpoints/latest``: ``state.pt`` (the networks' and Adam's state dicts and torch's
+  random state, loaded weights-only), ``normalization.npz``, ``policy.zip`` and
+  ``state.json`` (the counters, the 200-episode window and the options), written under a
+  temporary name and renamed into place;
+* ``policy.zip`` and ``validation.json`` at the end.
+
+``--resume`` restores the weights, Adam, the normalisation, torch's random state and the
+counters (agent-steps, updates, so the critic warm-up goes on where it was, episodes, the
+window and the training time spent), and refuses a checkpoint of the other trainer. Like
+SB3's resume it is not bit-exact: the environments restart their episodes from their seeds.
+The wall budget (``--max-minutes``) counts training time, not the checkpoints' and the
+curve's writing. The Lagrangian recipes (their constraint is an SB3 callback) and MAPPO
+refuse ``--trainer lean``, and so does ``--tensorboard`` (SB3's logger).
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import io
+import os
+import shutil
+from pathlib import Path
+from typing import Any
+
+from uasep_env.training.args import Args
+from uasep_env.training.ppo_lean import Hooks
+
+__all__ = ["load_checkpoint", "save_checkpoint", "train"]
+
+#: The networks' parts in ``state.pt``.
+_PARTS = ("pi", "vf", "mu", "v")
+
+
+def save_checkpoint(state: Any, config: Any, args: Args, directory: Path, info: dict) -> None:
+    """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
+
+    Written under a temporary name and renamed into place when complete
+    (:func:`uasep_env.training.rundir.publish_dir`); ``state.json`` last.
+
+    Args:
+        state: The run's :class:`~uasep_env.training.ppo_lean.State`.
+        config: The run's env config.
+        args: The run's options.
+        directory: The checkpoint folder (``checkpoints/step_N``).
+        info: The counters and figures for ``state.json`` (the options are added).
+    """
+    from uasep_env.training.rundir import publish_dir
+
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        _write_checkpoint(state, config, args, tmp, info)
+        publish_dir(tmp, directory)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)  # the previous checkpoint stays as it was
+        raise
+
+
+def _write_checkpoint(state: Any, config: Any, args: Args, tmp: Path, info: dict) -> None:
+    import torch
+
+    from uasep_env.atomic import atomic_write
+    from uasep_env.jsonio import dumps
+    from uasep_env.training import ppo_lean
+    from uasep_env.training.rundir import normalization_bytes
+
+    learner = state.learner
+    nets = {part: getattr(learner, part).state_dict() for part in _PARTS}
+    nets["log_std"] = learner.log_std.detach().clone()
+    saved = {"nets": nets, "optimizer": state.opt.state_dict(), "torch_rng": torch.get_rng_state()}
+    device = learner.log_std.device
+    if device.type == "cuda":
+        saved["cuda_rng"] = torch.cuda.get_rng_state(device)
+    buf = io.BytesIO()
+    torch.save(saved, buf)
+    atomic_write(tmp / "state.pt", buf.getvalue())
+    atomic_write(tmp / "normalization.npz", normalization_bytes(state.norm))
+    ppo_lean.export_policy(state.nets, state.norm, config, args, tmp / "policy.zip", info)
+    text = dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+    atomic_write(tmp / "state.json", text)
+
+
+def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:
+    """Restore a :func:`save_checkpoint` folder into ``state``; returns its ``state.json``.
+
+    Weights-only loads (no unpickling). The learner takes the weights (``state.nets`` takes
+    them from it when the run starts).
+
+    Raises:
+        RunError: The folder is incomplete, or a checkpoint of SB3's trainer (one line).
+    """
+    import torch
+
+    from uasep_env.training.rundir import check_checkpoint, check_trainer, load_normalization
+
+    directory = check_checkpoint(directory)
+    info = check_trainer(directory, args)
+    saved = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
+    learner = state.learner
+    for part in _PARTS:
+        getattr(learner, part).load_state_dict(saved["nets"][part])
+    with torch.no_grad():
+        learner.log_std.copy_(saved["nets"]["log_std"])
+    state.opt.load_state_dict(saved["optimizer"])
+    torch.set_rng_state(saved["torch_rng"])
+    device = learner.log_std.device
+    if "cuda_rng" in saved and device.type == "cuda":
+        torch.cuda.set_rng_state(saved["cuda_rng"], device)
+    load_normalization(state.norm, directory / "normalization.npz")
+    state.agent_steps = int(info["agent_steps"])
+    state.updates = int(info["updates"])
+    state.episodes = int(info["episodes"])
+    state.wall_s = float(info["wall_s"])
+    return info
+
+
+def train(args: Args, plugin: Any = None) -> dict:
+    """Train (or resume) ``args``' PPO recipe with the lean loop; export, validate, summarise.
+
+    The contract of :func:`uasep_env.training.ppo_shared.train`, which calls this for
+    ``--trainer lean``.
+
+    Raises:
+        ValueError: A ``plugin`` (the Lagrangian recipes' constraint is SB3's callback).
+    """
+    if plugin is not None:
+        raise ValueError(f"trainer 'lean': the {plugin.title} recipe trains on SB3 only")
+    import torch
+
+    from uasep_env.training import ppo_lean
+    from uasep_env.training.args import make_env_config
+    from uasep_env.training.rundir import (
+        CSV_FIELDS,
+        check_checkpoint,
+        check_trainer,
+        plot_curves,
+        prepare_out_dir,
+        rewind,
+        write_validation,
+    )
+
+    torch.set_num_threads(args.torch_threads)
+    config = make_env_config(args)
+    out = Path(args.out_dir)
+    resume = check_checkpoint(Path(args.resume)) if args.resume else None
+    if resume is not None:
+        check_trainer(resume, args)
+    prepare_out_dir(out, args.resume, args.overwrite)
+    hooks = _RunHooks(args, config, out)
+
+    def prepare(state: Any) -> None:
+        hooks.last_state = state
+        if resume is not None:
+            hooks.resumed = load_checkpoint(state, resume, args)
+            rewind(out, CSV_FIELDS, state.agent_steps)
+            print(f"resumed from {resume} at {state.agent_steps:,} agent-steps")
+
+    nets, norm, facts = ppo_lean.train(args, config, hooks, prepare)
+    trained = resume is None or facts["updates"] > int(hooks.resumed.get("updates", 0))
+    if trained:
+        if hooks.saved_at != hooks.last_state.agent_steps:
+            hooks.checkpoint(hooks.last_state)  # the final one (after the last update)
+        info = hooks.info(hooks.last_state)
+    else:  # resumed at the end: only the final outputs are (re)written
+        info = {k: v for k, v in hooks.resumed.items() if k not in ("window", "args")}
+    hooks.close()
+    policy_path = ppo_lean.export_policy(nets, norm, config, args, out / "policy.zip", info)
+    plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS,
+                f"PPO, lean loop ({args.action_mode})")  # fmt: skip
+    return write_validation(out, config, policy_path, info, args.eval_episodes)
+
+
+class _RunHooks(Hooks):
+    """The run's learning curve, progress bar and checkpoints around the lean loop."""
+
+    def __init__(self, args: Args, config: Any, out: Path) -> None:
+        self.args, self.config, self.out = args, config, out
+        self.resumed: dict = {}  # the resumed checkpoint's state.json
+        self.last_state: Any = None  # the loop's State
+        self.saved_at = -1  # agent-steps of the last checkpoint saved
+        self.csv: Any = None
+        self.bar: Any = None
+
+    def start(self, nets: Any, norm: Any) -> None:
+        from uasep_env.training.rundir import CSV_FIELDS, ProgressLog
+
+        args, resumed = self.args, self.resumed
+        self.window: collections.deque = collections.deque(
+            (tuple(e) for e in resumed.get("window", ())), maxlen=200
+        )
+        steps = int(resumed.get("agent_steps", 0))
+        self.next_ckpt = (steps // args.checkpoint_every + 1) * args.checkpoint_every
+        self.csv = ProgressLog(self.out / "progress.csv", CSV_FIELDS)
+        if args.progress:
+            from tqdm import tqdm
+
+            self.bar = tqdm(
+                total=args.total_timesteps, initial=steps, unit="step", unit_scale=True,
+                desc=f"{args.action_mode} (lean)", dynamic_ncols=True,
+            )  # fmt: skip
+
+    def rollout_end(self, agent_steps: int) -> None:
+        if self.bar is not None:
+            self.bar.update(agent_steps - self.bar.n)
+
+    def update_end(self, state: Any) -> None:
+        from uasep_env.training.rundir import bar_postfix, window_summary
+
+        self.last_state = state
+        self.window.extend(state.finished)
+        s = window_summary(self.window)
+        self.csv.write({"agent_steps": state.agent_steps, "wall_s": round(state.wall_s, 2),
+                        "episodes": state.episodes, **s})  # fmt: skip
+        if self.bar is not None and s:
+            self.bar.set_postfix(**bar_postfix(s))
+        # The last one is saved at the end, not twice.
+        if self.next_ckpt <= state.agent_steps < self.args.total_timesteps:
+            self.checkpoint(state)
+            every = self.args.checkpoint_every
+            self.next_ckpt = (state.agent_steps // every + 1) * every
+
+    def info(self, state: Any) -> dict:
+        from uasep_env.training.rundir import window_summary
+
+        return {"agent_steps": int(state.agent_steps), "wall_s": state.wall_s,
+                "episodes": state.episodes, "updates": state.updates,
+                **window_summary(self.window)}  # fmt: skip
+
+    def checkpoint(self, state: Any) -> None:
+        from uasep_env.atomic import atomic_symlink
+
+        d = self.out / "checkpoints" / f"step_{state.agent_steps}"
+        window = [[float(x) for x in e] for e in self.window]
+        save_checkpoint(state, self.config, self.args, d, {**self.info(state), "window": window})
+        self.saved_at = state.agent_steps
+        atomic_symlink(d.name, self.out / "checkpoints" / "latest")  # once d is complete
+
+    def close(self) -> None:
+        if self.csv is not None:
+            self.csv.close()
+        if self.bar is not None:
+            self.bar.close()
