@@ -22,15 +22,12 @@ def _newton_terms(sig, off, cq):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202
-    """Nearest point of one ellipsoid, body frame: ``(x0, x1, x2, dist, n0, n1, n2)``.
+def _setup(q0, q1, q2, a0, a1, a2):  # noqa: ANN001, ANN202
+    """One point's solve before Newton's iterations (body frame, scaled, axes sorted).
 
-    Scalars only (no temporary arrays): allocation would dominate the arithmetic. Inlined,
-    so that a caller that keeps only the distance does not compute the rest.
+    Returns ``(scale, qs0, qs1, qs2, b0, b1, b2, m, am, off0, off1, off2, cq0, cq1, cq2,
+    sig_lo, sig, level)``: ``m`` the shortest axis, ``sig`` the first multiplier.
     """
-    g0 = -1.0 if q0 < 0.0 else 1.0
-    g1 = -1.0 if q1 < 0.0 else 1.0
-    g2 = -1.0 if q2 < 0.0 else 1.0
     qa0, qa1, qa2 = abs(q0), abs(q1), abs(q2)
     scale = max(max(a0, a1, a2), max(qa0, qa1, qa2))
     if not scale > 0.0:
@@ -56,26 +53,38 @@ def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202
     level = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
     guess = am * am * (level if math.isfinite(level) else 0.0) if am > 0.0 else 0.0
     sig = max(sig_lo, guess)
-    for _ in range(n_newton):
-        w20, w2s0 = _newton_terms(sig, off0, cq0)
-        w21, w2s1 = _newton_terms(sig, off1, cq1)
-        w22, w2s2 = _newton_terms(sig, off2, cq2)
-        f2 = w20 + w21 + w22
-        g = w2s0 + w2s1 + w2s2
-        if m == 0:
-            f2r, gr = f2 - w20, g - w2s0
-        elif m == 1:
-            f2r, gr = f2 - w21, g - w2s1
-        else:
-            f2r, gr = f2 - w22, g - w2s2
-        f = math.sqrt(f2)
-        fr = math.sqrt(max(f2r, 0.0))
-        step = f2 * (f - 1.0) / g if g > 0.0 else 0.0
-        step_r = f2r * (fr - 1.0) / gr if (gr > 0.0 and fr > 1.0) else -np.inf
-        nxt = max(sig_lo, sig + max(step, step_r))
-        if nxt == sig:
-            break  # a fixed point: the remaining iterations would not change a bit
-        sig = nxt
+    return (scale, qs0, qs1, qs2, b0, b1, b2, m, am, off0, off1, off2, cq0, cq1, cq2,
+            sig_lo, sig, level)  # fmt: skip
+
+
+@numba.njit(inline="always", **_JIT)
+def _newton(sig, sig_lo, m, off0, off1, off2, cq0, cq1, cq2):  # noqa: ANN001, ANN202
+    """One Newton iteration of the multiplier: the next ``sig`` (``sig`` itself: converged)."""
+    w20, w2s0 = _newton_terms(sig, off0, cq0)
+    w21, w2s1 = _newton_terms(sig, off1, cq1)
+    w22, w2s2 = _newton_terms(sig, off2, cq2)
+    f2 = w20 + w21 + w22
+    g = w2s0 + w2s1 + w2s2
+    if m == 0:
+        f2r, gr = f2 - w20, g - w2s0
+    elif m == 1:
+        f2r, gr = f2 - w21, g - w2s1
+    else:
+        f2r, gr = f2 - w22, g - w2s2
+    f = math.sqrt(f2)
+    fr = math.sqrt(max(f2r, 0.0))
+    step = f2 * (f - 1.0) / g if g > 0.0 else 0.0
+    step_r = f2r * (fr - 1.0) / gr if (gr > 0.0 and fr > 1.0) else -np.inf
+    return max(sig_lo, sig + max(step, step_r))
+
+
+@numba.njit(inline="always", **_JIT)
+def _finish(sig, scale, qs0, qs1, qs2, b0, b1, b2, m, am, off0, off1, off2, cq0, cq1, cq2, level):  # noqa: ANN001, ANN202
+    """The solve from its last multiplier, scaled body frame: ``(x0, x1, x2, dist, d0, d1, d2)``.
+
+    ``dist`` signed and scaled back; the point and the normal still in the first octant
+    (the caller puts the signs back).
+    """
     s0, s1, s2 = sig + off0, sig + off1, sig + off2
     w0 = cq0 / s0 if s0 > 0.0 and m != 0 else 0.0
     w1 = cq1 / s1 if s1 > 0.0 and m != 1 else 0.0
@@ -115,7 +124,28 @@ def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202
         d0 = 1.0 if m == 0 else 0.0
         d1 = 1.0 if m == 1 else 0.0
         d2 = 1.0 if m == 2 else 0.0
-    signed = (-dist if inside else dist) * scale
+    return x0, x1, x2, (-dist if inside else dist) * scale, d0, d1, d2
+
+
+@numba.njit(inline="always", **_JIT)
+def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202
+    """Nearest point of one ellipsoid, body frame: ``(x0, x1, x2, dist, n0, n1, n2)``.
+
+    Scalars only (no temporary arrays): allocation would dominate the arithmetic. Inlined,
+    so that a caller that keeps only the distance does not compute the rest.
+    """
+    g0 = -1.0 if q0 < 0.0 else 1.0
+    g1 = -1.0 if q1 < 0.0 else 1.0
+    g2 = -1.0 if q2 < 0.0 else 1.0
+    (scale, qs0, qs1, qs2, b0, b1, b2, m, am, off0, off1, off2, cq0, cq1, cq2, sig_lo, sig,
+     level) = _setup(q0, q1, q2, a0, a1, a2)  # fmt: skip
+    for _ in range(n_newton):
+        nxt = _newton(sig, sig_lo, m, off0, off1, off2, cq0, cq1, cq2)
+        if nxt == sig:
+            break  # a fixed point: the remaining iterations would not change a bit
+        sig = nxt
+    x0, x1, x2, signed, d0, d1, d2 = _finish(sig, scale, qs0, qs1, qs2, b0, b1, b2, m, am,
+                                             off0, off1, off2, cq0, cq1, cq2, level)  # fmt: skip
     return (
         x0 * scale * g0,
         x1 * scale * g1,
@@ -204,20 +234,87 @@ def nearest_on_ellipsoids(
     return x.reshape(*shape, 3), d.reshape(shape), n.reshape(*shape, 3)
 
 
-@numba.njit(inline="always", **_JIT)
-def _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
-    """Pair ``k`` of the flat ``(E, N, M)`` grid: point ``(e, i)`` against ellipsoid ``(e, j)``.
+#: Columns of a point's solve kept between Newton's sweeps: :func:`_setup`'s values.
+_WORK = 18
 
-    ``inf`` where the ellipsoid is not ``active``.
+
+@numba.njit(**_JIT)
+def _store(work, k, q0, q1, q2, a0, a1, a2):  # noqa: ANN001, ANN202
+    """Set up the solve of body-frame point ``q`` against semi-axes ``a`` in ``work[k]``."""
+    (scale, qs0, qs1, qs2, b0, b1, b2, m, am, off0, off1, off2, cq0, cq1, cq2, sig_lo, sig,
+     level) = _setup(q0, q1, q2, a0, a1, a2)  # fmt: skip
+    w = work[k]
+    w[0], w[1], w[2], w[3], w[4], w[5], w[6] = scale, qs0, qs1, qs2, b0, b1, b2
+    w[7], w[8], w[9], w[10], w[11] = float(m), am, off0, off1, off2
+    w[12], w[13], w[14], w[15], w[16], w[17] = cq0, cq1, cq2, sig_lo, sig, level
+
+
+@numba.njit(**_JIT)
+def _sweep(work, live, lo, hi, n_newton, out):  # noqa: ANN001, ANN202
+    """The signed distances of the solves set up in ``work[lo:hi]``, into ``out[lo:hi]``.
+
+    Each of Newton's iterations sweeps the points still moving: a point's own iterations
+    are :func:`_nearest_one`'s, in its order, and it leaves the sweep where that loop
+    breaks (a fixed point), so every distance is the same bit for bit. What changes is the
+    order of the work: one point's iterations are a chain of divisions and square roots
+    that each wait for the last, and a sweep interleaves the chains of independent points
+    (1.3-1.4x sooner on the 4096-environment batch's 12,288 points than point by point).
+    """
+    for k in range(lo, hi):
+        live[k] = k
+    n_live = hi - lo
+    for _ in range(n_newton):
+        kept = lo
+        for t in range(lo, lo + n_live):
+            k = live[t]
+            w = work[k]
+            sig = w[16]
+            nxt = _newton(sig, w[15], int(w[7]), w[9], w[10], w[11], w[12], w[13], w[14])
+            if nxt != sig:  # not a fixed point (NaN included, as the loop that breaks)
+                w[16] = nxt
+                live[kept] = k
+                kept += 1
+        n_live = kept - lo
+        if n_live == 0:
+            break
+    for k in range(lo, hi):
+        w = work[k]
+        out[k] = _finish(w[16], w[0], w[1], w[2], w[3], w[4], w[5], w[6], int(w[7]), w[8],
+                         w[9], w[10], w[11], w[12], w[13], w[14], w[17])[3]  # fmt: skip
+
+
+@numba.njit(inline="always", **_JIT)
+def _pairs_rows(e0, e1, points, centers, axes, cos_h, sin_h, active, n_newton, work, live, gaps, out):  # noqa: ANN001, ANN202, E501  # fmt: skip
+    """Rows ``e0:e1`` of the ``(E, N, M)`` grid: point ``(e, i)`` against ellipsoid ``(e, j)``.
+
+    ``inf`` where the ellipsoid is not ``active``; the others set up in the scratch rows
+    from ``e0 * N * M`` on, solved in one :func:`_sweep`, then put in place.
     """
     n, m = points.shape[1], centers.shape[1]
-    e = k // (n * m)
-    i = (k // m) % n
-    j = k % m
-    if not active[e, j]:
-        out[e, i, j] = np.inf
-        return
-    out[e, i, j] = _region_gap(points, e, i, centers, axes, cos_h, sin_h, j, n_newton)
+    lo = k = e0 * n * m
+    for e in range(e0, e1):
+        for i in range(n):
+            for j in range(m):
+                if not active[e, j]:
+                    out[e, i, j] = np.inf
+                    continue
+                cp = cos_h[e, j]
+                sp = sin_h[e, j]
+                d0 = points[e, i, 0] - centers[e, j, 0]
+                d1 = points[e, i, 1] - centers[e, j, 1]
+                d2 = points[e, i, 2] - centers[e, j, 2]
+                q0 = d0 * cp + d1 * sp
+                q1 = -d0 * sp + d1 * cp
+                _store(work, k, q0, q1, d2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2])
+                k += 1
+    _sweep(work, live, lo, k, n_newton, gaps)
+    k = lo
+    for e in range(e0, e1):
+        for i in range(n):
+            for j in range(m):
+                if active[e, j]:
+                    out[e, i, j] = gaps[k]
+                    k += 1
 
 
 # A plain call (LLVM may inline it), not numba's IR inlining: the solve inlined into the
@@ -235,16 +332,28 @@ def _region_gap(points, e, i, centers, axes, cos_h, sin_h, j, n_newton):  # noqa
     return _nearest_one(q0, q1, d2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2], n_newton)[3]
 
 
+#: Environments per task of the parallel loop over pairs (each task sweeps its own rows).
+_ROWS_PER_TASK = 64
+
+
 @numba.njit(**_JIT)
-def _pairs_serial(points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
-    for k in range(out.size):
-        _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out)
+def _pairs_serial(points, centers, axes, cos_h, sin_h, active, n_newton, work, live, gaps, out):  # noqa: ANN001, ANN202
+    _pairs_rows(0, points.shape[0], points, centers, axes, cos_h, sin_h, active, n_newton,
+                work, live, gaps, out)  # fmt: skip
 
 
 @numba.njit(parallel=True, **_JIT)
-def _pairs_parallel(points, centers, axes, cos_h, sin_h, active, n_newton, out):  # noqa: ANN001, ANN202
-    for k in numba.prange(out.size):
-        _pair_distance(k, points, centers, axes, cos_h, sin_h, active, n_newton, out)
+def _pairs_parallel(points, centers, axes, cos_h, sin_h, active, n_newton, work, live, gaps, out):  # noqa: ANN001, ANN202
+    n_rows = points.shape[0]
+    for c in numba.prange((n_rows + _ROWS_PER_TASK - 1) // _ROWS_PER_TASK):
+        e0 = c * _ROWS_PER_TASK
+        _pairs_rows(e0, min(e0 + _ROWS_PER_TASK, n_rows), points, centers, axes, cos_h, sin_h,
+                    active, n_newton, work, live, gaps, out)  # fmt: skip
+
+
+def _scratch(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(work, live, gaps)``: a sweep's scratch for ``k`` solves (:func:`_sweep`)."""
+    return np.empty((k, _WORK)), np.empty(k, dtype=np.int64), np.empty(k)
 
 
 def pairwise_distances(
@@ -319,5 +428,7 @@ def _region_loop(
     out = np.empty((e, n, centers.shape[1]))
     fn = _pairs_parallel if _parallel(out.size) else _pairs_serial
     c = frozen
-    fn(c(points), c(centers), c(axes), c(cos_h), c(sin_h), c(active), n_newton, out)
+    work, live, gaps = _scratch(out.size)
+    fn(c(points), c(centers), c(axes), c(cos_h), c(sin_h), c(active), n_newton, work, live,
+       gaps, out)  # fmt: skip
     return out

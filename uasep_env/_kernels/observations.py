@@ -10,7 +10,7 @@ import numba
 import numpy as np
 
 from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel, frozen
-from uasep_env._kernels.ellipsoids import _region_gap
+from uasep_env._kernels.ellipsoids import _ROWS_PER_TASK, _scratch, _store, _sweep
 
 #: Entries of the optional ``obstacle_class`` feature: one per code of
 #: ``uasep_env.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
@@ -161,16 +161,10 @@ def _observe_agent(e, i, frame, x, scales, clip, cols, region, n_newton, out):  
                 row[c + a] = 0.0
     col += cols.k_uavs * cols.uav_width
 
-    # Nearest obstacles by distance to their reachable region (stable, like the UAVs). The
-    # region is solved only for the obstacles observed: present, within the sensing range.
+    # Nearest obstacles by distance to their reachable region (stable, like the UAVs), the
+    # distances solved beforehand (_regions_rows).
     k_o, w = cols.k_obstacles, cols.obstacle_width
     kk = min(k_o, m)
-    for j in range(m if kk else 0):
-        key = np.inf
-        if x.active[e, j] and _gap(pos, e, i, x.obstacle_pos, j) <= sensing:
-            key = _region_gap(pos, e, i, x.pred_center, x.pred_axes, x.cos_h, x.sin_h, j,
-                              n_newton)  # fmt: skip
-        region[e, i, j] = key
     prev_d, prev_j = -np.inf, -1
     for s in range(kk):
         best_d, best_j = np.inf, m
@@ -266,20 +260,67 @@ _Columns = namedtuple(
 )
 
 
+@numba.njit(inline="always", **_JIT)
+def _regions_rows(e0, e1, x, sensing, cols, n_newton, work, live, gaps, region):  # noqa: ANN001, ANN202
+    """``region[e, i, j]``: agent ``i``'s distance to obstacle ``j``'s region, rows ``e0:e1``.
+
+    Solved only for the obstacles observed (present, within the sensing range; ``inf`` for
+    the others), and not at all for a layout without obstacles: set up in the scratch rows
+    from ``e0 * N * M`` on and solved in one sweep (:func:`~.ellipsoids._sweep`, each
+    distance :func:`~.ellipsoids._region_gap`'s bit for bit).
+    """
+    pos = x.pos
+    n, m = pos.shape[1], x.pred_center.shape[1]
+    if min(cols.k_obstacles, m) == 0:
+        return
+    c, ax, cos_h, sin_h = x.pred_center, x.pred_axes, x.cos_h, x.sin_h
+    lo = k = e0 * n * m
+    for e in range(e0, e1):
+        for i in range(n):
+            for j in range(m):
+                if x.active[e, j] and _gap(pos, e, i, x.obstacle_pos, j) <= sensing:
+                    cp = cos_h[e, j]
+                    sp = sin_h[e, j]
+                    d0 = pos[e, i, 0] - c[e, j, 0]
+                    d1 = pos[e, i, 1] - c[e, j, 1]
+                    d2 = pos[e, i, 2] - c[e, j, 2]
+                    q0 = d0 * cp + d1 * sp
+                    q1 = -d0 * sp + d1 * cp
+                    _store(work, k, q0, q1, d2, ax[e, j, 0], ax[e, j, 1], ax[e, j, 2])
+                    k += 1
+                    region[e, i, j] = np.nan  # solved below
+                else:
+                    region[e, i, j] = np.inf
+    _sweep(work, live, lo, k, n_newton, gaps)
+    k = lo
+    for e in range(e0, e1):
+        for i in range(n):
+            for j in range(m):
+                if math.isnan(region[e, i, j]):
+                    region[e, i, j] = gaps[k]
+                    k += 1
+
+
 @numba.njit(**_JIT)
-def _observe_serial(xt, scales, limit, ct, region, n_newton, out):  # noqa: ANN001, ANN202
+def _observe_serial(xt, scales, limit, ct, region, n_newton, work, live, gaps, out):  # noqa: ANN001, ANN202
     x = _Inputs(*xt)
     cols = _Columns(*ct)
+    _regions_rows(0, out.shape[0], x, scales[3], cols, n_newton, work, live, gaps, region)
     for e in range(out.shape[0]):
         _observe_env(e, x, scales, limit, cols, region, n_newton, out)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _observe_parallel(xt, scales, limit, ct, region, n_newton, out):  # noqa: ANN001, ANN202
+def _observe_parallel(xt, scales, limit, ct, region, n_newton, work, live, gaps, out):  # noqa: ANN001, ANN202
     x = _Inputs(*xt)  # one statement each: the parallel loop looks up the definitions
     cols = _Columns(*ct)
-    for e in numba.prange(out.shape[0]):
-        _observe_env(e, x, scales, limit, cols, region, n_newton, out)
+    n_rows = out.shape[0]
+    for c in numba.prange((n_rows + _ROWS_PER_TASK - 1) // _ROWS_PER_TASK):
+        e0 = c * _ROWS_PER_TASK
+        e1 = min(e0 + _ROWS_PER_TASK, n_rows)
+        _regions_rows(e0, e1, x, scales[3], cols, n_newton, work, live, gaps, region)
+        for e in range(e0, e1):
+            _observe_env(e, x, scales, limit, cols, region, n_newton, out)
 
 
 def assemble_observations(
@@ -300,8 +341,9 @@ def assemble_observations(
     # One compiled signature, whatever views the caller passes (common.frozen).
     x = tuple(map(frozen, inputs))
     fn = _observe_parallel if _parallel(out.shape[0] * out.shape[1]) else _observe_serial
-    region = np.empty((*out.shape[:2], inputs.pred_center.shape[1]))  # the agents' scratch
-    fn(x, scales, limit, columns, region, n_newton, out)
+    region = np.empty((*out.shape[:2], inputs.pred_center.shape[1]))  # the agents' distances
+    work, live, gaps = _scratch(region.size)
+    fn(x, scales, limit, columns, region, n_newton, work, live, gaps, out)
 
 
 @functools.lru_cache(maxsize=32)
