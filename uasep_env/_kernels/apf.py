@@ -17,7 +17,7 @@ import numba
 import numpy as np
 
 from uasep_env._kernels.common import _JIT, _maximum, frozen
-from uasep_env._kernels.ellipsoids import _nearest_one
+from uasep_env._kernels.ellipsoids import _WORK, _converge, _finished, _nearest_one, _store
 
 #: The features the APF reads, in the order of the kernel's column and scale arrays.
 _KEYS = (
@@ -138,21 +138,64 @@ def _will_enter(v0, v1, v2, c0, c1, c2, a0, a1, a2, cp, sp, times, safe_min, n_n
     return least < safe_min
 
 
+@numba.njit(inline="always", **_JIT)
+def _region(obs, b, k, cols, scales, stride, cos_h, sin_h):  # noqa: ANN001, ANN202
+    """Region ``k`` of row ``b``, and the UAV (at the origin) in its body frame.
+
+    ``(c0, c1, c2, a0, a1, a2, cp, sp, q0, q1, q2)``: the centre, the semi-axes (at least
+    1 mm), the heading's cosine and sine, the UAV's offset.
+    """
+    c0, c1, c2 = _read3(obs, b, cols[_CENTER], k, stride, scales[_CENTER])
+    a0, a1, a2 = _read3(obs, b, cols[_AXES], k, stride, scales[_AXES])
+    a0, a1, a2 = _maximum(a0, 1e-3), _maximum(a1, 1e-3), _maximum(a2, 1e-3)
+    cp, sp = cos_h[b, k], sin_h[b, k]
+    d0, d1, d2 = 0.0 - c0, 0.0 - c1, 0.0 - c2
+    q0 = d0 * cp + d1 * sp
+    q1 = -d0 * sp + d1 * cp
+    return c0, c1, c2, a0, a1, a2, cp, sp, q0, q1, d2
+
+
 @numba.njit(**_JIT)
-def _obstacles(obs, b, cols, scales, n_obs, stride, cos_h, sin_h, v, vh, speed, g, times, n_newton):  # noqa: ANN001, ANN202
+def _solve_regions(obs, cols, scales, n_obs, stride, cos_h, sin_h, n_newton, work, live):  # noqa: ANN001, ANN202
+    """Every row's distance to each region and the outward normal there (body frame).
+
+    ``work[b * n_obs + k, _WORK:]`` gets ``(distance, n0, n1, n2)``: :func:`_nearest_one`'s,
+    bit for bit, solved in one sweep (:func:`~.ellipsoids._converge`).
+    """
+    k = 0
+    for b in range(obs.shape[0]):
+        for j in range(n_obs):
+            _, _, _, a0, a1, a2, _, _, q0, q1, q2 = _region(obs, b, j, cols, scales, stride,
+                                                             cos_h, sin_h)  # fmt: skip
+            _store(work, k, q0, q1, q2, a0, a1, a2)
+            k += 1
+    _converge(work, live, 0, k, n_newton)
+    k = 0
+    for b in range(obs.shape[0]):
+        for j in range(n_obs):
+            _, _, _, _, _, _, _, _, q0, q1, q2 = _region(obs, b, j, cols, scales, stride,
+                                                         cos_h, sin_h)  # fmt: skip
+            _, _, _, dist, m0, m1, m2 = _finished(work, k)
+            # The signs _nearest_one puts back, as it does (a product, not a negation).
+            w = work[k]
+            w[_WORK] = dist
+            w[_WORK + 1] = m0 * (-1.0 if q0 < 0.0 else 1.0)
+            w[_WORK + 2] = m1 * (-1.0 if q1 < 0.0 else 1.0)
+            w[_WORK + 3] = m2 * (-1.0 if q2 < 0.0 else 1.0)
+            k += 1
+
+
+@numba.njit(**_JIT)
+def _obstacles(obs, b, cols, scales, n_obs, stride, cos_h, sin_h, v, vh, speed, g, times, n_newton, work):  # noqa: ANN001, ANN202, E501  # fmt: skip
     """The obstacle repulsion of row ``b`` (eqs. 23-25), summed over the obstacles."""
     t0 = t1 = t2 = 0.0
     for k in range(n_obs):
-        c0, c1, c2 = _read3(obs, b, cols[_CENTER], k, stride, scales[_CENTER])
-        a0, a1, a2 = _read3(obs, b, cols[_AXES], k, stride, scales[_AXES])
-        a0, a1, a2 = _maximum(a0, 1e-3), _maximum(a1, 1e-3), _maximum(a2, 1e-3)
+        c0, c1, c2, a0, a1, a2, cp, sp, _, _, _ = _region(obs, b, k, cols, scales, stride,
+                                                          cos_h, sin_h)  # fmt: skip
         present = obs[b, cols[_OBSTACLE_MASK] + k * stride] * scales[_OBSTACLE_MASK] > 0.5
-        cp, sp = cos_h[b, k], sin_h[b, k]
         # The UAV at the origin: its distance to the region and the outward normal.
-        d0, d1, d2 = 0.0 - c0, 0.0 - c1, 0.0 - c2
-        q0 = d0 * cp + d1 * sp
-        q1 = -d0 * sp + d1 * cp
-        _, _, _, dist, m0, m1, m2 = _nearest_one(q0, q1, d2, a0, a1, a2, n_newton)
+        r = work[b * n_obs + k]
+        dist, m0, m1, m2 = r[_WORK], r[_WORK + 1], r[_WORK + 2], r[_WORK + 3]
         n0 = m0 * cp - m1 * sp
         n1 = m0 * sp + m1 * cp
         n2 = m2
@@ -227,8 +270,11 @@ def _apf_rows(
     dt: float,
     v: np.ndarray,
     vh: np.ndarray,
+    work: np.ndarray,
+    live: np.ndarray,
     out: np.ndarray,
 ) -> None:
+    _solve_regions(obs, cols, scales, n_obs, obs_stride, cos_h, sin_h, n_newton, work, live)
     for b in range(obs.shape[0]):
         # Eqs. 19-22 (policies.nominal.plan_tracking).
         x0, x1, x2 = _read3(obs, b, cols[_GOAL], 0, 0, scales[_GOAL])
@@ -245,7 +291,7 @@ def _apf_rows(
         den = _maximum(speed, 1e-9)
         vh[0], vh[1], vh[2] = v[0] / den, v[1] / den, v[2] / den
         o0, o1, o2 = _obstacles(obs, b, cols, scales, n_obs, obs_stride, cos_h, sin_h, v, vh,
-                                speed, g, times, n_newton)  # fmt: skip
+                                speed, g, times, n_newton, work)  # fmt: skip
         i0, i1, i2 = _inner(obs, b, cols, scales, n_uav, uav_stride, g)
         a0, a1, a2 = (a0 + o0) + i0, (a1 + o1) + i1, (a2 + o2) + i2
         # Eq. 4 and the acceleration bound (policies.nominal.bounded_action).
@@ -319,8 +365,11 @@ def apf_actions(
     times = samples * gains.horizon  # type: ignore[attr-defined]
     out = np.empty((flat.shape[0], 3))
     scratch = np.empty((2, 3))  # the velocity and its direction
+    # Each region's solve, then its distance and normal (the last four columns).
+    work = np.empty((flat.shape[0] * n_obs, _WORK + 4))
+    live = np.empty(flat.shape[0] * n_obs, dtype=np.int64)
     _apf_rows(frozen(flat), cols, scales, n_uav, uav_stride, n_obs, obs_stride,
               frozen(np.cos(heading)), frozen(np.sin(heading)), _gains(gains), frozen(times),
               n_newton, float(max_speed), float(max_accel), float(dt), scratch[0], scratch[1],
-              out)  # fmt: skip
+              work, live, out)  # fmt: skip
     return out.reshape(*lead, 3)

@@ -250,15 +250,16 @@ def _store(work, k, q0, q1, q2, a0, a1, a2):  # noqa: ANN001, ANN202
 
 
 @numba.njit(**_JIT)
-def _sweep(work, live, lo, hi, n_newton, out):  # noqa: ANN001, ANN202
-    """The signed distances of the solves set up in ``work[lo:hi]``, into ``out[lo:hi]``.
+def _converge(work, live, lo, hi, n_newton):  # noqa: ANN001, ANN202
+    """Newton's iterations of the solves set up in ``work[lo:hi]``, swept.
 
     Each of Newton's iterations sweeps the points still moving: a point's own iterations
     are :func:`_nearest_one`'s, in its order, and it leaves the sweep where that loop
-    breaks (a fixed point), so every distance is the same bit for bit. What changes is the
-    order of the work: one point's iterations are a chain of divisions and square roots
-    that each wait for the last, and a sweep interleaves the chains of independent points
-    (1.3-1.4x sooner on the 4096-environment batch's 12,288 points than point by point).
+    breaks (a fixed point), so every solve ends with the same multiplier bit for bit. What
+    changes is the order of the work: one point's iterations are a chain of divisions and
+    square roots that each wait for the last, and a sweep interleaves the chains of
+    independent points (1.3-1.4x sooner on the 4096-environment batch's 12,288 points than
+    point by point).
     """
     for k in range(lo, hi):
         live[k] = k
@@ -277,10 +278,22 @@ def _sweep(work, live, lo, hi, n_newton, out):  # noqa: ANN001, ANN202
         n_live = kept - lo
         if n_live == 0:
             break
+
+
+@numba.njit(inline="always", **_JIT)
+def _finished(work, k):  # noqa: ANN001, ANN202
+    """:func:`_finish` of the converged solve ``work[k]``."""
+    w = work[k]
+    return _finish(w[16], w[0], w[1], w[2], w[3], w[4], w[5], w[6], int(w[7]), w[8], w[9],
+                   w[10], w[11], w[12], w[13], w[14], w[17])  # fmt: skip
+
+
+@numba.njit(**_JIT)
+def _sweep(work, live, lo, hi, n_newton, out):  # noqa: ANN001, ANN202
+    """The signed distances of the solves set up in ``work[lo:hi]``, into ``out[lo:hi]``."""
+    _converge(work, live, lo, hi, n_newton)
     for k in range(lo, hi):
-        w = work[k]
-        out[k] = _finish(w[16], w[0], w[1], w[2], w[3], w[4], w[5], w[6], int(w[7]), w[8],
-                         w[9], w[10], w[11], w[12], w[13], w[14], w[17])[3]  # fmt: skip
+        out[k] = _finished(work, k)[3]
 
 
 @numba.njit(inline="always", **_JIT)
