@@ -158,6 +158,17 @@ def _nearest_one(q0, q1, q2, a0, a1, a2, n_newton):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
+def _body_offset(points, e, i, centers, cos_h, sin_h, j):  # noqa: ANN001, ANN202
+    """``points[e, i]`` less centre ``j`` of row ``e``, in that ellipsoid's body frame."""
+    cp = cos_h[e, j]
+    sp = sin_h[e, j]
+    d0 = points[e, i, 0] - centers[e, j, 0]
+    d1 = points[e, i, 1] - centers[e, j, 1]
+    d2 = points[e, i, 2] - centers[e, j, 2]
+    return d0 * cp + d1 * sp, -d0 * sp + d1 * cp, d2
+
+
+@numba.njit(inline="always", **_JIT)
 def _solve_point(k, points, centers, axes, cos_h, sin_h, n_newton, x_out, d_out, n_out):  # noqa: ANN001, ANN202
     """Point ``k`` of a flat batch: rotate into the body frame, solve, rotate back."""
     cp = cos_h[k]
@@ -311,14 +322,8 @@ def _pairs_rows(e0, e1, points, centers, axes, cos_h, sin_h, active, n_newton, w
                 if not active[e, j]:
                     out[e, i, j] = np.inf
                     continue
-                cp = cos_h[e, j]
-                sp = sin_h[e, j]
-                d0 = points[e, i, 0] - centers[e, j, 0]
-                d1 = points[e, i, 1] - centers[e, j, 1]
-                d2 = points[e, i, 2] - centers[e, j, 2]
-                q0 = d0 * cp + d1 * sp
-                q1 = -d0 * sp + d1 * cp
-                _store(work, k, q0, q1, d2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2])
+                q0, q1, q2 = _body_offset(points, e, i, centers, cos_h, sin_h, j)
+                _store(work, k, q0, q1, q2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2])
                 k += 1
     _sweep(work, live, lo, k, n_newton, gaps)
     k = lo
@@ -335,14 +340,8 @@ def _pairs_rows(e0, e1, points, centers, axes, cos_h, sin_h, active, n_newton, w
 @numba.njit(**_JIT)
 def _region_gap(points, e, i, centers, axes, cos_h, sin_h, j, n_newton):  # noqa: ANN001, ANN202
     """Signed distance from ``points[e, i]`` to ellipsoid ``j`` of row ``e``."""
-    cp = cos_h[e, j]
-    sp = sin_h[e, j]
-    d0 = points[e, i, 0] - centers[e, j, 0]
-    d1 = points[e, i, 1] - centers[e, j, 1]
-    d2 = points[e, i, 2] - centers[e, j, 2]
-    q0 = d0 * cp + d1 * sp
-    q1 = -d0 * sp + d1 * cp
-    return _nearest_one(q0, q1, d2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2], n_newton)[3]
+    q0, q1, q2 = _body_offset(points, e, i, centers, cos_h, sin_h, j)
+    return _nearest_one(q0, q1, q2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2], n_newton)[3]
 
 
 #: Environments per task of the parallel loop over pairs (each task sweeps its own rows).

@@ -10,7 +10,13 @@ import numba
 import numpy as np
 
 from uasep_env._kernels.common import _JIT, _gap, _norm3, _parallel, frozen
-from uasep_env._kernels.ellipsoids import _ROWS_PER_TASK, _scratch, _store, _sweep
+from uasep_env._kernels.ellipsoids import (
+    _ROWS_PER_TASK,
+    _body_offset,
+    _scratch,
+    _store,
+    _sweep,
+)
 
 #: Entries of the optional ``obstacle_class`` feature: one per code of
 #: ``uasep_env.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
@@ -279,14 +285,8 @@ def _regions_rows(e0, e1, x, sensing, cols, n_newton, work, live, gaps, region):
         for i in range(n):
             for j in range(m):
                 if x.active[e, j] and _gap(pos, e, i, x.obstacle_pos, j) <= sensing:
-                    cp = cos_h[e, j]
-                    sp = sin_h[e, j]
-                    d0 = pos[e, i, 0] - c[e, j, 0]
-                    d1 = pos[e, i, 1] - c[e, j, 1]
-                    d2 = pos[e, i, 2] - c[e, j, 2]
-                    q0 = d0 * cp + d1 * sp
-                    q1 = -d0 * sp + d1 * cp
-                    _store(work, k, q0, q1, d2, ax[e, j, 0], ax[e, j, 1], ax[e, j, 2])
+                    q0, q1, q2 = _body_offset(pos, e, i, c, cos_h, sin_h, j)
+                    _store(work, k, q0, q1, q2, ax[e, j, 0], ax[e, j, 1], ax[e, j, 2])
                     k += 1
                     region[e, i, j] = np.nan  # solved below
                 else:

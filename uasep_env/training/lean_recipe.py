@@ -139,27 +139,16 @@ def train(args: Args, plugin: Any = None) -> dict:
     """
     if plugin is not None:
         raise ValueError(f"trainer 'lean': the {plugin.title} recipe trains on SB3 only")
-    import torch
-
     from uasep_env.training import ppo_lean
-    from uasep_env.training.args import make_env_config
     from uasep_env.training.rundir import (
         CSV_FIELDS,
-        check_checkpoint,
-        check_trainer,
         plot_curves,
-        prepare_out_dir,
         rewind,
+        start_run,
         write_validation,
     )
 
-    torch.set_num_threads(args.torch_threads)
-    config = make_env_config(args)
-    out = Path(args.out_dir)
-    resume = check_checkpoint(Path(args.resume)) if args.resume else None
-    if resume is not None:
-        check_trainer(resume, args)
-    prepare_out_dir(out, args.resume, args.overwrite)
+    config, out, resume = start_run(args)
     hooks = _RunHooks(args, config, out)
 
     def prepare(state: Any) -> None:

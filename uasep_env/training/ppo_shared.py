@@ -69,7 +69,6 @@ from uasep_env.training.args import parse_args as _parse_args
 from uasep_env.training.rundir import (
     CSV_FIELDS,
     bar_postfix,
-    check_trainer,
     export_actor,
     load_normalization,
     normalization_bytes,
@@ -373,18 +372,11 @@ def train(args: Args, plugin: Any = None) -> dict:
         from uasep_env.training import lean_recipe
 
         return lean_recipe.train(args, plugin)
-    import torch  # lazy: the training extra
-    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.callbacks import CallbackList  # lazy: the training extra
 
-    from uasep_env.training.rundir import check_checkpoint, plot_curves, prepare_out_dir, rewind
+    from uasep_env.training.rundir import plot_curves, rewind, start_run
 
-    torch.set_num_threads(args.torch_threads)
-    config = make_env_config(args)
-    out = Path(args.out_dir)
-    resume = check_checkpoint(Path(args.resume)) if args.resume else None
-    if resume is not None:
-        check_trainer(resume, args)
-    prepare_out_dir(out, args.resume, args.overwrite)
+    config, out, resume = start_run(args)
     venv, model = build(args, config)
     resumed: dict = {}
     if resume is not None:

@@ -58,6 +58,26 @@ class RunError(SystemExit):
         super().__init__(f"{Path(sys.argv[0]).name}: error: {message}")
 
 
+def start_run(args: Args) -> tuple[Any, Path, Path | None]:
+    """What every PPO trainer does first: ``(config, out_dir, checkpoint to resume or None)``.
+
+    Sets torch's threads, builds the env config, checks the checkpoint (and that it is
+    this trainer's) before the output folder is claimed (:func:`prepare_out_dir`).
+    """
+    import torch
+
+    from uasep_env.training.args import make_env_config
+
+    torch.set_num_threads(args.torch_threads)
+    config = make_env_config(args)
+    out = Path(args.out_dir)
+    resume = check_checkpoint(Path(args.resume)) if args.resume else None
+    if resume is not None:
+        check_trainer(resume, args)
+    prepare_out_dir(out, args.resume, args.overwrite)
+    return config, out, resume
+
+
 def prepare_out_dir(out: Path, resume: str, overwrite: bool) -> None:
     """Refuse to mix runs: check (or clear, with ``overwrite``) the output folder.
 
