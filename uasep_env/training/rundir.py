@@ -42,7 +42,7 @@ import numpy as np
 
 from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write, fsync_dir
 from uasep_env.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder
-from uasep_env.training.args import Args, hidden
+from uasep_env.training.args import Args, hidden, make_env_config
 
 #: What a run writes in its folder (``--overwrite`` deletes these, and only these).
 RUN_FILES = ("progress.csv", "curves.png", "policy.zip", "validation.json")
@@ -65,8 +65,6 @@ def start_run(args: Args) -> tuple[Any, Path, Path | None]:
     this trainer's) before the output folder is claimed (:func:`prepare_out_dir`).
     """
     import torch
-
-    from uasep_env.training.args import make_env_config
 
     torch.set_num_threads(args.torch_threads)
     config = make_env_config(args)
