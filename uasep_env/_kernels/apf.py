@@ -157,10 +157,11 @@ def _region(obs, b, k, cols, scales, stride, cos_h, sin_h):  # noqa: ANN001, ANN
 
 @numba.njit(**_JIT)
 def _solve_regions(obs, cols, scales, n_obs, stride, cos_h, sin_h, n_newton, work, live):  # noqa: ANN001, ANN202
-    """Every row's distance to each region and the outward normal there (body frame).
+    """Every row's solve against each region, converged in one sweep.
 
-    ``work[b * n_obs + k, _WORK:]`` gets ``(distance, n0, n1, n2)``: :func:`_nearest_one`'s,
-    bit for bit, solved in one sweep (:func:`~.ellipsoids._converge`).
+    ``work[b * n_obs + k]`` is row ``b``'s against region ``k`` (:func:`~.ellipsoids._store`,
+    :func:`~.ellipsoids._converge`); :func:`_obstacles` finishes it as
+    :func:`_nearest_one` would, bit for bit.
     """
     k = 0
     for b in range(obs.shape[0]):
@@ -170,19 +171,6 @@ def _solve_regions(obs, cols, scales, n_obs, stride, cos_h, sin_h, n_newton, wor
             _store(work, k, q0, q1, q2, a0, a1, a2)
             k += 1
     _converge(work, live, 0, k, n_newton)
-    k = 0
-    for b in range(obs.shape[0]):
-        for j in range(n_obs):
-            _, _, _, _, _, _, _, _, q0, q1, q2 = _region(obs, b, j, cols, scales, stride,
-                                                         cos_h, sin_h)  # fmt: skip
-            _, _, _, dist, m0, m1, m2 = _finished(work, k)
-            # The signs _nearest_one puts back, as it does (a product, not a negation).
-            w = work[k]
-            w[_WORK] = dist
-            w[_WORK + 1] = m0 * (-1.0 if q0 < 0.0 else 1.0)
-            w[_WORK + 2] = m1 * (-1.0 if q1 < 0.0 else 1.0)
-            w[_WORK + 3] = m2 * (-1.0 if q2 < 0.0 else 1.0)
-            k += 1
 
 
 @numba.njit(**_JIT)
@@ -190,12 +178,15 @@ def _obstacles(obs, b, cols, scales, n_obs, stride, cos_h, sin_h, v, vh, speed, 
     """The obstacle repulsion of row ``b`` (eqs. 23-25), summed over the obstacles."""
     t0 = t1 = t2 = 0.0
     for k in range(n_obs):
-        c0, c1, c2, a0, a1, a2, cp, sp, _, _, _ = _region(obs, b, k, cols, scales, stride,
-                                                          cos_h, sin_h)  # fmt: skip
+        c0, c1, c2, a0, a1, a2, cp, sp, q0, q1, q2 = _region(obs, b, k, cols, scales, stride,
+                                                             cos_h, sin_h)  # fmt: skip
         present = obs[b, cols[_OBSTACLE_MASK] + k * stride] * scales[_OBSTACLE_MASK] > 0.5
         # The UAV at the origin: its distance to the region and the outward normal.
-        r = work[b * n_obs + k]
-        dist, m0, m1, m2 = r[_WORK], r[_WORK + 1], r[_WORK + 2], r[_WORK + 3]
+        _, _, _, dist, m0, m1, m2 = _finished(work, b * n_obs + k)
+        # The signs _nearest_one puts back, as it does (a product, not a negation).
+        m0 = m0 * (-1.0 if q0 < 0.0 else 1.0)
+        m1 = m1 * (-1.0 if q1 < 0.0 else 1.0)
+        m2 = m2 * (-1.0 if q2 < 0.0 else 1.0)
         n0 = m0 * cp - m1 * sp
         n1 = m0 * sp + m1 * cp
         n2 = m2
@@ -365,8 +356,7 @@ def apf_actions(
     times = samples * gains.horizon  # type: ignore[attr-defined]
     out = np.empty((flat.shape[0], 3))
     scratch = np.empty((2, 3))  # the velocity and its direction
-    # Each region's solve, then its distance and normal (the last four columns).
-    work = np.empty((flat.shape[0] * n_obs, _WORK + 4))
+    work = np.empty((flat.shape[0] * n_obs, _WORK))  # each region's solve
     live = np.empty(flat.shape[0] * n_obs, dtype=np.int64)
     _apf_rows(frozen(flat), cols, scales, n_uav, uav_stride, n_obs, obs_stride,
               frozen(np.cos(heading)), frozen(np.sin(heading)), _gains(gains), frozen(times),

@@ -335,15 +335,6 @@ def _pairs_rows(e0, e1, points, centers, axes, cos_h, sin_h, active, n_newton, w
                     k += 1
 
 
-# A plain call (LLVM may inline it), not numba's IR inlining: the solve inlined into the
-# observations' kernel, itself inlined, made that kernel take 10 s to compile, not 4.
-@numba.njit(**_JIT)
-def _region_gap(points, e, i, centers, axes, cos_h, sin_h, j, n_newton):  # noqa: ANN001, ANN202
-    """Signed distance from ``points[e, i]`` to ellipsoid ``j`` of row ``e``."""
-    q0, q1, q2 = _body_offset(points, e, i, centers, cos_h, sin_h, j)
-    return _nearest_one(q0, q1, q2, axes[e, j, 0], axes[e, j, 1], axes[e, j, 2], n_newton)[3]
-
-
 #: Environments per task of the parallel loop over pairs (each task sweeps its own rows).
 _ROWS_PER_TASK = 64
 

@@ -71,7 +71,7 @@ def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_env(e, x, scales, limit, cols, region, n_newton, out):  # noqa: ANN001, ANN202
+def _observe_env(e, x, scales, limit, cols, region, out):  # noqa: ANN001, ANN202
     """Environment ``e`` of :func:`uasep_env.observation._assemble`, every agent.
 
     ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays, ``cols`` the
@@ -88,7 +88,7 @@ def _observe_env(e, x, scales, limit, cols, region, n_newton, out):  # noqa: ANN
     ct, st, cp, sp = _frame(mv0, mv1, mv2, d[e, 0], d[e, 1], d[e, 2], scales[4])
     frame = (c0, c1, c2, mv0, mv1, mv2, ct, st, cp, sp)
     for i in range(pos.shape[1]):
-        _observe_agent(e, i, frame, x, scales, limit[0], cols, region, n_newton, out)
+        _observe_agent(e, i, frame, x, scales, limit[0], cols, region, out)
 
 
 @numba.njit(**_JIT)
@@ -108,7 +108,7 @@ def _put1(row, col, v, clip):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
-def _observe_agent(e, i, frame, x, scales, clip, cols, region, n_newton, out):  # noqa: ANN001, ANN202
+def _observe_agent(e, i, frame, x, scales, clip, cols, region, out):  # noqa: ANN001, ANN202
     """UAV ``i`` of environment ``e``; ``frame`` is the formation's, from :func:`_observe_env`.
 
     Every feature is written at its column of ``cols`` relative to its block, and skipped
@@ -273,7 +273,7 @@ def _regions_rows(e0, e1, x, sensing, cols, n_newton, work, live, gaps, region):
     Solved only for the obstacles observed (present, within the sensing range; ``inf`` for
     the others), and not at all for a layout without obstacles: set up in the scratch rows
     from ``e0 * N * M`` on and solved in one sweep (:func:`~.ellipsoids._sweep`, each
-    distance :func:`~.ellipsoids._region_gap`'s bit for bit).
+    distance :func:`~.ellipsoids._nearest_one`'s bit for bit).
     """
     pos = x.pos
     n, m = pos.shape[1], x.pred_center.shape[1]
@@ -307,7 +307,7 @@ def _observe_serial(xt, scales, limit, ct, region, n_newton, work, live, gaps, o
     cols = _Columns(*ct)
     _regions_rows(0, out.shape[0], x, scales[3], cols, n_newton, work, live, gaps, region)
     for e in range(out.shape[0]):
-        _observe_env(e, x, scales, limit, cols, region, n_newton, out)
+        _observe_env(e, x, scales, limit, cols, region, out)
 
 
 @numba.njit(parallel=True, **_JIT)
@@ -320,7 +320,7 @@ def _observe_parallel(xt, scales, limit, ct, region, n_newton, work, live, gaps,
         e1 = min(e0 + _ROWS_PER_TASK, n_rows)
         _regions_rows(e0, e1, x, scales[3], cols, n_newton, work, live, gaps, region)
         for e in range(e0, e1):
-            _observe_env(e, x, scales, limit, cols, region, n_newton, out)
+            _observe_env(e, x, scales, limit, cols, region, out)
 
 
 def assemble_observations(
