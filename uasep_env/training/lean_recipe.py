@@ -28,10 +28,7 @@ refuse ``--trainer lean``, and so does ``--tensorboard`` (SB3's logger).
 from __future__ import annotations
 
 import collections
-import dataclasses
 import io
-import os
-import shutil
 from pathlib import Path
 from typing import Any
 
@@ -47,8 +44,7 @@ _PARTS = ("pi", "vf", "mu", "v")
 def save_checkpoint(state: Any, config: Any, args: Args, directory: Path, info: dict) -> None:
     """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
 
-    Written under a temporary name and renamed into place when complete
-    (:func:`uasep_env.training.rundir.publish_dir`); ``state.json`` last.
+    Complete or not at all (:func:`uasep_env.training.rundir.save_checkpoint_dir`).
 
     Args:
         state: The run's :class:`~uasep_env.training.ppo_lean.State`.
@@ -57,24 +53,17 @@ def save_checkpoint(state: Any, config: Any, args: Args, directory: Path, info: 
         directory: The checkpoint folder (``checkpoints/step_N``).
         info: The counters and figures for ``state.json`` (the options are added).
     """
-    from uasep_env.training.rundir import publish_dir
+    from uasep_env.training.rundir import save_checkpoint_dir
 
-    directory.parent.mkdir(parents=True, exist_ok=True)
-    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
-        _write_checkpoint(state, config, args, tmp, info)
-        publish_dir(tmp, directory)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)  # the previous checkpoint stays as it was
-        raise
+    save_checkpoint_dir(
+        directory, lambda tmp: _write_checkpoint(state, config, args, tmp, info), info, args
+    )
 
 
 def _write_checkpoint(state: Any, config: Any, args: Args, tmp: Path, info: dict) -> None:
     import torch
 
     from uasep_env.atomic import atomic_write
-    from uasep_env.jsonio import dumps
     from uasep_env.training import ppo_lean
     from uasep_env.training.rundir import normalization_bytes
 
@@ -90,8 +79,6 @@ def _write_checkpoint(state: Any, config: Any, args: Args, tmp: Path, info: dict
     atomic_write(tmp / "state.pt", buf.getvalue())
     atomic_write(tmp / "normalization.npz", normalization_bytes(state.norm))
     ppo_lean.export_policy(state.nets, state.norm, config, args, tmp / "policy.zip", info)
-    text = dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
-    atomic_write(tmp / "state.json", text)
 
 
 def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:

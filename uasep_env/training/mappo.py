@@ -39,11 +39,8 @@ Options of ``ppo_shared.py`` MAPPO does not have (``--critic-warmup``, ``--norm-
 from __future__ import annotations
 
 import collections
-import dataclasses
 import io
 import json
-import os
-import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -314,19 +311,14 @@ def save_checkpoint(
 ) -> None:
     """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
 
-    As ``ppo_shared.save_checkpoint``: written under a temporary name and renamed into place
-    when complete (:func:`uasep_env.training.rundir.publish_dir`), ``state.json`` last.
+    Complete or not at all (:func:`uasep_env.training.rundir.save_checkpoint_dir`).
     """
     import torch
 
     from uasep_env.atomic import atomic_write
-    from uasep_env.jsonio import dumps
-    from uasep_env.training.rundir import publish_dir
+    from uasep_env.training.rundir import save_checkpoint_dir
 
-    directory.parent.mkdir(parents=True, exist_ok=True)
-    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
+    def write(tmp: Path) -> None:
         buf = io.BytesIO()
         torch.save({"agent": _modules(agent), "torch_rng": torch.get_rng_state()}, buf)
         atomic_write(tmp / "state.pt", buf.getvalue())
@@ -335,13 +327,8 @@ def save_checkpoint(
         np.savez(buf, obs_mean=o.mean, obs_var=o.var, obs_count=o.count)
         atomic_write(tmp / "normalization.npz", buf.getvalue())
         export_policy(agent, venv, config, args, tmp / "policy.zip", info)
-        atomic_write(
-            tmp / "state.json", dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
-        )
-        publish_dir(tmp, directory)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)  # the previous checkpoint stays as it was
-        raise
+
+    save_checkpoint_dir(directory, write, info, args)
 
 
 def load_checkpoint(agent: Any, venv: Any, directory: Path) -> dict:

@@ -50,11 +50,8 @@ Requires the ``train`` extra (install ``torch==2.13.0`` first).
 from __future__ import annotations
 
 import collections
-import dataclasses
 import io
 import json
-import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -177,22 +174,14 @@ def save_checkpoint(
 ) -> None:
     """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
 
-    The folder is written under a temporary name and renamed into place when complete
-    (:func:`uasep_env.training.rundir.publish_dir`), so ``directory`` is either the old
-    checkpoint or the new one; ``state.json`` is written last (a folder without it is
-    incomplete).
+    Complete or not at all (:func:`uasep_env.training.rundir.save_checkpoint_dir`: written
+    under a temporary name, ``state.json`` last, renamed into place).
     """
-    from uasep_env.training.rundir import publish_dir
+    from uasep_env.training.rundir import save_checkpoint_dir
 
-    directory.parent.mkdir(parents=True, exist_ok=True)
-    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
-        _write_checkpoint(model, venv, config, args, tmp, info)
-        publish_dir(tmp, directory)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)  # the previous checkpoint stays as it was
-        raise
+    save_checkpoint_dir(
+        directory, lambda tmp: _write_checkpoint(model, venv, config, args, tmp, info), info, args
+    )
 
 
 def _write_checkpoint(
@@ -201,7 +190,6 @@ def _write_checkpoint(
     import torch
 
     from uasep_env.atomic import atomic_write
-    from uasep_env.jsonio import dumps
 
     state = {
         "policy": model.policy.state_dict(),
@@ -215,8 +203,6 @@ def _write_checkpoint(
     atomic_write(tmp / "state.pt", buf.getvalue())
     atomic_write(tmp / "normalization.npz", normalization_bytes(venv))
     export_policy(model, venv, config, args, tmp / "policy.zip", info)
-    state = dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
-    atomic_write(tmp / "state.json", state)
 
 
 def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:

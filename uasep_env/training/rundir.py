@@ -35,6 +35,7 @@ import json
 import os
 import shutil
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +75,32 @@ def start_run(args: Args) -> tuple[Any, Path, Path | None]:
         check_trainer(resume, args)
     prepare_out_dir(out, args.resume, args.overwrite)
     return config, out, resume
+
+
+def save_checkpoint_dir(
+    directory: Path, write: Callable[[Path], None], info: dict, args: Any
+) -> None:
+    """A checkpoint folder, complete or not at all: what every trainer's checkpoint does.
+
+    ``write(tmp)`` writes the trainer's files into a temporary folder beside ``directory``;
+    ``state.json`` (``info`` and the options ``args``) is written last (a folder without it
+    is incomplete), then the folder is renamed into place (:func:`publish_dir`), so
+    ``directory`` is either the old checkpoint or the new one. On any error the temporary
+    folder goes and the previous checkpoint stays as it was.
+    """
+    from uasep_env.jsonio import dumps
+
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        write(tmp)
+        state = dumps({**info, "args": dataclasses.asdict(args)}, indent=2)
+        atomic_write(tmp / "state.json", state)
+        publish_dir(tmp, directory)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def prepare_out_dir(out: Path, resume: str, overwrite: bool) -> None:
