@@ -8,13 +8,14 @@ Steps the native vector env (``gymnasium.make_vec("uasep/Formation-v2")``, 3 UAV
 obstacle) in fresh processes and prints agent-steps/s for
 
 * one process, threads decided by the package (``UASEP_THREADS``/``UASEP_WORKERS`` unset);
-* one process with the parallel loops on every core (``UASEP_THREADS`` = the cores, what
-  numba's default thread pool did before the package decided);
+* one process with the serial loops (``UASEP_THREADS=1``);
 * two processes side by side, as ``train/seeds.py --parallel 2`` and ``uasep-eval --workers 2``
   start them (``UASEP_WORKERS=2``: each takes its share of the cores);
-* two processes side by side, each with the parallel loops on every core (oversubscribed);
+* two processes side by side, each with the parallel loops on every core (``UASEP_THREADS``
+  = the cores: two scripts started by hand, oversubscribing the cores);
 
-then the ratios: the package's choice against the parallel loops, alone and side by side.
+then the ratios: the package's choice against the serial loops alone, and the processes
+that share the cores against those that oversubscribe them.
 Needs numba (``pip install -e ".[fast]"``); each process compiles or loads the kernels first
 (not timed).
 """
@@ -91,7 +92,7 @@ def main() -> None:
     clean = {"UASEP_THREADS": "", "UASEP_WORKERS": ""}
     cases = {
         "one process, package's choice": (1, clean),
-        f"one process, parallel loops on {cores} cores": (1, {**clean, "UASEP_THREADS": cores}),
+        "one process, serial loops": (1, {**clean, "UASEP_THREADS": "1"}),
         "two side by side, package's choice": (2, {**clean, "UASEP_WORKERS": "2"}),
         f"two side by side, parallel loops on {cores} cores each": (
             2,
@@ -110,8 +111,8 @@ def main() -> None:
     def mean(k: int) -> float:
         return sum(rates[names[k]]) / len(rates[names[k]])
 
-    print(f"ratio alone, package's choice / parallel loops:        {mean(0) / mean(1):.2f}x")
-    print(f"ratio side by side, package's choice / parallel loops: {mean(2) / mean(3):.2f}x")
+    print(f"ratio alone, package's choice / serial loops:          {mean(0) / mean(1):.2f}x")
+    print(f"ratio side by side, shared cores / oversubscribed:     {mean(2) / mean(3):.2f}x")
 
 
 if __name__ == "__main__":

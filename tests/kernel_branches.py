@@ -20,8 +20,8 @@ import sys
 import types
 from pathlib import Path
 
-KERNEL_MODULES = ("apf", "common", "ellipse_fit", "ellipsoids", "network", "observations",
-                  "physics", "plan", "rewards", "separations")  # fmt: skip
+KERNEL_MODULES = ("apf", "common", "ellipse_fit", "ellipsoids", "network", "noise",
+                  "observations", "physics", "plan", "rewards", "separations")  # fmt: skip
 
 
 def _functions(modules: list[types.ModuleType]) -> list[types.CodeType]:

@@ -19,6 +19,7 @@ from uasep_env import (  # noqa: F401
     estimation,
     formation,
     geometry,
+    noise,
     observation,
     obstacles,
     outcome,
@@ -103,6 +104,8 @@ def _copy(x):
         return type(x)(*(_copy(a) for a in x))
     if isinstance(x, tuple):
         return tuple(_copy(a) for a in x)
+    if isinstance(x, list):  # generators: each copied with its state
+        return [copy.deepcopy(g) for g in x]
     if isinstance(x, obstacles.ObstacleState):
         state = copy.copy(x)
         for name, value in vars(x).items():
@@ -136,6 +139,10 @@ def _assert_same(got, want, where: str) -> None:
             _assert_same(g, w, f"{where}[{k}]")
     elif isinstance(want, np.ndarray):
         _assert_bits(got, want, where)
+    elif isinstance(want, list):  # generators: left in the same state
+        assert len(got) == len(want), where
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_equal(g.bit_generator.state, w.bit_generator.state, err_msg=where)
     elif isinstance(want, obstacles.ObstacleState):  # updated in place: every attribute
         assert vars(got).keys() == vars(want).keys(), where
         for name, value in vars(want).items():
@@ -379,6 +386,25 @@ def _case_dense():
     return [(x, w, rng.normal(0, 0.1, size=128).astype(np.float32).astype(np.float64))]
 
 
+def _case_noise():
+    """Noise blocks: numpy's every path (tail, wedges, retries), chunks, other generators.
+
+    The first case's 18,816 Gaussians take the ziggurat's rare paths (the tail beyond the
+    base strip about once in 3,000 draws, and a second try in it from seed 11); the second
+    refills 70 environments (more than one chunk of the kernel's scratch); the third holds
+    a Philox generator, which the kernel declines (numpy draws, the reference).
+    """
+    rngs = [np.random.default_rng(s) for s in (3, 11, 8, 13, 21, 34, 55)]
+    std = np.random.default_rng(30).uniform(0.1, 3.0, size=49)
+    first = (rngs, np.array([0, 2, 3, 6, 1, 4]), std, np.zeros((64, 7, 49)), np.zeros((64, 7, 2)))
+    many = [np.random.default_rng(100 + s) for s in range(80)]
+    envs = np.r_[np.arange(0, 80, 2), np.arange(1, 61, 2)]
+    second = (many, envs, std[:3], np.full((2, 80, 3), 7.0), np.full((2, 80, 4), -1.0))
+    mixed = [np.random.default_rng(7), np.random.Generator(np.random.Philox(7))]
+    third = (mixed, np.arange(2), std[:5], np.zeros((3, 2, 5)), np.zeros((3, 2, 1)))
+    return [first, second, third]
+
+
 def _case_double_integrator():
     rng = np.random.default_rng(24)
     k, v_max, a_max, dt = 600, 12.0, 4.0, 0.1
@@ -591,6 +617,7 @@ TWIN_CASES = {
     "fit_ellipse": _case_fit_ellipse,
     "physics_step": _case_physics,
     "step_outcome": _case_outcome,
+    "refill_noise": _case_noise,
 }
 
 
@@ -598,6 +625,7 @@ TWIN_CASES = {
 IN_PLACE = {
     "assemble_observations": lambda args: args[2:],
     "kalman_correct": lambda args: args[:2],
+    "refill_noise": lambda args: args[3:],
     "obstacle_step": lambda args: (args[0].pos, args[0].heading, args[0].climb_rate),
     "physics_step": lambda args: (
         *(a for a in args[0] if a.dtype == np.float64),
@@ -689,6 +717,24 @@ def test_public_functions_use_the_kernel_with_broadcasting(monkeypatch):
     assert fast[0].shape == (5, 4, 2) and fast[1].shape == (5, 4, 2, 3)
     for f, s in zip((*fast, *near_fast), (*slow, *near_slow), strict=True):
         _assert_bits(f, s)
+
+
+def test_noise_kernel_draws_itself_and_declines_what_it_cannot_read(monkeypatch):
+    """The kernel draws PCG64's numbers itself here (so the twin cases compare two codes),
+    and where it could not read the generators' memory it declines and numpy draws."""
+    from uasep_env._kernels import noise as kernel
+
+    args = _case_noise()[0]
+    assert kernel._native_pcg64()  # numpy's native 128-bit layout (x86-64 Linux)
+    assert kernel.refill_noise(*_copy(args)) is None  # drawn by the kernel
+    monkeypatch.setattr(kernel, "_DRAWS_FROM", ())
+    got = _copy(args)
+    assert kernel.refill_noise(*got) is NotImplemented
+    assert not got[3].any()  # nothing drawn
+    want = _copy(args)
+    noise.refill_noise.reference(*want)
+    noise.refill_noise(*got)  # the dispatch: numpy's draws
+    _assert_same(got, want, "declined")
 
 
 def test_disabled_by_environment_variable(monkeypatch):
@@ -1077,14 +1123,22 @@ def test_install_time_warm_up_command_runs_without_numba():
 
 def test_threads_are_the_process_share_of_its_cores():
     """N processes started side by side never ask for more threads than the cores."""
-    from uasep_env.cores import PARALLEL_MIN_THREADS, decide_threads
+    from uasep_env.cores import PARALLEL_MIN_THREADS, PARALLEL_MIN_THREADS_OTHER, decide_threads
 
-    assert PARALLEL_MIN_THREADS == 4  # the cases below are written for it
+    # The cases below are written for these.
+    assert PARALLEL_MIN_THREADS == {"omp": 2} and PARALLEL_MIN_THREADS_OTHER == 4
     assert decide_threads({}, cores=16) == 16
     assert decide_threads({"UASEP_WORKERS": "4"}, cores=16) == 4
-    assert decide_threads({"UASEP_WORKERS": "8"}, cores=16) == 1  # 2 threads do not pay
-    assert decide_threads({}, cores=2) == 1
+    assert decide_threads({"UASEP_WORKERS": "8"}, cores=16) == 2
+    assert decide_threads({"UASEP_WORKERS": "16"}, cores=16) == 1
+    assert decide_threads({}, cores=2) == 2  # OpenMP's two sleeping threads pay
+    assert decide_threads({"UASEP_WORKERS": "2"}, cores=2) == 1
     assert decide_threads({"UASEP_WORKERS": "3"}, cores=2) == 1
+    # numba's own workqueue (no OpenMP runtime): two threads do not pay, four do.
+    assert decide_threads({}, cores=2, layer="workqueue") == 1
+    assert decide_threads({"UASEP_WORKERS": "8"}, cores=16, layer="tbb") == 1
+    assert decide_threads({}, cores=4, layer="workqueue") == 4
+    assert decide_threads({"UASEP_THREADS": "2"}, cores=2, layer="workqueue") == 2
     assert decide_threads({"UASEP_THREADS": "2", "UASEP_WORKERS": "8"}, cores=16) == 2
     for name, value in (("UASEP_THREADS", "0"), ("UASEP_WORKERS", "two")):
         with pytest.raises(ValueError, match=f"{name}='{value}'"):
@@ -1094,10 +1148,36 @@ def test_threads_are_the_process_share_of_its_cores():
 def test_the_kernels_take_the_process_share_of_the_cores():
     import numba
 
-    from uasep_env.cores import kernel_threads
+    from uasep_env.cores import kernel_threads, process_share
 
     common = _numba.kernels().common
-    assert common.THREADS[0] == min(kernel_threads(), numba.config.NUMBA_NUM_THREADS)
+    want = 1
+    if min(process_share(), numba.config.NUMBA_NUM_THREADS) > 1:
+        want = min(kernel_threads(numba.threading_layer()), numba.config.NUMBA_NUM_THREADS)
+    assert common.THREADS[0] == want
+
+
+@pytest.mark.parametrize("users", [None, "ACTIVE"])
+def test_openmp_threads_start_asleep_unless_the_user_says(monkeypatch, users):
+    """``OMP_WAIT_POLICY=PASSIVE`` while the pool starts (the runtime reads it then), and
+    gone after it, so that torch's runtime, loaded later, keeps its own; a user's value is
+    theirs. Spinning threads halved two processes' throughput on two cores."""
+    seen = []
+
+    class FakeNumba:
+        def set_num_threads(self, n):
+            seen.append((n, os.environ.get("OMP_WAIT_POLICY")))
+
+        def threading_layer(self):
+            return "omp"
+
+    if users is None:
+        monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    else:
+        monkeypatch.setenv("OMP_WAIT_POLICY", users)
+    assert _numba.start_threads(FakeNumba(), 2) == "omp"
+    assert seen == [(2, users or "PASSIVE")]
+    assert os.environ.get("OMP_WAIT_POLICY") == users
 
 
 def test_serial_loops_with_one_thread(monkeypatch):

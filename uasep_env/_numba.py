@@ -24,7 +24,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-__all__ = ["TWINS", "Twin", "available", "compiled_twin", "kernels", "note_slow_kernels"]
+__all__ = [
+    "TWINS",
+    "Twin",
+    "available",
+    "compiled_twin",
+    "kernels",
+    "note_slow_kernels",
+    "start_threads",
+]
 
 _state: dict[str, Any] = {}
 F = TypeVar("F", bound=Callable[..., Any])
@@ -90,16 +98,49 @@ def kernels() -> Any:
         return None
     if "kernels" not in _state:
         from uasep_env import _kernels
-        from uasep_env.cores import kernel_threads
+        from uasep_env.cores import kernel_threads, process_share
 
         # numba's pool starts with every core: this process takes its share (uasep_env.cores).
         numba = _state["numba"]
-        threads = min(kernel_threads(), numba.config.NUMBA_NUM_THREADS)
+        threads = min(process_share(), numba.config.NUMBA_NUM_THREADS)
         if threads > 1:
-            numba.set_num_threads(threads)
+            layer = start_threads(numba, threads)
+            threads = min(kernel_threads(layer), numba.config.NUMBA_NUM_THREADS)
         _kernels.common.THREADS[0] = threads
         _state["kernels"] = _kernels
     return _state["kernels"]
+
+
+#: OpenMP's setting of how its threads wait between parallel loops.
+WAIT_POLICY = "OMP_WAIT_POLICY"
+
+
+def start_threads(numba: Any, threads: int) -> str:
+    """Start numba's pool of ``threads`` threads, its OpenMP threads waiting asleep; its layer.
+
+    OpenMP's threads spin while they wait for the next parallel loop unless told otherwise,
+    taking the cores from the process's other threads and from other processes: two
+    processes of two threads each on a 2-core machine lost half their throughput to it
+    (``docs/speed.md``). The runtime reads ``OMP_WAIT_POLICY`` once, when it loads, which
+    is here; the variable is set for that moment only (the user's own value is left as it
+    is, and other OpenMP runtimes loaded later, torch's, do not see it).
+
+    Args:
+        numba: The numba module.
+        threads: The threads of the pool.
+
+    Returns:
+        numba's threading layer (``"omp"``, ``"tbb"`` or ``"workqueue"``).
+    """
+    unset = WAIT_POLICY not in os.environ
+    if unset:
+        os.environ[WAIT_POLICY] = "PASSIVE"
+    try:
+        numba.set_num_threads(threads)  # loads the threading layer and starts its pool
+    finally:
+        if unset:
+            del os.environ[WAIT_POLICY]
+    return numba.threading_layer()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -117,8 +158,18 @@ class Twin:
     constants: dict[str, Any] = field(default_factory=dict)
 
     def compiled(self) -> Callable[..., Any]:
-        """The kernel with the constants bound (imports numba; only when it is in use)."""
-        return functools.partial(getattr(kernels(), self.kernel), **self.constants)
+        """What a call runs when numba is in use (imports numba).
+
+        The kernel with the constants bound, or the reference where the kernel declines the
+        inputs (returns ``NotImplemented``).
+        """
+        kernel = functools.partial(getattr(kernels(), self.kernel), **self.constants)
+
+        def call(*args: Any, **kwargs: Any) -> Any:
+            out = kernel(*args, **kwargs)
+            return self.reference(*args, **kwargs) if out is NotImplemented else out
+
+        return call
 
 
 #: Every numpy function with a compiled twin, by kernel name (filled as modules import).
@@ -129,7 +180,8 @@ def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
     """Decorator: the numpy function runs as the kernel ``kernel`` when numba is in use.
 
     The kernel takes the same arguments (with the same names) and returns the same
-    numbers, bit for bit; ``constants`` (values the numpy code owns, e.g. an iteration
+    numbers, bit for bit, or ``NotImplemented`` for inputs it does not take (then the
+    reference runs); ``constants`` (values the numpy code owns, e.g. an iteration
     count or column offsets) are passed to it as keyword arguments. The undecorated
     function stays reachable as ``.reference``.
 
@@ -147,7 +199,10 @@ def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
             compiled = kernels()
             if compiled is None:
                 return reference(*args, **kwargs)
-            return getattr(compiled, kernel)(*args, **kwargs, **twin.constants)
+            out = getattr(compiled, kernel)(*args, **kwargs, **twin.constants)
+            if out is NotImplemented:  # the kernel declines these inputs
+                return reference(*args, **kwargs)
+            return out
 
         dispatch.reference = reference  # type: ignore[attr-defined]
         return dispatch  # type: ignore[return-value]

@@ -15,6 +15,7 @@ from collections.abc import Mapping
 
 __all__ = [
     "PARALLEL_MIN_THREADS",
+    "PARALLEL_MIN_THREADS_OTHER",
     "THREADS_VARIABLE",
     "WORKERS_VARIABLE",
     "core_share",
@@ -24,11 +25,16 @@ __all__ = [
     "process_share",
 ]
 
-#: The fewest threads the compiled loops run in parallel on by default: on the project's
-#: 2-core machine two threads gained nothing at 4096 environments and lost most of the
-#: throughput under load, where a loop waits for its slowest thread
-#: (``benchmarks/bench_threads.py``, ``docs/speed.md``).
-PARALLEL_MIN_THREADS = 4
+#: The fewest threads the compiled loops run in parallel on by default, by numba's threading
+#: layer. OpenMP's threads wait asleep (:func:`uasep_env._numba.kernels` starts them with
+#: ``OMP_WAIT_POLICY=PASSIVE``): two of them pay on a 2-core machine at 4096 environments,
+#: and processes sharing the cores lose little to them; spinning as they did by default,
+#: two processes of two threads each lost half their throughput. numba's own ``workqueue``
+#: layer (no OpenMP runtime) gained nothing with two threads, nor is any other measured:
+#: four there (``benchmarks/bench_threads.py``, ``docs/speed.md``).
+PARALLEL_MIN_THREADS = {"omp": 2}
+#: :data:`PARALLEL_MIN_THREADS` of the layers it does not name.
+PARALLEL_MIN_THREADS_OTHER = 4
 #: ``UASEP_THREADS=N``: the threads of this process (the user's choice wins).
 THREADS_VARIABLE = "UASEP_THREADS"
 #: ``UASEP_WORKERS=N``: set by the project's tools in the ``N`` processes they start side by
@@ -87,22 +93,27 @@ def process_share() -> int:
     return core_share()
 
 
-def decide_threads(environ: Mapping[str, str] | None = None, cores: int | None = None) -> int:
+def decide_threads(
+    environ: Mapping[str, str] | None = None, cores: int | None = None, layer: str = "omp"
+) -> int:
     """The threads of this process's compiled loops (1: the serial loops).
 
     ``UASEP_THREADS`` if set (the user's choice); else this process's share of the cores
-    (:func:`core_share`), or 1 where that share is under :data:`PARALLEL_MIN_THREADS`.
+    (:func:`core_share`), or 1 where that share is under ``layer``'s
+    :data:`PARALLEL_MIN_THREADS`.
 
     Args:
         environ: The environment variables (default ``os.environ``).
         cores: The cores this process may run on (default: its affinity mask).
+        layer: numba's threading layer (``numba.threading_layer()``).
     """
     share = core_share(environ, cores)
     chosen = explicit_threads(environ) is not None
-    return share if chosen or share >= PARALLEL_MIN_THREADS else 1
+    least = PARALLEL_MIN_THREADS.get(layer, PARALLEL_MIN_THREADS_OTHER)
+    return share if chosen or share >= least else 1
 
 
 @functools.cache
-def kernel_threads() -> int:
-    """:func:`decide_threads` of this process, decided on first use."""
-    return decide_threads()
+def kernel_threads(layer: str = "omp") -> int:
+    """:func:`decide_threads` of this process with numba's threading ``layer``, decided once."""
+    return decide_threads(layer=layer)

@@ -28,6 +28,8 @@ kernel receives as keyword arguments. These modules import nothing else of the p
   ellipse's centre search, axes and certificate);
 * :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
   network's layer, in float64 before the rounding);
+* :func:`refill_noise` -- :func:`uasep_env.noise.refill_noise` (numpy's PCG64 draws of
+  the environments' noise blocks, compiled);
 * :func:`apf_actions` -- :func:`uasep_env.policies.apf._apf_actions` (the paper's APF's
   decision from the observations).
 """
@@ -42,6 +44,7 @@ from uasep_env._kernels.ellipsoids import (
     region_distances,
 )
 from uasep_env._kernels.network import dense
+from uasep_env._kernels.noise import refill_noise
 from uasep_env._kernels.observations import assemble_observations
 from uasep_env._kernels.physics import (
     double_integrator,
@@ -65,6 +68,7 @@ __all__ = [
     "pairwise_distances",
     "physics_step",
     "plan_now",
+    "refill_noise",
     "region_distances",
     "reward_terms",
     "separations",
