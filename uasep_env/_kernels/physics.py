@@ -4,9 +4,9 @@ Twins of :func:`uasep_env.dynamics.step_double_integrator`,
 :func:`uasep_env.obstacles.step_obstacles` and :func:`uasep_env.estimation.kalman_correct`,
 and of the whole physics step they make with the measurements and separations,
 :func:`uasep_env.physics_step.physics_step` (:func:`physics_step`: three kernels that share
-the loops of the others). Serial loops over the points (the work per point is a few dozen
-operations: threads would cost more than they save, and compiling parallel loops costs
-seconds).
+the loops of the others). The single-part twins loop over the points serially (a few dozen
+operations a point); the whole step's two large loops, over the environments, are spread over
+the cores for large batches as the other kernels' are (:func:`~.common._parallel`).
 
 Unlike the read-only kernels these update the world's arrays in place, so they take them as
 they are (the world's own arrays are C-contiguous and writable: one specialisation each)
@@ -28,7 +28,8 @@ import math
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, _sq3
+from uasep_env._kernels.common import _JIT, _parallel, _sq3
+from uasep_env._kernels.ellipsoids import _ROWS_PER_TASK
 from uasep_env._kernels.separations import _nearest
 
 
@@ -115,7 +116,19 @@ def _commands(u, switch_prob, time, has_time, hold_until, straight_prob, max_tur
               turn, climb, pos, band, wind, ground, dt, new_turn, new_climb, y, mid, heading):  # noqa: ANN001
 # fmt: on
     """The pilot's commands (turn, climb) and the arc's ``y`` and mid-heading per obstacle."""
-    for e in range(turn.shape[0]):
+    _commands_rows(0, turn.shape[0], u, switch_prob, time, has_time, hold_until, straight_prob,
+                   max_turn, max_climb, turn, climb, pos, band, wind, ground, dt, new_turn,
+                   new_climb, y, mid, heading)  # fmt: skip
+
+
+# fmt: off
+@numba.njit(inline="always", **_JIT)
+def _commands_rows(e0, e1, u, switch_prob, time, has_time, hold_until, straight_prob, max_turn,  # noqa: ANN001, ANN202
+                   max_climb, turn, climb, pos, band, wind, ground, dt, new_turn, new_climb, y,  # noqa: ANN001
+                   mid, heading):  # noqa: ANN001
+# fmt: on
+    """:func:`_commands` of the rows ``e0:e1``."""
+    for e in range(e0, e1):
         for j in range(turn.shape[1]):
             switch = u[e, j, 0] < switch_prob[e, j]
             if has_time:
@@ -241,15 +254,19 @@ def kalman_correct(
 
 
 # ---------------------------------------------------------------- the whole physics step
+# Each kernel is a loop over rows (environments), serial or spread over the cores in tasks of
+# _ROWS_PER_TASK rows (common._parallel: large batches only); a row's numbers are the same
+# either way.
 # fmt: off
-@numba.njit(**_JIT)
-def _advance(uav_pos, uav_vel, accel_cmd, normals, uav_acc, dt, max_speed, max_accel,  # noqa: ANN001, ANN202
-             u, switch_prob, time, hold_until, straight_prob, max_turn, max_climb, turn, climb,  # noqa: ANN001
-             pos, band, wind, ground, new_turn, new_climb, y, mid, heading):  # noqa: ANN001
+@numba.njit(inline="always", **_JIT)
+def _advance_rows(e0, e1, uav_pos, uav_vel, accel_cmd, normals, uav_acc, dt, max_speed,  # noqa: ANN001, ANN202
+                  max_accel, u, switch_prob, time, hold_until, straight_prob, max_turn,  # noqa: ANN001
+                  max_climb, turn, climb, pos, band, wind, ground, new_turn, new_climb, y, mid,  # noqa: ANN001
+                  heading):  # noqa: ANN001
 # fmt: on
     """The UAVs' double integrator with their process noise, then the obstacles' commands."""
     half_dt = 0.5 * dt
-    for e in range(uav_pos.shape[0]):
+    for e in range(e0, e1):
         for i in range(uav_pos.shape[1]):
             z = 3 * i  # the acceleration noise's columns
             a0 = _minimum(_maximum(accel_cmd[e, i, 0], -max_accel), max_accel) + normals[e, z]
@@ -262,19 +279,35 @@ def _advance(uav_pos, uav_vel, accel_cmd, normals, uav_acc, dt, max_speed, max_a
             uav_pos[e, i, 2] += half_dt * (v2 + n2)
             uav_vel[e, i, 0], uav_vel[e, i, 1], uav_vel[e, i, 2] = n0, n1, n2
             uav_acc[e, i, 0], uav_acc[e, i, 1], uav_acc[e, i, 2] = a0, a1, a2
-    _commands(u, switch_prob, time, True, hold_until, straight_prob, max_turn, max_climb, turn,
-              climb, pos, band, wind, ground, dt, new_turn, new_climb, y, mid, heading)  # fmt: skip
+    _commands_rows(e0, e1, u, switch_prob, time, True, hold_until, straight_prob, max_turn,
+                   max_climb, turn, climb, pos, band, wind, ground, dt, new_turn, new_climb, y,
+                   mid, heading)  # fmt: skip
+
+
+# Arguments spelled out, not ``*args``: arrays read from a tuple inside a parallel loop lost
+# their writes once (rewards._outcome_parallel's note).
+@numba.njit(**_JIT)
+def _advance(uav_pos, uav_vel, accel_cmd, normals, uav_acc, dt, max_speed, max_accel, u, switch_prob, time, hold_until, straight_prob, max_turn, max_climb, turn, climb, pos, band, wind, ground, new_turn, new_climb, y, mid, heading):  # noqa: ANN001, ANN202, E501  # fmt: skip
+    _advance_rows(0, uav_pos.shape[0], uav_pos, uav_vel, accel_cmd, normals, uav_acc, dt, max_speed, max_accel, u, switch_prob, time, hold_until, straight_prob, max_turn, max_climb, turn, climb, pos, band, wind, ground, new_turn, new_climb, y, mid, heading)  # noqa: E501  # fmt: skip
+
+
+@numba.njit(parallel=True, **_JIT)
+def _advance_parallel(uav_pos, uav_vel, accel_cmd, normals, uav_acc, dt, max_speed, max_accel, u, switch_prob, time, hold_until, straight_prob, max_turn, max_climb, turn, climb, pos, band, wind, ground, new_turn, new_climb, y, mid, heading):  # noqa: ANN001, ANN202, E501  # fmt: skip
+    n_rows = uav_pos.shape[0]
+    for c in numba.prange((n_rows + _ROWS_PER_TASK - 1) // _ROWS_PER_TASK):
+        e0 = c * _ROWS_PER_TASK
+        _advance_rows(e0, min(e0 + _ROWS_PER_TASK, n_rows), uav_pos, uav_vel, accel_cmd, normals, uav_acc, dt, max_speed, max_accel, u, switch_prob, time, hold_until, straight_prob, max_turn, max_climb, turn, climb, pos, band, wind, ground, new_turn, new_climb, y, mid, heading)  # noqa: E501  # fmt: skip
 
 
 # fmt: off
-@numba.njit(**_JIT)
-def _sense(time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals, est_pos, est_vel,  # noqa: ANN001, ANN202
-           pos, speed, climb, cos_h, sin_h, wind, active, obstacle_est_pos, obstacle_est_vel,  # noqa: ANN001
-           uav_gains, obstacle_gains, min_uav, min_obstacle):  # noqa: ANN001
+@numba.njit(inline="always", **_JIT)
+def _sense_rows(e0, e1, time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals, est_pos,  # noqa: ANN001, ANN202
+                est_vel, pos, speed, climb, cos_h, sin_h, wind, active, obstacle_est_pos,  # noqa: ANN001
+                obstacle_est_vel, uav_gains, obstacle_gains, min_uav, min_obstacle):  # noqa: ANN001
 # fmt: on
     """The clock, both tracks' measurements and Kalman steps, and the running separations."""
     n, m = uav_pos.shape[1], pos.shape[1]
-    for e in range(uav_pos.shape[0]):
+    for e in range(e0, e1):
         time[e] += dt
         if kalman:
             count[e] += 1
@@ -310,6 +343,19 @@ def _sense(time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals, est_pos,
             min_obstacle[e, i] = _minimum(min_obstacle[e, i], d_obstacle)
 
 
+@numba.njit(**_JIT)
+def _sense(time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals, est_pos, est_vel, pos, speed, climb, cos_h, sin_h, wind, active, obstacle_est_pos, obstacle_est_vel, uav_gains, obstacle_gains, min_uav, min_obstacle):  # noqa: ANN001, ANN202, E501  # fmt: skip
+    _sense_rows(0, uav_pos.shape[0], time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals, est_pos, est_vel, pos, speed, climb, cos_h, sin_h, wind, active, obstacle_est_pos, obstacle_est_vel, uav_gains, obstacle_gains, min_uav, min_obstacle)  # noqa: E501  # fmt: skip
+
+
+@numba.njit(parallel=True, **_JIT)
+def _sense_parallel(time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals, est_pos, est_vel, pos, speed, climb, cos_h, sin_h, wind, active, obstacle_est_pos, obstacle_est_vel, uav_gains, obstacle_gains, min_uav, min_obstacle):  # noqa: ANN001, ANN202, E501  # fmt: skip
+    n_rows = uav_pos.shape[0]
+    for c in numba.prange((n_rows + _ROWS_PER_TASK - 1) // _ROWS_PER_TASK):
+        e0 = c * _ROWS_PER_TASK
+        _sense_rows(e0, min(e0 + _ROWS_PER_TASK, n_rows), time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals, est_pos, est_vel, pos, speed, climb, cos_h, sin_h, wind, active, obstacle_est_pos, obstacle_est_vel, uav_gains, obstacle_gains, min_uav, min_obstacle)  # noqa: E501  # fmt: skip
+
+
 def physics_step(w, obs, normals, uniforms, p, replay=None, *, n_uniforms: int) -> None:  # noqa: ANN001
     """:func:`uasep_env.physics_step.physics_step`, compiled: same arguments, same bits.
 
@@ -321,7 +367,9 @@ def physics_step(w, obs, normals, uniforms, p, replay=None, *, n_uniforms: int) 
     new_turn, new_climb, y, mid, heading = (np.empty(shape) for _ in range(5))
     dt = float(p.dt)
     normals = np.ascontiguousarray(normals)
-    _advance(w.uav_pos, w.uav_vel, w.accel_cmd, normals, w.uav_acc, dt, float(p.max_speed),
+    parallel = _parallel(w.uav_pos.shape[0] * w.uav_pos.shape[1])
+    advance, sense = (_advance_parallel, _sense_parallel) if parallel else (_advance, _sense)
+    advance(w.uav_pos, w.uav_vel, w.accel_cmd, normals, w.uav_acc, dt, float(p.max_speed),
              float(p.max_accel), np.ascontiguousarray(uniforms).reshape(*shape, n_uniforms),
              obs.switch_prob, w.time, obs.hold_until, obs.straight_prob, obs.max_turn_rate,
              obs.max_climb_rate, obs.turn_rate, obs.climb_rate, obs.pos, obs.alt_band, obs.wind,
@@ -332,7 +380,7 @@ def physics_step(w, obs, normals, uniforms, p, replay=None, *, n_uniforms: int) 
     obs.turn_rate, obs.climb_rate, obs.heading = new_turn, new_climb, heading
     if replay is not None:
         replay.step(obs, w.time)
-    _sense(w.time, w.kf_count, dt, bool(p.kalman), w.uav_pos, w.uav_vel, w.uav_acc, normals,
+    sense(w.time, w.kf_count, dt, bool(p.kalman), w.uav_pos, w.uav_vel, w.uav_acc, normals,
            w.est_pos, w.est_vel, obs.pos, obs.speed, obs.climb_rate, np.cos(obs.heading),
            np.sin(obs.heading), obs.wind, obs.active, w.obstacle_est_pos, w.obstacle_est_vel,
            p.uav_gains, p.obstacle_gains, w.min_uav_dist, w.min_obstacle_dist)  # fmt: skip
