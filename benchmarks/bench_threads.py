@@ -40,7 +40,6 @@ def _worker(envs: int, seconds: float, actions: str) -> None:
 
     import uasep_env  # noqa: F401  (registers the ids)
     from uasep_env import _numba
-    from uasep_env.cores import kernel_threads
 
     vec = gymnasium.make_vec("uasep/Formation-v2", num_envs=envs)
     vec.reset(seed=0)
@@ -58,7 +57,7 @@ def _worker(envs: int, seconds: float, actions: str) -> None:
         vec.step(act())
         steps += 1
     n_uavs = shape[1] // 3  # (envs, 3 * n_uavs): one 3-axis command per UAV
-    threads = kernel_threads() if _numba.available() else 0
+    threads = _numba.kernels().common.THREADS[0] if _numba.available() else 0
     print(json.dumps({"rate": steps * envs * n_uavs / elapsed, "threads": threads}))
 
 

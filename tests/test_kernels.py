@@ -737,6 +737,27 @@ def test_noise_kernel_draws_itself_and_declines_what_it_cannot_read(monkeypatch)
     _assert_same(got, want, "declined")
 
 
+def test_noise_kernel_declines_where_numba_moved_its_tables():
+    """numba's copy of numpy's ziggurat tables is a private module: gone, numpy draws."""
+    import subprocess
+
+    code = (
+        "import sys; sys.modules['numba.np.random._constants'] = None\n"
+        "import numpy as np\n"
+        "from uasep_env._kernels import noise as k\n"
+        "args = ([np.random.default_rng(1)], np.arange(1), np.ones(2), np.zeros((2, 1, 2)),"
+        " np.zeros((2, 1, 1)))\n"
+        "print(k._DRAWS_FROM, k.refill_noise(*args) is NotImplemented)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])}
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env,
+        timeout=HANG_GUARD_S,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["()", "True"]
+
+
 def test_disabled_by_environment_variable(monkeypatch):
     monkeypatch.setenv("UASEP_NUMBA", "0")
     monkeypatch.delitem(_numba._state, "numba", raising=False)

@@ -5,8 +5,9 @@ Each environment of a :class:`~uasep_env.world.World` owns a
 physics steps of noise at once (Gaussian noise, already scaled, and uniforms), per
 environment, so that environment ``i`` of a batch reads exactly the numbers a single
 environment with the same seed reads, bit for bit, whatever the batch and whichever
-environments take part in a step. Drawing is most of a large batch's step: the refills
-are split over a thread pool (:func:`_run_chunked`), each generator used by one task only.
+environments take part in a step. The refills (:func:`refill_noise`; compiled, numpy's
+numbers drawn about three times sooner, :mod:`uasep_env._kernels.noise`) are split over a
+thread pool for large batches (:func:`_run_chunked`), each generator used by one task only.
 """
 
 from __future__ import annotations
@@ -34,9 +35,10 @@ os.register_at_fork(after_in_child=_pool.clear)
 def _run_chunked(fn: Callable[[np.ndarray], None], envs: np.ndarray) -> None:
     """``fn(envs)``, split over the cores when ``envs`` is long.
 
-    Drawing noise is most of a large batch's step, and numpy's generators release the GIL
-    while they draw. Each environment's generator is used by one task only, in order, so
-    the numbers are the same as one thread's, bit for bit.
+    Drawing noise is a large item of a large batch's step, and both numpy's generators and
+    the compiled refill release the GIL while they draw. Each environment's generator is
+    used by one task only, in order, so the numbers are the same as one thread's, bit for
+    bit.
     """
     share = process_share()  # never more threads than this process's share of the cores
     workers = min(share, len(envs) // REFILL_CHUNK)

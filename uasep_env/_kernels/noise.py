@@ -11,7 +11,8 @@ and the generator's state afterwards are numpy's, bit for bit, about three times
 
 Where the generators' memory is not laid out as this code reads it (a numpy build without
 a native 128-bit integer; checked once, when the kernels load, by :func:`_native_pcg64`),
-or a generator is not PCG64, :func:`refill_noise` declines (``NotImplemented``) and numpy draws.
+where numba no longer ships numpy's tables where this module reads them, or where a
+generator is not PCG64, :func:`refill_noise` declines (``NotImplemented``) and numpy draws.
 """
 
 from __future__ import annotations
@@ -24,15 +25,24 @@ import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic, overload
-from numba.np.random._constants import (
-    fi_double,
-    ki_double,
-    wi_double,
-    ziggurat_nor_inv_r,
-    ziggurat_nor_r,
-)
 
 from uasep_env._kernels.common import _JIT, frozen
+
+try:  # numba's copy of numpy's ziggurat tables (a private module: it may move)
+    from numba.np.random._constants import (
+        fi_double,
+        ki_double,
+        wi_double,
+        ziggurat_nor_inv_r,
+        ziggurat_nor_r,
+    )
+
+    _TABLES = True
+except ImportError:  # pragma: no cover - depends on numba's version; then numpy draws
+    ki_double = np.zeros(256, dtype=np.uint64)
+    wi_double = fi_double = np.zeros(256)
+    ziggurat_nor_r = ziggurat_nor_inv_r = 0.0
+    _TABLES = False
 
 #: PCG64's multiplier (numpy's ``PCG_DEFAULT_MULTIPLIER_128``).
 _MULTIPLIER = (2549297995355413924 << 64) + 4865540595714422341
@@ -181,8 +191,9 @@ def _native_pcg64() -> bool:
 
 
 #: The bit generators the kernel draws from: PCG64 where its memory reads as expected
-#: (checked once, when the kernels load), else none (numpy draws, the reference).
-_DRAWS_FROM = (np.random.PCG64,) if _native_pcg64() else ()
+#: (checked once, when the kernels load) and numba has numpy's tables, else none (numpy
+#: draws, the reference).
+_DRAWS_FROM = (np.random.PCG64,) if _TABLES and _native_pcg64() else ()
 
 
 def refill_noise(
