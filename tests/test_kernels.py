@@ -724,8 +724,10 @@ def test_noise_kernel_draws_itself_and_declines_what_it_cannot_read(monkeypatch)
     and where it could not read the generators' memory it declines and numpy draws."""
     from uasep_env._kernels import noise as kernel
 
+    if sys.platform == "win32":
+        pytest.skip("numpy's MSVC builds store PCG64's words high first: the kernel declines")
     args = _case_noise()[0]
-    assert kernel._native_pcg64()  # numpy's native 128-bit layout (x86-64 Linux)
+    assert kernel._native_pcg64()  # numpy's native 128-bit layout (GCC, Clang builds)
     assert kernel.refill_noise(*_copy(args)) is None  # drawn by the kernel
     monkeypatch.setattr(kernel, "_DRAWS_FROM", ())
     got = _copy(args)
