@@ -764,6 +764,8 @@ def test_disabled_by_environment_variable(monkeypatch):
     monkeypatch.setenv("UASEP_NUMBA", "0")
     monkeypatch.delitem(_numba._state, "numba", raising=False)
     assert not _numba.available()
+    with pytest.raises(RuntimeError, match="dense: numba is not in use"):
+        _numba.TWINS["dense"].compiled()  # would compare the reference with itself
     monkeypatch.delitem(_numba._state, "numba")
     monkeypatch.setenv("UASEP_NUMBA", "1")
     assert _numba.available()

@@ -151,25 +151,27 @@ class Twin:
         kernel: The kernel's name; it takes the reference's arguments plus ``constants``.
         reference: The numpy function (the fallback, and the numbers the kernel must give).
         constants: Keyword arguments the kernel receives from the reference's module.
+        dispatch: The public function: the kernel where numba is in use and it takes the
+            inputs, else the reference.
     """
 
     kernel: str
     reference: Callable[..., Any]
     constants: dict[str, Any] = field(default_factory=dict)
+    dispatch: Callable[..., Any]
 
     def compiled(self) -> Callable[..., Any]:
-        """What a call runs when numba is in use (imports numba).
+        """What a call runs when numba is in use (imports numba): :attr:`dispatch`.
 
         The kernel with the constants bound, or the reference where the kernel declines the
         inputs (returns ``NotImplemented``).
+
+        Raises:
+            RuntimeError: Where numba is not in use (a call would run the reference).
         """
-        kernel = functools.partial(getattr(kernels(), self.kernel), **self.constants)
-
-        def call(*args: Any, **kwargs: Any) -> Any:
-            out = kernel(*args, **kwargs)
-            return self.reference(*args, **kwargs) if out is NotImplemented else out
-
-        return call
+        if kernels() is None:
+            raise RuntimeError(f"{self.kernel}: numba is not in use")
+        return self.dispatch
 
 
 #: Every numpy function with a compiled twin, by kernel name (filled as modules import).
@@ -191,20 +193,20 @@ def compiled_twin(kernel: str, **constants: Any) -> Callable[[F], F]:
     """
 
     def wrap(reference: F) -> F:
-        twin = Twin(kernel=kernel, reference=reference, constants=dict(constants))
-        TWINS[kernel] = twin
+        bound = dict(constants)
 
         @functools.wraps(reference)
         def dispatch(*args: Any, **kwargs: Any) -> Any:
             compiled = kernels()
             if compiled is None:
                 return reference(*args, **kwargs)
-            out = getattr(compiled, kernel)(*args, **kwargs, **twin.constants)
+            out = getattr(compiled, kernel)(*args, **kwargs, **bound)
             if out is NotImplemented:  # the kernel declines these inputs
                 return reference(*args, **kwargs)
             return out
 
         dispatch.reference = reference  # type: ignore[attr-defined]
+        TWINS[kernel] = Twin(kernel=kernel, reference=reference, constants=bound, dispatch=dispatch)
         return dispatch  # type: ignore[return-value]
 
     return wrap

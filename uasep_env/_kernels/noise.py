@@ -184,9 +184,7 @@ def _native_pcg64() -> bool:
     """
     bit_generator = np.random.PCG64(0x0123456789ABCDEF_FEDCBA9876543210)
     want = bit_generator.state["state"]
-    words = (ctypes.c_uint64 * 4).from_address(
-        ctypes.c_void_p.from_address(bit_generator.ctypes.state_address).value
-    )
+    words = (ctypes.c_uint64 * 4).from_address(_pcg64_address(bit_generator.ctypes.state_address))
     return {"state": words[0] | words[1] << 64, "inc": words[2] | words[3] << 64} == want
 
 
