@@ -21,7 +21,8 @@ import types
 from pathlib import Path
 
 KERNEL_MODULES = ("apf", "common", "ellipse_fit", "ellipsoids", "network", "noise",
-                  "observations", "physics", "plan", "rewards", "separations")  # fmt: skip
+                  "observations", "physics", "plan", "rewards", "scenario",
+                  "separations")  # fmt: skip
 
 
 def _functions(modules: list[types.ModuleType]) -> list[types.CodeType]:

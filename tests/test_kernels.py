@@ -601,6 +601,43 @@ def _case_apf():
     return [cases[0], (obs, layout, gains, *rest), (nan, layout, gains, *rest)]
 
 
+def _case_scenario():
+    """Episodes' draws of the random family, edited to take every path of the geometry.
+
+    Typical batches (aimed obstacles level and climbing, no obstacle), a narrow airspace
+    (the starts' and climbs' clamps), starts crowded on purpose (the scatter shrunk, or the
+    pattern itself where even it is too tight), an obstacle whose pilot reacts at once, a
+    NaN, and the two paths the kernel declines (a plan flown on past the timeline, a
+    zero-length segment).
+    """
+    from uasep_env.config import make_config
+    from uasep_env.scenarios import batched
+    from uasep_env.scenarios.registry import get_family
+
+    def inputs(seeds, **config):
+        cfg = make_config(scenario="random", **config)
+        family = get_family("random")
+        draws = [family.draws(np.random.default_rng(s), cfg) for s in seeds]
+        return list(batched.geometry_inputs(draws, cfg))
+
+    typical = inputs(range(60), n_uavs=4, n_obstacles=3)
+    typical[1][:5, :, 10] = 500.0  # reaction leads longer than the meeting times
+    narrow = inputs(range(40), n_obstacles=3, airspace={"obstacle_margin": 85.0,
+                                                         "ceiling_altitude": 112.0})  # fmt: skip
+    crowded = inputs(range(12), n_uavs=3, n_obstacles=0)
+    lay, n_plan = crowded[0], batched._N_PLAN
+    lay[:6, n_plan + 3 : n_plan + 6] = 0.0  # UAV 1 on its slot, UAV 0 scattered onto it
+    lay[:6, n_plan : n_plan + 3] = crowded[2][:6, 1] - crowded[2][:6, 0]
+    tight = [*crowded[:5], 1e6, *crowded[6:]]  # no shrink separates them: the pattern
+    nan = inputs(range(4), n_obstacles=2)
+    nan[1][0, :, 9] = 0.0  # level, at a NaN altitude offset
+    nan[1][0, :, 7] = np.nan
+    longer = [*typical[:4], 50.0, *typical[5:]]
+    flat = inputs(range(3), n_obstacles=1)
+    flat[0][1, 1 + 2 * batched._TURNS : n_plan] = 0.5  # every turn at one place
+    return [tuple(c) for c in (typical, narrow, crowded, tight, nan, longer, flat)]
+
+
 TWIN_CASES = {
     "apf_actions": _case_apf,
     "nearest_on_ellipsoids": _case_nearest,
@@ -618,6 +655,7 @@ TWIN_CASES = {
     "physics_step": _case_physics,
     "step_outcome": _case_outcome,
     "refill_noise": _case_noise,
+    "scenario_geometry": _case_scenario,
 }
 
 
@@ -636,7 +674,12 @@ IN_PLACE = {
 
 
 #: Cases whose outputs hold NaN on purpose (NaN inputs propagate as numpy propagates them).
-NAN_ON_PURPOSE = {("double_integrator", 3), ("fit_ellipse", 2), ("apf_actions", 2)}
+NAN_ON_PURPOSE = {
+    ("double_integrator", 3),
+    ("fit_ellipse", 2),
+    ("apf_actions", 2),
+    ("scenario_geometry", 4),
+}
 
 
 def test_every_compiled_twin_has_a_case():

@@ -265,6 +265,22 @@ class PlannedTrajectory:
         )
         self._frozen: PlannedTrajectory | None = None
 
+    @classmethod
+    def from_geometry(
+        cls, waypoints: np.ndarray, cum: np.ndarray, direction: np.ndarray, cruise_speed: float
+    ) -> PlannedTrajectory:
+        """The plans whose arc lengths and directions are computed already (taken, not copied).
+
+        ``PlannedTrajectory(waypoints, cruise_speed)`` where ``cum`` and ``direction`` are what
+        it would compute (a batched scenario's compiled geometry makes them).
+        """
+        plan = object.__new__(cls)
+        plan.waypoints, plan.cum, plan.direction = waypoints, cum, direction
+        plan.length = cum[:, -1].copy()
+        plan.cruise_speed = np.full(waypoints.shape[0], float(cruise_speed))
+        plan._frozen = None
+        return plan
+
     #: The arrays that hold the trajectories (written in place by :meth:`set_rows`).
     _ARRAYS = ("waypoints", "cum", "direction", "length", "cruise_speed")
 

@@ -30,6 +30,8 @@ kernel receives as keyword arguments. These modules import nothing else of the p
   network's layer, in float64 before the rounding);
 * :func:`refill_noise` -- :func:`uasep_env.noise.refill_noise` (numpy's PCG64 draws of
   the environments' noise blocks, compiled);
+* :func:`scenario_geometry` -- :func:`uasep_env.scenarios.batched.scenario_geometry` (a
+  partial reset's episodes built from their draws: plans, starts, obstacles);
 * :func:`apf_actions` -- :func:`uasep_env.policies.apf._apf_actions` (the paper's APF's
   decision from the observations).
 """
@@ -54,6 +56,7 @@ from uasep_env._kernels.physics import (
 )
 from uasep_env._kernels.plan import plan_now
 from uasep_env._kernels.rewards import reward_terms, step_outcome
+from uasep_env._kernels.scenario import scenario_geometry
 from uasep_env._kernels.separations import separations
 
 __all__ = [
@@ -71,6 +74,7 @@ __all__ = [
     "refill_noise",
     "region_distances",
     "reward_terms",
+    "scenario_geometry",
     "separations",
     "step_outcome",
 ]

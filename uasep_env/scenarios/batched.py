@@ -30,10 +30,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from uasep_env._numba import compiled_twin
 from uasep_env.config.groups import FLIGHT_ALTITUDE
 from uasep_env.formation import PlannedTrajectory, pattern_slots, segment_offsets
 from uasep_env.scenarios.building import (
     _ALT_BAND_HALF_WIDTH_M,
+    _SHRINK_FACTORS,
     _START_SCATTER_M,
     _START_SPEED_SCATTER_MPS,
     ALTITUDE_OFFSET_RANGE_M,
@@ -274,14 +276,14 @@ def _each(fn: Callable[..., float], *args: np.ndarray) -> np.ndarray:
     return np.array([fn(*xs) for xs in zip(*columns, strict=True)], dtype=float)
 
 
-def _plans(draws: np.ndarray, config: EnvConfig) -> np.ndarray:
-    """``(B, N_WAYPOINTS, 3)`` the random plans, extended for long episodes."""
+def _plans(draws: np.ndarray, cruise_speed: float, extra: float) -> np.ndarray:
+    """``(B, N_WAYPOINTS, 3)`` the random plans, extended by ``extra`` (m) for long episodes."""
     b = len(draws)
     heading = draws[:, 0]
     turns = draws[:, 1 : 1 + _TURNS] * (draws[:, 1 + _TURNS : 1 + 2 * _TURNS] < 0.5)
     fractions = np.sort(draws[:, 1 + 2 * _TURNS : _N_PLAN], axis=1)
     edges = np.concatenate([np.zeros((b, 1)), fractions, np.ones((b, 1))], axis=1)
-    legs = np.diff(edges, axis=1) * (config.cruise_speed * TIMELINE_S)
+    legs = np.diff(edges, axis=1) * (cruise_speed * TIMELINE_S)
     # Each leg's heading: the turns added in order, as the generator does.
     h = np.empty((b, N_WAYPOINTS - 1))
     h[:, 0] = heading
@@ -296,9 +298,8 @@ def _plans(draws: np.ndarray, config: EnvConfig) -> np.ndarray:
     steps[:, 1:, 1] = legs * sin_h
     steps[:, 1:, 2] = legs * 0.0
     wp = np.cumsum(steps, axis=1)
-    if config.episode_duration > TIMELINE_S:
+    if extra > 0.0:
         # One row at a time, as the generator does (a 1-D norm is a dot product).
-        extra = config.cruise_speed * (config.episode_duration - TIMELINE_S)
         for row in wp:
             last = row[-1] - row[-2]
             row[-1] += last / np.linalg.norm(last) * extra
@@ -330,6 +331,18 @@ def _planned_at(
     return center[:, None, :] + offsets[np.arange(len(t)), located[1]], direction
 
 
+def geometry_inputs(draws: list[EpisodeDraws], config: EnvConfig) -> tuple:
+    """:func:`scenario_geometry`'s arguments for the episodes of ``draws``."""
+    m = config.n_obstacles
+    lay = np.stack([d.layout for d in draws])
+    ob = np.stack([d.obstacles for d in draws]) if m else np.zeros((len(draws), 0, _N_COLS))
+    long = config.episode_duration > TIMELINE_S
+    extra = config.cruise_speed * (config.episode_duration - TIMELINE_S) if long else 0.0
+    floor, ceiling = airspace(config)
+    return (lay, ob, _slots(draws, config), float(config.cruise_speed), float(extra),
+            float(config.uav.separation_distance), float(floor), float(ceiling))  # fmt: skip
+
+
 def geometry(draws: list[EpisodeDraws], config: EnvConfig) -> ScenarioBatch:
     """The episodes of ``draws``, their geometry computed once over the batch.
 
@@ -337,27 +350,92 @@ def geometry(draws: list[EpisodeDraws], config: EnvConfig) -> ScenarioBatch:
     :func:`~uasep_env.scenarios.building.aimed_obstacle` and
     :func:`~uasep_env.scenarios.building.assemble` make of the same draws.
     """
-    b, n, m = len(draws), config.n_uavs, config.n_obstacles
-    lay = np.stack([d.layout for d in draws])
-    wp = _plans(lay, config)
-    plan = PlannedTrajectory(wp, config.cruise_speed)
-    slots = _slots(draws, config)
+    b, m = len(draws), config.n_obstacles
+    args = geometry_inputs(draws, config)
+    ob, slots = args[1:3]
+    wp, cum, direction, offsets, uav_pos, uav_vel, pos, heading, climb, hold, band = (
+        scenario_geometry(*args)
+    )
+    obc = config.obstacle
+    return ScenarioBatch(
+        families=[d.family for d in draws],
+        waypoints=wp,
+        cruise_speed=np.full(b, float(config.cruise_speed)),
+        slots=slots,
+        uav_pos=uav_pos,
+        uav_vel=uav_vel,
+        obstacle_pos=pos,
+        obstacle_heading=heading,
+        obstacle_speed=ob[..., _SPEED].copy(),
+        obstacle_turn_rate=np.zeros((b, m)),
+        obstacle_climb_rate=climb,
+        obstacle_max_turn_rate=ob[..., _W_MAX].copy(),
+        obstacle_max_climb_rate=ob[..., _VZ_MAX].copy(),
+        obstacle_radius=np.full((b, m), obc.radius, dtype=float),
+        obstacle_alt_band=band,
+        obstacle_active=np.ones((b, m), dtype=bool),
+        obstacle_hold_until=hold,
+        wind=np.tile(np.asarray(obc.wind, dtype=float), (b, 1)),
+        plan=PlannedTrajectory.from_geometry(wp, cum, direction, config.cruise_speed),
+        plan_offsets=offsets,
+    )
+
+
+@compiled_twin(
+    "scenario_geometry",
+    n_plan=_N_PLAN,
+    timeline=TIMELINE_S,
+    altitude=FLIGHT_ALTITUDE,
+    band_half=_ALT_BAND_HALF_WIDTH_M,
+    shrink=_SHRINK_FACTORS,
+)
+def scenario_geometry(
+    lay: np.ndarray,
+    ob: np.ndarray,
+    slots: np.ndarray,
+    cruise_speed: float,
+    extra: float,
+    separation: float,
+    floor: float,
+    ceiling: float,
+) -> tuple[np.ndarray, ...]:
+    """The arrays of a batch of episodes from their draws (compiled as ``scenario_geometry``).
+
+    Args:
+        lay: ``(B, L)`` each episode's layout draws (:attr:`EpisodeDraws.layout`).
+        ob: ``(B, M, 11)`` its obstacles' draws (:attr:`EpisodeDraws.obstacles`).
+        slots: ``(B, N, 3)`` its formation pattern (m).
+        cruise_speed: The plan's speed (m/s).
+        extra: How far the plan flies on past the timeline (m; 0: not at all).
+        separation: The UAVs' separation distance (m).
+        floor: The lowest altitude an obstacle starts at (m, up).
+        ceiling: The highest (m, up).
+
+    Returns:
+        ``(waypoints, cum, direction, offsets, uav_pos, uav_vel, obstacle_pos,
+        obstacle_heading, climb_rate, hold_until, alt_band)``: the plan's way-points
+        ``(B, W, 3)``, arc lengths ``(B, W)`` and directions ``(B, W - 1, 3)``
+        (:class:`~uasep_env.formation.PlannedTrajectory`), the slots rotated along each
+        segment ``(B, W - 1, N, 3)``, the UAVs' starts ``(B, N, 3)``, the obstacles' starts
+        ``(B, M, 3)``, headings (wrapped to ``[-pi, pi)``), climb rates and times they fly
+        straight ``(B, M)`` and altitude bands ``(B, M, 2)``.
+    """
+    b, n, m = len(lay), slots.shape[1], ob.shape[1]
+    wp = _plans(lay, cruise_speed, extra)
+    plan = PlannedTrajectory(wp, cruise_speed)
     offsets = segment_offsets(plan.direction, slots)
     start_slots, _ = _planned_at(plan, offsets, np.zeros(b))
     scatter = lay[:, _N_PLAN:]
     uav_pos = start_slots + scatter[:, : 3 * n].reshape(b, n, 3)
     plan_dir = plan.direction[:, 0, :]
-    uav_vel = (plan_dir * config.cruise_speed)[:, None, :] + scatter[:, 3 * n :].reshape(b, n, 3)
+    uav_vel = (plan_dir * cruise_speed)[:, None, :] + scatter[:, 3 * n :].reshape(b, n, 3)
     # The start scatter is shrunk only where two UAVs start too close (rare): those rows
     # one at a time, as the generator does.
     d = np.linalg.norm(uav_pos[:, :, None] - uav_pos[:, None], axis=-1)
     d[:, np.arange(n), np.arange(n)] = np.inf
-    sep = config.uav.separation_distance
-    for k in np.flatnonzero(~(d.min(axis=(1, 2)) >= sep)):
-        uav_pos[k] = _separated_start(start_slots[k], uav_pos[k], sep)
+    for k in np.flatnonzero(~(d.min(axis=(1, 2)) >= separation)):
+        uav_pos[k] = _separated_start(start_slots[k], uav_pos[k], separation)
 
-    ob = np.stack([d.obstacles for d in draws]) if m else np.zeros((b, 0, _N_COLS))
-    floor, ceiling = airspace(config)
     pos = np.empty((b, m, 3))
     heading = np.empty((b, m))
     climb = np.empty((b, m))
@@ -396,26 +474,6 @@ def geometry(draws: list[EpisodeDraws], config: EnvConfig) -> ScenarioBatch:
     alts = -pos[..., 2]
     band[..., 0] = np.maximum(np.minimum(band[..., 0], alts), floor)
     band[..., 1] = np.minimum(np.maximum(band[..., 1], alts), ceiling)
-    obc = config.obstacle
-    return ScenarioBatch(
-        families=[d.family for d in draws],
-        waypoints=wp,
-        cruise_speed=np.full(b, float(config.cruise_speed)),
-        slots=slots,
-        uav_pos=uav_pos,
-        uav_vel=uav_vel,
-        obstacle_pos=pos,
-        obstacle_heading=np.mod(heading + math.pi, 2 * math.pi) - math.pi,
-        obstacle_speed=ob[..., _SPEED].copy(),
-        obstacle_turn_rate=np.zeros((b, m)),
-        obstacle_climb_rate=climb,
-        obstacle_max_turn_rate=ob[..., _W_MAX].copy(),
-        obstacle_max_climb_rate=ob[..., _VZ_MAX].copy(),
-        obstacle_radius=np.full((b, m), obc.radius, dtype=float),
-        obstacle_alt_band=band,
-        obstacle_active=np.ones((b, m), dtype=bool),
-        obstacle_hold_until=hold,
-        wind=np.tile(np.asarray(obc.wind, dtype=float), (b, 1)),
-        plan=plan,
-        plan_offsets=offsets,
-    )
+    wrapped = np.mod(heading + math.pi, 2 * math.pi) - math.pi
+    return (plan.waypoints, plan.cum, plan.direction, offsets, uav_pos, uav_vel, pos, wrapped,
+            climb, hold, band)  # fmt: skip
