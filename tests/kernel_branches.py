@@ -20,7 +20,7 @@ import sys
 import types
 from pathlib import Path
 
-KERNEL_MODULES = ("apf", "common", "ellipse_fit", "ellipsoids", "network", "noise",
+KERNEL_MODULES = ("apf", "common", "draws", "ellipse_fit", "ellipsoids", "network", "noise",
                   "observations", "physics", "plan", "rewards", "scenario",
                   "separations")  # fmt: skip
 

@@ -31,7 +31,9 @@ APF_LOOPS = {
     "physics._advance",  # the physics step
     "physics._move",
     "physics._sense",
-    "ellipse_fit._fit_rows",  # the obstacles' reachable ellipses, at reset
+    "ellipse_fit._start_rows",  # the obstacles' reachable ellipses, at reset
+    "ellipse_fit._nodes_rows",
+    "ellipse_fit._fit_rows",
 }
 
 # In a fresh process: the APF evaluated, then every kernel module's dispatchers and the
@@ -47,8 +49,8 @@ _PROBE = """
     evaluate(["apf"], {"scenario": "paper"}, [0])  # what make eval runs (whole episode)
     _numba.kernels()  # loaded, as every kernel call does
     counts = {}
-    for name in ("apf", "common", "ellipse_fit", "ellipsoids", "network", "observations",
-                 "physics", "plan", "rewards", "separations"):
+    for name in ("apf", "common", "draws", "ellipse_fit", "ellipsoids", "network",
+                 "observations", "physics", "plan", "rewards", "scenario", "separations"):
         module = importlib.import_module(f"uasep_env._kernels.{name}")
         for attr, obj in vars(module).items():
             if isinstance(obj, numba.core.registry.CPUDispatcher):

@@ -356,25 +356,50 @@ def _case_fit_ellipse_params():
     return vt, phi, r
 
 
-def _case_fit_ellipse():
-    """The fit's inputs as ``_ellipse_core`` makes them: typical, degenerate and NaN rows."""
+def _fit_stage_args(attr: str) -> list[tuple]:
+    """The arguments ``_ellipse_core`` passes to ``fit.<attr>`` (a twin), both sets' fits.
+
+    Typical and degenerate rows (:func:`_case_fit_ellipse_params`); the swept flag last.
+    """
     from uasep_env.reachable import fit
 
     vt, phi, r = _case_fit_ellipse_params()
     cases = []
-    reference = fit._fit_certified
-    try:  # capture the arguments _ellipse_core passes (the twin's dispatch replaced)
-        fit._fit_certified = lambda *args: cases.append(args) or reference.reference(*args)
+    reference = getattr(fit, attr)
+    try:  # capture the arguments (the twin's dispatch replaced)
+        setattr(fit, attr, lambda *args: cases.append(args) or reference.reference(*args))
         for swept in (True, False):
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 fit._ellipse_core(vt, phi, r, swept)
     finally:
-        fit._fit_certified = reference
-    cases = [(*(a.copy() for a in args[:-1]), args[-1]) for args in cases]  # swept last
+        setattr(fit, attr, reference)
+    return [(*(a.copy() for a in args[:-1]), args[-1]) for args in cases]
+
+
+def _case_fit_ellipse():
+    """The fit's inputs as ``_ellipse_core`` makes them: typical, degenerate and NaN rows."""
+    cases = _fit_stage_args("_fit_certified")
     nan = tuple(a[:16].copy() for a in cases[0][:-1])  # a NaN in each array in turn
     for j, a in enumerate(nan):
         a[j] = np.nan
     return [*cases, (*nan, True)]
+
+
+def _case_ellipse_start():
+    """The fit's start as ``_ellipse_core`` asks for it, and a NaN table coordinate."""
+    cases = _fit_stage_args("_ellipse_start")
+    nan = tuple(a.copy() for a in cases[0][:-1])
+    nan[4][:3] = np.nan  # log10 of the radius: the table's first column (np.where's guard)
+    return [*cases, (*nan, True)]
+
+
+def _case_ellipse_nodes():
+    """The nodes as ``_ellipse_core`` makes them; fewer (an odd number of merge passes), NaN."""
+    cases = _fit_stage_args("_ellipse_nodes")
+    th, phi = cases[0][0], cases[0][1]
+    nan = th[:6].copy()
+    nan[:, 5::17] = np.nan  # np.sort puts NaN last
+    return [*cases, (th[:8, :60].copy(), phi[:8].copy(), True), (nan, phi[:6].copy(), False)]
 
 
 def _case_dense():
@@ -618,7 +643,8 @@ def _case_scenario():
         cfg = make_config(scenario="random", **config)
         family = get_family("random")
         draws = [family.draws(np.random.default_rng(s), cfg) for s in seeds]
-        return list(batched.geometry_inputs(draws, cfg))
+        patterns = [d.pattern for d in draws]
+        return list(batched.geometry_inputs(patterns, *batched._stacked(draws, cfg), cfg))
 
     typical = inputs(range(60), n_uavs=4, n_obstacles=3)
     typical[1][:5, :, 10] = 500.0  # reaction leads longer than the meeting times
@@ -638,6 +664,48 @@ def _case_scenario():
     return [tuple(c) for c in (typical, narrow, crowded, tight, nan, longer, flat)]
 
 
+def _case_draws():
+    """Episodes' draws: the random family's mix, single members, no obstacle, numpy's rare
+    rejection in its bounded integers, a one-entry mix (nothing drawn), a Philox generator
+    (declined)."""
+    from uasep_env.config import make_config
+    from uasep_env.scenarios import batched
+    from uasep_env.scenarios.families import ENCOUNTERS
+    from uasep_env.scenarios.registry import Mix, get_family
+
+    tables, _ = get_family("random").draw_tables()
+    names = tables.names
+
+    def rngs(seeds):
+        return [np.random.default_rng(s) for s in seeds]
+
+    def config(**kw):
+        return make_config(scenario="random", **kw)
+
+    # The first integers() reads the kept half: 0 is rejected (drawn again), the least
+    # value above the rejection threshold is kept.
+    crafted = rngs(range(2))
+    for g, kept in zip(crafted, (0, 858993460), strict=True):
+        state = g.bit_generator.state
+        g.bit_generator.state = {**state, "has_uint32": 1, "uinteger": kept}
+    solo_mix = Mix(weights={"head_on": 1})
+
+    def solo(rng, cfg):
+        return batched.draw_encounters("solo", cfg, rng, None, solo_mix, ENCOUNTERS)
+
+    solo_tables = batched.draw_tables({"solo": None}, None, solo_mix, ENCOUNTERS, solo, (solo,))
+    philox = [np.random.default_rng(1), np.random.Generator(np.random.Philox(1))]
+    return [
+        (rngs(range(40)), config(n_uavs=3, n_obstacles=1), tables, -1),
+        (rngs(range(40, 70)), config(n_uavs=5, n_obstacles=3), tables, -1),
+        (rngs(range(70, 90)), config(n_obstacles=2), tables, names.index("climbing")),
+        (rngs(range(90, 100)), config(n_obstacles=0), tables, names.index("multi_obstacle")),
+        (crafted, config(n_obstacles=2), tables, -1),
+        (rngs(range(100, 110)), config(n_obstacles=2), solo_tables, -1),
+        (philox, config(), tables, -1),
+    ]
+
+
 TWIN_CASES = {
     "apf_actions": _case_apf,
     "nearest_on_ellipsoids": _case_nearest,
@@ -652,10 +720,13 @@ TWIN_CASES = {
     "obstacle_step": _case_obstacles,
     "kalman_correct": _case_kalman,
     "fit_ellipse": _case_fit_ellipse,
+    "ellipse_start": _case_ellipse_start,
+    "ellipse_nodes": _case_ellipse_nodes,
     "physics_step": _case_physics,
     "step_outcome": _case_outcome,
     "refill_noise": _case_noise,
     "scenario_geometry": _case_scenario,
+    "encounter_draws": _case_draws,
 }
 
 
@@ -679,6 +750,8 @@ NAN_ON_PURPOSE = {
     ("fit_ellipse", 2),
     ("apf_actions", 2),
     ("scenario_geometry", 4),
+    ("ellipse_nodes", 3),
+    *(("encounter_draws", k) for k in range(7)),  # level obstacles' climbs are NaN
 }
 
 
@@ -710,7 +783,7 @@ def test_each_kernel_matches_its_numpy_reference_bit_for_bit(name, loops, monkey
         _assert_same(got_args, want_args, f"{name} case {k} arguments")
         outputs = IN_PLACE[name](want_args) if name in IN_PLACE else want
         for a in outputs if isinstance(outputs, tuple) else (outputs,):
-            if a.dtype == np.bool_:  # a flag (the ellipse fit's certificate)
+            if a.dtype.kind in "bi":  # a flag (the fit's certificate), an index (a member)
                 continue
             assert a.dtype == np.float64, name  # compared before any cast to float32
             if (name, k) not in NAN_ON_PURPOSE:

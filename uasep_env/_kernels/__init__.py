@@ -25,12 +25,17 @@ kernel receives as keyword arguments. These modules import nothing else of the p
   physics step they make with the measurements and separations, :func:`physics_step` --
   :func:`uasep_env.physics_step.physics_step` (these write the world's arrays in place);
 * :func:`fit_ellipse` -- :func:`uasep_env.reachable.fit._fit_certified` (the enclosing
-  ellipse's centre search, axes and certificate);
+  ellipse's centre search, axes and certificate), :func:`ellipse_start` --
+  :func:`uasep_env.reachable.fit._ellipse_start` (its start from the shape table) and
+  :func:`ellipse_nodes` -- :func:`uasep_env.reachable.fit._ellipse_nodes` (its nodes,
+  sorted);
 * :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
   network's layer, in float64 before the rounding);
 * :func:`refill_noise` -- :func:`uasep_env.noise.refill_noise` (numpy's PCG64 draws of
   the environments' noise blocks, compiled);
-* :func:`scenario_geometry` -- :func:`uasep_env.scenarios.batched.scenario_geometry` (a
+* :func:`encounter_draws` -- :func:`uasep_env.scenarios.batched.encounter_draws` (a
+  partial reset's episodes' draws from their generators, numpy's algorithms on PCG64's
+  state) and :func:`scenario_geometry` -- :func:`uasep_env.scenarios.batched.scenario_geometry` (a
   partial reset's episodes built from their draws: plans, starts, obstacles);
 * :func:`apf_actions` -- :func:`uasep_env.policies.apf._apf_actions` (the paper's APF's
   decision from the observations).
@@ -39,7 +44,8 @@ kernel receives as keyword arguments. These modules import nothing else of the p
 from __future__ import annotations
 
 from uasep_env._kernels.apf import apf_actions
-from uasep_env._kernels.ellipse_fit import fit_ellipse
+from uasep_env._kernels.draws import encounter_draws
+from uasep_env._kernels.ellipse_fit import ellipse_nodes, ellipse_start, fit_ellipse
 from uasep_env._kernels.ellipsoids import (
     nearest_on_ellipsoids,
     pairwise_distances,
@@ -64,6 +70,9 @@ __all__ = [
     "assemble_observations",
     "dense",
     "double_integrator",
+    "ellipse_nodes",
+    "ellipse_start",
+    "encounter_draws",
     "fit_ellipse",
     "kalman_correct",
     "nearest_on_ellipsoids",

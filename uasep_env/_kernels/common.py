@@ -53,6 +53,12 @@ def _maximum(x, y):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always", **_JIT)
+def _minimum(x, y):  # noqa: ANN001, ANN202
+    """``np.minimum``'s scalar rule: ``x`` unless ``y`` is smaller, NaN if either is."""
+    return x if (x <= y or x != x) else y
+
+
+@numba.njit(inline="always", **_JIT)
 def _sq3(a, b, c):  # noqa: ANN001, ANN202
     """Squared norm in the order numpy's ``einsum("...i,...i")`` adds (two SIMD lanes)."""
     return (a * a + c * c) + b * b

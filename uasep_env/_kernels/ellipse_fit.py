@@ -1,7 +1,9 @@
-"""The enclosing ellipse's search and fit: :func:`uasep_env.reachable.fit._fit_certified`.
+"""The enclosing ellipse's start, nodes, search and fit (:mod:`uasep_env.reachable.fit`).
 
-Only arithmetic and square roots (no trigonometry: the nodes' sines and cosines come in),
-so the numbers are numpy's on any CPU.
+:func:`ellipse_start` (``_ellipse_start``), :func:`ellipse_nodes` (``_ellipse_nodes``) and
+:func:`fit_ellipse` (``_fit_certified``). Only arithmetic and square roots (no
+trigonometry: the sines, cosines, arctangents and logarithms come in, numpy's), so the
+numbers are numpy's on any CPU.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import math
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, _maximum, frozen
+from uasep_env._kernels.common import _JIT, _maximum, _minimum, frozen
 
 
 @numba.njit(**_JIT)
@@ -207,3 +209,172 @@ def fit_ellipse(
     _fit_rows(*(frozen(np.asarray(a, dtype=np.float64)) for a in inputs), bool(swept),
               golden_iters, c_out, lat_out, lon_out, ok, scratch)  # fmt: skip
     return c_out, lat_out, lon_out, ok
+
+
+@numba.njit(**_JIT)
+def _start_rows(  # noqa: ANN202
+    vt, phi, r, atan, logr, half_sin, sin_y, swept,  # noqa: ANN001
+    u0, du, l0, dl, corners, dirs, dsin, dcos, tiny_y, eps_rel, step, c_search,  # noqa: ANN001
+    out,  # noqa: ANN001
+):  # fmt: skip
+    """Every row of ``_ellipse_start`` into ``out`` ``(12, R)``, in its order."""
+    na, nl = corners.shape[0] + 1, corners.shape[1] + 1
+    for i in range(vt.shape[0]):
+        v, p, rr = vt[i], phi[i], r[i]
+        scale = v + rr
+        eps = rr / v if v > 0.0 else math.inf
+        u = math.sqrt(atan[i] * (2.0 / math.pi) if math.isfinite(eps) else 1.0)
+        ip = 1.0 / p if p > 1e-200 else 0.0
+        hs = half_sin[i]
+        omc = 2.0 * (hs * hs) * ip
+        y = math.pi * (p / math.pi)
+        sc = sin_y[i] / (y if y != 0.0 else tiny_y)
+        # The shape table, interpolated in its cell (np.clip: NaN stays NaN).
+        fa = _minimum(_maximum((u - u0) / du, 0.0), na - 1.0)
+        fl = _minimum(_maximum((logr[i] - l0) / dl, 0.0), nl - 1.0)
+        if fl != fl:
+            fl = 0.0
+        i0 = min(int(fa), na - 2)
+        j0 = min(int(fl), nl - 2)
+        ta, tl = fa - i0, fl - j0
+        ua, ul = 1 - ta, 1 - tl
+        k = corners[i0, j0]
+        f0 = k[0, 0] * ua * ul + k[1, 0] * ta * ul + k[2, 0] * ua * tl + k[3, 0] * ta * tl
+        f1 = k[0, 1] * ua * ul + k[1, 1] * ta * ul + k[2, 1] * ua * tl + k[3, 1] * ta * tl
+        f2 = k[0, 2] * ua * ul + k[1, 2] * ta * ul + k[2, 2] * ua * tl + k[3, 2] * ta * tl
+        # The set's supports ahead, behind and to the side (sets._h_unit_of).
+        h0 = hpi = hx = 0.0
+        for j in range(3):
+            a = dirs[j]
+            if a <= p:
+                unit = 1.0 - (a - dsin[j]) * ip
+            else:
+                unit = dsin[j] * omc + dcos[j] * sc
+                if swept:
+                    unit = _maximum(unit, 0.0)
+            h = rr + v * unit
+            if j == 0:
+                h0 = h
+            elif j == 1:
+                hpi = h
+            else:
+                hx = h
+        ext = h0 + hpi
+        lat = f2 * hx
+        lon = f1 * ext
+        lat_g = _maximum(lat, 1e-9 * scale)
+        lon_g = _maximum(lon, 1e-9 * scale)
+        t_lo = _minimum(0.2 * _minimum(lat_g, lon_g) / _maximum(lat_g, lon_g), step)
+        out[0, i] = f0 * ext - hpi
+        out[1, i] = lon
+        out[2, i] = lat
+        out[3, i] = c_search * ext
+        out[4, i] = eps_rel * scale
+        out[5, i] = lat_g
+        out[6, i] = lon_g
+        out[7, i] = t_lo
+        out[8, i] = step / t_lo
+        out[9, i] = ip
+        out[10, i] = omc
+        out[11, i] = sc
+
+
+def ellipse_start(
+    vt: np.ndarray,
+    phi: np.ndarray,
+    r: np.ndarray,
+    atan: np.ndarray,
+    logr: np.ndarray,
+    half_sin: np.ndarray,
+    sin_y: np.ndarray,
+    swept: bool,
+    *,
+    tab_u: tuple[float, float],
+    tab_logr: tuple[float, float],
+    corners: tuple[np.ndarray, np.ndarray],
+    directions: tuple[np.ndarray, np.ndarray, np.ndarray],
+    constants: tuple[float, float, float, float],
+) -> tuple[np.ndarray, ...]:
+    """Compiled :func:`uasep_env.reachable.fit._ellipse_start`: twelve ``(R,)`` arrays.
+
+    ``tab_u``, ``tab_logr``: the shape table's first node and spacing on each axis;
+    ``corners``: its cells' corners (swept, terminal); ``directions``: the extents'
+    directions with their sines and cosines; ``constants``: ``sinc``'s guard for 0, the
+    relative rounding margin, the nodes' largest spacing and the centre search's half-width.
+    """
+    out = np.empty((12, vt.shape[0]))
+    inputs = (vt, phi, r, atan, logr, half_sin, sin_y)
+    _start_rows(*(frozen(np.asarray(a, dtype=np.float64)) for a in inputs), bool(swept),
+                *tab_u, *tab_logr, corners[0] if swept else corners[1], *directions,
+                *constants, out)  # fmt: skip
+    return tuple(out)
+
+
+@numba.njit(inline="always", **_JIT)
+def _before(a, b):  # noqa: ANN001, ANN202
+    """``a`` sorts before ``b`` as in ``np.sort`` (NaN last)."""
+    return a < b or (b != b and a == a)
+
+
+@numba.njit(**_JIT)
+def _nodes_rows(th, phi, swept, n_cert, uniform, out, tmp):  # noqa: ANN001, ANN202
+    """Each row of ``_ellipse_nodes``: the nodes gathered, three set exactly, then sorted.
+
+    Sorted by runs of 16 put in order by insertion, then merged pairwise through ``tmp``
+    (equal values are equal bits here, so any sort gives ``np.sort``'s row).
+    """
+    k, n_uni = th.shape[1], uniform.shape[0]
+    size = out.shape[1]
+    for i in range(th.shape[0]):
+        row = out[i]
+        for j in range(k):
+            row[j] = th[i, j]
+        for j in range(n_uni):
+            row[k + j] = uniform[j]
+        p = phi[i]
+        row[size - 1] = 0.5 * (math.pi + p) if (swept and p < math.pi) else 0.5 * math.pi
+        row[0] = 0.0
+        row[n_cert // 2] = 0.5 * math.pi
+        row[n_cert] = math.pi
+        for lo in range(0, size, 16):
+            for j in range(lo + 1, min(lo + 16, size)):
+                x = row[j]
+                m = j
+                while _before(x, row[m - 1]):
+                    row[m] = row[m - 1]
+                    m -= 1
+                    if m == lo:
+                        break
+                row[m] = x
+        width = 16
+        src, dst = row, tmp
+        flips = 0
+        while True:
+            if width >= size:
+                break
+            for lo in range(0, size, 2 * width):
+                mid, hi = min(lo + width, size), min(lo + 2 * width, size)
+                a, b = lo, mid
+                for m in range(lo, hi):
+                    if b >= hi or (a < mid and not _before(src[b], src[a])):
+                        dst[m] = src[a]
+                        a += 1
+                    else:
+                        dst[m] = src[b]
+                        b += 1
+            src, dst = dst, src
+            width *= 2
+            flips += 1
+        if flips % 2:  # the sorted row is in tmp
+            for j in range(size):
+                row[j] = tmp[j]
+
+
+def ellipse_nodes(
+    th: np.ndarray, phi: np.ndarray, swept: bool, *, n_cert: int, uniform: np.ndarray
+) -> np.ndarray:
+    """Compiled :func:`uasep_env.reachable.fit._ellipse_nodes`: ``(R, K + 48)`` ascending."""
+    out = np.empty((th.shape[0], th.shape[1] + uniform.shape[0] + 1))
+    _nodes_rows(frozen(th), frozen(phi), bool(swept), n_cert, frozen(uniform), out,
+                np.empty(out.shape[1]))  # fmt: skip
+    return out

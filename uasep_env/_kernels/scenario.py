@@ -12,13 +12,7 @@ import math
 import numba
 import numpy as np
 
-from uasep_env._kernels.common import _JIT, _maximum, _norm3, frozen
-
-
-@numba.njit(inline="always", **_JIT)
-def _minimum(x, y):  # noqa: ANN001, ANN202
-    """``np.minimum``'s scalar rule: ``x`` unless ``y`` is smaller, NaN if either is."""
-    return x if (x <= y or x != x) else y
+from uasep_env._kernels.common import _JIT, _maximum, _minimum, _norm3, frozen
 
 
 @numba.njit(inline="always", **_JIT)

@@ -19,12 +19,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from uasep_env._numba import compiled_twin
+from uasep_env.obstacles import _EPS
 from uasep_env.reachable.sets import (
     FloatArray,
     Mode,
     _check_mode,
-    _h_unit,
     _h_unit_of,
+    _inv,
     _nonneg_all,
     _out,
     _unit_factors,
@@ -42,6 +43,7 @@ _N_GEO = 14
 #: Nodes uniform in the normal angle, merged with those uniform in the ellipse's parameter.
 _UNIFORM_NODES = np.linspace(0.0, np.pi, 49)[1:-1]
 _PARAMETRIC_NODES = np.linspace(0.0, np.pi, _N_CERT + 1)
+_PARAMETRIC_SIN, _PARAMETRIC_COS = np.sin(_PARAMETRIC_NODES), np.cos(_PARAMETRIC_NODES)
 _GEO_EXPONENTS = np.linspace(0.0, 1.0, _N_GEO)
 #: Relative absolute margin (of ``v t + r``) that absorbs floating-point rounding.
 _EPS_ABS = 1e-12
@@ -262,13 +264,138 @@ def _certified(
 _EXTENT_DIRECTIONS = np.array([0.0, np.pi, 0.5 * np.pi])
 
 
+_EXTENT_SIN, _EXTENT_COS = np.sin(_EXTENT_DIRECTIONS), np.cos(_EXTENT_DIRECTIONS)
+
+
 def _extents(
     vt: FloatArray, phi: FloatArray, r: FloatArray, swept: bool
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The set's supports ahead (``0``), behind (``pi``) and to the side (``pi / 2``) (m)."""
-    a = np.broadcast_to(_EXTENT_DIRECTIONS, (*vt.shape, 3))
-    h = r[..., None] + vt[..., None] * _h_unit(a, phi[..., None], swept)
+    return _extents_of(vt, phi, r, *_unit_factors(phi), swept)
+
+
+def _extents_of(
+    vt: FloatArray,
+    phi: FloatArray,
+    r: FloatArray,
+    ip: FloatArray,
+    omc: FloatArray,
+    sc: FloatArray,
+    swept: bool,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`_extents` from :func:`_unit_factors` of ``phi`` (no trigonometry)."""
+    unit = _h_unit_of(
+        _EXTENT_DIRECTIONS,
+        _EXTENT_SIN,
+        _EXTENT_COS,
+        phi[..., None],
+        ip[..., None],
+        omc[..., None],
+        sc[..., None],
+        swept,
+    )
+    h = r[..., None] + vt[..., None] * unit
     return h[..., 0], h[..., 1], h[..., 2]
+
+
+def _fit_trigonometry(
+    vt: FloatArray, phi: FloatArray, r: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The transcendental functions the fit's start needs, numpy's (its numbers on any CPU).
+
+    Returns:
+        ``arctan2(2 eps, phi)`` and ``log10(hypot(phi, 2 eps))`` of the table's coordinates
+        (:func:`_table_coords`; ``eps = r / (v t)``, ``log10(inf)`` where it is not
+        finite), ``sin(phi / 2)`` and the sine of ``sinc``'s argument
+        (:func:`_unit_factors`).
+    """
+    pos = vt > 0.0
+    eps = np.where(pos, r / np.where(pos, vt, 1.0), np.inf)
+    finite = np.isfinite(eps)
+    e2 = 2.0 * np.where(finite, eps, 0.0)
+    y = np.pi * (phi / np.pi)
+    return (
+        np.arctan2(e2, phi),
+        np.log10(np.where(finite, np.hypot(phi, e2), np.inf)),
+        np.sin(0.5 * phi),
+        np.sin(np.where(y, y, _EPS)),
+    )
+
+
+@compiled_twin(
+    "ellipse_start",
+    tab_u=(float(_TAB_U[0]), float(_TAB_U[1] - _TAB_U[0])),
+    tab_logr=(float(_TAB_LOGR[0]), float(_TAB_LOGR[1] - _TAB_LOGR[0])),
+    corners=(_CORNERS[True], _CORNERS[False]),
+    directions=(_EXTENT_DIRECTIONS, _EXTENT_SIN, _EXTENT_COS),
+    constants=(_EPS, _EPS_ABS, np.pi / _N_CERT, _C_SEARCH),
+)
+def _ellipse_start(
+    vt: FloatArray,
+    phi: FloatArray,
+    r: FloatArray,
+    atan: FloatArray,
+    logr: FloatArray,
+    half_sin: FloatArray,
+    sin_y: FloatArray,
+    swept: bool,
+) -> tuple[FloatArray, ...]:
+    """The fit's start from the table, and its nodes' spacing (arithmetic and square roots).
+
+    Compiled as ``ellipse_start``; the transcendental functions come in
+    (:func:`_fit_trigonometry`).
+
+    Returns:
+        ``(c, B, A, half, eps_abs, A_g, B_g, t_lo, base, ip, omc, sc)``, each ``(R,)``: the
+        table's centre and axes (m), the half-width of the centre's search (m), the
+        rounding margin (m), the axes the nodes are spaced on (m), the smallest node
+        spacing and the ratio of the largest to it, and :func:`_unit_factors` of ``phi``.
+    """
+    scale = vt + r
+    pos = vt > 0.0
+    finite = np.isfinite(np.where(pos, r / np.where(pos, vt, 1.0), np.inf))
+    u = np.sqrt(np.where(finite, atan * (2.0 / np.pi), 1.0))
+    ip = _inv(phi)
+    omc = 2.0 * half_sin**2 * ip
+    y = np.pi * (phi / np.pi)
+    sc = sin_y / np.where(y, y, _EPS)
+    frac = _interp_table(swept, u, logr)
+    h0, hpi, hx = _extents_of(vt, phi, r, ip, omc, sc, swept)
+    ext = h0 + hpi
+    c = frac[..., 0] * ext - hpi
+    lon = frac[..., 1] * ext
+    lat = frac[..., 2] * hx
+    # Nodes: uniform in the parametric angle of the table's ellipse, merged with nodes uniform
+    # in the normal angle, pi/2 and the kink of the swept set's support.
+    # Near the ends of a thin ellipse the normal turns fast, so the parameter is also refined
+    # geometrically towards 0, pi/2 and pi, down to a fifth of the aspect ratio.
+    lat_g = np.maximum(lat, 1e-9 * scale)
+    lon_g = np.maximum(lon, 1e-9 * scale)
+    step = np.pi / _N_CERT
+    t_lo = np.minimum(0.2 * np.minimum(lat_g, lon_g) / np.maximum(lat_g, lon_g), step)
+    return (c, lon, lat, _C_SEARCH * ext, _EPS_ABS * scale, lat_g, lon_g, t_lo, step / t_lo,
+            ip, omc, sc)  # fmt: skip
+
+
+@compiled_twin("ellipse_nodes", n_cert=_N_CERT, uniform=_UNIFORM_NODES)
+def _ellipse_nodes(th: FloatArray, phi: FloatArray, swept: bool) -> FloatArray:
+    """The certificate's nodes, ascending (compiled as ``ellipse_nodes``).
+
+    ``th``'s, those uniform in the normal angle, the kink of the swept set's support, and 0,
+    pi/2 and pi exactly.
+
+    Args:
+        th: ``(R, K)`` the normal angles of the table ellipse's parametric nodes.
+        phi: ``(R,)`` the largest turn (rad).
+        swept: The swept set (else the terminal one).
+    """
+    kink = np.where(swept & (phi < np.pi), 0.5 * (np.pi + phi), 0.5 * np.pi)
+    uni = np.broadcast_to(_UNIFORM_NODES, (*th.shape[:-1], _UNIFORM_NODES.size))
+    out = np.concatenate([th, uni, kink[..., None]], axis=-1)
+    out[..., 0] = 0.0
+    out[..., _N_CERT // 2] = 0.5 * np.pi
+    out[..., _N_CERT] = np.pi
+    return np.sort(out, axis=-1)
 
 
 @compiled_twin("fit_ellipse", golden_iters=_C_ITERS)
@@ -339,45 +466,20 @@ def _ellipse_core(
     scale = vt + r
     live = scale > 0.0
     with np.errstate(divide="ignore", invalid="ignore"):
-        eps = np.where(vt > 0.0, r / np.where(vt > 0.0, vt, 1.0), np.inf)
-    u, logr = _table_coords(phi, eps)
-    frac = _interp_table(swept, u, logr)
-    h0, hpi, hx = _extents(vt, phi, r, swept)
-    ext = h0 + hpi
-    c = frac[..., 0] * ext - hpi
-    lon = frac[..., 1] * ext
-    lat = frac[..., 2] * hx
-    eps_abs = _EPS_ABS * scale
-    # Nodes: uniform in the parametric angle of the table's ellipse, merged with nodes uniform
-    # in the normal angle, pi/2 and the kink of the swept set's support.
-    # Near the ends of a thin ellipse the normal turns fast, so the parameter is also refined
-    # geometrically towards 0, pi/2 and pi, down to a fifth of the aspect ratio.
-    lat_g = np.maximum(lat, 1e-9 * scale)
-    lon_g = np.maximum(lon, 1e-9 * scale)
-    step = np.pi / _N_CERT
-    t_lo = np.minimum(0.2 * np.minimum(lat_g, lon_g) / np.maximum(lat_g, lon_g), step)
-    geo = t_lo[..., None] * (step / t_lo)[..., None] ** _GEO_EXPONENTS
-    tpar = np.concatenate(
-        [
-            np.broadcast_to(_PARAMETRIC_NODES, (*vt.shape, _N_CERT + 1)),
-            geo,
-            0.5 * np.pi - geo,
-            0.5 * np.pi + geo,
-            np.pi - geo,
-        ],
-        axis=-1,
-    )
-    th = np.arctan2(lon_g[..., None] * np.sin(tpar), lat_g[..., None] * np.cos(tpar))
-    th[..., 0] = 0.0
-    th[..., _N_CERT // 2] = 0.5 * np.pi
-    th[..., _N_CERT] = np.pi
-    kink = np.where(swept & (phi < np.pi), 0.5 * (np.pi + phi), 0.5 * np.pi)
-    uni = np.broadcast_to(_UNIFORM_NODES, (*th.shape[:-1], _UNIFORM_NODES.size))
-    th = np.sort(np.concatenate([th, uni, kink[..., None]], axis=-1), axis=-1)
+        trig = _fit_trigonometry(vt, phi, r)
+        c, lon, lat, half, eps_abs, lat_g, lon_g, t_lo, base, ip, omc, sc = _ellipse_start(
+            vt, phi, r, *trig, swept
+        )
+    geo = t_lo[..., None] * base[..., None] ** _GEO_EXPONENTS
+    geo = np.concatenate([geo, 0.5 * np.pi - geo, 0.5 * np.pi + geo, np.pi - geo], axis=-1)
+    # The parametric nodes' sines and cosines are the same every call: made once.
+    shape = (*vt.shape, _N_CERT + 1)
+    sin_t = np.concatenate([np.broadcast_to(_PARAMETRIC_SIN, shape), np.sin(geo)], axis=-1)
+    cos_t = np.concatenate([np.broadcast_to(_PARAMETRIC_COS, shape), np.cos(geo)], axis=-1)
+    th = _ellipse_nodes(np.arctan2(lon_g[..., None] * sin_t, lat_g[..., None] * cos_t), phi, swept)
     cos, sin = np.cos(th), np.sin(th)
-    ip, omc, sc = _unit_factors(phi)
     c, lat, lon, ok = _fit_certified(
-        th, cos, sin, vt, phi, ip, omc, sc, r, c, _C_SEARCH * ext, lat_g, lon, eps_abs, swept
+        th, cos, sin, vt, phi, ip, omc, sc, r, c, half, lat_g, lon, eps_abs, swept
     )
     ok |= ~live
     grow = 1e-6

@@ -19,8 +19,10 @@ plus ``airspace.obstacle_margin`` and ``airspace.ceiling_altitude``.
 
 A partial reset draws many episodes at once (:func:`uasep_env.scenarios.batched.sample_batch`):
 the families that declare a batched form (:attr:`ScenarioFamily.draws`) draw per episode,
-from its generator in its order, and build the geometry once over the batch; the same
-episodes as :func:`sample_scenario`, bit for bit.
+from its generator in its order, and build the geometry once over the batch (compiled,
+``scenario_geometry``); ``random`` and its members declare their draws as tables too
+(:attr:`ScenarioFamily.draw_tables`), which a compiled kernel draws from every episode's
+generator at once. The same episodes as :func:`sample_scenario`, bit for bit.
 
 The encounters' timing does not depend on ``episode_duration``: they are laid out on the
 default 200 s timeline (meetings at 60-140 s, the paper's at 115 s), so a shorter episode is

@@ -26,7 +26,7 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -55,7 +55,7 @@ from uasep_env.scenarios.spec import N_WAYPOINTS, ScenarioBatch
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
 
-__all__ = ["EpisodeDraws", "draw_encounters", "sample_batch"]
+__all__ = ["DrawTables", "EpisodeDraws", "draw_encounters", "draw_tables", "sample_batch"]
 
 _TURNS = N_WAYPOINTS - 2
 # The layout's uniform draws, in order: the plan's heading, its turns, whether each turn is
@@ -244,6 +244,127 @@ def draw_encounters(
     return EpisodeDraws(family, pattern, layout, obstacles)
 
 
+class DrawTables(NamedTuple):
+    """A family's draws as tables: what :func:`encounter_draws` compiles (:func:`draw_tables`).
+
+    Attributes:
+        member_cum: ``(K,)`` the cumulative weights of the member families drawn per episode
+            (its :class:`Mix`; one member: none drawn).
+        first: ``(K,)`` each member's slot-0 encounter, a row of the encounter tables (-1:
+            background traffic like the other slots).
+        traffic_cum: ``(T,)`` the cumulative weights of the background traffic's kinds.
+        traffic_kind: ``(T,)`` their encounter rows.
+        low: ``(E, 8)`` each encounter's uniform draws' low ends (:func:`_bounds`, padded).
+        span: ``(E, 8)`` their spans.
+        count: ``(E,)`` how many it draws.
+        flags: ``(E, 3)`` whether its speed is above the cruise speed, it comes from either
+            side, it climbs or descends.
+        heading_offset: ``(E,)`` its heading offset from the plan's (rad).
+        names: Each member's family name.
+        draws: The family's per-episode draws (drawing its member).
+        member_draws: Each member family's per-episode draws.
+    """
+
+    member_cum: np.ndarray
+    first: np.ndarray
+    traffic_cum: np.ndarray
+    traffic_kind: np.ndarray
+    low: np.ndarray
+    span: np.ndarray
+    count: np.ndarray
+    flags: np.ndarray
+    heading_offset: np.ndarray
+    names: tuple[str, ...]
+    draws: Callable[..., EpisodeDraws]
+    member_draws: tuple[Callable[..., EpisodeDraws], ...]
+
+
+def draw_tables(
+    members: dict[str, Encounter | None],
+    mix: Mix | None,
+    traffic: Mix,
+    encounters: dict[str, Encounter],
+    draws: Callable[..., EpisodeDraws],
+    member_draws: tuple[Callable[..., EpisodeDraws], ...],
+) -> DrawTables:
+    """The tables of a family whose episodes are :func:`draw_encounters`' of its members.
+
+    Args:
+        members: Each member family's name and slot-0 encounter (``None``: background).
+        mix: The mix a member is drawn from per episode (its names in ``members``' order),
+            or ``None`` for a family of one member.
+        traffic: The mix of the background traffic's kinds.
+        encounters: The encounter kinds by name.
+        draws: The family's per-episode draws.
+        member_draws: Each member's per-episode draws, in ``members``' order.
+    """
+    kinds = list(encounters.values())
+    names = tuple(members)
+    if mix is not None and mix.names != names:
+        raise ValueError(f"the mix {mix.names} does not list the members {names}")
+    weights = [mix.weights[n] for n in names] if mix is not None else [1]
+    low, span = np.zeros((len(kinds), 8)), np.zeros((len(kinds), 8))
+    count = np.zeros(len(kinds), dtype=np.int64)
+    flags = np.zeros((len(kinds), 3), dtype=bool)
+    offset = np.zeros(len(kinds))
+    for e, kind in enumerate(kinds):
+        d = kind.draws
+        assert d is not None  # families with such an encounter declare no batched form
+        lo, _, sp = _bounds(d)
+        count[e] = len(lo)
+        low[e, : len(lo)], span[e, : len(lo)] = lo, sp
+        flags[e] = d.above_cruise, d.either_side, d.climbs
+        offset[e] = d.heading_offset
+    index = {id(kind): e for e, kind in enumerate(kinds)}
+    return DrawTables(
+        member_cum=np.cumsum(weights, dtype=np.int64),
+        first=np.array([-1 if f is None else index[id(f)] for f in members.values()], np.int64),
+        traffic_cum=np.cumsum(list(traffic.weights.values()), dtype=np.int64),
+        traffic_kind=np.array([index[id(encounters[n])] for n in traffic.names], np.int64),
+        low=low,
+        span=span,
+        count=count,
+        flags=flags,
+        heading_offset=offset,
+        names=names,
+        draws=draws,
+        member_draws=member_draws,
+    )
+
+
+@compiled_twin(
+    "encounter_draws",
+    exact=_FORMULA_IS_EXACT,
+    layout_bounds=_layout_bounds,
+    meet_range=MEET_TIME_RANGE,
+    timeline=TIMELINE_S,
+)
+def encounter_draws(
+    rngs: list[np.random.Generator], config: EnvConfig, tables: DrawTables, member: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each generator's episode drawn by ``tables``' family, stacked.
+
+    Compiled as ``encounter_draws``, which draws from the tables.
+
+    Args:
+        rngs: Each episode's generator (left where its draws leave it).
+        config: The environment config.
+        tables: The family's :class:`DrawTables`.
+        member: The member drawn (-1: drawn per episode by the family's mix).
+
+    Returns:
+        ``(members, layout, obstacles)``: each episode's member ``(B,)``, layout draws
+        ``(B, L)`` and obstacles' draws ``(B, M, 11)`` (:class:`EpisodeDraws`).
+    """
+    draw = tables.draws if member < 0 else tables.member_draws[member]
+    drawn = [draw(rng, config) for rng in rngs]
+    members = np.array([tables.names.index(d.family) for d in drawn], dtype=np.int64)
+    obstacles = np.zeros((len(drawn), config.n_obstacles, _N_COLS))
+    for k, d in enumerate(drawn):
+        obstacles[k] = d.obstacles
+    return members, np.stack([d.layout for d in drawn]), obstacles
+
+
 def sample_batch(rngs: list[np.random.Generator], config: EnvConfig) -> ScenarioBatch:
     """Draw one episode's initial conditions per generator, as one batch.
 
@@ -255,6 +376,11 @@ def sample_batch(rngs: list[np.random.Generator], config: EnvConfig) -> Scenario
         config: The environment config (``config.scenario`` names the family).
     """
     family = get_family(config.scenario)
+    if family.draw_tables is not None:  # the draws compiled, from the family's tables
+        tables, member = family.draw_tables()
+        members, lay, ob = encounter_draws(rngs, config, tables, member)
+        names = [tables.names[k] for k in members.tolist()]
+        return _geometry_of(names, [None] * len(rngs), lay, ob, config)
     if family.draws is None:
         return ScenarioBatch.from_specs([family.generate(rng, config) for rng in rngs])
     return geometry([family.draws(rng, config) for rng in rngs], config)
@@ -306,11 +432,11 @@ def _plans(draws: np.ndarray, cruise_speed: float, extra: float) -> np.ndarray:
     return wp
 
 
-def _slots(draws: list[EpisodeDraws], config: EnvConfig) -> np.ndarray:
-    """``(B, n_uavs, 3)`` each episode's formation pattern."""
-    out = np.empty((len(draws), config.n_uavs, 3))
-    for k, d in enumerate(draws):
-        out[k] = _pattern(d.pattern or config.formation, config.n_uavs, config.formation_spacing)
+def _slots(patterns: list[str | tuple | None], config: EnvConfig) -> np.ndarray:
+    """``(B, n_uavs, 3)`` each episode's formation pattern (``None``: the config's)."""
+    out = np.empty((len(patterns), config.n_uavs, 3))
+    for k, pattern in enumerate(patterns):
+        out[k] = _pattern(pattern or config.formation, config.n_uavs, config.formation_spacing)
     return out
 
 
@@ -331,15 +457,22 @@ def _planned_at(
     return center[:, None, :] + offsets[np.arange(len(t)), located[1]], direction
 
 
-def geometry_inputs(draws: list[EpisodeDraws], config: EnvConfig) -> tuple:
-    """:func:`scenario_geometry`'s arguments for the episodes of ``draws``."""
-    m = config.n_obstacles
+def _stacked(draws: list[EpisodeDraws], config: EnvConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The layouts ``(B, L)`` and obstacles' draws ``(B, M, 11)`` of ``draws``, stacked."""
     lay = np.stack([d.layout for d in draws])
-    ob = np.stack([d.obstacles for d in draws]) if m else np.zeros((len(draws), 0, _N_COLS))
+    if not config.n_obstacles:
+        return lay, np.zeros((len(draws), 0, _N_COLS))
+    return lay, np.stack([d.obstacles for d in draws])
+
+
+def geometry_inputs(
+    patterns: list[str | tuple | None], lay: np.ndarray, ob: np.ndarray, config: EnvConfig
+) -> tuple:
+    """:func:`scenario_geometry`'s arguments for episodes of these patterns and draws."""
     long = config.episode_duration > TIMELINE_S
     extra = config.cruise_speed * (config.episode_duration - TIMELINE_S) if long else 0.0
     floor, ceiling = airspace(config)
-    return (lay, ob, _slots(draws, config), float(config.cruise_speed), float(extra),
+    return (lay, ob, _slots(patterns, config), float(config.cruise_speed), float(extra),
             float(config.uav.separation_distance), float(floor), float(ceiling))  # fmt: skip
 
 
@@ -350,15 +483,27 @@ def geometry(draws: list[EpisodeDraws], config: EnvConfig) -> ScenarioBatch:
     :func:`~uasep_env.scenarios.building.aimed_obstacle` and
     :func:`~uasep_env.scenarios.building.assemble` make of the same draws.
     """
-    b, m = len(draws), config.n_obstacles
-    args = geometry_inputs(draws, config)
-    ob, slots = args[1:3]
+    lay, ob = _stacked(draws, config)
+    return _geometry_of([d.family for d in draws], [d.pattern for d in draws], lay, ob, config)
+
+
+def _geometry_of(
+    families: list[str],
+    patterns: list[str | tuple | None],
+    lay: np.ndarray,
+    ob: np.ndarray,
+    config: EnvConfig,
+) -> ScenarioBatch:
+    """:func:`geometry` of stacked draws."""
+    b, m = len(families), config.n_obstacles
+    args = geometry_inputs(patterns, lay, ob, config)
+    slots = args[2]
     wp, cum, direction, offsets, uav_pos, uav_vel, pos, heading, climb, hold, band = (
         scenario_geometry(*args)
     )
     obc = config.obstacle
     return ScenarioBatch(
-        families=[d.family for d in draws],
+        families=families,
         waypoints=wp,
         cruise_speed=np.full(b, float(config.cruise_speed)),
         slots=slots,

@@ -14,14 +14,16 @@ to a mix only if ``random`` should draw it (that moves every bank: see ``tests/t
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from uasep_env.formation import pattern_slots
 from uasep_env.scenarios import real_traffic as _real_traffic
-from uasep_env.scenarios.batched import EpisodeDraws, draw_encounters
+from uasep_env.scenarios.batched import DrawTables, EpisodeDraws, draw_encounters, draw_tables
 from uasep_env.scenarios.building import (
     SPEED_RANGE_MPS,
     TIMELINE_S,
@@ -154,6 +156,7 @@ def _encounter(kind: str) -> ScenarioFamily:
         parameters=encounter.parameters,
         generate=generate,
         draws=draws if _batched(encounter, *ENCOUNTERS.values()) else None,
+        draw_tables=_tables_of(kind) if kind in RANDOM_MIX.names else None,
     )
 
 
@@ -305,6 +308,30 @@ RANDOM_MIX = Mix(
     weights={"crossing": 1, "head_on": 1, "overtaking": 1, "climbing": 1, "multi_obstacle": 1}
 )
 
+
+@functools.cache
+def _random_tables() -> DrawTables:
+    """The ``random`` family's draws as tables (its members registered by then)."""
+    members = {name: ENCOUNTERS.get(name) for name in RANDOM_MIX.names}
+    return draw_tables(
+        members,
+        RANDOM_MIX,
+        TRAFFIC_MIX,
+        ENCOUNTERS,
+        _random_draws,
+        tuple(FAMILIES[name].draws for name in members),  # type: ignore[misc]
+    )
+
+
+def _tables_of(member: str | None) -> Callable[[], tuple[DrawTables, int]] | None:
+    """``ScenarioFamily.draw_tables`` of the ``random`` family or one of its members."""
+    if not _batched(*ENCOUNTERS.values()):
+        return None
+    if member is None:
+        return lambda: (_random_tables(), -1)
+    return lambda: (_random_tables(), RANDOM_MIX.names.index(member))
+
+
 # ---- The registry, in the order the names are listed ----------------------------------------
 register(
     ScenarioFamily(
@@ -328,6 +355,7 @@ register(
         gym_name="Formation",
         mix=RANDOM_MIX,
         draws=_random_draws if _batched(*ENCOUNTERS.values()) else None,
+        draw_tables=_tables_of(None),
     )
 )
 for _kind in ENCOUNTERS:
@@ -339,6 +367,7 @@ register(
         parameters="Each slot's kind drawn from " + TRAFFIC_MIX.describe() + ".",
         generate=_multi_obstacle,
         draws=_multi_obstacle_draws if _batched(*ENCOUNTERS.values()) else None,
+        draw_tables=_tables_of("multi_obstacle"),
     )
 )
 register(

@@ -88,6 +88,10 @@ class ScenarioFamily:
             :attr:`generate`, in the same order, with the geometry left to
             :func:`uasep_env.scenarios.batched.geometry` (``None``: a batch of its episodes
             is generated one at a time).
+        draw_tables: Its draws as tables, ``() -> (DrawTables, member)`` (made on first use;
+            ``member`` -1: drawn per episode by the tables' mix): a batch of its episodes is
+            drawn by :func:`uasep_env.scenarios.batched.encounter_draws`, compiled
+            (``None``: by :attr:`draws`, one episode at a time).
     """
 
     name: str
@@ -99,6 +103,7 @@ class ScenarioFamily:
     mix: Mix | None = None
     obstacle_model: str = "dubins"
     draws: Callable[[np.random.Generator, Any], Any] | None = None
+    draw_tables: Callable[[], tuple[Any, int]] | None = None
 
 
 #: Every registered family by name, in registration order.
