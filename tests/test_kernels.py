@@ -855,6 +855,42 @@ def test_noise_kernel_draws_itself_and_declines_what_it_cannot_read(monkeypatch)
     _assert_same(got, want, "declined")
 
 
+def test_reset_kernels_build_random_episodes_themselves(monkeypatch):
+    """A partial reset's draws and geometry run compiled on the random family's episodes
+    (the twin cases compare two codes), and the draws decline where they could not read
+    the generators' kept half-word: then Python draws the same episodes."""
+    from uasep_env._kernels import draws as kernel_draws
+
+    if sys.platform == "win32":
+        pytest.skip("numpy's MSVC builds store PCG64's words high first: the kernel declines")
+    compiled = _numba.kernels()
+    draws_case, geometry_case = _case_draws()[0], _case_scenario()[0]
+    twin = _numba.TWINS["encounter_draws"]
+    assert kernel_draws._BUFFER_OK
+    got = compiled.encounter_draws(*_copy(draws_case), **twin.constants)
+    assert got is not NotImplemented
+    built = compiled.scenario_geometry(
+        *geometry_case, **_numba.TWINS["scenario_geometry"].constants
+    )
+    assert built is not NotImplemented
+    monkeypatch.setattr(kernel_draws, "_BUFFER_OK", False)
+    declined = _copy(draws_case)
+    assert compiled.encounter_draws(*declined, **twin.constants) is NotImplemented
+    _assert_same(twin.dispatch(*declined), got, "declined: Python's draws")
+
+
+def test_draw_tables_need_the_mix_to_list_the_members():
+    from uasep_env.scenarios import batched
+    from uasep_env.scenarios.families import ENCOUNTERS, TRAFFIC_MIX
+    from uasep_env.scenarios.registry import Mix
+
+    with pytest.raises(ValueError, match="does not list the members"):
+        batched.draw_tables(
+            {"crossing": ENCOUNTERS["crossing"]}, Mix(weights={"head_on": 1}), TRAFFIC_MIX,
+            ENCOUNTERS, print, (print,),
+        )  # fmt: skip
+
+
 def test_noise_kernel_declines_where_numba_moved_its_tables():
     """numba's copy of numpy's ziggurat tables is a private module: gone, numpy draws."""
     import subprocess
