@@ -81,17 +81,6 @@ def _load_table() -> tuple[FloatArray, FloatArray, dict[bool, FloatArray]]:
 _TAB_U, _TAB_LOGR, _TAB = _load_table()
 
 
-def _table_coords(phi: FloatArray, eps: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Table coordinates for ``phi = w t`` and ``eps = r / (v t)`` (may be inf)."""
-    finite = np.isfinite(eps)
-    e = np.where(finite, eps, 0.0)
-    u = np.sqrt(np.where(finite, np.arctan2(2.0 * e, phi) * (2.0 / np.pi), 1.0))
-    rad = np.where(finite, np.hypot(phi, 2.0 * e), np.inf)
-    with np.errstate(divide="ignore"):
-        logr = np.log10(rad)
-    return u, logr
-
-
 def _corners(tab: FloatArray) -> FloatArray:
     """``(na - 1, nl - 1, 4, 3)``: each cell's four corners, in the order of the interpolation."""
     return np.stack([tab[:-1, :-1], tab[1:, :-1], tab[:-1, 1:], tab[1:, 1:]], axis=2)
@@ -304,10 +293,9 @@ def _fit_trigonometry(
     """The transcendental functions the fit's start needs, numpy's (its numbers on any CPU).
 
     Returns:
-        ``arctan2(2 eps, phi)`` and ``log10(hypot(phi, 2 eps))`` of the table's coordinates
-        (:func:`_table_coords`; ``eps = r / (v t)``, ``log10(inf)`` where it is not
-        finite), ``sin(phi / 2)`` and the sine of ``sinc``'s argument
-        (:func:`_unit_factors`).
+        ``arctan2(2 eps, phi)`` and ``log10(hypot(phi, 2 eps))``, whence the shape table's
+        coordinates (``eps = r / (v t)``; ``log10(inf)`` where it is not finite),
+        ``sin(phi / 2)`` and the sine of ``sinc``'s argument (:func:`_unit_factors`).
     """
     pos = vt > 0.0
     eps = np.where(pos, r / np.where(pos, vt, 1.0), np.inf)
