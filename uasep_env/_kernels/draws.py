@@ -26,7 +26,7 @@ from numba import types
 from numba.extending import intrinsic, overload
 
 from uasep_env._kernels.common import _JIT, frozen
-from uasep_env._kernels.noise import _DRAWS_FROM, _next_double, _pcg64_address, _pcg64_next
+from uasep_env._kernels.noise import _NATIVE, _next_double, _pcg64_address, _pcg64_next
 
 _I32 = ir.IntType(32)
 #: Offsets in numpy's ``pcg64_state`` of ``has_uint32`` (an int) and ``uinteger`` (a
@@ -188,7 +188,8 @@ def _buffer_layout_ok() -> bool:
     )
 
 
-_BUFFER_OK = bool(_DRAWS_FROM) and _buffer_layout_ok()
+# The draws need the state's layout, not the ziggurat's tables (the noise kernel's too).
+_BUFFER_OK = _NATIVE and _buffer_layout_ok()
 
 
 def encounter_draws(

@@ -58,25 +58,30 @@ def _axes_row(cos, c2, s2, h, delta, c, lon):  # noqa: ANN001, ANN202
     return math.sqrt(_maximum(most, 0.0)), b
 
 
+@numba.njit(inline="always", **_JIT)
+def _h_unit(a, sa, ca, phi, ip, omc, sc, swept):  # noqa: ANN001, ANN202
+    """``sets._h_unit_of`` in one direction ``a``, in its order.
+
+    ``reach`` where ``a`` can be reached, else the corner's (at least 0 for the swept set).
+    """
+    if a <= phi:
+        return 1.0 - (a - sa) * ip
+    unit = sa * omc + ca * sc
+    return _maximum(unit, 0.0) if swept else unit
+
+
 @numba.njit(**_JIT)
 def _nodes_row(th, sn, cs, vt, phi, ip, omc, sc, r, swept, c2, s2, d2, h):  # noqa: ANN001, ANN202
     """One row of ``_Nodes``: squared cosines and sines, squared spacings over 8, support.
 
-    The support is ``sets._h_unit_of``'s, in its order: ``reach`` where the direction can be
-    reached, else the corner's (at least 0 for the swept set).
+    The support is ``sets._h_unit_of``'s (:func:`_h_unit`).
     """
     k = th.shape[0]
     for j in range(k):
         a, sa, ca = th[j], sn[j], cs[j]
         c2[j] = ca * ca
         s2[j] = sa * sa
-        if a <= phi:
-            unit = 1.0 - (a - sa) * ip
-        else:
-            unit = sa * omc + ca * sc
-            if swept:
-                unit = _maximum(unit, 0.0)
-        h[j] = r + vt * unit
+        h[j] = r + vt * _h_unit(a, sa, ca, phi, ip, omc, sc, swept)
         if j + 1 < k:
             d = th[j + 1] - a
             d2[j] = d * d / 8.0
@@ -242,23 +247,10 @@ def _start_rows(  # noqa: ANN202
         f0 = k[0, 0] * ua * ul + k[1, 0] * ta * ul + k[2, 0] * ua * tl + k[3, 0] * ta * tl
         f1 = k[0, 1] * ua * ul + k[1, 1] * ta * ul + k[2, 1] * ua * tl + k[3, 1] * ta * tl
         f2 = k[0, 2] * ua * ul + k[1, 2] * ta * ul + k[2, 2] * ua * tl + k[3, 2] * ta * tl
-        # The set's supports ahead, behind and to the side (sets._h_unit_of).
-        h0 = hpi = hx = 0.0
-        for j in range(3):
-            a = dirs[j]
-            if a <= p:
-                unit = 1.0 - (a - dsin[j]) * ip
-            else:
-                unit = dsin[j] * omc + dcos[j] * sc
-                if swept:
-                    unit = _maximum(unit, 0.0)
-            h = rr + v * unit
-            if j == 0:
-                h0 = h
-            elif j == 1:
-                hpi = h
-            else:
-                hx = h
+        # The set's supports ahead, behind and to the side.
+        h0 = rr + v * _h_unit(dirs[0], dsin[0], dcos[0], p, ip, omc, sc, swept)
+        hpi = rr + v * _h_unit(dirs[1], dsin[1], dcos[1], p, ip, omc, sc, swept)
+        hx = rr + v * _h_unit(dirs[2], dsin[2], dcos[2], p, ip, omc, sc, swept)
         ext = h0 + hpi
         lat = f2 * hx
         lon = f1 * ext

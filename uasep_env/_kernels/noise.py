@@ -188,10 +188,12 @@ def _native_pcg64() -> bool:
     return {"state": words[0] | words[1] << 64, "inc": words[2] | words[3] << 64} == want
 
 
-#: The bit generators the kernel draws from: PCG64 where its memory reads as expected
-#: (checked once, when the kernels load) and numba has numpy's tables, else none (numpy
-#: draws, the reference).
-_DRAWS_FROM = (np.random.PCG64,) if _TABLES and _native_pcg64() else ()
+#: Whether numpy's PCG64 state reads as this module reads it (checked once, when the
+#: kernels load).
+_NATIVE = _native_pcg64()
+#: The bit generators the kernel draws from: PCG64 where its memory reads as expected and
+#: numba has numpy's tables, else none (numpy draws, the reference).
+_DRAWS_FROM = (np.random.PCG64,) if _TABLES and _NATIVE else ()
 
 
 def refill_noise(

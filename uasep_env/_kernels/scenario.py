@@ -42,11 +42,10 @@ def _locate(e, t, cruise_speed, cum, n_seg):  # noqa: ANN001, ANN202
 def _separated(pos, n, separation):  # noqa: ANN001, ANN202
     """Whether no two of the ``n`` points of ``pos`` are within ``separation`` (NaN: no)."""
     for i in range(n):
-        for j in range(n):
-            if i != j:
-                d = _norm3(pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1], pos[i, 2] - pos[j, 2])
-                if not d >= separation:
-                    return False
+        for j in range(i + 1, n):  # each pair once: a difference and its negative, one norm
+            d = _norm3(pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1], pos[i, 2] - pos[j, 2])
+            if not d >= separation:
+                return False
     return True
 
 
