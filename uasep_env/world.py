@@ -314,14 +314,23 @@ class World(RenamedAttributes):
         self._reset_plan_rows(idx, batch)
 
     # ------------------------------------------------------------------ step
-    def step(self, accel_cmd: np.ndarray, active: np.ndarray | None = None) -> None:
+    def step(
+        self,
+        accel_cmd: np.ndarray,
+        active: np.ndarray | None = None,
+        reset: np.ndarray | None = None,
+    ) -> None:
         """Advance every environment by one environment step.
 
         Args:
             accel_cmd: ``(n_envs, n_uavs, 3)`` commanded accelerations (m/s^2), finite;
                 each axis is bounded by ``uav.max_accel`` (the physical limit).
             active: Optional ``(n_envs,)`` bool; environments outside it do not move and
-                consume no randomness (used by vector envs that reset them instead).
+                consume no randomness.
+            reset: Optional ``(n_envs,)`` bool; environments that start a new episode in
+                this step instead of moving (the vector envs' autoresets): their commands
+                are ignored and they end the step in their reset state, the same numbers as
+                ``reset(mask=reset)`` followed by ``step(accel_cmd, active=~reset)``.
 
         Raises:
             ValueError: Wrong shape or non-finite values (the offending entries are named).
@@ -337,26 +346,46 @@ class World(RenamedAttributes):
             bad = np.argwhere(~np.isfinite(cmd))[:3].tolist()
             raise ValueError(f"accel_cmd has non-finite values at (env, uav, axis) {bad}")
         cfg = self.config
+        active = self._mask("active", active)
+        reset = self._mask("reset", reset)
         frozen = None
-        if active is not None:
-            active = np.asarray(active, dtype=bool)
-            if active.shape != (self.n_envs,):
-                raise ValueError(f"active must have shape ({self.n_envs},), got {active.shape}")
-            if active.all():
-                active = None
-            else:
-                frozen = self._snapshot(np.flatnonzero(~active))
+        if active is not None and not active.all():
+            held = ~active if reset is None else ~active & ~reset
+            if held.any():
+                frozen = self._snapshot(np.flatnonzero(held))
+        moving = active
+        if reset is not None and reset.any():
+            # The reset rows move on from their ended episodes without noise (their rows are
+            # rewritten below), so nothing of theirs is saved and put back: a reset before
+            # the step would have had them held still (snapshot and restore), to the same
+            # numbers.
+            moving = ~reset if active is None else active & ~reset
+        else:
+            reset = None
+        if moving is not None and moving.all():
+            moving = None
         self.prev_accel_cmd[...] = self.accel_cmd
         np.minimum(np.maximum(cmd, -cfg.uav.max_accel), cfg.uav.max_accel, out=self.accel_cmd)
         self.min_uav_dist.fill(np.inf)
         self.min_obstacle_dist.fill(np.inf)
         for _ in range(cfg.decision_interval):
-            self._physics_step(active)
+            self._physics_step(moving)
         self.steps += 1
         self._predict_regions()
         if frozen is not None:
             self._restore(frozen)
         self._refresh_plan()
+        if reset is not None:
+            self.reset(mask=reset)
+
+    def _mask(self, name: str, mask: np.ndarray | None) -> np.ndarray | None:
+        """``mask`` as an ``(n_envs,)`` bool array (``None`` stays ``None``), checked."""
+        if mask is None:
+            return None
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != (self.n_envs,):
+            raise ValueError(f"{name} must have shape ({self.n_envs},), got {mask.shape}")
+        return mask
 
     def _refresh_plan(self) -> None:
         """Mark the plan stale; the next read of a ``plan_*`` attribute recomputes it.

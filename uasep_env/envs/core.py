@@ -329,7 +329,11 @@ class EnvCore:
         return global_state(self.world)
 
     def step(
-        self, actions: np.ndarray, validate: bool = True, active: np.ndarray | None = None
+        self,
+        actions: np.ndarray,
+        validate: bool = True,
+        active: np.ndarray | None = None,
+        reset: np.ndarray | None = None,
     ) -> StepResult:
         """Apply normalised actions ``(E, N, 3)`` in ``[-1, 1]`` and advance one step.
 
@@ -340,6 +344,8 @@ class EnvCore:
             validate: Check the actions (shape, finite, in range) first.
             active: Optional ``(E,)`` mask of environments that move (see
                 :meth:`World.step <uasep_env.world.World.step>`).
+            reset: Optional ``(E,)`` mask of environments that start a new episode in this
+                step instead of moving (the same; their actions are ignored).
 
         Returns:
             The :class:`StepResult`. Episodes that ended are not reset here.
@@ -349,7 +355,7 @@ class EnvCore:
             actions = validate_actions(actions, (self.n_envs, self.n_uavs, 3), "actions")
         if self.residual is not None:
             actions = self.residual.command(self._base, actions)
-        w.step(actions * self.config.uav.max_accel, active=active)
+        w.step(actions * self.config.uav.max_accel, active=active, reset=reset)
         cfg = self.config
         out = compute_outcome(w, cfg, w.region_distances())
         terminated = (out.collided | out.lost).any(axis=1)

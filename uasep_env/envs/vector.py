@@ -71,19 +71,25 @@ def _masked(values: dict[str, np.ndarray], rows: np.ndarray | None) -> dict[str,
     return _with_masks(kept, rows)
 
 
-def _zero_rows(values: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, Any]:
+def _zero_rows(values: dict[str, np.ndarray], rows: np.ndarray, idx: np.ndarray) -> dict[str, Any]:
     """``_masked(values, ~rows)``, zeroing ``rows`` in place (the step's own, fresh arrays).
 
     A few rows reset in a step of a large batch: writing them costs a few rows, where
-    ``np.where`` would copy every array.
+    ``np.where`` would copy every array. ``idx``: the indices of ``rows`` (a few indices:
+    cheaper to write through than a mask). The terms' means (:data:`_TERM_KEYS`) were
+    zeroed where they were made.
     """
     keep = ~rows
     if not keep.any():
         return {}
-    idx = np.flatnonzero(rows)  # a few indices: cheaper to write through than a mask
-    for v in values.values():
-        v[idx] = 0
+    for k, v in values.items():
+        if k not in _TERM_KEYS:
+            v[idx] = 0
     return _with_masks(values, keep)
+
+
+#: The infos' keys of the reward and cost terms' team means (rows of one array each).
+_TERM_KEYS = frozenset(["reward_" + k for k in REWARD_TERMS] + ["cost_" + k for k in COST_TERMS])
 
 
 class FormationVectorEnv(ViewMixin, VectorEnv):
@@ -219,16 +225,15 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
             self._needs_reset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
         )
         some_pending = pending is not None and bool(pending.any())
-        if some_pending:
-            # Environments that ended last step: reset now and hold them still during the
-            # step (their action is ignored), so one observation pass serves both.
-            self.core.world.reset(mask=pending)
-        res = self.core.step(a, validate=False, active=~pending if some_pending else None)
+        # Environments that ended last step start new episodes in this one (their action is
+        # ignored), so one observation pass serves both.
+        res = self.core.step(a, validate=False, reset=pending if some_pending else None)
         obs = res.obs.reshape(self.num_envs, -1)
         rewards = team_mean(res.rewards)
         terminated = res.terminated.copy()
         truncated = res.truncated.copy()
-        values = self._info_values(res)
+        held = np.flatnonzero(pending) if some_pending else None
+        values = self._info_values(res, held)
         values["clipped_actions"] = clipped_counts(outside, (self.num_envs, n))
         done = terminated | truncated
         if some_pending:
@@ -237,7 +242,7 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
             truncated[pending] = False
             done = terminated | truncated
             # Reset this step: the reset's (empty) info, as SyncVectorEnv gives.
-            infos = _zero_rows(values, pending)
+            infos = _zero_rows(values, pending, held)
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             final_obs = np.full(self.num_envs, None, dtype=object)
             for i in np.flatnonzero(done):
@@ -259,16 +264,25 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         return obs, rewards, terminated, truncated, infos
 
     @staticmethod
-    def _info_values(res: Any) -> dict[str, np.ndarray]:
+    def _info_values(res: Any, zeroed: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The infos' arrays; the terms' means already zero in the rows ``zeroed`` (indices).
+
+        The terms' means are rows of one array each: zeroed there in one write, not one
+        per key (:func:`_zero_rows` does the others).
+        """
         # The step's arrays are its own (fresh each step): no copies needed.
         values: dict[str, np.ndarray] = {"rewards": res.rewards}
         means = team_mean(np.stack([res.terms[k] for k in REWARD_TERMS]))
+        if zeroed is not None:
+            means[:, zeroed] = 0
         for k, mean in zip(REWARD_TERMS, means, strict=True):
             values["reward_" + k] = mean
         values.update(res.safety)
         values["cost"] = team_mean(res.cost)
         values["costs"] = res.cost
         means = team_mean(np.stack([res.cost_terms[k] for k in COST_TERMS]))
+        if zeroed is not None:
+            means[:, zeroed] = 0
         for k, mean in zip(COST_TERMS, means, strict=True):
             values["cost_" + k] = mean
         return values

@@ -502,6 +502,8 @@ def _geometry_of(
         scenario_geometry(*args)
     )
     obc = config.obstacle
+    wind = np.empty((b, 3))  # np.tile's wrapper costs more than the rows
+    wind[...] = obc.wind
     return ScenarioBatch(
         families=families,
         waypoints=wp,
@@ -520,7 +522,7 @@ def _geometry_of(
         obstacle_alt_band=band,
         obstacle_active=np.ones((b, m), dtype=bool),
         obstacle_hold_until=hold,
-        wind=np.tile(np.asarray(obc.wind, dtype=float), (b, 1)),
+        wind=wind,
         plan=PlannedTrajectory.from_geometry(wp, cum, direction, config.cruise_speed),
         plan_offsets=offsets,
     )
