@@ -32,6 +32,7 @@ APF_LOOPS = {
     "physics._move",
     "physics._sense",
     "ellipse_fit._start_rows",  # the obstacles' reachable ellipses, at reset
+    "ellipse_fit._arguments_rows",
     "ellipse_fit._nodes_rows",
     "ellipse_fit._fit_rows",
 }

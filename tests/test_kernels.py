@@ -389,8 +389,16 @@ def _case_ellipse_start():
     """The fit's start as ``_ellipse_core`` asks for it, and a NaN table coordinate."""
     cases = _fit_stage_args("_ellipse_start")
     nan = tuple(a.copy() for a in cases[0][:-1])
-    nan[4][:3] = np.nan  # log10 of the radius: the table's first column (np.where's guard)
+    nan[4][40:43] = np.nan  # log10 of the radius: the table's first column (np.where's guard)
     return [*cases, (*nan, True)]
+
+
+def _case_node_arguments():
+    """The nodes' arguments as ``_ellipse_core`` asks for them, and NaN spacings."""
+    cases = _fit_stage_args("_node_arguments")
+    nan = tuple(a[:6].copy() for a in cases[0])
+    nan[0][0], nan[1][1, 3], nan[2][2], nan[3][3] = np.nan, np.nan, np.nan, np.nan
+    return [*cases, nan]
 
 
 def _case_ellipse_nodes():
@@ -722,6 +730,7 @@ TWIN_CASES = {
     "fit_ellipse": _case_fit_ellipse,
     "ellipse_start": _case_ellipse_start,
     "ellipse_nodes": _case_ellipse_nodes,
+    "node_arguments": _case_node_arguments,
     "physics_step": _case_physics,
     "step_outcome": _case_outcome,
     "refill_noise": _case_noise,
@@ -751,6 +760,7 @@ NAN_ON_PURPOSE = {
     ("apf_actions", 2),
     ("scenario_geometry", 4),
     ("ellipse_nodes", 3),
+    ("node_arguments", 2),
     *(("encounter_draws", k) for k in range(7)),  # level obstacles' climbs are NaN
 }
 
@@ -877,6 +887,30 @@ def test_reset_kernels_build_random_episodes_themselves(monkeypatch):
     declined = _copy(draws_case)
     assert compiled.encounter_draws(*declined, **twin.constants) is NotImplemented
     _assert_same(twin.dispatch(*declined), got, "declined: Python's draws")
+
+
+def test_fit_kernels_take_the_sines_themselves(monkeypatch):
+    """numpy's float64 sines and cosines are the C library's here, so the fit's kernels
+    that take them run (the twin cases compare two codes); where they were not, the three
+    kernels decline and numpy's give the same fit."""
+    from uasep_env._kernels import common
+    from uasep_env.reachable import fit
+
+    assert common.sin_cos_agree()
+    compiled = _numba.kernels()
+    vt, phi, r = _case_fit_ellipse_params()
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        want = fit._ellipse_core(vt, phi, r, True)
+    names = ("ellipse_start", "node_arguments", "ellipse_nodes")
+
+    def answer(name: str) -> object:
+        return getattr(compiled, name)(*TWIN_CASES[name]()[0], **_numba.TWINS[name].constants)
+
+    assert all(answer(name) is not NotImplemented for name in names)
+    monkeypatch.setattr(common, "_SIN_COS", [False])
+    assert all(answer(name) is NotImplemented for name in names)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        _assert_same(fit._ellipse_core(vt, phi, r, True), want, "declined: numpy's sines")
 
 
 def test_draw_tables_need_the_mix_to_list_the_members():

@@ -27,8 +27,10 @@ kernel receives as keyword arguments. These modules import nothing else of the p
 * :func:`fit_ellipse` -- :func:`uasep_env.reachable.fit._fit_certified` (the enclosing
   ellipse's centre search, axes and certificate), :func:`ellipse_start` --
   :func:`uasep_env.reachable.fit._ellipse_start` (its start from the shape table) and
-  :func:`ellipse_nodes` -- :func:`uasep_env.reachable.fit._ellipse_nodes` (its nodes,
-  sorted);
+  :func:`node_arguments` -- :func:`uasep_env.reachable.fit._node_arguments` (the
+  arctangent's arguments of its nodes) and :func:`ellipse_nodes` --
+  :func:`uasep_env.reachable.fit._ellipse_nodes` (its nodes, sorted, with their cosines and
+  sines);
 * :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
   network's layer, in float64 before the rounding);
 * :func:`refill_noise` -- :func:`uasep_env.noise.refill_noise` (numpy's PCG64 draws of
@@ -45,7 +47,12 @@ from __future__ import annotations
 
 from uasep_env._kernels.apf import apf_actions
 from uasep_env._kernels.draws import encounter_draws
-from uasep_env._kernels.ellipse_fit import ellipse_nodes, ellipse_start, fit_ellipse
+from uasep_env._kernels.ellipse_fit import (
+    ellipse_nodes,
+    ellipse_start,
+    fit_ellipse,
+    node_arguments,
+)
 from uasep_env._kernels.ellipsoids import (
     nearest_on_ellipsoids,
     pairwise_distances,
@@ -76,6 +83,7 @@ __all__ = [
     "fit_ellipse",
     "kalman_correct",
     "nearest_on_ellipsoids",
+    "node_arguments",
     "obstacle_step",
     "pairwise_distances",
     "physics_step",

@@ -1,9 +1,11 @@
 """The enclosing ellipse's start, nodes, search and fit (:mod:`uasep_env.reachable.fit`).
 
-:func:`ellipse_start` (``_ellipse_start``), :func:`ellipse_nodes` (``_ellipse_nodes``) and
-:func:`fit_ellipse` (``_fit_certified``). Only arithmetic and square roots (no
-trigonometry: the sines, cosines, arctangents and logarithms come in, numpy's), so the
-numbers are numpy's on any CPU.
+:func:`ellipse_start` (``_ellipse_start``), :func:`node_arguments` (``_node_arguments``),
+:func:`ellipse_nodes` (``_ellipse_nodes``) and :func:`fit_ellipse` (``_fit_certified``).
+Arithmetic, square roots, and sines and cosines: the C library's, which numpy's are
+(``common.sin_cos_agree``, checked once; where they are not, the three kernels that take
+them decline). The arctangents, logarithms and powers come in, numpy's (they are not the C
+library's on every CPU).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 import numba
 import numpy as np
 
+from uasep_env._kernels import common
 from uasep_env._kernels.common import _JIT, _maximum, _minimum, frozen
 
 
@@ -218,7 +221,7 @@ def fit_ellipse(
 
 @numba.njit(**_JIT)
 def _start_rows(  # noqa: ANN202
-    vt, phi, r, atan, logr, half_sin, sin_y, swept,  # noqa: ANN001
+    vt, phi, r, atan, logr, swept,  # noqa: ANN001
     u0, du, l0, dl, corners, dirs, dsin, dcos, tiny_y, eps_rel, step, c_search,  # noqa: ANN001
     out,  # noqa: ANN001
 ):  # fmt: skip
@@ -230,13 +233,15 @@ def _start_rows(  # noqa: ANN202
         eps = rr / v if v > 0.0 else math.inf
         u = math.sqrt(atan[i] * (2.0 / math.pi) if math.isfinite(eps) else 1.0)
         ip = 1.0 / p if p > 1e-200 else 0.0
-        hs = half_sin[i]
+        hs = math.sin(0.5 * p)
         omc = 2.0 * (hs * hs) * ip
         y = math.pi * (p / math.pi)
-        sc = sin_y[i] / (y if y != 0.0 else tiny_y)
+        y = y if y != 0.0 else tiny_y
+        sc = math.sin(y) / y
         # The shape table, interpolated in its cell (np.clip: NaN stays NaN).
+        lr = logr[i] if math.isfinite(eps) else math.inf
         fa = _minimum(_maximum((u - u0) / du, 0.0), na - 1.0)
-        fl = _minimum(_maximum((logr[i] - l0) / dl, 0.0), nl - 1.0)
+        fl = _minimum(_maximum((lr - l0) / dl, 0.0), nl - 1.0)
         if fl != fl:
             fl = 0.0
         i0 = min(int(fa), na - 2)
@@ -277,8 +282,6 @@ def ellipse_start(
     r: np.ndarray,
     atan: np.ndarray,
     logr: np.ndarray,
-    half_sin: np.ndarray,
-    sin_y: np.ndarray,
     swept: bool,
     *,
     tab_u: tuple[float, float],
@@ -289,13 +292,17 @@ def ellipse_start(
 ) -> tuple[np.ndarray, ...]:
     """Compiled :func:`uasep_env.reachable.fit._ellipse_start`: twelve ``(R,)`` arrays.
 
+    Declines (``NotImplemented``) where numpy's sines are not the C library's.
+
     ``tab_u``, ``tab_logr``: the shape table's first node and spacing on each axis;
     ``corners``: its cells' corners (swept, terminal); ``directions``: the extents'
     directions with their sines and cosines; ``constants``: ``sinc``'s guard for 0, the
     relative rounding margin, the nodes' largest spacing and the centre search's half-width.
     """
+    if not common.sin_cos_agree():
+        return NotImplemented
     out = np.empty((12, vt.shape[0]))
-    inputs = (vt, phi, r, atan, logr, half_sin, sin_y)
+    inputs = (vt, phi, r, atan, logr)
     _start_rows(*(frozen(np.asarray(a, dtype=np.float64)) for a in inputs), bool(swept),
                 *tab_u, *tab_logr, corners[0] if swept else corners[1], *directions,
                 *constants, out)  # fmt: skip
@@ -309,11 +316,12 @@ def _before(a, b):  # noqa: ANN001, ANN202
 
 
 @numba.njit(**_JIT)
-def _nodes_rows(th, phi, swept, n_cert, uniform, out, tmp):  # noqa: ANN001, ANN202
+def _nodes_rows(th, phi, swept, n_cert, uniform, out, cos, sin, tmp):  # noqa: ANN001, ANN202
     """Each row of ``_ellipse_nodes``: the nodes gathered, three set exactly, then sorted.
 
     Sorted by runs of 16 put in order by insertion, then merged pairwise through ``tmp``
-    (equal values are equal bits here, so any sort gives ``np.sort``'s row).
+    (equal values are equal bits here, so any sort gives ``np.sort``'s row); then their
+    cosines and sines.
     """
     k, n_uni = th.shape[1], uniform.shape[0]
     size = out.shape[1]
@@ -360,13 +368,77 @@ def _nodes_rows(th, phi, swept, n_cert, uniform, out, tmp):  # noqa: ANN001, ANN
         if flips % 2:  # the sorted row is in tmp
             for j in range(size):
                 row[j] = tmp[j]
+        for j in range(size):
+            cos[i, j] = math.cos(row[j])
+            sin[i, j] = math.sin(row[j])
 
 
 def ellipse_nodes(
     th: np.ndarray, phi: np.ndarray, swept: bool, *, n_cert: int, uniform: np.ndarray
-) -> np.ndarray:
-    """Compiled :func:`uasep_env.reachable.fit._ellipse_nodes`: ``(R, K + 48)`` ascending."""
-    out = np.empty((th.shape[0], th.shape[1] + uniform.shape[0] + 1))
-    _nodes_rows(frozen(th), frozen(phi), bool(swept), n_cert, frozen(uniform), out,
-                np.empty(out.shape[1]))  # fmt: skip
-    return out
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Compiled :func:`uasep_env.reachable.fit._ellipse_nodes`: ``(nodes, cos, sin)``.
+
+    Each ``(R, K + 48)``, the nodes ascending. Declines (``NotImplemented``) where numpy's
+    cosines and sines are not the C library's.
+    """
+    if not common.sin_cos_agree():
+        return NotImplemented
+    shape = (th.shape[0], th.shape[1] + uniform.shape[0] + 1)
+    out, cos, sin = np.empty(shape), np.empty(shape), np.empty(shape)
+    _nodes_rows(frozen(th), frozen(phi), bool(swept), n_cert, frozen(uniform), out, cos, sin,
+                np.empty(shape[1]))  # fmt: skip
+    return out, cos, sin
+
+
+@numba.njit(**_JIT)
+def _arguments_rows(t_lo, powers, lat, lon, psin, pcos, y, x):  # noqa: ANN001, ANN202
+    """Each row of ``_node_arguments`` into ``y``, ``x``.
+
+    The parametric nodes, then the geometric ones towards 0, pi/2 (from below and above)
+    and pi.
+    """
+    n_par, n_geo = psin.shape[0], powers.shape[1]
+    half_pi = 0.5 * math.pi
+    for i in range(t_lo.shape[0]):
+        a, b = lon[i], lat[i]
+        for j in range(n_par):
+            y[i, j] = a * psin[j]
+            x[i, j] = b * pcos[j]
+        for g in range(n_geo):
+            t = t_lo[i] * powers[i, g]
+            for q in range(4):
+                if q == 0:
+                    angle = t
+                elif q == 1:
+                    angle = half_pi - t
+                elif q == 2:
+                    angle = half_pi + t
+                else:
+                    angle = math.pi - t
+                j = n_par + q * n_geo + g
+                y[i, j] = a * math.sin(angle)
+                x[i, j] = b * math.cos(angle)
+
+
+def node_arguments(
+    t_lo: np.ndarray,
+    powers: np.ndarray,
+    lat: np.ndarray,
+    lon: np.ndarray,
+    *,
+    n_cert: int,
+    parametric: tuple[np.ndarray, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Compiled :func:`uasep_env.reachable.fit._node_arguments`: ``(y, x)``, each ``(R, K)``.
+
+    ``parametric``: the sines and cosines of the ``n_cert + 1`` nodes uniform in the
+    ellipse's parameter. Declines (``NotImplemented``) where numpy's sines and cosines are
+    not the C library's.
+    """
+    if not common.sin_cos_agree():
+        return NotImplemented
+    shape = (t_lo.shape[0], n_cert + 1 + 4 * powers.shape[1])
+    y, x = np.empty(shape), np.empty(shape)
+    _arguments_rows(frozen(t_lo), frozen(powers), frozen(lat), frozen(lon),
+                    frozen(parametric[0]), frozen(parametric[1]), y, x)  # fmt: skip
+    return y, x

@@ -289,25 +289,20 @@ def _extents_of(
 
 def _fit_trigonometry(
     vt: FloatArray, phi: FloatArray, r: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The transcendental functions the fit's start needs, numpy's (its numbers on any CPU).
+) -> tuple[FloatArray, FloatArray]:
+    """The fit's start's transcendental functions that stay numpy's (not the C library's).
+
+    numpy's ``arctan2`` and ``log10`` differ from the C library's in the last bit on some
+    CPUs, so the compiled start takes them from here, as its reference does.
 
     Returns:
         ``arctan2(2 eps, phi)`` and ``log10(hypot(phi, 2 eps))``, whence the shape table's
-        coordinates (``eps = r / (v t)``; ``log10(inf)`` where it is not finite),
-        ``sin(phi / 2)`` and the sine of ``sinc``'s argument (:func:`_unit_factors`).
+        coordinates (``eps = r / (v t)``, 0 where it is not finite: the start takes the
+        logarithm as ``inf`` there). The callers silence numpy's divide warnings.
     """
-    pos = vt > 0.0
-    eps = np.where(pos, r / np.where(pos, vt, 1.0), np.inf)
-    finite = np.isfinite(eps)
-    e2 = 2.0 * np.where(finite, eps, 0.0)
-    y = np.pi * (phi / np.pi)
-    return (
-        np.arctan2(e2, phi),
-        np.log10(np.where(finite, np.hypot(phi, e2), np.inf)),
-        np.sin(0.5 * phi),
-        np.sin(np.where(y, y, _EPS)),
-    )
+    eps = r / vt  # inf or NaN where v t = 0
+    e2 = 2.0 * np.where(np.isfinite(eps), eps, 0.0)
+    return np.arctan2(e2, phi), np.log10(np.hypot(phi, e2))
 
 
 @compiled_twin(
@@ -324,14 +319,12 @@ def _ellipse_start(
     r: FloatArray,
     atan: FloatArray,
     logr: FloatArray,
-    half_sin: FloatArray,
-    sin_y: FloatArray,
     swept: bool,
 ) -> tuple[FloatArray, ...]:
-    """The fit's start from the table, and its nodes' spacing (arithmetic and square roots).
+    """The fit's start from the table, and its nodes' spacing.
 
-    Compiled as ``ellipse_start``; the transcendental functions come in
-    (:func:`_fit_trigonometry`).
+    Compiled as ``ellipse_start``; ``atan`` and ``logr`` come in (:func:`_fit_trigonometry`);
+    its sines are the C library's, which numpy's are (the kernel declines where not).
 
     Returns:
         ``(c, B, A, half, eps_abs, A_g, B_g, t_lo, base, ip, omc, sc)``, each ``(R,)``: the
@@ -344,10 +337,11 @@ def _ellipse_start(
     finite = np.isfinite(np.where(pos, r / np.where(pos, vt, 1.0), np.inf))
     u = np.sqrt(np.where(finite, atan * (2.0 / np.pi), 1.0))
     ip = _inv(phi)
-    omc = 2.0 * half_sin**2 * ip
+    omc = 2.0 * np.sin(0.5 * phi) ** 2 * ip
     y = np.pi * (phi / np.pi)
-    sc = sin_y / np.where(y, y, _EPS)
-    frac = _interp_table(swept, u, logr)
+    y = np.where(y, y, _EPS)
+    sc = np.sin(y) / y
+    frac = _interp_table(swept, u, np.where(finite, logr, np.inf))
     h0, hpi, hx = _extents_of(vt, phi, r, ip, omc, sc, swept)
     ext = h0 + hpi
     c = frac[..., 0] * ext - hpi
@@ -365,17 +359,51 @@ def _ellipse_start(
             ip, omc, sc)  # fmt: skip
 
 
+@compiled_twin("node_arguments", n_cert=_N_CERT, parametric=(_PARAMETRIC_SIN, _PARAMETRIC_COS))
+def _node_arguments(
+    t_lo: FloatArray, powers: FloatArray, lat: FloatArray, lon: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """``arctan2``'s arguments for the normal angles of the table ellipse's nodes.
+
+    The nodes are uniform in the ellipse's parameter ``t``, and geometric towards 0, pi/2
+    and pi from ``t_lo``. Compiled as ``node_arguments`` (its sines and cosines are the C
+    library's, which numpy's are; the kernel declines where not).
+
+    Args:
+        t_lo: ``(R,)`` the smallest geometric spacing.
+        powers: ``(R, G)`` the spacings' ratios, ``base ** (0 .. 1)`` (numpy's power).
+        lat: ``(R,)`` the lateral axis the nodes are spaced on (m).
+        lon: ``(R,)`` the longitudinal one (m).
+
+    Returns:
+        ``(lon sin t, lat cos t)``, each ``(R, K)``.
+    """
+    geo = t_lo[..., None] * powers
+    geo = np.concatenate([geo, 0.5 * np.pi - geo, 0.5 * np.pi + geo, np.pi - geo], axis=-1)
+    # The parametric nodes' sines and cosines are the same every call: made once.
+    shape = (*t_lo.shape, _N_CERT + 1)
+    sin_t = np.concatenate([np.broadcast_to(_PARAMETRIC_SIN, shape), np.sin(geo)], axis=-1)
+    cos_t = np.concatenate([np.broadcast_to(_PARAMETRIC_COS, shape), np.cos(geo)], axis=-1)
+    return lon[..., None] * sin_t, lat[..., None] * cos_t
+
+
 @compiled_twin("ellipse_nodes", n_cert=_N_CERT, uniform=_UNIFORM_NODES)
-def _ellipse_nodes(th: FloatArray, phi: FloatArray, swept: bool) -> FloatArray:
-    """The certificate's nodes, ascending (compiled as ``ellipse_nodes``).
+def _ellipse_nodes(
+    th: FloatArray, phi: FloatArray, swept: bool
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The certificate's nodes, ascending, with their cosines and sines.
 
     ``th``'s, those uniform in the normal angle, the kink of the swept set's support, and 0,
-    pi/2 and pi exactly.
+    pi/2 and pi exactly. Compiled as ``ellipse_nodes`` (its cosines and sines are the C
+    library's, which numpy's are; the kernel declines where not).
 
     Args:
         th: ``(R, K)`` the normal angles of the table ellipse's parametric nodes.
         phi: ``(R,)`` the largest turn (rad).
         swept: The swept set (else the terminal one).
+
+    Returns:
+        ``(nodes, cos, sin)``, each ``(R, K + 48)``.
     """
     kink = np.where(swept & (phi < np.pi), 0.5 * (np.pi + phi), 0.5 * np.pi)
     uni = np.broadcast_to(_UNIFORM_NODES, (*th.shape[:-1], _UNIFORM_NODES.size))
@@ -383,7 +411,8 @@ def _ellipse_nodes(th: FloatArray, phi: FloatArray, swept: bool) -> FloatArray:
     out[..., 0] = 0.0
     out[..., _N_CERT // 2] = 0.5 * np.pi
     out[..., _N_CERT] = np.pi
-    return np.sort(out, axis=-1)
+    nodes = np.sort(out, axis=-1)
+    return nodes, np.cos(nodes), np.sin(nodes)
 
 
 @compiled_twin("fit_ellipse", golden_iters=_C_ITERS)
@@ -454,18 +483,13 @@ def _ellipse_core(
     # The callers (ellipse, ellipsoid) silence numpy's divide and invalid warnings.
     scale = vt + r
     live = scale > 0.0
-    trig = _fit_trigonometry(vt, phi, r)
+    atan, logr = _fit_trigonometry(vt, phi, r)
     c, lon, lat, half, eps_abs, lat_g, lon_g, t_lo, base, ip, omc, sc = _ellipse_start(
-        vt, phi, r, *trig, swept
+        vt, phi, r, atan, logr, swept
     )
-    geo = t_lo[..., None] * base[..., None] ** _GEO_EXPONENTS
-    geo = np.concatenate([geo, 0.5 * np.pi - geo, 0.5 * np.pi + geo, np.pi - geo], axis=-1)
-    # The parametric nodes' sines and cosines are the same every call: made once.
-    shape = (*vt.shape, _N_CERT + 1)
-    sin_t = np.concatenate([np.broadcast_to(_PARAMETRIC_SIN, shape), np.sin(geo)], axis=-1)
-    cos_t = np.concatenate([np.broadcast_to(_PARAMETRIC_COS, shape), np.cos(geo)], axis=-1)
-    th = _ellipse_nodes(np.arctan2(lon_g[..., None] * sin_t, lat_g[..., None] * cos_t), phi, swept)
-    cos, sin = np.cos(th), np.sin(th)
+    # numpy's power and arctangent between the compiled stages (not the C library's).
+    y, x = _node_arguments(t_lo, base[..., None] ** _GEO_EXPONENTS, lat_g, lon_g)
+    th, cos, sin = _ellipse_nodes(np.arctan2(y, x), phi, swept)
     c, lat, lon, ok = _fit_certified(
         th, cos, sin, vt, phi, ip, omc, sc, r, c, half, lat_g, lon, eps_abs, swept
     )
@@ -473,7 +497,7 @@ def _ellipse_core(
     grow = 1e-6
     nd = None
     for _ in range(30):
-        if np.all(ok):
+        if ok.all():
             break
         if nd is None:  # rare: the nodes in numpy, for the rows that grow
             nd = _Nodes(th, vt, phi, r, swept, cos, sin, (ip, omc, sc))
@@ -568,6 +592,11 @@ def ellipse(
     return _out(c.reshape(shape)), _out(lat.reshape(shape)), _out(lon.reshape(shape))
 
 
+def _spread(a: FloatArray, shape: tuple[int, ...]) -> FloatArray:
+    """``a`` broadcast to ``shape``, flat (a view where it has that shape already)."""
+    return (a if a.shape == shape else np.broadcast_to(a, shape)).ravel()
+
+
 def ellipsoid(
     speed: ArrayLike,
     max_turn_rate: ArrayLike,
@@ -619,20 +648,17 @@ def ellipsoid(
         horizon=horizon,
         radius=radius,
     )
-    # The products broadcast; only the radius is spread to their shape (np.broadcast_arrays
-    # of five arrays cost a tenth of a partial reset's fit).
-    shape = np.broadcast_shapes(v.shape, w.shape, vz.shape, t.shape, r.shape)
-    vt = np.broadcast_to(v * t, shape).ravel()
-    phi = np.broadcast_to(w * t, shape).ravel()
+    # The products broadcast, and are spread to the common shape only where they lack it
+    # (np.broadcast_arrays of five arrays cost a tenth of a partial reset's fit).
+    vt, phi, z = v * t, w * t, vz * t + r
+    shape = np.broadcast(vt, phi, z).shape
+    vt, phi, z, r = (_spread(a, shape) for a in (vt, phi, z, r))
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        c, lat, lon = (_paper_core if paper else _ellipse_core)(
-            vt, phi, np.broadcast_to(r, shape).ravel(), swept
-        )
+        c, lat, lon = (_paper_core if paper else _ellipse_core)(vt, phi, r, swept)
     axes = np.empty((c.size, 3))
     if paper:
         axes[:, 0], axes[:, 1], axes[:, 2] = lon, lat, lat
         return _out(c.reshape(shape)), axes.reshape((*shape, 3))
-    z = np.broadcast_to(vz * t + r, shape).ravel()
     lam = np.where(z <= 0.0, 1.0, np.sqrt(1.5))
     axes[:, 0] = lam * lon
     axes[:, 1] = lam * lat
