@@ -240,20 +240,19 @@ class World(RenamedAttributes):
         if mask.shape != (e,) or mask.dtype != bool:
             raise ValueError(f"mask must be a bool array of shape ({e},), got {mask!r}")
         check_seed(seed, e)
-        seeds: list[int | None]
-        if seed is None:
-            seeds = [None] * e
-        elif is_int(seed):
-            seeds = [int(seed) + i for i in range(e)]  # type: ignore[arg-type]
-        else:
-            seeds = list(seed)  # type: ignore[arg-type]
         idx = np.flatnonzero(mask)
         if len(idx) == 0:
             return
-        for i in idx:
-            s = seeds[i]
-            if s is not None:
-                self._noise.reseed(i, s)
+        if seed is not None:  # else each generator continues (the autoresets' case)
+            seeds = (
+                [int(seed) + i for i in range(e)]  # type: ignore[arg-type]
+                if is_int(seed)
+                else list(seed)  # type: ignore[arg-type]
+            )
+            for i in idx:
+                s = seeds[i]
+                if s is not None:
+                    self._noise.reseed(i, s)
         # Each environment's scenario from its own generator, the geometry batched over
         # them: the episodes of sample_scenario, bit for bit (uasep_env.scenarios.batched).
         batch = sample_batch([self._noise.rngs[i] for i in idx], self.config)
@@ -287,7 +286,9 @@ class World(RenamedAttributes):
             # The ellipsoid's shape is fixed by the obstacle's performance; only its pose moves.
             # Inflations keep the true obstacle inside despite wind drift and the track error.
             pred = cfg.prediction
-            wind_speed = np.linalg.norm(ob.wind[idx], axis=-1)[:, None]
+            wind = ob.wind[idx]
+            # np.linalg.norm's own sum (add.reduce of the squares), without its wrapper.
+            wind_speed = np.sqrt((wind * wind).sum(axis=-1))[:, None]
             track_err = 3.0 * self._obstacle_kf.steady_state_position_std()
             inflation = ob.radius[idx] + wind_speed * pred.horizon + track_err
             if pred.fit == "calibrated":  # sized per step from the estimate (_predict_regions)
