@@ -113,6 +113,9 @@ def main() -> None:
     common._parallel(common.PARALLEL_MIN + 1)
     common._SIN_COS.clear()  # the check, made before the tracer ran: again
     common.sin_cos_agree()
+    svml, common.numba.config.USING_SVML = common.numba.config.USING_SVML, True
+    common._sin_cos_agree()  # numba on Intel's SVML: its sines may be vectorised
+    common.numba.config.USING_SVML = svml
     sys.settrace(None)
     common._SIN_COS[:] = [False]  # numpy's sines not the C library's: the fit's kernels decline
     for name in ("ellipse_start", "node_arguments", "ellipse_nodes"):
