@@ -277,3 +277,27 @@ def test_vector_info_masks_are_right_and_each_its_own_array(mode):
                 assert "_" + k not in infos
         done = term | trunc
     assert seen_partial
+
+
+def test_vector_infos_term_means_are_each_environments_own():
+    """The infos' reward and cost terms' team means (made from the step's terms arrays):
+    each environment's own terms, in order."""
+    from uasep_env.costs import compute_costs
+    from uasep_env.rewards import compute_rewards
+
+    vec = FormationVectorEnv(num_envs=6, scenario="random")
+    vec.reset(seed=3)
+    rng = np.random.default_rng(5)
+    seen = 0
+    for _ in range(40):
+        *_, infos = vec.step(rng.uniform(-1.0, 1.0, (6, 9)).astype(np.float32))
+        _, terms = compute_rewards(vec.core.world, vec.config.reward)
+        _, cost_terms = compute_costs(infos, vec.config.cost)
+        for prefix, values in (("reward_", terms), ("cost_", cost_terms)):
+            for k, v in values.items():
+                mask = infos["_" + prefix + k]
+                np.testing.assert_array_equal(
+                    infos[prefix + k][mask], v.mean(axis=-1)[mask], err_msg=k, strict=True
+                )
+                seen += int(mask.sum())
+    assert seen > 0

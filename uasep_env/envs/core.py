@@ -238,6 +238,10 @@ class StepResult:
         safety: Per-step safety figures, name -> ``(E, N)``.
         cost: ``(E, N)`` costs (>= 0; :mod:`uasep_env.costs`), in no reward.
         cost_terms: Unweighted cost terms, name -> ``(E, N)``.
+        terms_array: ``(T, E, N)`` the reward terms in ``REWARD_TERMS`` order, whose rows
+            :attr:`terms` holds (``None`` where a caller built only the dict).
+        cost_terms_array: ``(C, E, N)`` the cost terms in ``COST_TERMS`` order, whose rows
+            :attr:`cost_terms` holds (or ``None``).
     """
 
     obs: np.ndarray
@@ -248,6 +252,8 @@ class StepResult:
     safety: dict[str, np.ndarray]
     cost: np.ndarray
     cost_terms: dict[str, np.ndarray]
+    terms_array: np.ndarray | None = None
+    cost_terms_array: np.ndarray | None = None
 
 
 class EnvCore:
@@ -373,7 +379,10 @@ class EnvCore:
         terms = dict(zip(REWARD_TERMS, out.terms, strict=True))
         cost_terms = dict(zip(COST_TERMS, out.cost_terms, strict=True))
         obs = self._observe()
-        return StepResult(obs, rewards, terms, terminated, truncated, safety, out.cost, cost_terms)
+        return StepResult(
+            obs, rewards, terms, terminated, truncated, safety, out.cost, cost_terms,
+            out.terms, out.cost_terms,
+        )  # fmt: skip
 
     @staticmethod
     def env_infos(result: StepResult, env: int) -> list[dict]:

@@ -272,7 +272,12 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         """
         # The step's arrays are its own (fresh each step): no copies needed.
         values: dict[str, np.ndarray] = {"rewards": res.rewards}
-        means = team_mean(np.stack([res.terms[k] for k in REWARD_TERMS]))
+        # The terms' own (T, E, N) array where the step gave it (a stack of its rows was a
+        # copy of a megabyte a step at 4096 environments).
+        terms = res.terms_array
+        if terms is None:
+            terms = np.stack([res.terms[k] for k in REWARD_TERMS])
+        means = team_mean(terms)
         if zeroed is not None:
             means[:, zeroed] = 0
         for k, mean in zip(REWARD_TERMS, means, strict=True):
@@ -280,7 +285,10 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         values.update(res.safety)
         values["cost"] = team_mean(res.cost)
         values["costs"] = res.cost
-        means = team_mean(np.stack([res.cost_terms[k] for k in COST_TERMS]))
+        cost_terms = res.cost_terms_array
+        if cost_terms is None:
+            cost_terms = np.stack([res.cost_terms[k] for k in COST_TERMS])
+        means = team_mean(cost_terms)
         if zeroed is not None:
             means[:, zeroed] = 0
         for k, mean in zip(COST_TERMS, means, strict=True):
