@@ -88,6 +88,28 @@ def _zero_rows(values: dict[str, np.ndarray], rows: np.ndarray, idx: np.ndarray)
     return _with_masks(values, keep)
 
 
+def _add_term_means(
+    values: dict[str, np.ndarray],
+    prefix: str,
+    names: tuple[str, ...],
+    array: np.ndarray | None,
+    rows: dict[str, np.ndarray],
+    zeroed: np.ndarray | None,
+) -> None:
+    """Put each term's team mean in ``values`` as ``prefix + name``, zero in ``zeroed``.
+
+    From the terms' own ``(K, E, N)`` array where the step gave it (a stack of its rows
+    was a copy of a megabyte a step at 4096 environments), else from ``rows``.
+    """
+    if array is None:
+        array = np.stack([rows[k] for k in names])
+    means = team_mean(array)
+    if zeroed is not None:
+        means[:, zeroed] = 0
+    for k, mean in zip(names, means, strict=True):
+        values[prefix + k] = mean
+
+
 #: The infos' keys of the reward and cost terms' team means (rows of one array each).
 _TERM_KEYS = frozenset(["reward_" + k for k in REWARD_TERMS] + ["cost_" + k for k in COST_TERMS])
 
@@ -272,27 +294,11 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         """
         # The step's arrays are its own (fresh each step): no copies needed.
         values: dict[str, np.ndarray] = {"rewards": res.rewards}
-        # The terms' own (T, E, N) array where the step gave it (a stack of its rows was a
-        # copy of a megabyte a step at 4096 environments).
-        terms = res.terms_array
-        if terms is None:
-            terms = np.stack([res.terms[k] for k in REWARD_TERMS])
-        means = team_mean(terms)
-        if zeroed is not None:
-            means[:, zeroed] = 0
-        for k, mean in zip(REWARD_TERMS, means, strict=True):
-            values["reward_" + k] = mean
+        _add_term_means(values, "reward_", REWARD_TERMS, res.terms_array, res.terms, zeroed)
         values.update(res.safety)
         values["cost"] = team_mean(res.cost)
         values["costs"] = res.cost
-        cost_terms = res.cost_terms_array
-        if cost_terms is None:
-            cost_terms = np.stack([res.cost_terms[k] for k in COST_TERMS])
-        means = team_mean(cost_terms)
-        if zeroed is not None:
-            means[:, zeroed] = 0
-        for k, mean in zip(COST_TERMS, means, strict=True):
-            values["cost_" + k] = mean
+        _add_term_means(values, "cost_", COST_TERMS, res.cost_terms_array, res.cost_terms, zeroed)
         return values
 
     def render(self) -> tuple[np.ndarray, ...] | None:
