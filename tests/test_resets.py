@@ -1,6 +1,7 @@
 """Partial resets: several environments reset in one call, bit for bit as one at a time."""
 
 import numpy as np
+import pytest
 
 from uasep_env import World, make_config
 
@@ -207,3 +208,13 @@ def test_a_reset_inside_the_step_equals_a_reset_then_a_held_step():
             a.step(act, active=held & ~mask)
             b.step(act, active=held, reset=mask)
             _assert_same(a, b)
+
+
+def test_a_step_names_a_mask_of_the_wrong_shape():
+    cfg = make_config(scenario="random")
+    w = World(cfg, 2)
+    w.reset(seed=0)
+    zero = np.zeros((2, cfg.n_uavs, 3))
+    for name in ("active", "reset"):
+        with pytest.raises(ValueError, match=rf"{name} must have shape \(2,\), got \(3,\)"):
+            w.step(zero, **{name: np.ones(3, dtype=bool)})

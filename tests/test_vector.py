@@ -301,3 +301,21 @@ def test_vector_infos_term_means_are_each_environments_own():
                 )
                 seen += int(mask.sum())
     assert seen > 0
+
+
+def test_vector_infos_from_a_step_result_without_its_terms_arrays():
+    """A ``StepResult`` built with the term dicts only (its arrays ``None``, the fields'
+    defaults) gives the same infos, the rows stacked."""
+    import dataclasses
+
+    vec = FormationVectorEnv(num_envs=4, scenario="random")
+    vec.reset(seed=1)
+    res = vec.core.step(np.random.default_rng(2).uniform(-1.0, 1.0, (4, 3, 3)))
+    bare = dataclasses.replace(res, terms_array=None, cost_terms_array=None)
+    held = np.array([1])
+    want = FormationVectorEnv._info_values(res, held)
+    got = FormationVectorEnv._info_values(bare, held)
+    assert got.keys() == want.keys()
+    for k, v in want.items():
+        np.testing.assert_array_equal(got[k], v, err_msg=k, strict=True)
+    assert not got["reward_" + next(iter(res.terms))][1]  # the held row's means zeroed

@@ -101,7 +101,8 @@ def _sin_cos_agree() -> bool:
             [0.0, 5e-324, 1e-300, 1e-9, 0.5 * np.pi, np.pi, 1e5],
         ]
     )
-    libm = [[math.sin(v) for v in x.tolist()], [math.cos(v) for v in x.tolist()]]
+    values = x.tolist()
+    libm = [[math.sin(v) for v in values], [math.cos(v) for v in values]]
     return bool(np.array_equal(libm, [np.sin(x), np.cos(x)]))
 
 
