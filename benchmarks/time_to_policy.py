@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/time_to_policy.py --recipe residual_apf [--max-minutes 60]
         [--episodes 100] [--check-every 2000000] [--out FILE] [--force] [--overwrite]
-        [--held-out N] [--trainer default|lean] [-- recipe flags]
+        [--held-out N] [--trainer default|lean] [--seeds N] [-- recipe flags]
     python benchmarks/time_to_policy.py --held-out N --of RECORD.json [--workers W]
 
 The shipped checkpoint of the recipe (``baselines/checkpoints/<name>.zip``) plays the first
@@ -30,6 +30,16 @@ figures with 95 % intervals (``held_out``): whether a policy reached this fast i
 the shipped one where no selection looked. ``--of RECORD`` adds them to an earlier record
 whose run folder still holds its policy (``check.zip``, the last check's; its SHA-256 is
 recorded).
+
+With ``--seeds N`` the recipe trains ``N`` training seeds at once (``--seed`` 0, 1000, ...:
+``train/seeds.py``'s), each in its own process sharing the cores (``UASEP_WORKERS=N``), each
+checked as above; the first whose check clears the bar stops them all, and the record is
+that run's, with ``side_by_side`` holding which seed reached, the agent-steps of all the
+runs, the wall minutes and every run's own record (their folders ``seed_K`` under the run
+folder). The shared and MAPPO recipes' shipped checkpoints are each the best checkpoint of
+three training seeds (``baselines/results/seeds_shared.md``, ``seeds_mappo.md``): this
+measures the time to a policy as good as theirs by the same road, whichever seed it comes
+from (side by side, not in turn, so that the seeds' order does not matter).
 
 The run folder (``--run-dir``, default ``runs/time_to_policy/<recipe>``) keeps the recipe's
 usual files (``progress.csv``, checkpoints); a used one is refused before anything runs,
@@ -197,6 +207,8 @@ class Checker:
         done: Whether a check cleared the bar.
         t0: When training started (``time.perf_counter``; the trainer sets it).
         next: The agent-steps at which the next check runs.
+        stop_file: Side by side (``--seeds``): the file a run that clears the bar creates
+            and whose existence stops the others; None when the run is alone.
     """
 
     bar: Bar
@@ -209,6 +221,7 @@ class Checker:
     done: bool = False
     t0: float = field(default_factory=time.perf_counter)
     next: int = 0
+    stop_file: Path | None = None
 
     def __post_init__(self) -> None:
         self.next = self.check_every
@@ -218,8 +231,15 @@ class Checker:
         return time.perf_counter() - self.t0 - self.clock.eval_s
 
     def spent(self) -> bool:
-        """Whether training should stop: the bar cleared or the budget spent."""
-        return self.done or self.training_s() >= self.max_minutes * 60.0
+        """Whether training should stop: the bar cleared or the budget spent.
+
+        Side by side, also when another run has cleared the bar (its stop file exists).
+        """
+        return (
+            self.done
+            or self.training_s() >= self.max_minutes * 60.0
+            or (self.stop_file is not None and self.stop_file.exists())
+        )
 
     def maybe_check(self, agent_steps: int, export: Any) -> None:
         """At a rollout's end: play the encounters when ``check_every`` more steps are done.
@@ -238,14 +258,16 @@ class Checker:
         self.clock.eval_s += time.perf_counter() - e0
         ok = reached(fig, self.bar)
         minutes = self.training_s() / 60.0
-        self.checks.append(
-            {"agent_steps": int(agent_steps), "training_minutes": minutes, **fig, "reached": ok}
-        )
+        # The wall clock (seconds since the epoch) orders the checks of runs side by side.
+        self.checks.append({"agent_steps": int(agent_steps), "training_minutes": minutes, **fig,
+                            "reached": ok, "unix_time": time.time()})  # fmt: skip
         print(f"{agent_steps:>12,} agent-steps {minutes:6.1f} min: "
               f"collisions {fig['collision']:.1%}, loss of separation "
               f"{fig['loss_of_separation']:.1%}, max deviation {fig['max_deviation']:.1f} m"
               f"{'  reached' if ok else ''}", flush=True)  # fmt: skip
         self.done = ok
+        if ok and self.stop_file is not None:
+            self.stop_file.touch()
 
 
 def _train_sb3(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
@@ -364,11 +386,13 @@ def run(
     extra: list[str],
     overwrite: bool = False,
     trainer: str = "default",
+    stop_file: Path | None = None,
 ) -> dict[str, Any]:
     """Train until the bar is reached or the budget is spent; the record (see the module).
 
     ``trainer``: ``"default"`` (SB3's PPO, or skrl's MAPPO) or ``"lean"`` (the PPO recipes
-    on :mod:`uasep_env.training.ppo_lean`).
+    on :mod:`uasep_env.training.ppo_lean`). ``stop_file``: side by side, the file that a run
+    clearing the bar creates and that stops the others (:attr:`Checker.stop_file`).
     """
     import torch
 
@@ -401,7 +425,7 @@ def run(
 
     clock = Clock()
     checker = Checker(bar=bar, seeds=seeds, eval_cfg=eval_cfg, check_every=check_every,
-                      max_minutes=max_minutes, clock=clock)  # fmt: skip
+                      max_minutes=max_minutes, clock=clock, stop_file=stop_file)  # fmt: skip
     steps = train(args, config, run_dir, checker)
     gpu = gpu_name(args.device)
     train_s = checker.training_s()
@@ -415,6 +439,8 @@ def run(
         "apf": apf,
         "apf_clears_bar": reached(apf, bar),
         "reached": hit is not None,
+        # Side by side: stopped because another run cleared the bar (not its budget).
+        "stopped_by_another": bool(hit is None and stop_file is not None and stop_file.exists()),
         "training_minutes": (hit["training_minutes"] if hit else train_s / 60.0),
         "agent_steps": hit["agent_steps"] if hit else steps,
         "time_s": {
@@ -556,6 +582,107 @@ def _print_held_out(h: dict[str, Any]) -> None:
               f"[{dev['ci_low']:.1f}, {dev['ci_high']:.1f}]")  # fmt: skip
 
 
+def first_to_reach(runs: list[dict[str, Any]]) -> int | None:
+    """The index of the run side by side whose bar-clearing check came first (wall clock).
+
+    Several can clear it at about the same time (each sees the others' stop file only at
+    its next step): the earliest check wins. None when no run reached the bar.
+    """
+    hits = [(run["checks"][-1]["unix_time"], k) for k, run in enumerate(runs) if run["reached"]]
+    return min(hits)[1] if hits else None
+
+
+def merge_runs(runs: list[dict[str, Any]], seeds: list[int], wall_s: float) -> dict[str, Any]:
+    """The record of training seeds side by side (``--seeds``) from each run's own record.
+
+    Args:
+        runs: Each seed's record (:func:`run`), in the order of ``seeds``.
+        seeds: Their training seeds (the recipe's ``--seed``).
+        wall_s: Wall seconds from their start to the last one's end (bars, checks and
+            held-out figures excluded from nothing).
+
+    Returns:
+        A record with the fields of a single run's (``recipe``, ``bar``, ``reached``,
+        ``training_minutes``, ``agent_steps``, ``recipe_args``: those of the run that cleared
+        the bar first, else of the first seed's with the longest training) and
+        ``side_by_side``: the seeds, which one reached (``reached_by``, its seed), the
+        agent-steps of all the runs together when they stopped, the wall minutes and every
+        run's record (``runs``).
+    """
+    k = first_to_reach(runs)
+    lead = runs[k] if k is not None else max(runs, key=lambda r: r["training_minutes"])
+    record = {key: value for key, value in lead.items() if key not in ("checks", "command")}
+    record["checks"] = lead["checks"]
+    record["side_by_side"] = {
+        "seeds": list(seeds),
+        "reached_by": seeds[k] if k is not None else None,
+        "agent_steps_all": int(sum(r["agent_steps"] if not r["reached"]
+                                   else r["checks"][-1]["agent_steps"] for r in runs)),
+        "wall_minutes": wall_s / 60.0,
+        "runs": runs,
+    }  # fmt: skip
+    return record
+
+
+def _relay(prefix: str, stream: Any) -> None:
+    """Print a child's output lines as they come, each after ``prefix``."""
+    for line in stream:
+        print(f"{prefix}{line}", end="", flush=True)
+
+
+def side_by_side(a: argparse.Namespace, extra: list[str]) -> dict[str, Any]:
+    """Train ``a.seeds`` training seeds at once, each in its own process; their record.
+
+    Each process is this script alone (``--seed 1000 k`` after ``--``, its own ``seed_k``
+    folder and record under the run folder), with ``UASEP_WORKERS`` set so that they share
+    the cores (:mod:`uasep_env.cores`); the first whose check clears the bar creates the stop
+    file (``<run folder>/stop``) and the others stop at their next step.
+
+    Raises:
+        ValueError: The run folder holds files and ``a.overwrite`` is off.
+        RuntimeError: A run's process failed (its output was printed).
+    """
+    import subprocess
+    import threading
+
+    run_dir = (a.run_dir or ROOT / "runs" / "time_to_policy" / f"{a.recipe}_seeds").resolve()
+    stride = seeds_driver().SEED_STRIDE
+    seeds = [stride * k for k in range(a.seeds)]
+    folders = [run_dir / f"seed_{k}" for k in range(a.seeds)]
+    stop = run_dir / "stop"
+    if run_dir.exists() and any(run_dir.iterdir()) and not a.overwrite:
+        raise ValueError(f"{run_dir} is not empty (--overwrite replaces its runs)")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    stop.unlink(missing_ok=True)
+    own = ["--recipe", a.recipe, "--trainer", a.trainer, "--episodes", str(a.episodes),
+           "--check-every", str(a.check_every), "--max-minutes", repr(a.max_minutes)]  # fmt: skip
+    env = {**os.environ, "UASEP_WORKERS": str(a.seeds)}
+    procs, relays = [], []
+    t0 = time.perf_counter()
+    for k, (seed, folder) in enumerate(zip(seeds, folders, strict=True)):
+        out = run_dir / f"seed_{k}.json"
+        out.unlink(missing_ok=True)  # under --overwrite: a stale record is not this run's
+        cmd = [sys.executable, str(Path(__file__).resolve()), *own, "--run-dir", str(folder),
+               "--out", str(out), "--stop-file", str(stop),
+               *(["--overwrite"] if a.overwrite else []),
+               "--", *extra, "--seed", str(seed)]  # fmt: skip
+        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True, bufsize=1)  # fmt: skip
+        relay = threading.Thread(target=_relay, args=(f"[seed {seed}] ", proc.stdout))
+        relay.start()
+        procs.append(proc)
+        relays.append(relay)
+    codes = [proc.wait() for proc in procs]
+    for relay in relays:
+        relay.join()
+    wall_s = time.perf_counter() - t0
+    failed = [seed for seed, code in zip(seeds, codes, strict=True) if code != 0]
+    if failed:
+        raise RuntimeError(f"the run(s) of training seed(s) {failed} failed (their output above)")
+    runs = [json.loads((run_dir / f"seed_{k}.json").read_text()) for k in range(a.seeds)]
+    return merge_runs(runs, seeds, wall_s)
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Parse, run, print the summary and write the record."""
     from uasep_env.atomic import atomic_write
@@ -581,9 +708,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                    help="lean: the PPO recipes on uasep_env.training.ppo_lean")  # fmt: skip
     p.add_argument("--workers", type=positive_int, default=1,
                    help="held-out evaluation processes")  # fmt: skip
+    p.add_argument("--seeds", type=positive_int, default=None, metavar="N",
+                   help="train seeds 0, 1000, ... side by side (see above)")  # fmt: skip
+    p.add_argument("--stop-file", type=Path, default=None, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.of is not None:
-        if a.held_out is None or a.recipe or extra:
+        if a.held_out is None or a.recipe or extra or a.seeds is not None:
             p.error("argument --of: takes --held-out N (and --workers) only")
         try:
             record = json.loads(a.of.read_text())
@@ -609,8 +739,21 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         p.error(f"argument --out: {out} exists (--force replaces it)")
     # Absolute: a later --of finds the policy from any folder.
     run_dir = (a.run_dir or ROOT / "runs" / "time_to_policy" / a.recipe).resolve()
-    record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra, a.overwrite,
-                 a.trainer)  # fmt: skip
+    if a.seeds is not None:
+        if a.stop_file is not None:
+            p.error("argument --stop-file: not with --seeds (each run side by side gets one)")
+        given = [f for f in extra if f.split("=", 1)[0] == "--seed"]
+        if given:
+            p.error(f"argument --seeds: sets each run's --seed itself, got {given[0]} after --")
+        if a.seeds > 100:
+            p.error("argument --seeds: at most 100 (seed k trains on 1000*k + e)")
+        try:
+            record = side_by_side(a, extra)
+        except ValueError as err:
+            p.error(f"argument --run-dir: {err}")
+    else:
+        record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra,
+                     a.overwrite, a.trainer, a.stop_file)  # fmt: skip
     record["command"] = "python benchmarks/time_to_policy.py " + " ".join(
         [*argv, *(["--", *extra] if extra else [])]
     )
@@ -622,6 +765,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
           f"agent-steps; time: env {share['env']:.0%}, rest of the rollout "
           f"{share['rollout_other']:.0%}, learner {share['learner']:.0%} (evaluation "
           f"{t['evaluation'] / 60:.1f} min apart)")  # fmt: skip
+    if "side_by_side" in record:
+        sbs = record["side_by_side"]
+        by = "none" if sbs["reached_by"] is None else f"training seed {sbs['reached_by']}"
+        print(f"side by side, training seeds {sbs['seeds']}: reached by {by}; "
+              f"{sbs['agent_steps_all']:,} agent-steps in all; {sbs['wall_minutes']:.1f} wall "
+              "minutes (bars and checks included)")  # fmt: skip
     if a.held_out is not None and record["reached"]:
         record["held_out"] = held_out(record, a.held_out, a.workers)
         _print_held_out(record["held_out"])

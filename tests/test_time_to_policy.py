@@ -148,6 +148,24 @@ def test_the_residual_recipe_has_a_committed_record():
 def test_a_committed_record_is_consistent(path):
     """A committed result file: its stop is the first check that clears its own bar."""
     rec = json.loads(path.read_text())
+    _check_record(rec)
+    if "side_by_side" not in rec:
+        return
+    sbs = rec["side_by_side"]
+    runs = sbs["runs"]
+    for run in runs:  # each seed's own record, checked as any record
+        _check_record(run)
+    assert [r["recipe_args"]["seed"] for r in runs] == sbs["seeds"]
+    k = ttp.first_to_reach(runs)
+    assert sbs["reached_by"] == (None if k is None else sbs["seeds"][k])
+    assert rec["reached"] == (k is not None)
+    if k is not None:  # the record is the first run's to reach; the others were stopped
+        assert rec["checks"] == runs[k]["checks"] and rec["recipe_args"] == runs[k]["recipe_args"]
+        assert all(r["reached"] or r["stopped_by_another"] for r in runs)
+    assert {r["bar"]["loss_of_separation"] for r in runs} == {rec["bar"]["loss_of_separation"]}
+
+
+def _check_record(rec):
     b = rec["bar"]
     bar = ttp.Bar(**b)  # records before the collision field asked for none (its default)
     if "collision" in b:
@@ -206,3 +224,96 @@ def test_the_machine_is_named_by_its_processor_model(tmp_path):
     assert ttp.cpu_model(info) and ttp.cpu_model(tmp_path / "missing")
     got = ttp.machine("x")
     assert got["cpu_model"] == ttp.cpu_model() and got["numpy"] == np.__version__
+
+
+def _run(seed, reached_at=None, stopped=False, minutes=5.0):
+    """A run's record, as much of it as merge_runs reads."""
+    hit = reached_at is not None
+    check = {"agent_steps": 4_000_000, "training_minutes": minutes, "reached": hit,
+             "unix_time": reached_at or 0.0}  # fmt: skip
+    return {"recipe": "shared", "reached": hit, "stopped_by_another": stopped,
+            "training_minutes": minutes, "agent_steps": 4_000_000 if hit else 4_100_000,
+            "checks": [check], "recipe_args": {"seed": seed},
+            "command": f"seed {seed}"}  # fmt: skip
+
+
+def test_side_by_side_the_record_is_the_first_run_to_reach():
+    # Two runs clear the bar at about the same time (each sees the stop file only at its
+    # next step): the one whose check came first by the wall clock is the record.
+    runs = [_run(0, stopped=True, minutes=6.0), _run(1000, reached_at=200.0, minutes=5.5),
+            _run(2000, reached_at=100.0, minutes=5.8)]  # fmt: skip
+    rec = ttp.merge_runs(runs, [0, 1000, 2000], 420.0)
+    assert rec["reached"] and rec["side_by_side"]["reached_by"] == 2000
+    assert rec["training_minutes"] == 5.8 and rec["recipe_args"] == {"seed": 2000}
+    assert rec["side_by_side"]["agent_steps_all"] == 4_100_000 + 2 * 4_000_000
+    assert rec["side_by_side"]["wall_minutes"] == 7.0 and rec["side_by_side"]["runs"] == runs
+    assert "command" not in rec  # the script's own command, not a run's
+    # None reached: the record is the longest-trained run's, and says so.
+    runs = [_run(0, minutes=6.0), _run(1000, minutes=6.2), _run(2000, minutes=6.1)]
+    rec = ttp.merge_runs(runs, [0, 1000, 2000], 420.0)
+    assert not rec["reached"] and rec["side_by_side"]["reached_by"] is None
+    assert rec["recipe_args"] == {"seed": 1000}
+
+
+def test_a_run_stops_when_the_stop_file_appears(tmp_path, monkeypatch):
+    """A check that clears the bar creates the stop file; the file stops every other run."""
+    import uasep_env.policies
+
+    stop = tmp_path / "stop"
+    bar = ttp.make_bar(_agg(0.0, 0.02, 0.05, 33.0, 35.0), 2)
+    checker = ttp.Checker(bar=bar, seeds=[1, 2], eval_cfg=None, check_every=10,
+                          max_minutes=60.0, clock=ttp.Clock(), stop_file=stop)  # fmt: skip
+    monkeypatch.setattr(uasep_env.policies, "load_policy", lambda path, cfg: path)
+    figs = iter([_agg(0.01, 0.0, 0, 20.0, 0), _agg(0.0, 0.04, 0, 34.0, 0)])
+    monkeypatch.setattr(ttp, "_evaluate", lambda policy, cfg, seeds: next(figs))
+    checker.maybe_check(10, lambda: "p.zip")  # a collision: not reached, no stop file
+    assert not checker.spent() and not stop.exists()
+    checker.maybe_check(20, lambda: "p.zip")
+    assert checker.done and stop.exists() and checker.spent()
+    other = ttp.Checker(bar=bar, seeds=[1], eval_cfg=None, check_every=10, max_minutes=60.0,
+                        clock=ttp.Clock(), stop_file=stop)  # fmt: skip
+    assert other.spent() and not other.done  # stopped by another run, not reached
+    assert [c["reached"] for c in checker.checks] == [False, True]
+    assert checker.checks[0]["unix_time"] <= checker.checks[1]["unix_time"]
+
+
+@pytest.mark.parametrize("trainer", ["default", "lean"])
+def test_a_run_under_an_existing_stop_file_stops_at_once(tmp_path, trainer):
+    """Another run cleared the bar before this one trained a rollout: it stops, says why."""
+    stop = tmp_path / "stop"
+    stop.touch()
+    tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
+            "--hidden", "16", "--total-timesteps", "9999", "--episode-duration", "20"]  # fmt: skip
+    rec = ttp.run("residual_apf", 2, 192, 60.0, tmp_path / "run", tiny, trainer=trainer,
+                  stop_file=stop)  # fmt: skip
+    assert rec["stopped_by_another"] and not rec["reached"] and not rec["checks"]
+    assert rec["agent_steps"] <= 2 * 3 * 32  # at most the rollout it was in
+
+
+def test_seeds_side_by_side_train_each_seed_in_its_own_process(tmp_path, capsys):
+    tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
+            "--hidden", "16", "--total-timesteps", "768", "--episode-duration", "20"]  # fmt: skip
+    out, run_dir = tmp_path / "sbs.json", tmp_path / "run"
+    flags = ["--recipe", "residual_apf", "--trainer", "lean", "--episodes", "2",
+             "--check-every", "384", "--seeds", "2", "--run-dir", str(run_dir)]  # fmt: skip
+    rec = ttp.main([*flags, "--out", str(out), "--", *tiny])
+    said = capsys.readouterr().out
+    assert "[seed 0] bar" in said and "[seed 1000] bar" in said  # each run's lines, relayed
+    sbs = rec["side_by_side"]
+    assert sbs["seeds"] == [0, 1000] and json.loads(out.read_text()) == rec
+    runs = sbs["runs"]
+    assert [r["recipe_args"]["seed"] for r in runs] == [0, 1000]
+    assert [r["recipe_args"]["out_dir"] for r in runs] == [
+        str(run_dir / f"seed_{k}") for k in (0, 1)
+    ]
+    assert all(r["trainer"] == "lean" for r in runs)
+    assert rec["reached"] == any(r["reached"] for r in runs)
+    k = ttp.first_to_reach(runs)
+    assert sbs["reached_by"] == (None if k is None else sbs["seeds"][k])
+    # Refused before anything runs: a used folder, a --seed of the caller's.
+    with pytest.raises(SystemExit):
+        ttp.main([*flags, "--out", str(tmp_path / "again.json"), "--", *tiny])
+    with pytest.raises(SystemExit):
+        ttp.main([*flags[:-1], str(tmp_path / "new"), "--out", str(tmp_path / "b.json"),
+                  "--", *tiny, "--seed", "5"])  # fmt: skip
+    assert not (tmp_path / "new").exists() and not (tmp_path / "again.json").exists()
