@@ -383,29 +383,32 @@ def test_compare_recipes_at_equal_wall_time(tmp_path, capsys):
     assert "different --max-minutes" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("name", ["fast", "lean"])
-def test_a_fast_residual_report_is_what_its_command_and_checkpoints_say(name):
-    """``seeds_residual_apf_<name>``: its recorded options are its command's flags over the
+@pytest.mark.parametrize(
+    ("recipe", "name"), [("residual_apf", "fast"), ("residual_apf", "lean"), ("shared", "lean")]
+)
+def test_a_fast_report_is_what_its_command_and_checkpoints_say(recipe, name):
+    """``seeds_<recipe>_<name>``: its recorded options are its command's flags over the
     recipe's defaults, every kept checkpoint was trained with them, and its APF row is the
     main report's (the same held-out encounters)."""
     from uasep_env.policies.checkpoint_reader import read_checkpoint
     from uasep_env.training import ppo_shared
-    from uasep_env.training.args import PER_RUN
+    from uasep_env.training.args import PER_RUN, Args
     from uasep_env.training.ppo_residual_apf import RESIDUAL_DEFAULTS
 
+    defaults = RESIDUAL_DEFAULTS if recipe == "residual_apf" else Args()
     results = ROOT / "baselines" / "results"
-    fast = json.loads((results / f"seeds_residual_apf_{name}.json").read_text())
-    main = json.loads((results / "seeds_residual_apf.json").read_text())
+    fast = json.loads((results / f"seeds_{recipe}_{name}.json").read_text())
+    main = json.loads((results / f"seeds_{recipe}.json").read_text())
     flags = fast["command"].split(" -- ", 1)[1].split()
-    args = vars(ppo_shared.parse_args(flags, RESIDUAL_DEFAULTS))
+    args = vars(ppo_shared.parse_args(flags, defaults))
     now = {k: v for k, v in args.items() if k not in PER_RUN}
     # Options the recipes gained after a report (--device, --trainer): at their defaults.
     added = set(now) - set(fast["recipe_args"])
     assert added <= {"device", "trainer"}
-    assert all(now[k] == getattr(RESIDUAL_DEFAULTS, k) for k in added)
+    assert all(now[k] == getattr(defaults, k) for k in added)
     assert fast["recipe_args"] == {k: now[k] for k in fast["recipe_args"]}
     for k in range(3):
-        path = ROOT / f"baselines/seeds/residual_apf_{name}/seed_{k}/selected.zip"
+        path = ROOT / f"baselines/seeds/{recipe}_{name}/seed_{k}/selected.zip"
         meta = read_checkpoint(path)[0]
         trained = {n: v for n, v in meta.info["args"].items() if n not in PER_RUN}
         assert trained == fast["recipe_args"] and meta.info["args"]["seed"] == 1000 * k
