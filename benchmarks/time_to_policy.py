@@ -209,6 +209,7 @@ class Checker:
         next: The agent-steps at which the next check runs.
         stop_file: Side by side (``--seeds``): the file a run that clears the bar creates
             and whose existence stops the others; None when the run is alone.
+        stopped_by_another: Whether the stop file, not this run's bar or budget, ended it.
     """
 
     bar: Bar
@@ -222,6 +223,7 @@ class Checker:
     t0: float = field(default_factory=time.perf_counter)
     next: int = 0
     stop_file: Path | None = None
+    stopped_by_another: bool = False
 
     def __post_init__(self) -> None:
         self.next = self.check_every
@@ -235,11 +237,10 @@ class Checker:
 
         Side by side, also when another run has cleared the bar (its stop file exists).
         """
-        return (
-            self.done
-            or self.training_s() >= self.max_minutes * 60.0
-            or (self.stop_file is not None and self.stop_file.exists())
-        )
+        if self.done or self.training_s() >= self.max_minutes * 60.0:
+            return True
+        self.stopped_by_another = self.stop_file is not None and self.stop_file.exists()
+        return self.stopped_by_another
 
     def maybe_check(self, agent_steps: int, export: Any) -> None:
         """At a rollout's end: play the encounters when ``check_every`` more steps are done.
@@ -440,7 +441,7 @@ def run(
         "apf_clears_bar": reached(apf, bar),
         "reached": hit is not None,
         # Side by side: stopped because another run cleared the bar (not its budget).
-        "stopped_by_another": bool(hit is None and stop_file is not None and stop_file.exists()),
+        "stopped_by_another": checker.stopped_by_another,
         "training_minutes": (hit["training_minutes"] if hit else train_s / 60.0),
         "agent_steps": hit["agent_steps"] if hit else steps,
         "time_s": {
@@ -598,8 +599,8 @@ def merge_runs(runs: list[dict[str, Any]], seeds: list[int], wall_s: float) -> d
     Args:
         runs: Each seed's record (:func:`run`), in the order of ``seeds``.
         seeds: Their training seeds (the recipe's ``--seed``).
-        wall_s: Wall seconds from their start to the last one's end (bars, checks and
-            held-out figures excluded from nothing).
+        wall_s: Wall seconds from their start to the last one's end (the bars' and the
+            checks' evaluations included).
 
     Returns:
         A record with the fields of a single run's (``recipe``, ``bar``, ``reached``,

@@ -272,7 +272,8 @@ def test_a_run_stops_when_the_stop_file_appears(tmp_path, monkeypatch):
     assert checker.done and stop.exists() and checker.spent()
     other = ttp.Checker(bar=bar, seeds=[1], eval_cfg=None, check_every=10, max_minutes=60.0,
                         clock=ttp.Clock(), stop_file=stop)  # fmt: skip
-    assert other.spent() and not other.done  # stopped by another run, not reached
+    assert other.spent() and other.stopped_by_another and not other.done  # not reached
+    assert not checker.stopped_by_another  # its own bar stopped it
     assert [c["reached"] for c in checker.checks] == [False, True]
     assert checker.checks[0]["unix_time"] <= checker.checks[1]["unix_time"]
 
