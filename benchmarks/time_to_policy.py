@@ -612,16 +612,15 @@ def merge_runs(runs: list[dict[str, Any]], seeds: list[int], wall_s: float) -> d
     """
     k = first_to_reach(runs)
     lead = runs[k] if k is not None else max(runs, key=lambda r: r["training_minutes"])
-    record = {key: value for key, value in lead.items() if key not in ("checks", "command")}
-    record["checks"] = lead["checks"]
+    record = {key: value for key, value in lead.items() if key != "command"}
     record["side_by_side"] = {
         "seeds": list(seeds),
         "reached_by": seeds[k] if k is not None else None,
-        "agent_steps_all": int(sum(r["agent_steps"] if not r["reached"]
-                                   else r["checks"][-1]["agent_steps"] for r in runs)),
+        # A run that reached stopped at that check: its agent-steps are the check's.
+        "agent_steps_all": int(sum(r["agent_steps"] for r in runs)),
         "wall_minutes": wall_s / 60.0,
         "runs": runs,
-    }  # fmt: skip
+    }
     return record
 
 
@@ -631,11 +630,11 @@ def _relay(prefix: str, stream: Any) -> None:
         print(f"{prefix}{line}", end="", flush=True)
 
 
-def side_by_side(a: argparse.Namespace, extra: list[str]) -> dict[str, Any]:
+def side_by_side(a: argparse.Namespace, run_dir: Path, extra: list[str]) -> dict[str, Any]:
     """Train ``a.seeds`` training seeds at once, each in its own process; their record.
 
     Each process is this script alone (``--seed 1000 k`` after ``--``, its own ``seed_k``
-    folder and record under the run folder), with ``UASEP_WORKERS`` set so that they share
+    folder and record under ``run_dir``), with ``UASEP_WORKERS`` set so that they share
     the cores (:mod:`uasep_env.cores`); the first whose check clears the bar creates the stop
     file (``<run folder>/stop``) and the others stop at their next step.
 
@@ -646,10 +645,9 @@ def side_by_side(a: argparse.Namespace, extra: list[str]) -> dict[str, Any]:
     import subprocess
     import threading
 
-    run_dir = (a.run_dir or ROOT / "runs" / "time_to_policy" / f"{a.recipe}_seeds").resolve()
-    stride = seeds_driver().SEED_STRIDE
-    seeds = [stride * k for k in range(a.seeds)]
-    folders = [run_dir / f"seed_{k}" for k in range(a.seeds)]
+    driver = seeds_driver()
+    seeds = [driver.SEED_STRIDE * k for k in range(a.seeds)]
+    folders = [driver.seed_dir(run_dir, k) for k in range(a.seeds)]
     stop = run_dir / "stop"
     if run_dir.exists() and any(run_dir.iterdir()) and not a.overwrite:
         raise ValueError(f"{run_dir} is not empty (--overwrite replaces its runs)")
@@ -739,17 +737,19 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if out.exists() and not a.force:
         p.error(f"argument --out: {out} exists (--force replaces it)")
     # Absolute: a later --of finds the policy from any folder.
-    run_dir = (a.run_dir or ROOT / "runs" / "time_to_policy" / a.recipe).resolve()
+    default = a.recipe if a.seeds is None else f"{a.recipe}_seeds"
+    run_dir = (a.run_dir or ROOT / "runs" / "time_to_policy" / default).resolve()
     if a.seeds is not None:
         if a.stop_file is not None:
             p.error("argument --stop-file: not with --seeds (each run side by side gets one)")
         given = [f for f in extra if f.split("=", 1)[0] == "--seed"]
         if given:
             p.error(f"argument --seeds: sets each run's --seed itself, got {given[0]} after --")
-        if a.seeds > 100:
-            p.error("argument --seeds: at most 100 (seed k trains on 1000*k + e)")
+        if a.seeds > seeds_driver().MAX_SEEDS:
+            p.error(f"argument --seeds: at most {seeds_driver().MAX_SEEDS} "
+                    "(seed k trains on 1000*k + e)")  # fmt: skip
         try:
-            record = side_by_side(a, extra)
+            record = side_by_side(a, run_dir, extra)
         except ValueError as err:
             p.error(f"argument --run-dir: {err}")
     else:

@@ -318,3 +318,16 @@ def test_seeds_side_by_side_train_each_seed_in_its_own_process(tmp_path, capsys)
         ttp.main([*flags[:-1], str(tmp_path / "new"), "--out", str(tmp_path / "b.json"),
                   "--", *tiny, "--seed", "5"])  # fmt: skip
     assert not (tmp_path / "new").exists() and not (tmp_path / "again.json").exists()
+    capsys.readouterr()
+    for bad, named in (
+        (["--seeds", "101"], "--seeds: at most 100"),
+        (["--seeds", "2", "--stop-file", str(tmp_path / "s")], "--stop-file: not with --seeds"),
+    ):
+        with pytest.raises(SystemExit):  # a used folder too: a missed check trains nothing
+            ttp.main(["--recipe", "shared", "--out", str(tmp_path / "c.json"),
+                      "--run-dir", str(run_dir), *bad])  # fmt: skip
+        assert named in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # --of adds held-out figures to a record: no training
+        ttp.main(["--held-out", "2", "--of", str(out), "--seeds", "2"])
+    assert "takes --held-out N" in capsys.readouterr().err
+    assert not (tmp_path / "c.json").exists()

@@ -66,6 +66,8 @@ RECIPES = {
 AS_SAFE_AS_APF = ("residual_apf", "lagrangian", "lagrangian_residual", "mappo_lagrangian")
 #: Training seed of run ``k`` is ``SEED_STRIDE * k`` (its environments ``+ e``, e < stride).
 SEED_STRIDE = 1000
+#: Most training seeds a driver runs (seed k trains on SEED_STRIDE * k + e).
+MAX_SEEDS = 100
 #: (dotted aggregate key, label, kind) reported per seed and across seeds.
 METRICS = (
     ("episode.collision", "collisions", "rate"),
@@ -542,8 +544,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     argv, extra = split_recipe_args(argv)
     p = build_parser()
     args = p.parse_args(argv)
-    if args.seeds > 100:
-        p.error("argument --seeds: at most 100 (seed k trains on 1000*k + e)")
+    if args.seeds > MAX_SEEDS:
+        p.error(f"argument --seeds: at most {MAX_SEEDS} (seed k trains on 1000*k + e)")
     for flag in ("--seed", "--out-dir", "--resume"):
         if flag in extra:
             p.error(f"{flag} is set per seed by this driver; do not pass it after --")
