@@ -294,9 +294,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if left > 0:
         study.optimize(objective_for(study_dir, a, fixed, n_uavs), n_trials=left)
     result = summary(study)
-    result["command"] = "python benchmarks/tune_time_to_policy.py " + " ".join(
-        [*argv, *(["--", *fixed] if fixed else [])]
-    )
+    result["command"] = ttp.command_line("benchmarks/tune_time_to_policy.py", argv, fixed)
     import torch
 
     result["machine"] = ttp.machine(torch.__version__, ttp.gpu_name(recipe_args.device))

@@ -2,6 +2,7 @@
 
 import hashlib
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -291,9 +292,18 @@ def test_a_run_under_an_existing_stop_file_stops_at_once(tmp_path, trainer):
     assert rec["agent_steps"] <= 2 * 3 * 32  # at most the rollout it was in
 
 
+def test_a_record_command_reads_back_as_the_arguments_it_ran_with():
+    """A recipe flag whose value holds a space (``--config "a=1 b=2"``) is quoted."""
+    argv, extra = ["--recipe", "mappo", "--seeds", "2"], ["--config", "reward.a=1 reward.b=2"]
+    line = ttp.command_line("benchmarks/time_to_policy.py", argv, extra)
+    assert shlex.split(line) == ["python", "benchmarks/time_to_policy.py", *argv, "--", *extra]
+    assert shlex.split(ttp.command_line("x.py", argv, [])) == ["python", "x.py", *argv]
+
+
 def test_seeds_side_by_side_train_each_seed_in_its_own_process(tmp_path, capsys):
     tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
-            "--hidden", "16", "--total-timesteps", "768", "--episode-duration", "20"]  # fmt: skip
+            "--hidden", "16", "--total-timesteps", "768", "--episode-duration", "20",
+            "--config", "reward.collision=4 reward.progress=1"]  # fmt: skip
     out, run_dir = tmp_path / "sbs.json", tmp_path / "run"
     flags = ["--recipe", "residual_apf", "--trainer", "lean", "--episodes", "2",
              "--check-every", "384", "--seeds", "2", "--run-dir", str(run_dir)]  # fmt: skip
@@ -308,6 +318,9 @@ def test_seeds_side_by_side_train_each_seed_in_its_own_process(tmp_path, capsys)
         str(run_dir / f"seed_{k}") for k in (0, 1)
     ]
     assert all(r["trainer"] == "lean" for r in runs)
+    # The recipe's flags reach each run whole, and the record's command reads back as them.
+    assert {r["recipe_args"]["config"] for r in runs} == {"reward.collision=4 reward.progress=1"}
+    assert shlex.split(rec["command"])[2:] == [*flags, "--out", str(out), "--", *tiny]
     assert rec["reached"] == any(r["reached"] for r in runs)
     k = ttp.first_to_reach(runs)
     assert sbs["reached_by"] == (None if k is None else sbs["seeds"][k])
