@@ -682,16 +682,6 @@ def side_by_side(a: argparse.Namespace, run_dir: Path, extra: list[str]) -> dict
     return merge_runs(runs, seeds, wall_s)
 
 
-def command_line(script: str, argv: list[str], extra: list[str]) -> str:
-    """The command that ran ``script``, as a shell reads it back (a value with spaces quoted).
-
-    ``argv`` are the script's own arguments, ``extra`` the recipe's (after ``--``).
-    """
-    import shlex
-
-    return f"python {script} " + shlex.join([*argv, *(["--", *extra] if extra else [])])
-
-
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Parse, run, print the summary and write the record."""
     from uasep_env.atomic import atomic_write
@@ -765,7 +755,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     else:
         record = run(a.recipe, a.episodes, a.check_every, a.max_minutes, run_dir, extra,
                      a.overwrite, a.trainer, a.stop_file)  # fmt: skip
-    record["command"] = command_line("benchmarks/time_to_policy.py", argv, extra)
+    record["command"] = seeds_driver().command_line("benchmarks/time_to_policy.py", argv, extra)
     t = record["time_s"]
     share = {k: t[k] / t["training"] if t["training"] else 0.0
              for k in ("env", "rollout_other", "learner")}  # fmt: skip

@@ -294,7 +294,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if left > 0:
         study.optimize(objective_for(study_dir, a, fixed, n_uavs), n_trials=left)
     result = summary(study)
-    result["command"] = ttp.command_line("benchmarks/tune_time_to_policy.py", argv, fixed)
+    result["command"] = ttp.seeds_driver().command_line(
+        "benchmarks/tune_time_to_policy.py", argv, fixed
+    )
     import torch
 
     result["machine"] = ttp.machine(torch.__version__, ttp.gpu_name(recipe_args.device))

@@ -2,6 +2,7 @@
 
 import itertools
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -399,7 +400,7 @@ def test_a_fast_report_is_what_its_command_and_checkpoints_say(recipe, name):
     results = ROOT / "baselines" / "results"
     fast = json.loads((results / f"seeds_{recipe}_{name}.json").read_text())
     main = json.loads((results / f"seeds_{recipe}.json").read_text())
-    flags = fast["command"].split(" -- ", 1)[1].split()
+    flags = shlex.split(fast["command"].split(" -- ", 1)[1])  # the driver quotes its command
     args = vars(ppo_shared.parse_args(flags, defaults))
     now = {k: v for k, v in args.items() if k not in PER_RUN}
     # Options the recipes gained after a report (--device, --trainer): at their defaults.

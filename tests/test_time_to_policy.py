@@ -295,9 +295,13 @@ def test_a_run_under_an_existing_stop_file_stops_at_once(tmp_path, trainer):
 def test_a_record_command_reads_back_as_the_arguments_it_ran_with():
     """A recipe flag whose value holds a space (``--config "a=1 b=2"``) is quoted."""
     argv, extra = ["--recipe", "mappo", "--seeds", "2"], ["--config", "reward.a=1 reward.b=2"]
-    line = ttp.command_line("benchmarks/time_to_policy.py", argv, extra)
+    line = ttp.seeds_driver().command_line("benchmarks/time_to_policy.py", argv, extra)
     assert shlex.split(line) == ["python", "benchmarks/time_to_policy.py", *argv, "--", *extra]
-    assert shlex.split(ttp.command_line("x.py", argv, [])) == ["python", "x.py", *argv]
+    assert shlex.split(ttp.seeds_driver().command_line("x.py", argv, [])) == [
+        "python",
+        "x.py",
+        *argv,
+    ]
 
 
 def test_seeds_side_by_side_train_each_seed_in_its_own_process(tmp_path, capsys):

@@ -504,6 +504,17 @@ def split_recipe_args(argv: list[str] | None) -> tuple[list[str], list[str]]:
     return argv[:at], argv[at + 1 :]
 
 
+def command_line(script: str, argv: list[str], extra: list[str]) -> str:
+    """The command that ran ``script``, as a shell reads it back (a value with spaces quoted).
+
+    The inverse of :func:`split_recipe_args`: ``argv`` are the script's own arguments,
+    ``extra`` the recipe's (after ``--``).
+    """
+    import shlex
+
+    return f"python {script} " + shlex.join([*argv, *(["--", *extra] if extra else [])])
+
+
 def build_parser() -> argparse.ArgumentParser:
     """This driver's flags (validated: a bad value is one line naming the flag)."""
     p = OneLineParser(description=__doc__, formatter_class=HelpFormatter)
@@ -537,8 +548,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Run the stages; return the report's JSON data."""
-    import shlex
-
     from uasep_env.jsonio import write_json
 
     argv, extra = split_recipe_args(argv)
@@ -562,7 +571,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         claim_run_folder(out)  # one driver per folder (each seed's run claims its own)
     except RunFolderBusy as err:
         p.error(f"argument --out-dir: {err}")
-    command = "python train/seeds.py " + shlex.join(argv + (["--", *extra] if extra else []))
+    command = command_line("train/seeds.py", argv, extra)
 
     t0 = time.perf_counter()
     train_all(args.recipe, out, args.seeds, args.parallel, extra)
