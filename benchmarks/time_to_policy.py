@@ -50,7 +50,8 @@ Recipes: ``residual_apf`` (shipped ``ppo_residual_apf.zip``) and ``shared``
 (``mappo.zip``, skrl's MAPPO; its rollout time is the training less the env, the learner and
 the checks, skrl having no rollout method to time). ``--trainer lean`` trains a PPO recipe
 with :mod:`uasep_env.training.ppo_lean` (SB3's PPO arithmetic without SB3's per-step layers)
-in place of SB3; the record says which (``trainer``). Needs the ``train`` extra. Speed
+in place of SB3, and MAPPO with the same loop's centralised critic in place of skrl; the
+record says which (``trainer``). Needs the ``train`` extra. Speed
 figures are machine-dependent: the file records the machine.
 """
 
@@ -332,8 +333,13 @@ def _train_skrl(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
     return hooks.steps
 
 
-def _train_lean(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
-    """Train a PPO recipe with the lean loop (:mod:`uasep_env.training.ppo_lean`)."""
+def _train_lean(
+    args: Any, config: Any, run_dir: Path, checker: Checker, central: bool = False
+) -> int:
+    """Train a recipe with the lean loop (:mod:`uasep_env.training.ppo_lean`).
+
+    ``central``: MAPPO's centralised critic (the MAPPO recipe's lean trainer).
+    """
     from uasep_env.training import ppo_lean
 
     clock = checker.clock
@@ -351,7 +357,7 @@ def _train_lean(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
         def stop(self) -> bool:
             return checker.spent()
 
-    _, _, facts = ppo_lean.train(args, config, Hooks())
+    _, _, facts = ppo_lean.train(args, config, Hooks(), central=central)
     # The loop times its own parts (the checks in none of them); the rollout's figure holds
     # the environment, as SB3's collect_rollouts does.
     clock.env_s, clock.learner_s = facts["env_s"], facts["learner_s"]
@@ -361,20 +367,20 @@ def _train_lean(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
 
 #: Each recipe's training loop, by :attr:`Recipe.reader`.
 TRAINERS = {_PPO: _train_sb3, _MAPPO: _train_skrl}
-#: ``--trainer lean``: the PPO recipes' lean loop in place of SB3's.
-LEAN = {_PPO: _train_lean}
+#: ``--trainer lean``: the lean loop in place of SB3's PPO and skrl's MAPPO.
+LEAN = {_PPO: _train_lean, _MAPPO: functools.partial(_train_lean, central=True)}
 
 
 def _loop(recipe: str, trainer: str) -> Any:
     """The training loop of ``recipe`` under ``trainer`` (``"default"`` or ``"lean"``).
 
     Raises:
-        ValueError: ``trainer`` does not train ``recipe`` (lean: the PPO recipes only).
+        ValueError: ``trainer`` does not train ``recipe`` (a recipe without a lean loop).
     """
     reader = RECIPES[recipe].reader
     loops = LEAN if trainer == "lean" else TRAINERS
     if reader not in loops:
-        raise ValueError(f"trainer {trainer!r}: not for the {recipe!r} recipe (PPO recipes only)")
+        raise ValueError(f"trainer {trainer!r}: not for the {recipe!r} recipe")
     return loops[reader]
 
 
@@ -391,8 +397,8 @@ def run(
 ) -> dict[str, Any]:
     """Train until the bar is reached or the budget is spent; the record (see the module).
 
-    ``trainer``: ``"default"`` (SB3's PPO, or skrl's MAPPO) or ``"lean"`` (the PPO recipes
-    on :mod:`uasep_env.training.ppo_lean`). ``stop_file``: side by side, the file that a run
+    ``trainer``: ``"default"`` (SB3's PPO, or skrl's MAPPO) or ``"lean"`` (the recipe on
+    :mod:`uasep_env.training.ppo_lean`). ``stop_file``: side by side, the file that a run
     clearing the bar creates and that stops the others (:attr:`Checker.stop_file`).
     """
     import torch
@@ -704,7 +710,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--of", type=Path, default=None, metavar="RECORD",
                    help="add --held-out figures to this earlier record (no training)")  # fmt: skip
     p.add_argument("--trainer", choices=("default", "lean"), default="default",
-                   help="lean: the PPO recipes on uasep_env.training.ppo_lean")  # fmt: skip
+                   help="lean: the recipe on uasep_env.training.ppo_lean")  # fmt: skip
     p.add_argument("--workers", type=positive_int, default=1,
                    help="held-out evaluation processes")  # fmt: skip
     p.add_argument("--seeds", type=positive_int, default=None, metavar="N",

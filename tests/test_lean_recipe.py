@@ -269,16 +269,24 @@ class _Keep(ppo_lean.Hooks):
         self.state = state
 
 
-def _fresh_state(args, config):
-    """A new run's State, built as ``ppo_lean.train`` builds it."""
+def _fresh_state(args, config, central=False):
+    """A new run's State, built as ``ppo_lean.train`` builds it (MAPPO's under ``central``)."""
     from uasep_env.envs.core import EnvCore
+    from uasep_env.observation import state_dim
 
     core = EnvCore(config, n_envs=args.n_envs)
-    nets = ppo_lean._ActorCritic(core.obs_dim, args)
+    rows = args.n_envs * config.n_uavs
+    width = state_dim(config) + core.obs_dim if central else None
+    nets = ppo_lean._ActorCritic(core.obs_dim, args, width)
     opt = torch.optim.Adam(nets.params, lr=args.learning_rate, eps=1e-5)
-    norm = ppo_lean.Normaliser(core.obs_dim, args.n_envs * config.n_uavs, norm_obs=args.norm_obs,
+    norm = ppo_lean.Normaliser(core.obs_dim, rows, norm_obs=args.norm_obs,
                                norm_reward=args.norm_reward, gamma=args.gamma)  # fmt: skip
-    return ppo_lean.State(nets=nets, learner=nets, opt=opt, norm=norm)
+    state = ppo_lean.State(nets=nets, learner=nets, opt=opt, norm=norm)
+    if central:
+        state.critic_norm = ppo_lean.Normaliser(width, rows, norm_obs=True, norm_reward=False,
+                                                gamma=args.gamma)  # fmt: skip
+        state.value_scale = ppo_lean.ValueScale()
+    return state
 
 
 def test_a_checkpoint_restores_weights_adam_normalisation_rng_and_counters(tmp_path):
@@ -398,7 +406,11 @@ REFUSED = [
       for r in PARSERS),
     ("ppo_shared", ["--trainer", "lean", "--tensorboard"], "argument --tensorboard: SB3's"),
     ("ppo_residual_apf", ["--tensorboard", "--trainer", "lean"], "argument --tensorboard: SB3's"),
-    ("mappo", ["--trainer", "lean"], "argument --trainer: not supported by the MAPPO recipe"),
+    ("mappo", ["--trainer", "lean", "--norm-reward"],
+     "argument --norm-reward: not supported by the MAPPO recipe"),
+    ("mappo", ["--critic-warmup", "2", "--trainer", "lean"],
+     "argument --critic-warmup: not supported by the MAPPO recipe"),
+    ("mappo", ["--batch-size", "100"], "argument --batch-size: 100 must divide"),
     *((r, ["--trainer", "lean"], "argument --trainer: 'lean' is not for a Lagrangian recipe")
       for r in ("ppo_lagrangian", "ppo_lagrangian_residual", "mappo_lagrangian")),
 ]  # fmt: skip
@@ -428,14 +440,139 @@ def test_uasep_train_refuses_tensorboard_with_the_lean_trainer(capsys, tmp_path)
     assert not out.exists()
 
 
-@pytest.mark.parametrize("recipe", ["ppo_shared", "ppo_residual_apf"])
-def test_the_ppo_recipes_take_the_lean_trainer(recipe, tmp_path):
+@pytest.mark.parametrize("recipe", ["ppo_shared", "ppo_residual_apf", "mappo"])
+def test_the_ppo_recipes_and_mappo_take_the_lean_trainer(recipe, tmp_path):
     args = PARSERS[recipe](["--trainer", "lean", "--out-dir", str(tmp_path)])
     assert args.trainer == "lean"
     assert PARSERS[recipe](["--out-dir", str(tmp_path)]).trainer == "default"
 
 
-# 6. EpisodeSafety.
+# 6. MAPPO on the lean loop.
+
+
+def _train_mappo(out: Path, *extra: str, total: int = TOTAL) -> dict:
+    argv = [*TINY, "--trainer", "lean", "--total-timesteps", str(total),
+            "--checkpoint-every", str(EVERY), "--out-dir", str(out), *extra]  # fmt: skip
+    return mappo.main(argv)
+
+
+@pytest.fixture(scope="module")
+def mappo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    torch.set_num_threads(1)
+    out = tmp_path_factory.mktemp("mappo") / "run"
+    _train_mappo(out)
+    return out
+
+
+def test_a_lean_mappo_run_writes_a_runs_files_and_a_mappo_policy(mappo_run, runs):
+    assert _files(mappo_run) == _files(runs["lean"])
+    rows = _rows(mappo_run)
+    assert [int(r["agent_steps"]) for r in rows] == list(range(PER_UPDATE, TOTAL + 1, PER_UPDATE))
+    assert int(rows[-1]["episodes"]) > 0
+    policy = load_policy(mappo_run / "policy.zip")
+    assert policy.meta.algorithm == "MAPPO"
+    assert policy.meta.info["implementation"] == "uasep_env.training.ppo_lean (centralised critic)"
+    assert _same_weights(mappo_run / "policy.zip", mappo_run / "checkpoints/latest/policy.zip")
+    assert json.loads((mappo_run / "validation.json").read_text())["training"]["updates"] == 5
+    # The critic's statistics are in the checkpoint (a PPO run's has none).
+    saved = torch.load(mappo_run / "checkpoints/latest/state.pt", weights_only=True)
+    assert saved["central"]["value_count"] > 1 and saved["central"]["critic_count"] > 1
+    assert "central" not in torch.load(runs["lean"] / "checkpoints/latest/state.pt",
+                                       weights_only=True)  # fmt: skip
+
+
+def test_a_mappo_checkpoint_restores_the_critics_statistics(mappo_run, tmp_path):
+    from uasep_env.observation import state_dim
+
+    args = mappo.parse_args([*TINY, "--trainer", "lean", "--out-dir", "unused"])
+    config = ppo_shared.make_env_config(args)
+    ck = mappo_run / "checkpoints" / f"step_{EVERY}"
+    state = _fresh_state(args, config, central=True)
+    assert lean_recipe.load_checkpoint(state, ck, args)["updates"] == 2
+    saved = torch.load(ck / "state.pt", weights_only=True)["central"]
+    for prefix, rms in (("critic_", state.critic_norm.obs_rms), ("value_", state.value_scale.rms)):
+        np.testing.assert_array_equal(rms.mean, saved[prefix + "mean"].numpy())
+        np.testing.assert_array_equal(rms.var, saved[prefix + "var"].numpy())
+        assert rms.count == float(saved[prefix + "count"]) > 1
+    width = state_dim(config) + state.norm.obs_rms.mean.shape[0]
+    assert state.critic_norm.obs_rms.mean.shape == (width,)
+    # Saved again, the same statistics.
+    again = tmp_path / "again"
+    info = {k: v for k, v in _state(ck).items() if k != "args"}
+    lean_recipe.save_checkpoint(state, config, args, again, info)
+    twice = torch.load(again / "state.pt", weights_only=True)["central"]
+    assert twice.keys() == saved.keys()
+    assert all(torch.equal(twice[k], saved[k]) for k in saved)
+
+
+def test_a_mappo_run_resumes_its_own_checkpoints_only(mappo_run, runs, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(mappo_run, out, symlinks=True)
+    _train_mappo(out, "--resume", str(out / "checkpoints" / f"step_{EVERY}"), total=6 * PER_UPDATE)
+    assert _state(out / "checkpoints" / "latest")["updates"] == 6
+    for ck, extra, want in (
+        (runs["lean"], ("--trainer", "lean"), "a PPO checkpoint, not MAPPO's"),
+        (
+            mappo_run,
+            ("--batch-size", "64"),  # skrl's MAPPO
+            "a checkpoint of --trainer lean; resume it with --trainer lean",
+        ),
+    ):
+        argv = [*TINY, *extra, "--resume", str(ck / "checkpoints/latest"),
+                "--out-dir", str(tmp_path / "new"), "--total-timesteps", str(TOTAL)]  # fmt: skip
+        with pytest.raises((SystemExit, RunError), match=want):
+            mappo.main(argv)
+        assert not (tmp_path / "new").exists()
+    # Nor under the other value normalisation: its statistics are there or not.
+    argv = [*TINY, "--trainer", "lean", "--no-value-norm", "--out-dir", str(tmp_path / "new"),
+            "--resume", str(mappo_run / "checkpoints/latest"),
+            "--total-timesteps", str(TOTAL + PER_UPDATE)]  # fmt: skip
+    want = "a checkpoint of --value-norm; resume it with --value-norm"
+    with pytest.raises((SystemExit, RunError), match=want):
+        mappo.main(argv)
+    assert not (tmp_path / "new").exists()
+    with pytest.raises((SystemExit, RunError), match="a MAPPO checkpoint, not PPO's"):
+        _train(tmp_path / "new", "--trainer", "lean", "--resume",
+               str(mappo_run / "checkpoints/latest"))  # fmt: skip
+    assert not (tmp_path / "new").exists()
+
+
+def test_value_norm_off_trains_raw_returns_and_resumes(tmp_path):
+    out = tmp_path / "run"
+    _train_mappo(out, "--no-value-norm", total=2 * PER_UPDATE)
+    saved = torch.load(out / "checkpoints/latest/state.pt", weights_only=True)["central"]
+    assert {k.split("_")[0] for k in saved} == {"critic"}  # no value statistics to keep
+    ck = out / "checkpoints" / "latest"
+    _train_mappo(out, "--no-value-norm", "--resume", str(ck), total=3 * PER_UPDATE)
+    assert _state(out / "checkpoints" / "latest")["updates"] == 3
+
+
+def test_skrls_mappo_resumes_under_its_checkpoints_value_norm_only(mappo_run, tmp_path):
+    # A checkpoint of skrl's trainer (here a lean one relabelled: refused before it is read).
+    ck = tmp_path / "ck"
+    shutil.copytree(mappo_run / "checkpoints" / "latest", ck)
+    state = _state(ck)
+    state["args"]["trainer"] = "default"
+    (ck / "state.json").write_text(json.dumps(state))
+    argv = [*TINY, "--batch-size", "64", "--no-value-norm", "--resume", str(ck),
+            "--out-dir", str(tmp_path / "new")]  # fmt: skip
+    want = "a checkpoint of --value-norm; resume it with --value-norm"
+    with pytest.raises((SystemExit, RunError), match=want):
+        mappo.main(argv)
+    assert not (tmp_path / "new").exists()
+
+
+def test_value_norm_off_is_skrls_mappo_without_its_value_preprocessor(tmp_path):
+    pytest.importorskip("skrl")
+    flags = [*TINY, "--batch-size", "64", "--out-dir", str(tmp_path)]
+    for extra, kept in (([], True), (["--no-value-norm"], False)):
+        args = mappo.parse_args([*flags, *extra])
+        _, env, agent = mappo.build(args, ppo_shared.make_env_config(args))
+        for uid in env.possible_agents:
+            assert ("value_preprocessor" in agent.checkpoint_modules[uid]) == kept
+
+
+# 7. EpisodeSafety.
 
 
 def _world(pos: list, time: list) -> SimpleNamespace:
@@ -489,7 +626,7 @@ def test_episode_safety_folds_flags_with_or_and_deviation_with_max_once_settled(
     assert type(s.summary(0)["max_deviation"]) is float
 
 
-# 7. The lean rollout's finished episodes are the SB3 view's.
+# 8. The lean rollout's finished episodes are the SB3 view's.
 
 
 def test_the_lean_rollouts_finished_episodes_are_the_sb3_views():

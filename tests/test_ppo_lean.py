@@ -308,12 +308,167 @@ def test_a_copy_of_the_networks_is_independent_until_it_loads_the_weights():
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-def test_the_update_on_a_gpu_trains_what_the_cpu_trains():
+@pytest.mark.parametrize("central", [False, True])
+def test_the_update_on_a_gpu_trains_what_the_cpu_trains(central):
     # The draws are the CPU's either way; only the GPU's float arithmetic differs, so the two
-    # runs part by rounding alone over a short run.
-    cpu = ppo_lean.train(_tiny(), ppo_shared.make_env_config(_tiny()))
-    gpu = ppo_lean.train(_tiny(device="cuda"), ppo_shared.make_env_config(_tiny()))
+    # runs part by rounding alone over a short run. MAPPO's critic inputs go there too.
+    tiny = _tiny_mappo if central else _tiny
+    config = ppo_shared.make_env_config(tiny())
+    cpu = ppo_lean.train(tiny(), config, central=central)
+    gpu = ppo_lean.train(tiny(device="cuda"), config, central=central)
     for a, b in zip(cpu[0].params, gpu[0].params, strict=True):
         assert b.device.type == "cpu"  # the rollout's copy, which the export reads
         torch.testing.assert_close(a, b, rtol=1e-3, atol=1e-4)
     assert cpu[2]["agent_steps"] == gpu[2]["agent_steps"]
+
+
+# MAPPO: the centralised critic (``central=True``).
+
+
+def _tiny_mappo(**extra: object) -> object:
+    from uasep_env.training import mappo
+
+    flags = ["--n-envs", "2", "--n-steps", "16", "--batch-size", "32", "--n-epochs", "2",
+             "--hidden", "8", "--total-timesteps", "288", "--episode-duration", "4",
+             "--trainer", "lean"]  # fmt: skip
+    for k, v in extra.items():  # True: a switch without a value
+        flags += [f"--{k.replace('_', '-')}", *([] if v is True else [str(v)])]
+    return mappo.parse_args(["--out-dir", "unused", "--no-progress", *flags])
+
+
+def _central_rollout(n_steps: int = 48) -> tuple:
+    """A MAPPO rollout whose core records every global state and every step's rewards."""
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.observation import state_dim
+
+    args = _tiny_mappo(n_steps=n_steps)
+    config = ppo_shared.make_env_config(args)
+    core = EnvCore(config, n_envs=args.n_envs)
+    states, steps = [], []
+    state_of, step_of = core.state, core.step
+
+    def state() -> np.ndarray:
+        states.append(state_of().copy())
+        return states[-1]
+
+    def step(actions: np.ndarray) -> object:
+        res = step_of(actions)
+        steps.append((res.rewards.reshape(-1).copy(), res.terminated.copy(),
+                      res.truncated.copy()))  # fmt: skip
+        return res
+
+    core.state, core.step = state, step
+    torch.manual_seed(0)
+    width = state_dim(config) + core.obs_dim
+    nets = ppo_lean._ActorCritic(core.obs_dim, args, width)
+    rows = args.n_envs * config.n_uavs
+    norm = ppo_lean.Normaliser(core.obs_dim, rows, norm_obs=True, norm_reward=False, gamma=0.99)
+    st = ppo_lean.State(nets=nets, learner=nets, opt=None, norm=norm,
+                        critic_norm=ppo_lean.Normaliser(width, rows, norm_obs=True,
+                                                        norm_reward=False, gamma=0.99),
+                        value_scale=ppo_lean.ValueScale())  # fmt: skip
+    # Value statistics away from (0, 1): the critic's outputs must be mapped back.
+    st.value_scale.rms.mean, st.value_scale.rms.var = np.float64(5.0), np.float64(4.0)
+    roll = ppo_lean._Rollout(core, st, n_steps)
+    roll.reset(args.seed)
+    roll.collect(args.gamma)
+    return roll, st, states, steps, config.n_uavs, width
+
+
+def test_mappos_critic_reads_each_agents_global_state_and_own_observation():
+    roll, st, states, _, n, width = _central_rollout()
+    assert len(states) == len(roll.rewards) + 1  # one a step, one for the last value
+    ref = ppo_lean.Normaliser(width, roll.obs_t.shape[1], norm_obs=True, norm_reward=False,
+                              gamma=0.99)  # fmt: skip
+    for t in range(len(roll.rewards)):
+        obs = roll.obs_t[t].numpy()
+        # Row e * n + i is UAV i of environment e: its environment's state, its observation.
+        x = np.stack([np.concatenate([states[t][r // n], obs[r]]) for r in range(len(obs))])
+        want = ref.observe(x, update=True)
+        np.testing.assert_array_equal(roll.crit_t[t].numpy(), want)
+        with torch.no_grad():
+            v = st.nets.value(roll.crit_t[t]).numpy()
+        np.testing.assert_allclose(roll.values[t], v * 2.0 + 5.0, rtol=1e-6)
+    # The state is the new episode's where one began: its progress is 0 there, else not.
+    begins = roll.starts[1:, ::n] == 1
+    assert begins.any()
+    progress = np.stack(states[1:-1])[..., -1]
+    assert np.all(progress[begins] == 0) and np.all(progress[~begins] > 0)
+    # The last value's input leaves the statistics as they were (the next rollout counts it).
+    np.testing.assert_array_equal(st.critic_norm.obs_rms.mean, ref.obs_rms.mean)
+
+
+def test_mappos_time_limit_ends_the_episode_without_a_bootstrap():
+    roll, _, _, steps, _, _ = _central_rollout()
+    rewards = np.stack([s[0] for s in steps]).astype(np.float32)
+    truncated = np.stack([s[2] & ~s[1] for s in steps])
+    assert truncated.any()  # 4 s episodes: time limits inside the rollout
+    np.testing.assert_array_equal(roll.rewards, rewards)
+
+
+def test_the_value_scale_standardises_by_every_return_seen():
+    rng = np.random.default_rng(1)
+    scale = ppo_lean.ValueScale()
+    batches = [rng.normal(50.0, 20.0, (16, 6)).astype(np.float32) for _ in range(3)]
+    first = scale.scale(batches[0])
+    assert abs(first.mean()) < 1e-4 and abs(first.std() - 1.0) < 1e-4
+    for b in batches[1:]:
+        z = scale.scale(b)
+    seen = np.concatenate([b.reshape(-1) for b in batches]).astype(np.float64)
+    np.testing.assert_allclose(scale.rms.mean, seen.mean(), rtol=1e-6)
+    np.testing.assert_allclose(scale.rms.var, seen.var(), rtol=1e-5)
+    np.testing.assert_allclose(scale.to_value(z), batches[-1], rtol=1e-5)
+
+
+@pytest.mark.parametrize(("central", "value_norm"), [(False, True), (True, True), (True, False)])
+def test_only_mappos_critic_learns_standardised_returns(monkeypatch, central, value_norm):
+    seen = []
+    real = ppo_lean._update
+
+    def update(nets, opt, args, updates, obs, act, logp, adv, ret, crit=None):
+        seen.append((ret.copy(), crit))
+        return real(nets, opt, args, updates, obs, act, logp, adv, ret, crit)
+
+    monkeypatch.setattr(ppo_lean, "_update", update)
+    args = _tiny_mappo(**({} if value_norm else {"no_value_norm": True})) if central else _tiny()
+    assert getattr(args, "value_norm", True) == value_norm
+    ppo_lean.train(args, ppo_shared.make_env_config(args), central=central)
+    ret, crit = seen[0]
+    standardised = abs(ret.mean()) < 1e-3 and abs(ret.std() - 1.0) < 1e-3
+    assert standardised == (central and value_norm)
+    if central:  # the critic's own inputs, a row for each return
+        assert crit.shape[:2] == ret.shape
+
+
+def test_a_mappo_run_is_reproducible_and_exports_a_mappo_policy(tmp_path):
+    from uasep_env.observation import state_dim
+    from uasep_env.policies import load_policy
+    from uasep_env.policies.learned import read_checkpoint
+
+    args = _tiny_mappo()
+    config = ppo_shared.make_env_config(args)
+    (nets, norm, facts), (nets2, _, _) = (
+        ppo_lean.train(args, config, central=True) for _ in range(2)
+    )
+    assert facts["agent_steps"] == 288 and facts["episodes"] > 0
+    assert all(torch.equal(a, b) for a, b in zip(nets.params, nets2.params, strict=True))
+    obs_dim = norm.obs_rms.mean.shape[0]
+    assert nets.vf[0].in_features == state_dim(config) + obs_dim
+    assert nets.pi[0].in_features == obs_dim
+    ppo = ppo_lean.train(_tiny(), config)[0]  # the same seed, PPO's critic: another run
+    assert not torch.equal(nets.mu.weight, ppo.mu.weight)
+    path = ppo_lean.export_policy(nets, norm, config, args, tmp_path / "p.zip", {})
+    meta = read_checkpoint(path)[0]
+    assert meta.algorithm == "MAPPO"
+    assert meta.info["implementation"] == "uasep_env.training.ppo_lean (centralised critic)"
+    policy = load_policy(path, config.replace(action={"mode": "direct"}))
+    raw = np.random.default_rng(0).normal(size=(1, obs_dim))
+    with torch.no_grad():
+        want = nets.mu(nets.pi(torch.from_numpy(norm.normalise(raw)))).numpy()
+    np.testing.assert_allclose(policy.network(raw), want, rtol=1e-4, atol=1e-6)
+
+
+def test_mappos_grad_norm_clip_zero_is_no_clip():
+    # skrl's meaning of 0; torch's clip to a norm of 0 would zero every gradient.
+    assert _update_once(_tiny_mappo(grad_norm_clip=0), +1.0)[2] > 0
+    assert _update_once(_tiny_mappo(grad_norm_clip=0), -1.0)[2] < 0

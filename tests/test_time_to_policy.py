@@ -40,7 +40,12 @@ def test_the_bar_is_the_shipped_intervals_upper_ends():
 
 @pytest.mark.parametrize(
     ("recipe", "trainer"),
-    [("residual_apf", "default"), ("mappo", "default"), ("residual_apf", "lean")],
+    [
+        ("residual_apf", "default"),
+        ("mappo", "default"),
+        ("residual_apf", "lean"),
+        ("mappo", "lean"),
+    ],
 )
 def test_a_run_stops_at_the_bar_and_records_where_the_time_went(
     tmp_path, recipe, trainer, monkeypatch, capsys
@@ -92,12 +97,17 @@ def test_the_recipes_trainer_flag_is_the_scripts(tmp_path):
     assert rec["trainer"] == "lean" and rec["recipe_args"]["trainer"] == "lean"
 
 
-def test_the_lean_trainer_is_refused_for_mappo(tmp_path):
-    with pytest.raises(SystemExit):
-        ttp.main(["--recipe", "mappo", "--trainer", "lean", "--out", str(tmp_path / "x.json")])
-    with pytest.raises(ValueError, match="PPO recipes only"):
-        ttp.run("mappo", 2, 384, 1.0, tmp_path / "run", [], trainer="lean")
-    assert not (tmp_path / "x.json").exists() and not (tmp_path / "run").exists()
+def test_mappo_on_the_lean_loop_trains_mappos_centralised_critic(tmp_path):
+    from uasep_env.policies.learned import read_checkpoint
+
+    tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
+            "--hidden", "16", "--total-timesteps", "400"]  # fmt: skip
+    rec = ttp.main(["--recipe", "mappo", "--trainer", "lean", "--episodes", "2",
+                    "--check-every", "384", "--out", str(tmp_path / "r.json"),
+                    "--run-dir", str(tmp_path / "run"), "--", *tiny])  # fmt: skip
+    assert rec["trainer"] == "lean" and rec["shipped"].endswith("mappo.zip")
+    meta = read_checkpoint(tmp_path / "run" / "check.zip")[0]
+    assert meta.algorithm == "MAPPO" and "centralised critic" in meta.info["implementation"]
 
 
 def test_of_names_a_file_that_is_not_a_record(tmp_path):

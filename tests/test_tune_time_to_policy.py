@@ -136,7 +136,7 @@ def test_a_study_of_other_settings_is_refused(tmp_path, monkeypatch, capsys):
     [
         (["--", "--n-envs", "64"], "a trial sets these itself"),
         (["--", "--learning-rate=1e-3"], "a trial sets these itself"),
-        (["--recipe", "mappo"], "argument --trainer"),
+        (["--recipe", "mappo"], "not a PPO recipe"),  # the lean loop trains it, not a study
         (["--trainer", "default", "--recipe", "mappo"], "not a PPO recipe"),
         (["--max-minutes", "0"], "argument --max-minutes"),
     ],

@@ -266,12 +266,13 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "device": (torch_device, "torch device: cpu, cuda or cuda:N (SB3: all; lean loop: update)"),
     "trainer": (
         choice("default", "lean"),
-        "default (SB3's PPO) or lean (uasep_env.training.ppo_lean: PPO recipes)",
+        "default (SB3's PPO; skrl's MAPPO) or lean (uasep_env.training.ppo_lean)",
     ),
     "progress": (None, "progress bar on stderr"),
     # MAPPO's own (uasep_env.training.mappo.Args).
     "value_loss_scale": (non_negative_float, "weight of the critic's loss"),
     "grad_norm_clip": (non_negative_float, "gradient norm clip (0: none)"),
+    "value_norm": (None, "the critic learns returns normalised by their running statistics"),
 }
 
 #: Fields of the env config: an invalid environment is reported against these flags.

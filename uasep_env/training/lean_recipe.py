@@ -1,4 +1,4 @@
-"""A PPO recipe trained by the lean loop: ``uasep-train ppo_residual_apf --trainer lean``.
+"""A recipe trained by the lean loop: ``uasep-train ppo_residual_apf --trainer lean``.
 
 :mod:`~uasep_env.training.ppo_lean` is the SB3 recipes' algorithm in one loop on the batched
 core (1.3x SB3's agent-steps a minute on the residual recipe, ``docs/speed.md``). This
@@ -21,8 +21,13 @@ counters (agent-steps, updates, so the critic warm-up goes on where it was, epis
 window and the training time spent), and refuses a checkpoint of the other trainer. Like
 SB3's resume it is not bit-exact: the environments restart their episodes from their seeds.
 The wall budget (``--max-minutes``) counts training time, not the checkpoints' and the
-curve's writing. The Lagrangian recipes (their constraint is an SB3 callback) and MAPPO
-refuse ``--trainer lean``, and so does ``--tensorboard`` (SB3's logger).
+curve's writing. The Lagrangian recipes (their constraint is an SB3 callback) refuse
+``--trainer lean``, and so does ``--tensorboard`` (SB3's logger).
+
+``uasep-train mappo --trainer lean`` trains MAPPO in the same loop (``central=True``: the
+centralised critic of :mod:`~uasep_env.training.ppo_lean`), in the same files; its
+``state.pt`` holds the critic's input and value statistics too, and a resume refuses a PPO
+run's checkpoint (and a PPO run a MAPPO one).
 """
 
 from __future__ import annotations
@@ -32,10 +37,12 @@ import io
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from uasep_env.training.args import Args
 from uasep_env.training.ppo_lean import Hooks
 
-__all__ = ["load_checkpoint", "save_checkpoint", "train"]
+__all__ = ["check_algorithm", "load_checkpoint", "save_checkpoint", "train"]
 
 #: The networks' parts in ``state.pt``.
 _PARTS = ("pi", "vf", "mu", "v")
@@ -74,11 +81,55 @@ def _write_checkpoint(state: Any, config: Any, args: Args, tmp: Path, info: dict
     device = learner.log_std.device
     if device.type == "cuda":
         saved["cuda_rng"] = torch.cuda.get_rng_state(device)
+    if state.critic_norm is not None:  # MAPPO's critic: its input and value statistics
+        parts = {"critic_": state.critic_norm.obs_rms}
+        if state.value_scale is not None:
+            parts["value_"] = state.value_scale.rms
+        saved["central"] = {
+            prefix + k: torch.as_tensor(v)
+            for prefix, rms in parts.items()
+            for k, v in _rms(rms).items()
+        }
     buf = io.BytesIO()
     torch.save(saved, buf)
     atomic_write(tmp / "state.pt", buf.getvalue())
     atomic_write(tmp / "normalization.npz", normalization_bytes(state.norm))
     ppo_lean.export_policy(state.nets, state.norm, config, args, tmp / "policy.zip", info)
+
+
+def _rms(rms: Any) -> dict:
+    """A ``RunningMeanStd``'s statistics, as arrays."""
+    return {k: np.asarray(getattr(rms, k), dtype=np.float64) for k in ("mean", "var", "count")}
+
+
+def _restore_rms(rms: Any, saved: dict, prefix: str) -> None:
+    rms.mean = saved[prefix + "mean"].numpy().astype(np.float64)
+    rms.var = saved[prefix + "var"].numpy().astype(np.float64)
+    rms.count = float(saved[prefix + "count"])
+
+
+def check_algorithm(directory: Path, args: Args, central: bool) -> None:
+    """Refuse a checkpoint of the other algorithm, or of the other value normalisation.
+
+    MAPPO's for a PPO run (``central`` False) or the reverse; a MAPPO checkpoint whose
+    ``--value-norm`` is not ``args``'.
+
+    Raises:
+        RunError: One line naming both (the checkpoint's ``policy.zip`` says which it is,
+            its ``state.json`` its flags).
+    """
+    import json
+
+    from uasep_env.policies.learned import read_checkpoint
+    from uasep_env.training.rundir import RunError, check_switch
+
+    theirs = read_checkpoint(directory / "policy.zip")[0].algorithm
+    ours = "MAPPO" if central else "PPO"
+    if theirs != ours:
+        raise RunError(f"--resume {directory}: a {theirs} checkpoint, not {ours}'s")
+    if central:
+        info = json.loads((directory / "state.json").read_text())
+        check_switch(directory, info, args, "value_norm", default=True)
 
 
 def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:
@@ -88,15 +139,25 @@ def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:
     them from it when the run starts).
 
     Raises:
-        RunError: The folder is incomplete, or a checkpoint of SB3's trainer (one line).
+        RunError: The folder is incomplete, a checkpoint of SB3's (or skrl's) trainer, or
+            of MAPPO resumed as PPO or the reverse (one line).
     """
     import torch
 
-    from uasep_env.training.rundir import check_checkpoint, check_trainer, load_normalization
+    from uasep_env.training.rundir import (
+        RunError,
+        check_checkpoint,
+        check_trainer,
+        load_normalization,
+    )
 
     directory = check_checkpoint(directory)
     info = check_trainer(directory, args)
+    central = state.critic_norm is not None
+    check_algorithm(directory, args, central)
     saved = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
+    if ("central" in saved) != central:  # a policy.zip swapped in: still one line
+        raise RunError(f"--resume {directory}: its state.pt and policy.zip disagree")
     learner = state.learner
     for part in _PARTS:
         getattr(learner, part).load_state_dict(saved["nets"][part])
@@ -108,6 +169,10 @@ def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:
     if "cuda_rng" in saved and device.type == "cuda":
         torch.cuda.set_rng_state(saved["cuda_rng"], device)
     load_normalization(state.norm, directory / "normalization.npz")
+    if central:
+        _restore_rms(state.critic_norm.obs_rms, saved["central"], "critic_")
+        if state.value_scale is not None:
+            _restore_rms(state.value_scale.rms, saved["central"], "value_")
     state.agent_steps = int(info["agent_steps"])
     state.updates = int(info["updates"])
     state.episodes = int(info["episodes"])
@@ -115,11 +180,12 @@ def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:
     return info
 
 
-def train(args: Args, plugin: Any = None) -> dict:
-    """Train (or resume) ``args``' PPO recipe with the lean loop; export, validate, summarise.
+def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
+    """Train (or resume) ``args``' recipe with the lean loop; export, validate, summarise.
 
     The contract of :func:`uasep_env.training.ppo_shared.train`, which calls this for
-    ``--trainer lean``.
+    ``--trainer lean`` (and :func:`uasep_env.training.mappo.main`, with ``central``: MAPPO's
+    centralised critic).
 
     Raises:
         ValueError: A ``plugin`` (the Lagrangian recipes' constraint is SB3's callback).
@@ -135,7 +201,7 @@ def train(args: Args, plugin: Any = None) -> dict:
         write_validation,
     )
 
-    config, out, resume = start_run(args)
+    config, out, resume = start_run(args, lambda ck: check_algorithm(ck, args, central))
     hooks = _RunHooks(args, config, out)
 
     def prepare(state: Any) -> None:
@@ -145,7 +211,7 @@ def train(args: Args, plugin: Any = None) -> dict:
             rewind(out, CSV_FIELDS, state.agent_steps)
             print(f"resumed from {resume} at {state.agent_steps:,} agent-steps")
 
-    nets, norm, facts = ppo_lean.train(args, config, hooks, prepare)
+    nets, norm, facts = ppo_lean.train(args, config, hooks, prepare, central=central)
     trained = resume is None or facts["updates"] > int(hooks.resumed.get("updates", 0))
     if trained:
         if hooks.saved_at != hooks.last_state.agent_steps:
@@ -155,8 +221,8 @@ def train(args: Args, plugin: Any = None) -> dict:
         info = {k: v for k, v in hooks.resumed.items() if k not in ("window", "args")}
     hooks.close()
     policy_path = ppo_lean.export_policy(nets, norm, config, args, out / "policy.zip", info)
-    plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS,
-                f"PPO, lean loop ({args.action_mode})")  # fmt: skip
+    title = "MAPPO, lean loop" if central else f"PPO, lean loop ({args.action_mode})"
+    plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS, title)
     return write_validation(out, config, policy_path, info, args.eval_episodes)
 
 

@@ -34,6 +34,15 @@ conventions of ``uasep-train ppo_shared`` (every flag of it applies where it mea
 Options of ``ppo_shared.py`` MAPPO does not have (``--critic-warmup``, ``--norm-reward``,
 ``--tensorboard``) are refused. ``--batch-size`` sets skrl's mini-batches per agent
 (``n_envs * n_steps / batch_size``). Requires the ``train`` extra and skrl.
+
+``--trainer lean`` trains the same algorithm (the same actor, the same critic on the same
+agent-specific global state, value normalisation, the time limit as an end) in the lean
+loop of :mod:`uasep_env.training.ppo_lean` on the batched core, without skrl or SB3's
+wrappers (more agent-steps a minute at the same flags, ``docs/speed.md``). There the shared
+actor is updated once per minibatch on every agent's steps (Yu et al.'s parameter
+sharing; skrl updates it once per agent in turn), ``--batch-size`` counts agent-steps as
+in the PPO recipes, ``--device`` runs the update, and its checkpoints resume with
+``--trainer lean`` only.
 """
 
 from __future__ import annotations
@@ -62,6 +71,7 @@ class Args(ppo_shared.Args):
     out_dir: str = "runs/mappo"
     value_loss_scale: float = 1.0
     grad_norm_clip: float = 0.5
+    value_norm: bool = True  # skrl's value preprocessor (Yu et al.'s value normalisation)
 
 
 def _hidden(args: Args) -> list[int]:
@@ -70,11 +80,14 @@ def _hidden(args: Args) -> list[int]:
 
 def _check(args: Args) -> str | None:
     """What MAPPO refuses of the shared flags (one message naming the flag), or None."""
-    for name, default in (("critic_warmup", 0), ("norm_reward", False), ("tensorboard", False),
-                          ("device", "cpu"), ("trainer", "default")):  # fmt: skip
+    refused = [("critic_warmup", 0), ("norm_reward", False), ("tensorboard", False)]
+    if args.trainer != "lean":  # the lean loop runs its update on --device
+        refused.append(("device", "cpu"))
+    for name, default in refused:
         if getattr(args, name) != default:
             return f"argument --{name.replace('_', '-')}: not supported by the MAPPO recipe"
-    if (args.n_envs * args.n_steps) % args.batch_size:
+    # skrl's mini-batches per agent; the lean loop's --batch-size is agent-steps, as PPO's.
+    if args.trainer != "lean" and (args.n_envs * args.n_steps) % args.batch_size:
         return (
             f"argument --batch-size: {args.batch_size} must divide n_envs * n_steps = "
             f"{args.n_envs * args.n_steps}"
@@ -187,7 +200,7 @@ def build(args: Args, config: Any, agent_class: type | None = None) -> tuple[Any
         "state_preprocessor_kwargs": {
             uid: {"size": env.state_spaces[uid], "device": "cpu"} for uid in env.possible_agents
         },
-        "value_preprocessor": RunningStandardScaler,
+        "value_preprocessor": RunningStandardScaler if args.value_norm else None,
         "value_preprocessor_kwargs": {
             uid: {"size": 1, "device": "cpu"} for uid in env.possible_agents
         },
@@ -533,15 +546,27 @@ def train(args: Args, config: Any, out: Path, hooks: Hooks | None = None) -> tup
 def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     """Train (or resume), export the actor, validate against the APF; returns the summary."""
     args = parse_args(argv, defaults)
+    if args.trainer == "lean":
+        from uasep_env.training import lean_recipe
+
+        return lean_recipe.train(args, central=True)
     import torch  # lazy: the training extra
 
     torch.set_num_threads(args.torch_threads)
-    from uasep_env.training.rundir import check_checkpoint, plot_curves, prepare_out_dir
+    from uasep_env.training.rundir import (
+        check_checkpoint,
+        check_switch,
+        check_trainer,
+        plot_curves,
+        prepare_out_dir,
+    )
 
     config = ppo_shared.make_env_config(args)
     out = Path(args.out_dir)
-    if args.resume:
-        check_checkpoint(Path(args.resume))
+    if args.resume:  # the lean loop's checkpoints are not skrl's
+        directory = check_checkpoint(Path(args.resume))
+        # skrl saves the value preprocessor's statistics under --value-norm only.
+        check_switch(directory, check_trainer(directory, args), args, "value_norm", default=True)
     prepare_out_dir(out, args.resume, args.overwrite)
     agent, venv, info = train(args, config, out)
     policy_path = export_policy(agent, venv, config, args, out / "policy.zip", info)

@@ -32,6 +32,21 @@ PPO recipe but the Lagrangian ones) trains a recipe's run with it, checkpoints a
 says what it measured). ``--device cuda`` runs the
 update on a GPU, on a copy of the networks whose weights the rollout's CPU copy takes after
 each update; the rollout acts on the CPU (its draws are the CPU's in either case).
+
+**MAPPO** (``uasep-train mappo --trainer lean``; ``central=True`` here): the same loop with
+the critic of MAPPO (Yu et al. 2022) in place of the local one, as the skrl recipe
+(:mod:`~uasep_env.training.mappo`) builds it: the critic reads the agent-specific global
+state, the environment's global true state (:meth:`~uasep_env.envs.core.EnvCore.state`)
+beside the agent's own normalised observation, normalised by running statistics of its
+own, and predicts values normalised by the running statistics of the returns (skrl's value
+preprocessor; Yu et al.'s value normalisation): the returns update them before each update,
+the critic's outputs are mapped back for GAE (``--no-value-norm``: raw returns, as PPO's
+critic). A time limit ends an episode as a termination (no bootstrap), as the skrl recipe
+has it: the global state holds the episode's progress. The value loss weight and the
+gradient clip are MAPPO's flags (``--value-loss-scale``, ``--grad-norm-clip``; 0: no clip).
+Unlike skrl's MAPPO, which updates the shared actor once per agent in turn (each with its
+own Adam state), the shared actor is updated once per minibatch on every agent's steps
+together, as Yu et al.'s parameter sharing does.
 """
 
 from __future__ import annotations
@@ -106,6 +121,33 @@ class Normaliser:
         return scaled
 
 
+class ValueScale:
+    """Running statistics of the returns: the centralised critic's value normalisation.
+
+    skrl's ``RunningStandardScaler`` as the MAPPO recipe's value preprocessor uses it
+    (mean and variance over every return seen, updated with each rollout's before its
+    update), without its clip: the critic predicts ``(value - mean) / std``.
+    """
+
+    def __init__(self) -> None:
+        from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+        self.rms = RunningMeanStd(shape=())
+
+    @property
+    def std(self) -> float:
+        return float(np.sqrt(self.rms.var + EPSILON))
+
+    def to_value(self, scaled: np.ndarray) -> np.ndarray:
+        """The critic's output in return units."""
+        return (scaled * self.std + self.rms.mean).astype(np.float32)
+
+    def scale(self, returns: np.ndarray) -> np.ndarray:
+        """``returns`` in the critic's units (statistics updated with them first)."""
+        self.rms.update(returns.reshape(-1))
+        return ((returns - self.rms.mean) / self.std).astype(np.float32)
+
+
 def gae(
     rewards: np.ndarray,
     values: np.ndarray,
@@ -159,14 +201,20 @@ def _init(module: Any, gain: float, torch: Any) -> None:
 
 
 class _ActorCritic:
-    """The recipes' networks: SB3's ``MlpPolicy`` with separate actor and critic MLPs."""
+    """The recipes' networks: SB3's ``MlpPolicy`` with separate actor and critic MLPs.
 
-    def __init__(self, obs_dim: int, args: Args) -> None:
+    The critic reads ``critic_dim`` inputs (MAPPO's centralised critic), else the
+    observation.
+    """
+
+    def __init__(self, obs_dim: int, args: Args, critic_dim: int | None = None) -> None:
         import torch
 
         sizes = hidden(args)
         act = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[args.activation]
-        self.pi, self.vf = _mlp(obs_dim, sizes, act, torch), _mlp(obs_dim, sizes, act, torch)
+        self.pi = _mlp(obs_dim, sizes, act, torch)
+        self.vf = _mlp(critic_dim or obs_dim, sizes, act, torch)
+        self.centralised = critic_dim is not None
         self.mu, self.v = torch.nn.Linear(sizes[-1], 3), torch.nn.Linear(sizes[-1], 1)
         for body in (self.pi, self.vf):
             _init(body, math.sqrt(2.0), torch)
@@ -249,6 +297,9 @@ class State:
         episodes: Episodes finished so far.
         wall_s: Training seconds so far (a resumed run's earlier ones included; hooks'
             time excluded).
+        critic_norm: MAPPO's: the running statistics of the critic's input (None for PPO).
+        value_scale: MAPPO's: the value normalisation (None for PPO, and for MAPPO under
+            ``--no-value-norm``).
         finished: ``(return, collision, loss_of_separation, max_deviation, length)`` of
             each episode ended since the last update (emptied after
             :meth:`Hooks.update_end`): the return and length
@@ -264,6 +315,8 @@ class State:
     updates: int = 0
     episodes: int = 0
     wall_s: float = 0.0
+    critic_norm: Normaliser | None = None
+    value_scale: ValueScale | None = None
     finished: list[tuple[float, bool, bool, float, int]] = field(default_factory=list)
 
 
@@ -288,6 +341,12 @@ class _Rollout:
         self.n_envs, self.n = core.n_envs, core.n_uavs
         rows, dim = self.n_envs * self.n, core.obs_dim
         self.obs_t = torch.zeros((n_steps, rows, dim))
+        # MAPPO: the critic's inputs, stored apart (the PPO critic reads obs_t).
+        self.central = state.critic_norm is not None
+        self.crit_t = (
+            torch.zeros((n_steps, rows, state.critic_norm.observation_space.shape[0]))
+            if self.central else self.obs_t
+        )  # fmt: skip
         self.act = torch.zeros((n_steps, rows, 3))
         self.logp = torch.zeros((n_steps, rows))
         self.rewards = np.zeros((n_steps, rows), dtype=np.float32)
@@ -310,6 +369,28 @@ class _Rollout:
         self.ep_return[:] = 0.0
         self.ep_length[:] = 0
 
+    def critic_input(self, *, update: bool) -> Any:
+        """The critic's input for the current observations (a tensor ``(rows, width)``).
+
+        PPO's critic reads the observation; MAPPO's the agent-specific global state: the
+        environment's global state beside the agent's normalised observation, normalised by
+        the critic's own running statistics (updated with it under ``update``).
+        """
+        import torch
+
+        if not self.central:
+            return torch.from_numpy(self.obs)
+        g = np.repeat(self.core.state(), self.n, axis=0)
+        return torch.from_numpy(
+            self.state.critic_norm.observe(np.concatenate([g, self.obs], axis=1), update=update)
+        )
+
+    def value(self, x: Any) -> np.ndarray:
+        """The critic's values of inputs ``x`` in return units (MAPPO's mapped back)."""
+        v = self.nets.value(x).numpy()
+        scale = self.state.value_scale
+        return v if scale is None else scale.to_value(v)
+
     def collect(self, gamma: float) -> float:
         """Fill the buffers (SB3's ``collect_rollouts``); returns the seconds in the core."""
         import torch
@@ -324,7 +405,10 @@ class _Rollout:
                 self.obs_t[t] = x
                 self.act[t] = act
                 self.logp[t] = nets.log_prob(mean, act)
-                self.values[t] = nets.value(x).numpy()
+                c = self.critic_input(update=True)
+                if self.central:
+                    self.crit_t[t] = c
+                self.values[t] = self.value(c)
                 self.starts[t] = self.start
                 e0 = time.perf_counter()
                 res = core.step(np.clip(act.numpy(), -1.0, 1.0).reshape(self.n_envs, n, 3))
@@ -345,13 +429,16 @@ class _Rollout:
                     # first, then the finished episodes' last ones are normalised.
                     self.obs = norm.observe(raw, update=True)
                     timeout = np.repeat(res.truncated & ~res.terminated, n)[dones]
-                    if timeout.any():  # a time limit: bootstrap from the terminal state
+                    # A time limit: bootstrap from the terminal state (MAPPO's critic sees
+                    # the episode's progress in the global state: a time limit is an end).
+                    if timeout.any() and not self.central:
                         last = torch.from_numpy(norm.normalise(final[timeout]))
                         rows_out = np.flatnonzero(dones)[timeout]
-                        reward[rows_out] += gamma * nets.value(last).numpy()
+                        reward[rows_out] += gamma * self.value(last)
                 self.rewards[t] = reward
                 self.start = dones.astype(np.float32)
-            self.last_value = nets.value(torch.from_numpy(self.obs)).numpy()
+            # Not counted in the statistics: the next rollout's first step counts it.
+            self.last_value = self.value(self.critic_input(update=False))
         return env_s
 
     def _track(self, res: Any, done_env: np.ndarray) -> None:
@@ -378,6 +465,8 @@ def train(
     config: Any,
     hooks: Hooks | None = None,
     prepare: Callable[[State], None] | None = None,
+    *,
+    central: bool = False,
 ) -> tuple[_ActorCritic, Normaliser, dict[str, Any]]:
     """Train until ``args.total_timesteps`` agent-steps, ``args.max_minutes`` or ``hooks.stop()``.
 
@@ -390,6 +479,9 @@ def train(
         prepare: Called with the fresh :class:`State` before the environments are reset:
             a resume restores a checkpoint into it (weights, optimiser, normalisation,
             counters, random state); the wall budget counts ``state.wall_s`` as spent.
+        central: MAPPO: the centralised critic (the module's docstring), with value
+            normalisation unless ``args.value_norm`` is off, the value loss weight and
+            gradient clip of ``args`` (``value_loss_scale``, ``grad_norm_clip``).
 
     Returns:
         ``(networks, normaliser, facts)``: facts hold ``agent_steps``, ``updates``,
@@ -400,6 +492,7 @@ def train(
     import torch
 
     from uasep_env.envs.core import EnvCore
+    from uasep_env.observation import state_dim
     from uasep_env.scenarios import check_training_seeds
 
     hooks = hooks or Hooks()
@@ -407,7 +500,8 @@ def train(
     torch.manual_seed(args.seed)
     core = EnvCore(config, n_envs=args.n_envs)
     rows = args.n_envs * config.n_uavs
-    nets = _ActorCritic(core.obs_dim, args)
+    critic_dim = state_dim(config) + core.obs_dim if central else None
+    nets = _ActorCritic(core.obs_dim, args, critic_dim)
     # The rollout acts on the CPU (a few hundred rows a step: a GPU's launches and copies
     # would cost more than they save); the update runs on args.device, on its own copy.
     learner = _learner(nets, torch.device(args.device))
@@ -416,6 +510,12 @@ def train(
         core.obs_dim, rows, norm_obs=args.norm_obs, norm_reward=args.norm_reward, gamma=args.gamma
     )
     state = State(nets=nets, learner=learner, opt=opt, norm=norm)
+    if central:
+        state.critic_norm = Normaliser(
+            critic_dim, rows, norm_obs=True, norm_reward=False, gamma=args.gamma
+        )
+        if getattr(args, "value_norm", True):
+            state.value_scale = ValueScale()
     if prepare is not None:
         prepare(state)
         if learner is not nets:
@@ -451,7 +551,10 @@ def train(
         u0 = time.perf_counter()
         adv, ret = gae(roll.rewards, roll.values, roll.starts, roll.last_value, roll.start,
                        args.gamma, args.gae_lambda)  # fmt: skip
-        _update(learner, opt, args, state.updates, roll.obs_t, roll.act, roll.logp, adv, ret)
+        if state.value_scale is not None:  # MAPPO: the critic learns normalised returns
+            ret = state.value_scale.scale(ret)
+        _update(learner, opt, args, state.updates, roll.obs_t, roll.act, roll.logp, adv, ret,
+                roll.crit_t)  # fmt: skip
         if learner is not nets:
             nets.load_from(learner)
         state.updates += 1
@@ -489,15 +592,20 @@ def _update(
     buf_logp: Any,
     adv: np.ndarray,
     ret: np.ndarray,
+    buf_crit: Any = None,
 ) -> None:
     """One PPO update (SB3's ``PPO.train`` as the recipes configure it), where ``nets`` are.
 
     The rollout's buffers are on the CPU; they go to ``nets``' device here. The minibatches'
     order is drawn on the CPU wherever the update runs, so a run draws the same numbers.
+    ``buf_crit`` holds the critic's inputs (None or ``buf_obs`` itself: PPO's critic).
     """
     import torch
 
     device = nets.log_std.device
+    # MAPPO's flags where the recipe has them, else SB3 PPO's defaults.
+    vf_coef = getattr(args, "value_loss_scale", _VF_COEF)
+    max_grad_norm = getattr(args, "grad_norm_clip", _MAX_GRAD_NORM)
 
     # The actor frozen, only the critic learns: as the SB3 recipes' callback, which counts
     # the rollout before its update, so the warm-up's last update trains the actor already.
@@ -505,6 +613,7 @@ def _update(
     for p in nets.actor:
         p.requires_grad_(not warm)
     obs, act, old = (b.flatten(0, 1).to(device) for b in (buf_obs, buf_act, buf_logp))
+    crit = obs if buf_crit is None or buf_crit is buf_obs else buf_crit.flatten(0, 1).to(device)
     adv_t = torch.from_numpy(adv.reshape(-1)).to(device)
     ret_t = torch.from_numpy(ret.reshape(-1)).to(device)
     size = len(obs)
@@ -516,7 +625,7 @@ def _update(
             x, a = obs[idx], act[idx]
             mean = nets.mu(nets.pi(x))
             logp = nets.log_prob(mean, a)
-            value = nets.value(x)
+            value = nets.value(crit[idx])
             entropy = (nets.log_std + 0.5 + 0.5 * math.log(2.0 * math.pi)).sum().expand(len(idx))
             b = adv_t[idx]
             if len(idx) > 1:
@@ -526,7 +635,7 @@ def _update(
             lo, hi = 1.0 - args.clip_range, 1.0 + args.clip_range
             policy_loss = -torch.min(b * ratio, b * ratio.clamp(lo, hi)).mean()
             value_loss = torch.nn.functional.mse_loss(ret_t[idx], value)
-            loss = policy_loss - args.ent_coef * entropy.mean() + _VF_COEF * value_loss
+            loss = policy_loss - args.ent_coef * entropy.mean() + vf_coef * value_loss
             with torch.no_grad():
                 kl = ((ratio - 1.0) - log_ratio).mean().item()
             if args.target_kl and kl > 1.5 * args.target_kl:
@@ -534,7 +643,8 @@ def _update(
                 break
             opt.zero_grad()
             loss.backward()
-            torch.nn.utils.clip_grad_norm_(nets.params, _MAX_GRAD_NORM)
+            if max_grad_norm > 0:  # MAPPO's --grad-norm-clip 0: none, as skrl's
+                torch.nn.utils.clip_grad_norm_(nets.params, max_grad_norm)
             opt.step()
         if stop:
             break
@@ -543,8 +653,14 @@ def _update(
 def export_policy(
     nets: _ActorCritic, norm: Normaliser, config: Any, args: Args, path: Path, info: dict
 ) -> Path:
-    """Write the actor and the normalisation as the recipes' policy checkpoint."""
+    """Write the actor and the normalisation as the recipes' policy checkpoint.
+
+    MAPPO's (networks with a centralised critic) say so: algorithm ``"MAPPO"``.
+    """
     from uasep_env.training.rundir import export_actor
 
-    info = {**info, "implementation": "uasep_env.training.ppo_lean"}
-    return export_actor(nets.linears(), norm, config, args, path, "PPO", info)
+    central = nets.centralised
+    info = {**info, "implementation": "uasep_env.training.ppo_lean"
+            + (" (centralised critic)" if central else "")}  # fmt: skip
+    return export_actor(nets.linears(), norm, config, args, path,
+                        "MAPPO" if central else "PPO", info)  # fmt: skip

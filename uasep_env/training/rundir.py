@@ -59,11 +59,14 @@ class RunError(SystemExit):
         super().__init__(f"{Path(sys.argv[0]).name}: error: {message}")
 
 
-def start_run(args: Args) -> tuple[Any, Path, Path | None]:
+def start_run(
+    args: Args, check: Callable[[Path], None] | None = None
+) -> tuple[Any, Path, Path | None]:
     """What every PPO trainer does first: ``(config, out_dir, checkpoint to resume or None)``.
 
-    Sets torch's threads, builds the env config, checks the checkpoint (and that it is
-    this trainer's) before the output folder is claimed (:func:`prepare_out_dir`).
+    Sets torch's threads, builds the env config, checks the checkpoint (that it is this
+    trainer's, then ``check(checkpoint)``, which raises :class:`RunError`) before the
+    output folder is claimed (:func:`prepare_out_dir`).
     """
     import torch
 
@@ -73,6 +76,8 @@ def start_run(args: Args) -> tuple[Any, Path, Path | None]:
     resume = check_checkpoint(Path(args.resume)) if args.resume else None
     if resume is not None:
         check_trainer(resume, args)
+        if check is not None:
+            check(resume)
     prepare_out_dir(out, args.resume, args.overwrite)
     return config, out, resume
 
@@ -356,6 +361,21 @@ def check_trainer(directory: Path, args: Args) -> dict:
             f"--trainer {theirs}"
         )
     return info
+
+
+def check_switch(directory: Path, info: dict, args: Any, name: str, default: bool) -> None:
+    """Refuse to resume ``directory`` (``state.json``: ``info``) under the other ``--name``.
+
+    For an on/off flag a checkpoint's files depend on (MAPPO's ``--value-norm``: its
+    statistics are saved or not); a checkpoint written before the flag had ``default``.
+
+    Raises:
+        RunError: One line naming the flag to resume it with.
+    """
+    saved = info.get("args", {}).get(name, default)
+    if saved != getattr(args, name):
+        flag = "--" + ("" if saved else "no-") + name.replace("_", "-")
+        raise RunError(f"--resume {directory}: a checkpoint of {flag}; resume it with {flag}")
 
 
 def window_summary(window: Any) -> dict:
