@@ -170,3 +170,34 @@ def test_api_docstrings_are_google_style_not_markdown(module):
         doc = inspect.getdoc(obj) or ""
         assert not markdown_headings(doc), f"{name}: Markdown headings {markdown_headings(doc)}"
         assert not split_table_rows(doc), f"{name}: split table rows {split_table_rows(doc)}"
+
+
+def broken_table_rows(text: str) -> list[str]:
+    """Rows of a Markdown table that do not have their table's cells, or run onto a new line.
+
+    A table is a run of lines starting with ``|``; each must end with ``|`` and have the
+    header's number of cells (``|`` inside code spans and ``\\|`` are not separators).
+    """
+    bad, width = [], None
+    for line in text.splitlines():
+        row = line.strip()
+        if not row.startswith("|"):
+            width = None
+            continue
+        cells = re.sub(r"`[^`]*`", "", row).replace("\\|", "").count("|")
+        width = cells if width is None else width  # the header sets it
+        if not row.endswith("|") or cells != width:
+            bad.append(row[:80])
+    return bad
+
+
+def test_the_table_check_sees_a_row_broken_over_lines():
+    ok = "| a | b |\n|---|---|\n| `x|y` | 2 |\n\ntext\n| c |\n|---|\n"
+    assert broken_table_rows(ok) == []
+    assert broken_table_rows("| a | b |\n|---|---|\n| 1 | two\nthree |\n") == ["| 1 | two"]
+    assert broken_table_rows("| a | b |\n|---|---|\n| 1 | 2 | 3 |\n") == ["| 1 | 2 | 3 |"]
+
+
+@pytest.mark.parametrize("page", [*PAGES, ROOT / "train" / "README.md"], ids=lambda p: p.name)
+def test_the_pages_tables_have_every_row_on_one_line(page):
+    assert broken_table_rows(page.read_text()) == []
