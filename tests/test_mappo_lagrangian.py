@@ -264,3 +264,18 @@ def test_resume_from_a_plain_mappo_checkpoint_is_refused(tmp_path, capsys):
     argv = ["mappo_lagrangian", "--resume", str(ckpt), "--out-dir", str(tmp_path / "mappo")]
     assert uasep_train(argv) == 1
     assert "not a MAPPO-Lagrangian checkpoint" in capsys.readouterr().err
+
+
+def test_resume_under_the_other_value_norm_is_refused(tmp_path, capsys):
+    # skrl saves the value preprocessor's statistics under --value-norm only.
+    from uasep_env.training.rundir import CHECKPOINT_FILES
+
+    ckpt = tmp_path / "run" / "checkpoints" / "step_96"
+    ckpt.mkdir(parents=True)
+    state = {"agent_steps": 96, "lagrangian": {}, "args": {"value_norm": True}}
+    for name in CHECKPOINT_FILES:
+        (ckpt / name).write_text(json.dumps(state) if name == "state.json" else "")
+    argv = ["mappo_lagrangian", "--resume", str(ckpt), "--out-dir", str(tmp_path / "run"),
+            "--no-value-norm"]  # fmt: skip
+    assert uasep_train(argv) == 1
+    assert "a checkpoint of --value-norm; resume it with --value-norm" in capsys.readouterr().err

@@ -347,7 +347,13 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     import torch  # lazy: the training extra
 
     from uasep_env.sb3_lagrangian import plot_cost_curves
-    from uasep_env.training.rundir import RunError, check_checkpoint, plot_curves, prepare_out_dir
+    from uasep_env.training.rundir import (
+        RunError,
+        check_checkpoint,
+        check_switch,
+        plot_curves,
+        prepare_out_dir,
+    )
 
     torch.set_num_threads(args.torch_threads)
     config = ppo_shared.make_env_config(args)
@@ -356,9 +362,11 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     out = Path(args.out_dir)
     resumed: dict = {}
     if args.resume:
-        resumed = json.loads((check_checkpoint(Path(args.resume)) / "state.json").read_text())
+        directory = check_checkpoint(Path(args.resume))
+        resumed = json.loads((directory / "state.json").read_text())
         if "lagrangian" not in resumed:  # plain MAPPO's has no cost critic, no multiplier
             raise RunError(f"--resume {args.resume}: not a MAPPO-Lagrangian checkpoint")
+        check_switch(directory, resumed, args, "value_norm", default=True)
     prepare_out_dir(out, args.resume, args.overwrite)
     if args.overwrite:  # prepare_out_dir deleted mappo's run files; these are ours
         for name in constraint.COST_FILES:
