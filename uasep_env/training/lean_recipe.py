@@ -108,18 +108,16 @@ def _restore_rms(rms: Any, saved: dict, prefix: str) -> None:
     rms.count = float(saved[prefix + "count"])
 
 
-def check_algorithm(directory: Path, args: Args, central: bool) -> None:
+def check_algorithm(directory: Path, info: dict, args: Args, central: bool) -> None:
     """Refuse a checkpoint of the other algorithm, or of the other value normalisation.
 
     MAPPO's for a PPO run (``central`` False) or the reverse; a MAPPO checkpoint whose
-    ``--value-norm`` is not ``args``'.
+    ``--value-norm`` (in ``info``, its ``state.json``) is not ``args``'.
 
     Raises:
         RunError: One line naming both (the checkpoint's ``policy.zip`` says which it is,
             its ``state.json`` its flags).
     """
-    import json
-
     from uasep_env.policies.learned import read_checkpoint
     from uasep_env.training.rundir import RunError, check_switch
 
@@ -128,7 +126,6 @@ def check_algorithm(directory: Path, args: Args, central: bool) -> None:
     if theirs != ours:
         raise RunError(f"--resume {directory}: a {theirs} checkpoint, not {ours}'s")
     if central:
-        info = json.loads((directory / "state.json").read_text())
         check_switch(directory, info, args, "value_norm", default=True)
 
 
@@ -154,7 +151,7 @@ def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:
     directory = check_checkpoint(directory)
     info = check_trainer(directory, args)
     central = state.critic_norm is not None
-    check_algorithm(directory, args, central)
+    check_algorithm(directory, info, args, central)
     saved = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
     if ("central" in saved) != central:  # a policy.zip swapped in: still one line
         raise RunError(f"--resume {directory}: its state.pt and policy.zip disagree")
@@ -201,7 +198,7 @@ def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
         write_validation,
     )
 
-    config, out, resume = start_run(args, lambda ck: check_algorithm(ck, args, central))
+    config, out, resume = start_run(args, lambda ck, info: check_algorithm(ck, info, args, central))
     hooks = _RunHooks(args, config, out)
 
     def prepare(state: Any) -> None:

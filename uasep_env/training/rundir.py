@@ -60,13 +60,13 @@ class RunError(SystemExit):
 
 
 def start_run(
-    args: Args, check: Callable[[Path], None] | None = None
+    args: Args, check: Callable[[Path, dict], None] | None = None
 ) -> tuple[Any, Path, Path | None]:
     """What every PPO trainer does first: ``(config, out_dir, checkpoint to resume or None)``.
 
     Sets torch's threads, builds the env config, checks the checkpoint (that it is this
-    trainer's, then ``check(checkpoint)``, which raises :class:`RunError`) before the
-    output folder is claimed (:func:`prepare_out_dir`).
+    trainer's, then ``check(checkpoint, its state.json)``, which raises :class:`RunError`)
+    before the output folder is claimed (:func:`prepare_out_dir`).
     """
     import torch
 
@@ -75,9 +75,9 @@ def start_run(
     out = Path(args.out_dir)
     resume = check_checkpoint(Path(args.resume)) if args.resume else None
     if resume is not None:
-        check_trainer(resume, args)
+        info = check_trainer(resume, args)
         if check is not None:
-            check(resume)
+            check(resume, info)
     prepare_out_dir(out, args.resume, args.overwrite)
     return config, out, resume
 
