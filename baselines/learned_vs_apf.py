@@ -28,12 +28,12 @@ from types import SimpleNamespace
 from typing import Any
 
 from uasep_env import make_config
-from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.metrics.statistics import no_worse_rate
 from uasep_env.policies import load_policy, reference_controllers
+from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.tables import render_table
 from uasep_env.scenarios import HELD_OUT_PAPER_SEEDS, HELD_OUT_SEEDS
-from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))

@@ -18,10 +18,10 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
-from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.plotting import plot_paper_figures
-from uasep_env.tables import render_table
+from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.tables import render_table
 
 POLICIES = ("apf", "motion-state-apf", "traditional-apf")
 ROOT = Path(__file__).resolve().parent

@@ -4,7 +4,7 @@ For every recorded track of :mod:`uasep_env.real_traffic` and every recorded sam
 ``t0`` with enough recorded future, the aircraft's state is estimated the way the env
 estimates an obstacle's: measurements every ``config.dt`` with the configured obstacle noise
 (``noise.obstacle_position_std``, ``noise.obstacle_velocity_std``), filtered by the env's
-Kalman filter (:class:`uasep_env.estimation.KalmanModel`, process noise
+Kalman filter (:class:`uasep_env.sim.estimation.KalmanModel`, process noise
 ``max(v w_max, 0.1)`` as in the env, ``v`` the track's median ground speed). The reachable
 ellipsoid (:func:`uasep_env.reachable.ellipsoid`, ``mode="swept"`` like the env's region:
 every point reachable *within* the horizon) is placed on the estimate like the env places it
@@ -43,11 +43,11 @@ from typing import Any
 import numpy as np
 
 from uasep_env import reachable, real_traffic
-from uasep_env.atomic import atomic_write
 from uasep_env.config import EnvConfig
-from uasep_env.estimation import KalmanModel
-from uasep_env.jsonio import write_json
 from uasep_env.real_traffic import Track
+from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.jsonio import write_json
+from uasep_env.sim.estimation import KalmanModel
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_prediction_report import plot, render_markdown

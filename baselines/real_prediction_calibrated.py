@@ -34,13 +34,13 @@ import numpy as np
 from scipy.stats import binomtest
 
 from uasep_env import make_config, reachable, real_traffic
-from uasep_env.atomic import atomic_output, atomic_write
-from uasep_env.jsonio import write_json
-from uasep_env.obstacles import AIRCRAFT_CLASSES
 from uasep_env.reachable.calibrated import calibrated_region, load_table
+from uasep_env.runtime.atomic import atomic_output, atomic_write
+from uasep_env.runtime.jsonio import write_json
+from uasep_env.runtime.tables import render_table
 from uasep_env.scenarios import REAL_TRAFFIC_TEST_SEEDS
 from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK
-from uasep_env.tables import render_table
+from uasep_env.sim.obstacles import AIRCRAFT_CLASSES
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
@@ -181,7 +181,7 @@ def offline(cls: str, horizons: tuple[float, ...] = HORIZONS) -> list[dict[str, 
 
 def in_env(horizon: float, episodes: int, scenario: str = "real_traffic") -> dict[str, Any]:
     """Containment of the world's own calibrated regions, per class, over ``episodes``."""
-    from uasep_env.world import World
+    from uasep_env.sim.world import World
 
     conf = (
         copy.deepcopy(REAL_TRAFFIC_BANK) if scenario == "real_traffic" else {"scenario": scenario}

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_output
+from uasep_env.runtime.atomic import atomic_output
 
 FITS = ("enclosing", "paper")
 

@@ -50,13 +50,13 @@ from typing import Any
 import numpy as np
 
 from uasep_env import make_config, real_traffic
-from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
 from uasep_env.metrics.statistics import wilson_interval
 from uasep_env.policies import reference_controllers, shipped_policies
+from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.tables import render_table
 from uasep_env.scenarios import HELD_OUT_SEEDS, REAL_TRAFFIC_TEST_SEEDS, sample_scenario
 from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK, REAL_TRAFFIC_SLOW_BANK
-from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))

@@ -29,11 +29,11 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
-from uasep_env.atomic import atomic_write
 from uasep_env.evaluation import evaluate, write_json
 from uasep_env.metrics.statistics import no_worse_rate
+from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.tables import render_table
 from uasep_env.scenarios import HELD_OUT_SEEDS
-from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))

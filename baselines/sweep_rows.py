@@ -1,8 +1,8 @@
 """The trade-off sweep's CSV: rewritten atomically, read tolerantly, never mixing episode counts.
 
 ``baselines/tradeoff.py`` rewrites its CSV after every evaluation call. The write is atomic
-(:func:`uasep_env.atomic.atomic_write`), so a kill or a full disk leaves the previous file and
-no finished row is lost; the reader drops a torn last row (a file cut short some other way);
+(:func:`uasep_env.runtime.atomic.atomic_write`), so a kill or a full disk leaves the previous file
+and no finished row is lost; the reader drops a torn last row (a file cut short some other way);
 rows of other episode counts are refused, not mixed into the tables.
 """
 
@@ -13,7 +13,7 @@ import io
 from pathlib import Path
 from typing import Any
 
-from uasep_env.atomic import atomic_write
+from uasep_env.runtime.atomic import atomic_write
 
 __all__ = ["check_counts", "read_rows", "write_rows"]
 

@@ -55,7 +55,6 @@ from typing import Any
 import numpy as np
 
 from uasep_env import make_config
-from uasep_env.atomic import atomic_output, atomic_write
 from uasep_env.config import AS_PUBLISHED, EnvConfig
 from uasep_env.config.checks import check_positive_int
 from uasep_env.evaluation import PolicyResult, evaluate
@@ -69,7 +68,8 @@ from uasep_env.policies import (
     TraditionalAPF,
     load_policy,
 )
-from uasep_env.tables import render_table
+from uasep_env.runtime.atomic import atomic_output, atomic_write
+from uasep_env.runtime.tables import render_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # run as a script or imported
 from sweep_rows import check_counts as _check_counts

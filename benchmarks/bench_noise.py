@@ -6,8 +6,8 @@ Usage::
 
 Refills one block of noise (64 physics steps: 33 Gaussian and 4 uniform columns, the
 default formation's) for every one of ``--envs`` environments, as
-:meth:`uasep_env.noise.NoiseStreams._refill` does when their blocks run out together, with
-the numpy reference (:func:`uasep_env.noise.refill_noise` ``.reference``: a
+:meth:`uasep_env.sim.noise.NoiseStreams._refill` does when their blocks run out together, with
+the numpy reference (:func:`uasep_env.sim.noise.refill_noise` ``.reference``: a
 ``standard_normal`` and a ``random`` call per environment) and with the compiled twin
 (:mod:`uasep_env._kernels.noise`), alternately, on one thread. Prints the best milliseconds
 of each, the ratio, and whether both gave the same numbers and generator states. Needs
@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from uasep_env import _numba
-from uasep_env.noise import refill_noise
+from uasep_env.sim.noise import refill_noise
 
 BLOCK, N_NORMAL, N_UNIFORM = 64, 33, 4
 

@@ -641,8 +641,8 @@ def side_by_side(a: argparse.Namespace, run_dir: Path, extra: list[str]) -> dict
 
     Each process is this script alone (``--seed 1000 k`` after ``--``, its own ``seed_k``
     folder and record under ``run_dir``), with ``UASEP_WORKERS`` set so that they share
-    the cores (:mod:`uasep_env.cores`); the first whose check clears the bar creates the stop
-    file (``<run folder>/stop``) and the others stop at their next step.
+    the cores (:mod:`uasep_env.runtime.cores`); the first whose check clears the bar creates the
+    stop file (``<run folder>/stop``) and the others stop at their next step.
 
     Raises:
         ValueError: The run folder holds files and ``a.overwrite`` is off.
@@ -690,7 +690,7 @@ def side_by_side(a: argparse.Namespace, run_dir: Path, extra: list[str]) -> dict
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Parse, run, print the summary and write the record."""
-    from uasep_env.atomic import atomic_write
+    from uasep_env.runtime.atomic import atomic_write
     from uasep_env.training.args import non_negative_float, positive_int
 
     argv, extra = seeds_driver().split_recipe_args(argv)

@@ -179,7 +179,7 @@ def open_study(study_dir: Path, settings: dict[str, Any]) -> Any:
 
 def objective_for(study_dir: Path, a: argparse.Namespace, fixed: list[str], n_uavs: int) -> Any:
     """The objective of a study: one time-to-policy run per trial (see the module)."""
-    from uasep_env.atomic import atomic_write
+    from uasep_env.runtime.atomic import atomic_write
 
     def objective(trial: Any) -> float:
         params = suggest(trial)
@@ -244,7 +244,7 @@ def summary(study: Any) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Parse, run (or resume) the study, print its trials and write the summary."""
-    from uasep_env.atomic import atomic_write
+    from uasep_env.runtime.atomic import atomic_write
     from uasep_env.training.args import non_negative_int, positive_float, positive_int
 
     argv, fixed = ttp.seeds_driver().split_recipe_args(argv)
@@ -281,7 +281,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     n_uavs = recipe_args.n_uavs
     import optuna
 
-    from uasep_env.runlock import RunFolderBusy, claim_run_folder
+    from uasep_env.runtime.runlock import RunFolderBusy, claim_run_folder
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # each trial prints its own line
     try:

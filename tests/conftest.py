@@ -89,8 +89,9 @@ class _FullDisk:
 
 
 def fill_disk(monkeypatch: pytest.MonkeyPatch, room: int = 0) -> None:
-    """From now on, every file ``uasep_env.atomic`` opens runs out of space after ``room`` bytes."""
-    from uasep_env import atomic
+    """From now on, every file ``uasep_env.runtime.atomic`` opens runs out of space after ``room``
+    bytes."""
+    from uasep_env.runtime import atomic
 
     real = open
     monkeypatch.setattr(

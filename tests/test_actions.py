@@ -6,9 +6,9 @@ import pytest
 
 import uasep_env
 from uasep_env import make_config
-from uasep_env.actions import ResidualAPF
 from uasep_env.envs.core import EnvCore
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.actions import ResidualAPF
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies import APF
 
 RESIDUAL = {"action": {"mode": "residual_apf"}}

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from conftest import fill_disk
 
-from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write
 from uasep_env.evaluation import main
 from uasep_env.evaluation.overrides import parse_config_overrides
+from uasep_env.runtime.atomic import atomic_output, atomic_symlink, atomic_write
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "baselines" / "checkpoints"
 

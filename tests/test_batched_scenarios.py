@@ -113,7 +113,7 @@ def _per_episode_batches(rngs: list, config: object) -> ScenarioBatch:
 
 def test_vector_env_episodes_with_batched_resets_equal_per_episode_resets(monkeypatch):
     """Random actions end many episodes; the batched resets give the same episodes."""
-    import uasep_env.world as world_module
+    import uasep_env.sim.world as world_module
     from uasep_env.envs.vector import FormationVectorEnv
 
     def run() -> list:

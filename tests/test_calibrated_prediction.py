@@ -18,8 +18,7 @@ import numpy as np
 import pytest
 
 from uasep_env import make_config, reachable, real_traffic
-from uasep_env.observation_layout import ObservationLayout
-from uasep_env.obstacles import AIRCRAFT_CLASSES, DUBINS_CLASS, UNKNOWN_CLASS
+from uasep_env.interface.observation_layout import ObservationLayout
 from uasep_env.reachable import calibrated
 from uasep_env.reachable.calibrated import (
     DEFAULT_TABLE,
@@ -28,7 +27,8 @@ from uasep_env.reachable.calibrated import (
     load_table,
 )
 from uasep_env.scenarios.real_traffic import REAL_TRAFFIC_BANK
-from uasep_env.world import World
+from uasep_env.sim.obstacles import AIRCRAFT_CLASSES, DUBINS_CLASS, UNKNOWN_CLASS
+from uasep_env.sim.world import World
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -184,8 +184,8 @@ def test_frozen_environments_keep_their_calibrated_region() -> None:
 
 
 def test_the_class_feature_is_optional_and_one_hot() -> None:
-    from uasep_env.observation import build_observations
-    from uasep_env.observation_layout import FEATURES
+    from uasep_env.interface.observation import build_observations
+    from uasep_env.interface.observation_layout import FEATURES
 
     size = next(f.size for f in FEATURES if f.key == "obstacle_class")
     assert size == len(AIRCRAFT_CLASSES)

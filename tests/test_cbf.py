@@ -10,7 +10,7 @@ from uasep_env import make_config
 from uasep_env.envs.core import EnvCore
 from uasep_env.evaluation import evaluate
 from uasep_env.evaluation.cli import main as eval_main
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies import (
     APF,
     CBFQP,
@@ -190,7 +190,7 @@ def test_shield_in_residual_mode_filters_the_flown_command():
     obs = _rollout_obs(cfg)[150::6]
     layout = ObservationLayout.from_config(res_cfg)
     # The residual observation: the world part and the APF's command.
-    from uasep_env.actions import ResidualAPF
+    from uasep_env.interface.actions import ResidualAPF
 
     residual = ResidualAPF(res_cfg)
     res_obs = residual.observe(obs, residual.base(obs))

@@ -10,7 +10,7 @@ import pytest
 
 from uasep_env import make_config
 from uasep_env.envs.core import EnvCore
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies import CheckpointError, checkpoint_config, load_policy
 from uasep_env.policies.learned import CHECKPOINT_FORMAT, PolicyCheckpoint, save_policy
 

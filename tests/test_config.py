@@ -119,7 +119,7 @@ def test_as_published_runs_the_papers_prediction():
 
     from uasep_env import reachable
     from uasep_env.config import AS_PUBLISHED
-    from uasep_env.world import World
+    from uasep_env.sim.world import World
 
     cfg = make_config(AS_PUBLISHED, scenario="paper")
     assert (cfg.prediction.mode, cfg.prediction.fit) == ("terminal", "paper")

@@ -12,8 +12,8 @@ from pettingzoo.test import max_cycles_test
 import uasep_env
 from uasep_env.envs.gym_env import FormationEnv
 from uasep_env.envs.vector import FormationVectorEnv
+from uasep_env.interface.rewards import REWARD_TERMS
 from uasep_env.registration import ENV_IDS
-from uasep_env.rewards import REWARD_TERMS
 
 # --- unknown keywords: TypeError, as Python raises for an unexpected keyword ------------------
 

@@ -1,4 +1,5 @@
-"""The cost channel (uasep_env.costs): > 0 exactly on loss of separation, in every view."""
+"""The cost channel (uasep_env.interface.costs): > 0 exactly on loss of separation, in every
+view."""
 
 import numpy as np
 import pytest
@@ -6,12 +7,12 @@ import pytest
 import uasep_env
 from uasep_env import make_config
 from uasep_env.config import CostWeights, RewardWeights
-from uasep_env.costs import COST_TERMS, TERMS
 from uasep_env.envs.core import EnvCore
 from uasep_env.envs.gym_env import FormationEnv
 from uasep_env.envs.vector import FormationVectorEnv
+from uasep_env.interface.costs import COST_TERMS, TERMS
+from uasep_env.interface.rewards import step_reward_bounds
 from uasep_env.metrics import obstacle_distances, pairwise_uav_distances
-from uasep_env.rewards import step_reward_bounds
 
 # Noise off (the geometry below stays as placed); 40 s: the obstacle arrives after ~7 s.
 CFG = {"scenario": "paper", "noise": False, "episode_duration": 40.0}
@@ -146,7 +147,7 @@ def test_sb3_cost_is_positive_exactly_on_loss():
 def _play(config: dict, read_cost: bool, steps: int = 200):
     """A seeded episode on the collision course with small random actions: everything each
     step returns except the cost, and each step's rewards recomputed from the world."""
-    from uasep_env.rewards import compute_rewards
+    from uasep_env.interface.rewards import compute_rewards
 
     env = uasep_env.parallel_env(**config)
     obs, _ = env.reset(seed=11)

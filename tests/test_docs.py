@@ -73,8 +73,8 @@ def test_key_public_functions_have_doctests():
         "uasep_env.config.env.make_config",
         "uasep_env.policies.check_policy_name",
         "uasep_env.reachable.distance.distance_to_ellipsoid",
-        "uasep_env.geometry.uav_distances",
-        "uasep_env.tables.render_table",
+        "uasep_env.sim.geometry.uav_distances",
+        "uasep_env.runtime.tables.render_table",
     ):
         assert name in have, f"{name} lost its doctest"
 

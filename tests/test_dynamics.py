@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from conftest import arrays, given, settings, st
 
-from uasep_env.dynamics import measure, step_double_integrator, transition_matrices
-from uasep_env.estimation import KalmanModel
+from uasep_env.sim.dynamics import measure, step_double_integrator, transition_matrices
+from uasep_env.sim.estimation import KalmanModel
 
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
 

@@ -247,7 +247,7 @@ def test_gym_reward_and_info_means_are_each_rows_numpy_mean():
         assert type(reward) is float and reward == float(info["rewards"].mean())
         assert info["cost"] == float(info["costs"].mean())
         world = env.core.world
-        _, terms = uasep_env.rewards.compute_rewards(world, env.config.reward)
+        _, terms = uasep_env.interface.rewards.compute_rewards(world, env.config.reward)
         for k, v in terms.items():
             got = info["reward_" + k]
             assert type(got) is float and np.float64(got).tobytes() == v[0].mean().tobytes(), k
@@ -333,7 +333,7 @@ def test_reset_options_config():
 def test_infos_carry_reward_terms_and_safety(env):
     _, rew, _, _, infos = env.step(_zero(env))
     info = infos["uav_0"]
-    assert set(info["reward_terms"]) == set(uasep_env.rewards.REWARD_TERMS)
+    assert set(info["reward_terms"]) == set(uasep_env.interface.rewards.REWARD_TERMS)
     for key in ("min_uav_distance", "min_obstacle_distance", "min_region_distance"):
         assert np.isfinite(info[key])
     for key in ("loss_of_separation_uav", "loss_of_separation_obstacle", "collision"):
@@ -365,7 +365,7 @@ def test_decode_columns_are_where_decode_reads(kw):
     and scale, as ``decode`` reads them (what the APF's kernel decodes with)."""
     from uasep_env import make_config
     from uasep_env.envs.core import EnvCore
-    from uasep_env.observation import ObservationLayout
+    from uasep_env.interface.observation import ObservationLayout
 
     cfg = make_config(**kw)
     layout = ObservationLayout.from_config(cfg)

@@ -5,7 +5,7 @@ import pytest
 from conftest import arrays, given, settings, st
 
 from uasep_env.config import FORMATION_PATTERNS
-from uasep_env.formation import (
+from uasep_env.sim.formation import (
     PlannedTrajectory,
     formation_center,
     pattern_slots,
@@ -94,7 +94,7 @@ def test_center_and_direction_agree_with_the_separate_queries():
 
 def test_segment_offsets_give_uav_positions_bit_for_bit():
     """The world's lookup of rotated slots per segment is uav_positions' rotation, exactly."""
-    from uasep_env.formation import segment_offsets
+    from uasep_env.sim.formation import segment_offsets
 
     rng = np.random.default_rng(9)
     wp = np.cumsum(rng.normal(0, 50, size=(6, 5, 3)), axis=1)

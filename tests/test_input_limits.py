@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 from conftest import HANG_GUARD_S, replace_npz_arrays
 
-from uasep_env.jsonio import DuplicateKeyError, json_depth, loads_unique
 from uasep_env.policies import CheckpointError
 from uasep_env.policies.checkpoint_reader import read_checkpoint
+from uasep_env.runtime.jsonio import DuplicateKeyError, json_depth, loads_unique
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "baselines" / "checkpoints" / "ppo_shared.zip"
@@ -250,9 +250,9 @@ def test_every_view_refuses_a_count_that_cannot_fit_naming_it_and_the_estimate(n
 
 
 def test_the_limit_follows_the_memory_available(monkeypatch):
-    from uasep_env import capacity
     from uasep_env.config import make_config
     from uasep_env.envs.core import EnvCore
+    from uasep_env.runtime import capacity
 
     cfg = make_config()
     per = capacity.env_bytes(cfg)
@@ -293,8 +293,8 @@ print((peak(n) - peak(n // 5)) / (n - n // 5))
     [({}, 2000), ({"n_uavs": 32, "n_obstacles": 8}, 200)],
 )
 def test_the_estimate_is_not_below_what_a_batch_really_takes(config, n):
-    from uasep_env import capacity
     from uasep_env.config import make_config
+    from uasep_env.runtime import capacity
 
     out = subprocess.run(
         [sys.executable, "-c", _PEAK, repr(config), str(n)],

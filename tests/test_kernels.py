@@ -1017,8 +1017,8 @@ def test_pairwise_distances_kernel_matches_the_broadcast_numpy_form(parallel_loo
     ],
 )
 def test_observation_kernel_matches_numpy_assembly_bit_for_bit(config, parallel_loops):
-    from uasep_env import observation
     from uasep_env.envs.core import EnvCore
+    from uasep_env.interface import observation
 
     core = EnvCore(config, n_envs=700)  # 2,100+ agents: the parallel loop
     core.reset(seed=5)
@@ -1111,7 +1111,7 @@ def test_every_feature_of_the_table_is_bit_identical_with_and_without_it(key):
 
 def test_optional_features_are_named_in_the_config():
     from uasep_env import make_config
-    from uasep_env.observation_layout import OPTIONAL_FEATURES, ObservationLayout
+    from uasep_env.interface.observation_layout import OPTIONAL_FEATURES, ObservationLayout
 
     with pytest.raises(ValueError, match=r"observation\.optional_features"):
         ObservationLayout.from_config(make_config(observation={"optional_features": ["nope"]}))
@@ -1165,7 +1165,7 @@ def test_separations_kernel_matches_numpy(monkeypatch, n_envs, n_obstacles):
 def test_formation_frame_kernel_matches_numpy_including_fallbacks():
     """The compiled frame (eq. 6) is rotation_from_velocity's, slow and vertical cases too."""
     from uasep_env._kernels.observations import _frame
-    from uasep_env.formation import MIN_FRAME_SPEED, rotation_from_velocity
+    from uasep_env.sim.formation import MIN_FRAME_SPEED, rotation_from_velocity
 
     rng = np.random.default_rng(12)
     vel = rng.normal(0, 3, size=(3000, 3)) * rng.choice([1e-3, 0.2, 1.0, 10.0], (3000, 1))
@@ -1185,8 +1185,9 @@ def test_formation_frame_kernel_matches_numpy_including_fallbacks():
 
 @pytest.mark.parametrize(("n_envs", "shared"), [(3, 0.0), (800, 0.4)])  # serial, parallel
 def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shared, parallel_loops):
-    from uasep_env import make_config, rewards
+    from uasep_env import make_config
     from uasep_env.envs.core import EnvCore
+    from uasep_env.interface import rewards
 
     cfg = make_config(n_uavs=4, n_obstacles=2, scenario="random", reward={"shared": shared})
     core = EnvCore(cfg, n_envs)
@@ -1211,9 +1212,9 @@ def test_reward_kernel_matches_numpy_terms_bit_for_bit(monkeypatch, n_envs, shar
 
 def test_kernels_name_their_plain_tuples_with_the_references_fields():
     """The kernels take plain tuples and name them again: the same fields, in order."""
-    from uasep_env import observation_layout
     from uasep_env._kernels import observations as kernel_obs
     from uasep_env._kernels import rewards as kernel_rewards
+    from uasep_env.interface import observation_layout
 
     assert kernel_obs._Inputs._fields == observation._Inputs._fields
     assert kernel_obs._Columns._fields == observation_layout.Columns._fields
@@ -1337,7 +1338,11 @@ def test_install_time_warm_up_command_runs_without_numba():
 
 def test_threads_are_the_process_share_of_its_cores():
     """N processes started side by side never ask for more threads than the cores."""
-    from uasep_env.cores import PARALLEL_MIN_THREADS, PARALLEL_MIN_THREADS_OTHER, decide_threads
+    from uasep_env.runtime.cores import (
+        PARALLEL_MIN_THREADS,
+        PARALLEL_MIN_THREADS_OTHER,
+        decide_threads,
+    )
 
     # The cases below are written for these.
     assert PARALLEL_MIN_THREADS == {"omp": 2} and PARALLEL_MIN_THREADS_OTHER == 4
@@ -1362,7 +1367,7 @@ def test_threads_are_the_process_share_of_its_cores():
 def test_the_kernels_take_the_process_share_of_the_cores():
     import numba
 
-    from uasep_env.cores import kernel_threads, process_share
+    from uasep_env.runtime.cores import kernel_threads, process_share
 
     common = _numba.kernels().common
     want = 1
@@ -1405,7 +1410,8 @@ def test_serial_loops_with_one_thread(monkeypatch):
 
 def test_noise_threads_take_the_process_share(monkeypatch):
     """The noise pool never starts more threads than the process's share of the cores."""
-    from uasep_env import cores, noise
+    from uasep_env.runtime import cores
+    from uasep_env.sim import noise
 
     calls = []
     monkeypatch.setattr(noise, "process_share", lambda: 1)

@@ -1,4 +1,4 @@
-"""The PID Lagrange multiplier (uasep_env.lagrangian) and its SB3 callback."""
+"""The PID Lagrange multiplier (uasep_env.training.lagrangian) and its SB3 callback."""
 
 import csv
 import itertools
@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from uasep_env.lagrangian import PIDLagrangian
+from uasep_env.training.lagrangian import PIDLagrangian
 
 # --------------------------------------------------------------------- the multiplier
 
@@ -106,7 +106,7 @@ def test_sb3_callback_moves_the_multiplier_from_the_env_cost(tmp_path, limit, in
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
     from uasep_env.envs.sb3 import UAVSharedVecEnv
-    from uasep_env.sb3_lagrangian import LagrangianCallback
+    from uasep_env.training.sb3_lagrangian import LagrangianCallback
 
     class EpisodeCosts(BaseCallback):  # the env's costs summed per episode, independently
         def _on_training_start(self):
@@ -145,7 +145,7 @@ def test_sb3_callback_shapes_the_stored_reward():
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
     from uasep_env.envs.sb3 import UAVSharedVecEnv
-    from uasep_env.sb3_lagrangian import LagrangianCallback
+    from uasep_env.training.sb3_lagrangian import LagrangianCallback
 
     class Record(BaseCallback):
         def __init__(self):
@@ -177,7 +177,7 @@ def test_a_cost_the_env_does_not_report_is_named():
 
     from uasep_env.envs.gym_env import FormationEnv
     from uasep_env.envs.sb3 import UAVSharedVecEnv
-    from uasep_env.sb3_lagrangian import LagrangianCallback
+    from uasep_env.training.sb3_lagrangian import LagrangianCallback
 
     with pytest.raises(ValueError, match="'colision'"):
         LagrangianCallback(PIDLagrangian(cost_limit=1.0), cost="colision")
@@ -260,7 +260,7 @@ def test_recipe_resumes_the_multiplier_and_its_cost_log(recipe, tmp_path):
     assert any(float(r["multiplier"]) != 0.25 for r in rows)
     ckpt = out / "checkpoints" / "step_256"
     saved = json.loads((ckpt / "state.json").read_text())["lagrangian"]["state"]
-    from uasep_env.sb3_lagrangian import LagrangianCallback
+    from uasep_env.training.sb3_lagrangian import LagrangianCallback
 
     expect = LagrangianCallback(recipe.make_lagrangian(recipe.parse_args(TINY), 0.5))
     expect.load_state_dict(saved)

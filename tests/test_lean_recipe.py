@@ -272,7 +272,7 @@ class _Keep(ppo_lean.Hooks):
 def _fresh_state(args, config, central=False):
     """A new run's State, built as ``ppo_lean.train`` builds it (MAPPO's under ``central``)."""
     from uasep_env.envs.core import EnvCore
-    from uasep_env.observation import state_dim
+    from uasep_env.interface.observation import state_dim
 
     core = EnvCore(config, n_envs=args.n_envs)
     rows = args.n_envs * config.n_uavs
@@ -482,7 +482,7 @@ def test_a_lean_mappo_run_writes_a_runs_files_and_a_mappo_policy(mappo_run, runs
 
 
 def test_a_mappo_checkpoint_restores_the_critics_statistics(mappo_run, tmp_path):
-    from uasep_env.observation import state_dim
+    from uasep_env.interface.observation import state_dim
 
     args = mappo.parse_args([*TINY, "--trainer", "lean", "--out-dir", "unused"])
     config = ppo_shared.make_env_config(args)

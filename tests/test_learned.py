@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from uasep_env import make_config
-from uasep_env.actions import ResidualAPF
 from uasep_env.envs.core import EnvCore
 from uasep_env.evaluation import main as eval_main
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.actions import ResidualAPF
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies import (
     CheckpointError,
     is_policy_checkpoint,

@@ -149,7 +149,7 @@ def test_tiny_run_writes_policy_cost_progress_and_validation(tmp_path):
     pytest.importorskip("skrl")
     pytest.importorskip("torch")
     from uasep_env.policies import load_policy
-    from uasep_env.sb3_lagrangian import COST_FIELDS
+    from uasep_env.training.sb3_lagrangian import COST_FIELDS
 
     out = tmp_path / "run"
     argv = [*TINY, "--out-dir", str(out), "--total-timesteps", "200", "--checkpoint-every",
@@ -177,7 +177,7 @@ def test_tiny_run_writes_policy_cost_progress_and_validation(tmp_path):
 def test_resume_restores_cost_critic_and_multiplier(tmp_path):
     pytest.importorskip("skrl")
     torch = pytest.importorskip("torch")
-    from uasep_env.sb3_lagrangian import COST_FIELDS
+    from uasep_env.training.sb3_lagrangian import COST_FIELDS
 
     # A multiplier that moves (limit 1 above the tiny runs' costs: it falls from 0.7).
     extra = ["--total-timesteps", "200", "--checkpoint-every", "150", "--cost-limit", "1",

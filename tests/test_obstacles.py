@@ -3,7 +3,7 @@
 import numpy as np
 from conftest import given, settings, st
 
-from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
+from uasep_env.sim.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 
 
 def _make(n_envs, m, rng, w_max, vz_max, speed):

@@ -218,9 +218,9 @@ def test_readme_for_the_package_index_has_absolute_links():
     relative = [t for t in targets if not t.startswith(("https://", "#"))]
     assert relative == []
     assert "../" not in "".join(targets)
-    assert absolute_links("![f](docs/frame.png) [x](uasep_env/world.py) [s](#speed)") == (
+    assert absolute_links("![f](docs/frame.png) [x](uasep_env/sim/world.py) [s](#speed)") == (
         "![f](https://raw.githubusercontent.com/uasep/uasep-env/main/docs/frame.png) "
-        "[x](https://github.com/uasep/uasep-env/blob/main/uasep_env/world.py) [s](#speed)"
+        "[x](https://github.com/uasep/uasep-env/blob/main/uasep_env/sim/world.py) [s](#speed)"
     )
 
 

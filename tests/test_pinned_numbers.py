@@ -16,7 +16,7 @@ import pytest
 
 from uasep_env import _numba, make_config
 from uasep_env.envs.core import EnvCore
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies import APF
 
 CONFIGS = {

@@ -171,8 +171,8 @@ def test_figure_7_draws_the_region_at_closest_approach_and_the_uavs_tracks():
 
 
 def test_figure_9_plots_the_uav_distances():
-    from uasep_env.geometry import uav_distances
     from uasep_env.plotting import plot_uav_distances
+    from uasep_env.sim.geometry import uav_distances
 
     ep = _episode()
     fig = plot_uav_distances(ep, "apf")

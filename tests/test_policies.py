@@ -7,8 +7,8 @@ from safety import COLLISION_COURSES, no_avoidance, separation_losses
 
 from uasep_env import make_config
 from uasep_env.envs.core import EnvCore
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.metrics import episode_metrics
-from uasep_env.observation import ObservationLayout
 from uasep_env.policies import (
     APF,
     POLICIES,

@@ -339,7 +339,7 @@ def _tiny_mappo(**extra: object) -> object:
 def _central_rollout(n_steps: int = 48) -> tuple:
     """A MAPPO rollout whose core records every global state and every step's rewards."""
     from uasep_env.envs.core import EnvCore
-    from uasep_env.observation import state_dim
+    from uasep_env.interface.observation import state_dim
 
     args = _tiny_mappo(n_steps=n_steps)
     config = ppo_shared.make_env_config(args)
@@ -441,7 +441,7 @@ def test_only_mappos_critic_learns_standardised_returns(monkeypatch, central, va
 
 
 def test_a_mappo_run_is_reproducible_and_exports_a_mappo_policy(tmp_path):
-    from uasep_env.observation import state_dim
+    from uasep_env.interface.observation import state_dim
     from uasep_env.policies import load_policy
     from uasep_env.policies.learned import read_checkpoint
 

@@ -11,8 +11,8 @@ import pytest
 
 from uasep_env import make_config
 from uasep_env.evaluation import evaluate
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.metrics.statistics import iqm, stratified_bootstrap_iqm
-from uasep_env.observation import ObservationLayout
 from uasep_env.policies import CheckpointError, load_policy
 from uasep_env.policies.learned import PolicyCheckpoint, save_policy
 from uasep_env.rollout import run_episodes

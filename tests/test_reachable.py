@@ -740,9 +740,9 @@ def test_written_out_helpers_give_numpys_numbers():
     """The fit's shortcuts against what they replace, bit for bit: ``sinc`` against
     ``np.sinc``, the three extents in one call against three, the corner table against the
     four gathers."""
-    from uasep_env.obstacles import sinc
     from uasep_env.reachable import fit
     from uasep_env.reachable.sets import _h_unit
+    from uasep_env.sim.obstacles import sinc
 
     rng = np.random.default_rng(5)
     x = np.concatenate([[0.0, 1e-300, 0.5, 1.0, 3.0], rng.uniform(0.0, 4.0, 500)])

@@ -208,7 +208,7 @@ def test_size_limits_bound_memory(tmp_path, monkeypatch):
 
 
 def test_zip_directory_is_checked_before_inflating(tmp_path):
-    # The checks the policy checkpoints have (uasep_env.boundedzip): a duplicate or an
+    # The checks the policy checkpoints have (uasep_env.runtime.boundedzip): a duplicate or an
     # unexpected member, and a member that inflates far more than data does.
     dup = tmp_path / "dup.npz"
     _rewrite(rt.DEFAULT_PATH, dup, {})

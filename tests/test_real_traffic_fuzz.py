@@ -218,8 +218,8 @@ def test_every_mutation_kind_yields_files_the_reader_sees(mutate):
 def test_metadata_is_refused_by_its_shape_before_it_is_parsed(tmp_path, monkeypatch):
     import json
 
-    from uasep_env.jsonio import json_shape
     from uasep_env.real_traffic import fileformat
+    from uasep_env.runtime.jsonio import json_shape
 
     def parsed(*args, **kwargs):
         raise AssertionError("the JSON was parsed")

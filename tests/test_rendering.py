@@ -15,7 +15,7 @@ from conftest import run_in_repo, run_python
 
 import uasep_env
 from uasep_env.rendering import Renderer, ellipsoid_points, save_frame
-from uasep_env.world import World
+from uasep_env.sim.world import World
 
 
 @pytest.fixture(autouse=True)
@@ -241,7 +241,7 @@ def test_human_mode_headless_does_not_crash():
         import warnings
         import numpy as np
         from uasep_env.rendering import Renderer
-        from uasep_env.world import World
+        from uasep_env.sim.world import World
         w = World({"scenario": "paper"}); w.reset(seed=0)
         r = Renderer(mode="human")
         with warnings.catch_warnings(record=True) as caught:

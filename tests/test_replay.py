@@ -10,7 +10,6 @@ from conftest import ROOT
 
 import uasep_env
 from uasep_env import make_config, real_traffic
-from uasep_env.replay import track_velocities
 from uasep_env.scenarios import RANDOM_MIX, REAL_TRAFFIC_TEST_SEEDS, sample_scenario
 from uasep_env.scenarios.real_traffic import (
     MEET_TOLERANCE_S,
@@ -18,7 +17,8 @@ from uasep_env.scenarios.real_traffic import (
     REAL_TRAFFIC_BANK,
     ReplaySpec,
 )
-from uasep_env.world import World
+from uasep_env.sim.replay import track_velocities
+from uasep_env.sim.world import World
 
 REPLAY = {"scenario": "real_traffic", "obstacle": {"model": "replay"}}
 
@@ -265,7 +265,7 @@ def test_the_gym_id():
 
 def test_replay_velocities_are_np_gradient_bit_for_bit():
     # Taken from the positions when needed (not stored): the same floats as np.gradient.
-    from uasep_env.replay import ReplayTracks
+    from uasep_env.sim.replay import ReplayTracks
 
     rng = np.random.default_rng(3)
     tracks = ReplayTracks(n_envs=2, n_obstacles=3, n_samples=7, dt=0.1)

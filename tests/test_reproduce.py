@@ -10,7 +10,7 @@ from conftest import ROOT
 
 from uasep_env import make_config
 from uasep_env.evaluation import evaluate
-from uasep_env.jsonio import dumps
+from uasep_env.runtime.jsonio import dumps
 
 pytest.importorskip("stable_baselines3")
 sys.path.insert(0, str(ROOT / "train"))

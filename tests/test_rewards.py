@@ -1,4 +1,4 @@
-"""Each named reward term reacts as documented in uasep_env.rewards."""
+"""Each named reward term reacts as documented in uasep_env.interface.rewards."""
 
 import itertools
 
@@ -8,7 +8,7 @@ import pytest
 from uasep_env import make_config
 from uasep_env.config import RewardWeights
 from uasep_env.envs.core import EnvCore
-from uasep_env.rewards import REWARD_TERMS, compute_rewards, term_bounds
+from uasep_env.interface.rewards import REWARD_TERMS, compute_rewards, term_bounds
 
 
 @pytest.fixture
@@ -91,7 +91,7 @@ def test_weights_and_sharing_combine_terms(core):
 
 @pytest.mark.parametrize("n", [1, 2, 3, 7, 8, 12])
 def test_team_mean_is_numpy_mean_bit_for_bit(n):
-    from uasep_env.rewards import team_mean
+    from uasep_env.interface.rewards import team_mean
 
     x = (
         np.random.default_rng(n).normal(0, 1, size=(5, 300, n))
@@ -104,7 +104,7 @@ def test_team_mean_is_numpy_mean_bit_for_bit(n):
 
 def _weights_max_penalty(w: RewardWeights) -> float:
     """The most a step alive can lose: every per-step penalty at its bound (the term table)."""
-    from uasep_env.rewards import TERMS
+    from uasep_env.interface.rewards import TERMS
 
     return sum(-t.low * getattr(w, t.name) for t in TERMS if t.high <= 0 and not t.per_episode)
 

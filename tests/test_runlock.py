@@ -16,7 +16,7 @@ from conftest import HANG_GUARD_S
 
 pytest.importorskip("fcntl")
 
-from uasep_env.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder, release_run_folder
+from uasep_env.runtime.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder, release_run_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -108,7 +108,7 @@ def test_the_lock_file_alone_does_not_make_a_folder_used(tmp_path):
 def test_a_claim_held_elsewhere_is_refused_with_its_holder(tmp_path):
     holder = subprocess.Popen(
         [sys.executable, "-c",
-         "import sys; from uasep_env.runlock import claim_run_folder; "
+         "import sys; from uasep_env.runtime.runlock import claim_run_folder; "
          "claim_run_folder(sys.argv[1]); print('held', flush=True); sys.stdin.read()",
          str(tmp_path)],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT,

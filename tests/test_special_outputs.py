@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 from conftest import HANG_GUARD_S
 
-from uasep_env import atomic
-from uasep_env.atomic import atomic_output, atomic_write, output_kind
+from uasep_env.runtime import atomic
+from uasep_env.runtime.atomic import atomic_output, atomic_write, output_kind
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -40,7 +40,7 @@ def _write_text(path):
 
 
 def _write_json(path):
-    from uasep_env.jsonio import write_json
+    from uasep_env.runtime.jsonio import write_json
 
     write_json({"a": [1, 2.5, None]}, path)
 
@@ -216,7 +216,7 @@ def test_uasep_eval_refuses_a_socket_output_before_running(tmp_path, capsys):
 
 _STREAM_WRITE = """
 import sys
-from uasep_env.atomic import atomic_write
+from uasep_env.runtime.atomic import atomic_write
 sys.stdout.write("before\\n"); sys.stdout.flush()
 atomic_write(sys.argv[1], "through\\n")
 sys.stdout.write("after\\n")
@@ -268,7 +268,7 @@ _BYPASS = re.compile(
 
 
 def test_no_writer_bypasses_uasep_env_atomic():
-    # Every file the package and its scripts write goes through uasep_env.atomic (whose
+    # Every file the package and its scripts write goes through uasep_env.runtime.atomic (whose
     # behaviour the tests above check per writer); appended logs and rundir.publish_dir's
     # folder renames are the exceptions, by design.
     found = []

@@ -203,7 +203,7 @@ def test_a_study_another_process_runs_is_refused(tmp_path, monkeypatch, capsys):
     import fcntl
     import os
 
-    from uasep_env.runlock import LOCK_NAME
+    from uasep_env.runtime.runlock import LOCK_NAME
 
     calls = []
     monkeypatch.setattr(tune.ttp, "run", _fake_run(calls))

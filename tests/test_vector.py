@@ -282,8 +282,8 @@ def test_vector_info_masks_are_right_and_each_its_own_array(mode):
 def test_vector_infos_term_means_are_each_environments_own():
     """The infos' reward and cost terms' team means (made from the step's terms arrays):
     each environment's own terms, in order."""
-    from uasep_env.costs import compute_costs
-    from uasep_env.rewards import compute_rewards
+    from uasep_env.interface.costs import compute_costs
+    from uasep_env.interface.rewards import compute_rewards
 
     vec = FormationVectorEnv(num_envs=6, scenario="random")
     vec.reset(seed=3)

@@ -279,7 +279,7 @@ def test_a_copied_env_steps_as_the_original(how):
 
 def test_noise_drawn_on_several_threads_is_bit_identical(monkeypatch):
     """Large batches refill their noise on a thread pool: the same numbers as one thread."""
-    import uasep_env.noise as noise_mod
+    import uasep_env.sim.noise as noise_mod
 
     def run(chunk):
         monkeypatch.setattr(noise_mod, "REFILL_CHUNK", chunk)
@@ -313,7 +313,7 @@ def test_noise_threads_work_in_a_forked_child(monkeypatch):
     """A child forked after the parent used the noise thread pool makes its own pool."""
     import multiprocessing
 
-    import uasep_env.noise as noise_mod
+    import uasep_env.sim.noise as noise_mod
 
     monkeypatch.setattr(noise_mod, "REFILL_CHUNK", 2)
     if (multiprocessing.cpu_count() or 1) < 2:

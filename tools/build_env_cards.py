@@ -2,9 +2,9 @@
 
 Every fact on a card is read from the code when the card is written: the spaces and their
 shapes from live environments (the PettingZoo and the Gymnasium view of the id), the
-observation layout (:class:`uasep_env.observation_layout.ObservationLayout`), the reward
-terms and weights (:data:`uasep_env.rewards.TERMS`, the id's ``reward`` config), the
-cost terms and weights (:data:`uasep_env.costs.TERMS`, the id's ``cost`` config), the
+observation layout (:class:`uasep_env.interface.observation_layout.ObservationLayout`), the reward
+terms and weights (:data:`uasep_env.interface.rewards.TERMS`, the id's ``reward`` config), the
+cost terms and weights (:data:`uasep_env.interface.costs.TERMS`, the id's ``cost`` config), the
 limits that end an episode (the id's ``uav`` config), how uniformly random actions end
 episodes (played here), the arguments (:class:`uasep_env.config.EnvConfig`'s fields, with
 the id's values) and the version history (:data:`uasep_env.registration.ENV_VERSIONS`).
@@ -32,12 +32,12 @@ from pathlib import Path
 import numpy as np
 
 import uasep_env
-from uasep_env.atomic import atomic_write
 from uasep_env.config import EnvConfig, make_config
-from uasep_env.costs import TERMS as COST_TERMS
-from uasep_env.observation_layout import ObservationLayout
+from uasep_env.interface.costs import TERMS as COST_TERMS
+from uasep_env.interface.observation_layout import ObservationLayout
+from uasep_env.interface.rewards import TERMS
 from uasep_env.registration import ENV_IDS, ENV_VERSION, ENV_VERSIONS, FIRST_VERSION
-from uasep_env.rewards import TERMS
+from uasep_env.runtime.atomic import atomic_write
 from uasep_env.scenarios import FAMILIES
 from uasep_env.scenarios.registry import ScenarioFamily
 

@@ -14,7 +14,7 @@ the same definitions in the env):
   replay flies it), measured every ``dt`` with the configured obstacle noise (velocities: the
   replay's central differences) and filtered by the env's obstacle Kalman filter;
 * ``dubins``: the synthetic obstacles of the ``random`` family (the held-out bank's), flown by
-  :class:`uasep_env.world.World` for 200 s, estimated by the world itself.
+  :class:`uasep_env.sim.world.World` for 200 s, estimated by the world itself.
 
 A window starts every second, at least 10 s into its stretch, with the whole horizon ahead.
 Its real path is the obstacle's true position at every physics step in ``(t, t + h]``
@@ -55,16 +55,16 @@ from scipy.stats import binom
 from uasep_env import real_traffic
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.groups import CALIBRATED_HORIZONS
-from uasep_env.dynamics import measure
-from uasep_env.estimation import KalmanModel
-from uasep_env.jsonio import dumps, write_json  # noqa: F401 -- dumps: for the test
 from uasep_env.reachable.calibrated import (
     CENTRE_FRACTION,
     DEFAULT_TABLE,
     TABLE_FORMAT,
     TABLE_VERSION,
 )
-from uasep_env.replay import track_velocities
+from uasep_env.runtime.jsonio import dumps, write_json  # noqa: F401 -- dumps: for the test
+from uasep_env.sim.dynamics import measure
+from uasep_env.sim.estimation import KalmanModel
+from uasep_env.sim.replay import track_velocities
 
 ROOT = Path(__file__).resolve().parents[1]
 ALPHA = 0.05
@@ -115,7 +115,7 @@ def env_config() -> EnvConfig:
 
 
 def obstacle_filter(cfg: EnvConfig) -> KalmanModel:
-    """The env's obstacle Kalman filter (:class:`uasep_env.world.World`'s)."""
+    """The env's obstacle Kalman filter (:class:`uasep_env.sim.world.World`'s)."""
     return KalmanModel(
         cfg.dt,
         max(cfg.obstacle.speed * cfg.obstacle.max_turn_rate, 0.1),
@@ -188,7 +188,7 @@ def _filter(
 
 def dubins_paths(split: str, cfg: EnvConfig, episodes: int = DUBINS_EPISODES) -> Paths:
     """The ``random`` family's obstacles over 200 s, estimated by the world itself."""
-    from uasep_env.world import World
+    from uasep_env.sim.world import World
 
     conf = make_config(scenario="random")
     world = World(conf, n_envs=episodes)

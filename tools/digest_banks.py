@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_write
 from uasep_env.config import make_config
 from uasep_env.registration import ENV_VERSION
+from uasep_env.runtime.atomic import atomic_write
 from uasep_env.scenarios import (
     HELD_OUT_PAPER_SEEDS,
     HELD_OUT_SEEDS,

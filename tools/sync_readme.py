@@ -23,7 +23,7 @@ The table of registered controllers stands between ``<!-- controllers -->`` and
 
 ``pretty`` writes the controllers as the README names them (``APF (proposed)``, ...) and
 units with superscripts (``m/s²``). The tables are re-laid out by
-:func:`uasep_env.tables.render_table`, so the pages say exactly what the results say.
+:func:`uasep_env.runtime.tables.render_table`, so the pages say exactly what the results say.
 
     python tools/sync_readme.py          # rewrite README.md and docs/*.md
     python tools/sync_readme.py --check  # exit 1 if one of them is out of date
@@ -36,11 +36,11 @@ import re
 import sys
 from pathlib import Path
 
-from uasep_env.atomic import atomic_write
 from uasep_env.policies import REGISTRY
 from uasep_env.registration import ENV_VERSION
+from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.tables import render_table
 from uasep_env.scenarios import FAMILIES
-from uasep_env.tables import render_table
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"

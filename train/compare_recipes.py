@@ -27,8 +27,8 @@ sys.path.insert(0, str(HERE))
 
 import seeds as seeds_driver  # noqa: E402
 
-from uasep_env.atomic import atomic_output, atomic_write  # noqa: E402
-from uasep_env.tables import render_table  # noqa: E402
+from uasep_env.runtime.atomic import atomic_output, atomic_write  # noqa: E402
+from uasep_env.runtime.tables import render_table  # noqa: E402
 
 
 def load_run(folder: Path) -> dict[str, Any]:

@@ -130,9 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Retrain (unless done), compare, optionally ship; return the comparison."""
     from uasep_env import make_config
-    from uasep_env.atomic import atomic_write
     from uasep_env.evaluation import evaluate
-    from uasep_env.jsonio import dumps
+    from uasep_env.runtime.atomic import atomic_write
+    from uasep_env.runtime.jsonio import dumps
 
     argv, extra = seeds_driver.split_recipe_args(argv)
     p = build_parser()

@@ -47,9 +47,9 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_output, atomic_write
 from uasep_env.metrics.statistics import no_worse_rate
-from uasep_env.runlock import RunFolderBusy, claim_run_folder
+from uasep_env.runtime.atomic import atomic_output, atomic_write
+from uasep_env.runtime.runlock import RunFolderBusy, claim_run_folder
 from uasep_env.training.args import HelpFormatter, OneLineParser, non_negative_int, positive_int
 
 HERE = Path(__file__).resolve().parent
@@ -378,7 +378,7 @@ def report(
     curves_name: str = "curves.png",
 ) -> tuple[str, dict]:
     """Stage 4: the markdown and JSON of every seed and of the aggregate."""
-    from uasep_env.tables import render_table
+    from uasep_env.runtime.tables import render_table
 
     agg = across_seeds(result, seeds)
     headers = ["policy", "agent-steps", "train (min)", *(label for _, label, _ in METRICS)]
@@ -548,7 +548,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Run the stages; return the report's JSON data."""
-    from uasep_env.jsonio import write_json
+    from uasep_env.runtime.jsonio import write_json
 
     argv, extra = split_recipe_args(argv)
     p = build_parser()

@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
-from uasep_env.atomic import atomic_output, atomic_write
 from uasep_env.evaluation import EvaluationResult, evaluate
 from uasep_env.policies import load_policy
+from uasep_env.runtime.atomic import atomic_output, atomic_write
 from uasep_env.scenarios import VALIDATION_SEEDS
 
 KEYS = ("terminated", "collision", "loss_of_separation", "max_deviation")

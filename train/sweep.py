@@ -22,7 +22,7 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from uasep_env.atomic import atomic_output, atomic_write
+from uasep_env.runtime.atomic import atomic_output, atomic_write
 
 HERE = Path(__file__).resolve().parent
 

@@ -10,10 +10,14 @@
 
 from __future__ import annotations
 
-from uasep_env.config import EnvConfig, make_config
-from uasep_env.envs.parallel import UAVSeparationParallelEnv, env, parallel_env
-from uasep_env.registration import register_envs
-from uasep_env.world import World
+from uasep_env._deprecation import install_moved_modules
+
+install_moved_modules()  # old module paths (uasep_env.world, ...) import, with a warning
+
+from uasep_env.config import EnvConfig, make_config  # noqa: E402
+from uasep_env.envs.parallel import UAVSeparationParallelEnv, env, parallel_env  # noqa: E402
+from uasep_env.registration import register_envs  # noqa: E402
+from uasep_env.sim.world import World  # noqa: E402
 
 __version__ = "0.4.0"
 

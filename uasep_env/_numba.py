@@ -98,9 +98,10 @@ def kernels() -> Any:
         return None
     if "kernels" not in _state:
         from uasep_env import _kernels
-        from uasep_env.cores import kernel_threads, process_share
+        from uasep_env.runtime.cores import kernel_threads, process_share
 
-        # numba's pool starts with every core: this process takes its share (uasep_env.cores).
+        # numba's pool starts with every core: this process takes its share
+        # (uasep_env.runtime.cores).
         numba = _state["numba"]
         threads = min(process_share(), numba.config.NUMBA_NUM_THREADS)
         if threads > 1:

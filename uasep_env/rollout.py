@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uasep_env.capacity import check_count, record_bytes
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.envs.core import EnvCore
 from uasep_env.metrics import EpisodeRecord
 from uasep_env.policies.base import Policy
+from uasep_env.runtime.capacity import check_count, record_bytes
 
 __all__ = ["DEFAULT_DEVIATION_THRESHOLD_M", "DEFAULT_SETTLE_TIME_S", "Episode", "run_episodes"]
 

@@ -13,17 +13,17 @@ kernel receives as keyword arguments. These modules import nothing else of the p
   its batch row (:func:`uasep_env.reachable.distance._pairwise`), without broadcast copies,
   and :func:`region_distances`, the same from precomputed cosines and sines with the
   inactive regions at ``inf`` (:func:`uasep_env.reachable.distance.region_distances`);
-* :func:`separations` -- :func:`uasep_env.geometry.nearest_separations`;
-* :func:`assemble_observations` -- :func:`uasep_env.observation._assemble`;
-* :func:`reward_terms` -- :func:`uasep_env.rewards._weighted_terms`, and with the step's
+* :func:`separations` -- :func:`uasep_env.sim.geometry.nearest_separations`;
+* :func:`assemble_observations` -- :func:`uasep_env.interface.observation._assemble`;
+* :func:`reward_terms` -- :func:`uasep_env.interface.rewards._weighted_terms`, and with the step's
   episode-end tests, safety flags and costs, :func:`step_outcome` --
-  :func:`uasep_env.outcome.step_outcome`;
-* :func:`plan_now` -- :func:`uasep_env.formation.planned_state`;
-* :func:`double_integrator` -- :func:`uasep_env.dynamics.step_double_integrator`,
-  :func:`obstacle_step` -- :func:`uasep_env.obstacles.step_obstacles` and
-  :func:`kalman_correct` -- :func:`uasep_env.estimation.kalman_correct`, and the whole
+  :func:`uasep_env.interface.outcome.step_outcome`;
+* :func:`plan_now` -- :func:`uasep_env.sim.formation.planned_state`;
+* :func:`double_integrator` -- :func:`uasep_env.sim.dynamics.step_double_integrator`,
+  :func:`obstacle_step` -- :func:`uasep_env.sim.obstacles.step_obstacles` and
+  :func:`kalman_correct` -- :func:`uasep_env.sim.estimation.kalman_correct`, and the whole
   physics step they make with the measurements and separations, :func:`physics_step` --
-  :func:`uasep_env.physics_step.physics_step` (these write the world's arrays in place);
+  :func:`uasep_env.sim.physics_step.physics_step` (these write the world's arrays in place);
 * :func:`fit_ellipse` -- :func:`uasep_env.reachable.fit._fit_certified` (the enclosing
   ellipse's centre search, axes and certificate), :func:`ellipse_start` --
   :func:`uasep_env.reachable.fit._ellipse_start` (its start from the shape table) and
@@ -33,7 +33,7 @@ kernel receives as keyword arguments. These modules import nothing else of the p
   sines);
 * :func:`dense` -- :func:`uasep_env.policies.checkpoint_policy.dense_sums` (a policy
   network's layer, in float64 before the rounding);
-* :func:`refill_noise` -- :func:`uasep_env.noise.refill_noise` (numpy's PCG64 draws of
+* :func:`refill_noise` -- :func:`uasep_env.sim.noise.refill_noise` (numpy's PCG64 draws of
   the environments' noise blocks, compiled);
 * :func:`encounter_draws` -- :func:`uasep_env.scenarios.batched.encounter_draws` (a
   partial reset's episodes' draws from their generators, numpy's algorithms on PCG64's

@@ -336,7 +336,7 @@ def apf_actions(
 
     Args:
         observations: ``(..., dim)`` observations of ``layout``.
-        layout: Their :class:`~uasep_env.observation.ObservationLayout`.
+        layout: Their :class:`~uasep_env.interface.observation.ObservationLayout`.
         gains: The :class:`~uasep_env.policies.apf.APFGains`.
         max_speed: ``V_max`` (m/s).
         max_accel: The per-axis bound (m/s^2).

@@ -21,7 +21,7 @@ PARALLEL_MIN = 2048
 _forked = [False]
 os.register_at_fork(after_in_child=lambda: _forked.__setitem__(0, True))
 #: The parallel loops' threads, set by :func:`uasep_env._numba.kernels` when it loads
-#: the kernels (the process's share of the cores, :func:`uasep_env.cores.kernel_threads`);
+#: the kernels (the process's share of the cores, :func:`uasep_env.runtime.cores.kernel_threads`);
 #: 1: the serial loops. A list, so that the value is read at call time.
 THREADS = [1]
 

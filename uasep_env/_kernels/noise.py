@@ -1,4 +1,4 @@
-"""The noise blocks: :func:`uasep_env.noise.refill_noise`, numpy's own draws compiled.
+"""The noise blocks: :func:`uasep_env.sim.noise.refill_noise`, numpy's own draws compiled.
 
 Each environment's :class:`numpy.random.Generator` is a PCG64 bit generator. numpy draws
 a Gaussian by its ziggurat (``random_standard_normal`` in numpy's ``distributions.c``)
@@ -203,7 +203,7 @@ def refill_noise(
     normal_buf: np.ndarray,
     unif_buf: np.ndarray,
 ) -> None:
-    """Compiled :func:`uasep_env.noise.refill_noise` (declines with ``NotImplemented``).
+    """Compiled :func:`uasep_env.sim.noise.refill_noise` (declines with ``NotImplemented``).
 
     Args:
         rngs: Every environment's generator.

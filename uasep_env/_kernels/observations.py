@@ -1,4 +1,4 @@
-"""Observation assembly: :func:`uasep_env.observation._assemble` per agent."""
+"""Observation assembly: :func:`uasep_env.interface.observation._assemble` per agent."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from uasep_env._kernels.ellipsoids import (
 )
 
 #: Entries of the optional ``obstacle_class`` feature: one per code of
-#: ``uasep_env.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
+#: ``uasep_env.sim.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
 #: ``tests/test_calibrated_prediction.py`` checks the count).
 _N_CLASSES = 5
 
@@ -44,7 +44,7 @@ def _put(row, col, value, clip):  # noqa: ANN001, ANN202
 
 @numba.njit(**_JIT)
 def _mean(x, e, a):  # noqa: ANN001, ANN202
-    """``x[e, :, a].mean()`` as :func:`uasep_env.formation._mean_over_uavs` adds it."""
+    """``x[e, :, a].mean()`` as :func:`uasep_env.sim.formation._mean_over_uavs` adds it."""
     total = x[e, 0, a]
     for j in range(1, x.shape[1]):
         total += x[e, j, a]
@@ -53,7 +53,7 @@ def _mean(x, e, a):  # noqa: ANN001, ANN202
 
 @numba.njit(**_JIT)
 def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
-    """:func:`uasep_env.formation.rotation_from_velocity` of one velocity: ``(ct, st, cp, sp)``.
+    """:func:`uasep_env.sim.formation.rotation_from_velocity` of one velocity: ``(ct, st, cp, sp)``.
 
     ``f`` is the fallback used below ``min_speed``.
     """
@@ -72,11 +72,12 @@ def _frame(v0, v1, v2, f0, f1, f2, min_speed):  # noqa: ANN001, ANN202
 
 @numba.njit(inline="always", **_JIT)
 def _observe_env(e, x, scales, limit, cols, region, out):  # noqa: ANN001, ANN202
-    """Environment ``e`` of :func:`uasep_env.observation._assemble`, every agent.
+    """Environment ``e`` of :func:`uasep_env.interface.observation._assemble`, every agent.
 
-    ``x`` is the :class:`uasep_env.observation._Inputs` named tuple of arrays, ``cols`` the
-    layout's :class:`uasep_env.observation_layout.Columns`: where each feature goes (-1 when
-    the layout lacks it), the neighbour counts and the block widths; ``limit[0]`` is the
+    ``x`` is the :class:`uasep_env.interface.observation._Inputs` named tuple of arrays, ``cols``
+    the
+    layout's :class:`uasep_env.interface.observation_layout.Columns`: where each feature goes (-1
+    when the layout lacks it), the neighbour counts and the block widths; ``limit[0]`` is the
     clip bound in ``out``'s dtype; ``region`` gets each agent's distances to the regions it
     observes (``inf`` for the others).
     """
@@ -326,15 +327,15 @@ def _observe_parallel(xt, scales, limit, ct, region, n_newton, work, live, gaps,
 def assemble_observations(
     inputs: tuple, layout: object, out: np.ndarray, *, min_frame_speed: float, n_newton: int
 ) -> None:
-    """Compiled :func:`uasep_env.observation._assemble`: fills ``out`` in place.
+    """Compiled :func:`uasep_env.interface.observation._assemble`: fills ``out`` in place.
 
     Args:
-        inputs: The :class:`uasep_env.observation._Inputs` of one call.
-        layout: Its :class:`uasep_env.observation_layout.ObservationLayout`; its
+        inputs: The :class:`uasep_env.interface.observation._Inputs` of one call.
+        layout: Its :class:`uasep_env.interface.observation_layout.ObservationLayout`; its
             ``columns`` say where each feature goes (data, not compiled in).
         out: ``(E, N, dim)`` float32, C-contiguous (float64: the same numbers before the
             cast to float32, for the tests).
-        min_frame_speed: :data:`uasep_env.formation.MIN_FRAME_SPEED`.
+        min_frame_speed: :data:`uasep_env.sim.formation.MIN_FRAME_SPEED`.
         n_newton: The region solve's Newton iterations (``uasep_env.reachable.distance``'s).
     """
     scales, limit, columns = _constants(layout, min_frame_speed, out.dtype)

@@ -1,9 +1,9 @@
 """The physics step's kernels: double integrator, obstacle motion and the Kalman correction.
 
-Twins of :func:`uasep_env.dynamics.step_double_integrator`,
-:func:`uasep_env.obstacles.step_obstacles` and :func:`uasep_env.estimation.kalman_correct`,
+Twins of :func:`uasep_env.sim.dynamics.step_double_integrator`,
+:func:`uasep_env.sim.obstacles.step_obstacles` and :func:`uasep_env.sim.estimation.kalman_correct`,
 and of the whole physics step they make with the measurements and separations,
-:func:`uasep_env.physics_step.physics_step` (:func:`physics_step`: three kernels that share
+:func:`uasep_env.sim.physics_step.physics_step` (:func:`physics_step`: three kernels that share
 the loops of the others). The single-part twins loop over the points serially (a few dozen
 operations a point); the whole step's two large loops, over the environments, are spread over
 the cores for large batches as the other kernels' are (:func:`~.common._parallel`).
@@ -94,7 +94,7 @@ def double_integrator(
     max_speed: float,
     max_accel: float,
 ) -> np.ndarray:
-    """:func:`uasep_env.dynamics.step_double_integrator`, compiled: same arguments, same bits."""
+    """:func:`~uasep_env.sim.dynamics.step_double_integrator`, compiled: same bits."""
     shape = pos.shape
     p, v = _writable(pos), _writable(vel)
     cmd = _writable(accel_cmd).reshape(-1, 3)
@@ -180,7 +180,7 @@ def _move(pos, heading, speed, climb, active, wind, ground, dt, y, sin_y, cos_mi
 
 
 def obstacle_step(obs, uniforms: np.ndarray, dt: float, time: np.ndarray | None = None) -> None:  # noqa: ANN001
-    """:func:`uasep_env.obstacles.step_obstacles`, compiled: same arguments, same bits.
+    """:func:`uasep_env.sim.obstacles.step_obstacles`, compiled: same arguments, same bits.
 
     Like the numpy form it gives ``turn_rate``, ``climb_rate`` and ``heading`` new arrays
     and moves ``pos`` in place.
@@ -241,7 +241,7 @@ def kalman_correct(
     gains: np.ndarray,
     dt: float,
 ) -> None:
-    """:func:`uasep_env.estimation.kalman_correct`, compiled: same arguments, same bits."""
+    """:func:`uasep_env.sim.estimation.kalman_correct`, compiled: same arguments, same bits."""
     p, v = _writable(est_pos), _writable(est_vel)
     mp, mv = _writable(meas_pos), _writable(meas_vel)
     acc = mp if accel is None else _writable(accel)
@@ -357,11 +357,11 @@ def _sense_parallel(time, count, dt, kalman, uav_pos, uav_vel, uav_acc, normals,
 
 
 def physics_step(w, obs, normals, uniforms, p, replay=None, *, n_uniforms: int) -> None:  # noqa: ANN001
-    """:func:`uasep_env.physics_step.physics_step`, compiled: same arguments, same bits.
+    """:func:`uasep_env.sim.physics_step.physics_step`, compiled: same arguments, same bits.
 
     Three kernels; numpy's sines and cosines between them (of the arcs, then of the new
     headings). The world's arrays are C-contiguous and written in place. ``n_uniforms``:
-    :data:`uasep_env.obstacles.N_UNIFORMS`.
+    :data:`uasep_env.sim.obstacles.N_UNIFORMS`.
     """
     shape = obs.heading.shape
     new_turn, new_climb, y, mid, heading = (np.empty(shape) for _ in range(5))

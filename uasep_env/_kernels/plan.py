@@ -1,4 +1,4 @@
-"""The plan at a time: :func:`uasep_env.formation.planned_state`."""
+"""The plan at a time: :func:`uasep_env.sim.formation.planned_state`."""
 
 from __future__ import annotations
 
@@ -35,10 +35,10 @@ def _plan_rows(time, speed, length, cum, waypoints, direction, offsets, center, 
 def plan_now(
     plan: object, time: np.ndarray, offsets: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Compiled :func:`uasep_env.formation.planned_state`: the plan at ``time``.
+    """Compiled :func:`uasep_env.sim.formation.planned_state`: the plan at ``time``.
 
     Args:
-        plan: The :class:`uasep_env.formation.PlannedTrajectory` (its arrays are read).
+        plan: The :class:`uasep_env.sim.formation.PlannedTrajectory` (its arrays are read).
         time: ``(E,)`` times (s).
         offsets: ``(E, W - 1, N, 3)`` slots rotated along each segment (m).
 

@@ -1,4 +1,4 @@
-"""Reward terms and their weighted sum: :func:`uasep_env.rewards._weighted_terms`."""
+"""Reward terms and their weighted sum: :func:`uasep_env.interface.rewards._weighted_terms`."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ from uasep_env._kernels.common import _JIT, _norm3, _parallel, _sq3, frozen
 
 @numba.njit(inline="always", **_JIT)
 def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
-    """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.rewards._weighted_terms`.
+    """Agent ``k`` (flat over env and UAV) of :func:`uasep_env.interface.rewards._weighted_terms`.
 
-    ``x`` is the :class:`uasep_env.rewards._Inputs` named tuple, ``c`` the
-    :class:`uasep_env.rewards._Constants` one; ``ix`` gives each term's row of ``terms``
-    by name (:data:`uasep_env.rewards._TERM_INDEX`, from the term table).
+    ``x`` is the :class:`uasep_env.interface.rewards._Inputs` named tuple, ``c`` the
+    :class:`uasep_env.interface.rewards._Constants` one; ``ix`` gives each term's row of ``terms``
+    by name (:data:`uasep_env.interface.rewards._TERM_INDEX`, from the term table).
     """
     n = x.uav_pos.shape[1]
     e = k // n
@@ -61,8 +61,8 @@ def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
 # The named tuples arrive as plain tuples and are named again here: numba reads a plain
 # tuple's type in C and a named one's in Python, about half a microsecond a tuple on every
 # call (observations.py says more). The fields are the reference's, in its order
-# (tests/test_kernels.py checks them): uasep_env.rewards._Inputs, _Constants and
-# _TERM_INDEX (the term table's names), and uasep_env.outcome.OutcomeConstants.
+# (tests/test_kernels.py checks them): uasep_env.interface.rewards._Inputs, _Constants and
+# _TERM_INDEX (the term table's names), and uasep_env.interface.outcome.OutcomeConstants.
 _Inputs = namedtuple(
     "_Inputs", "uav_pos plan_pos cmd prev_cmd min_uav_dist min_obstacle_dist region"
 )
@@ -103,10 +103,10 @@ def reward_terms(
     """Compiled reward terms and their weighted sum (before any team sharing).
 
     Args:
-        inputs: The :class:`uasep_env.rewards._Inputs` of one call.
-        constants: The :class:`uasep_env.rewards._Constants` of one call.
-        weights: One weight per term, in :data:`uasep_env.rewards.REWARD_TERMS` order.
-        index: :data:`uasep_env.rewards._TERM_INDEX`, each term's row by name.
+        inputs: The :class:`uasep_env.interface.rewards._Inputs` of one call.
+        constants: The :class:`uasep_env.interface.rewards._Constants` of one call.
+        weights: One weight per term, in :data:`uasep_env.interface.rewards.REWARD_TERMS` order.
+        index: :data:`uasep_env.interface.rewards._TERM_INDEX`, each term's row by name.
 
     Returns:
         ``(own, terms)``: ``(E, N)`` weighted sums and ``(T, E, N)`` unweighted terms.
@@ -129,7 +129,7 @@ def reward_terms(
 def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
                    cost_terms):  # noqa: ANN001
 # fmt: on
-    """Agent ``k`` of :func:`uasep_env.outcome.step_outcome` (the arrays: its ``Outcome``)."""
+    """Agent ``k`` of :func:`~uasep_env.interface.outcome.step_outcome` (arrays: ``Outcome``)."""
     d_region = _reward_agent(k, x, c, ix, weights, own, terms)
     n = x.uav_pos.shape[1]
     e = k // n
@@ -140,7 +140,7 @@ def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, f
     off = _sq3(x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0], x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
                x.uav_pos[e, i, 2] - x.plan_pos[e, i, 2])  # fmt: skip
     lost[e, i] = off > o.lost_sq
-    # The rows of uasep_env.outcome.SAFETY_FLAGS.
+    # The rows of uasep_env.interface.outcome.SAFETY_FLAGS.
     flags[0, e, i] = d_uav < c.separation_distance
     flags[1, e, i] = d_obstacle < c.obstacle_separation
     flags[2, e, i] = d_region < 0.0
@@ -184,15 +184,15 @@ def _outcome_parallel(xt, ct, it, weights, ot, own, terms, d_reg, collided, lost
 def step_outcome(
     inputs: tuple, constants: tuple, weights: np.ndarray, o: tuple, *, index: tuple, result: type
 ) -> tuple:
-    """Compiled :func:`uasep_env.outcome.step_outcome`: same arguments, same bits.
+    """Compiled :func:`uasep_env.interface.outcome.step_outcome`: same arguments, same bits.
 
     Args:
-        inputs: The :class:`uasep_env.rewards._Inputs` of one call.
-        constants: The :class:`uasep_env.rewards._Constants` of one call.
+        inputs: The :class:`uasep_env.interface.rewards._Inputs` of one call.
+        constants: The :class:`uasep_env.interface.rewards._Constants` of one call.
         weights: One weight per reward term.
-        o: The :class:`uasep_env.outcome.OutcomeConstants`.
-        index: :data:`uasep_env.rewards._TERM_INDEX`.
-        result: :class:`uasep_env.outcome.Outcome`, filled and returned.
+        o: The :class:`uasep_env.interface.outcome.OutcomeConstants`.
+        index: :data:`uasep_env.interface.rewards._TERM_INDEX`.
+        result: :class:`uasep_env.interface.outcome.Outcome`, filled and returned.
     """
     x = tuple(map(frozen, inputs))  # one compiled signature
     e, n = inputs.min_uav_dist.shape

@@ -1,4 +1,4 @@
-"""Nearest UAV and obstacle distances: :func:`uasep_env.geometry.nearest_separations`."""
+"""Nearest UAV and obstacle distances: :func:`uasep_env.sim.geometry.nearest_separations`."""
 
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def _separations_parallel(uav_pos, obstacle_pos, active, d_uav, d_obstacle):  # 
 def separations(
     uav_pos: np.ndarray, obstacle_pos: np.ndarray, active: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Compiled :meth:`uasep_env.world.World.separations`: nearest UAV and obstacle distances.
+    """Compiled :meth:`uasep_env.sim.world.World.separations`: nearest UAV and obstacle distances.
 
     Args:
         uav_pos: ``(E, N, 3)`` positions (m).

@@ -46,7 +46,7 @@ from uasep_env.scenarios.registry import get_family, scenario_names
 
 __all__ = ["AS_PUBLISHED", "FORMATION_PATTERNS", "SCENARIOS", "EnvConfig", "make_config"]  # noqa: F822
 
-#: Names accepted for ``EnvConfig.formation`` (see :mod:`uasep_env.formation`).
+#: Names accepted for ``EnvConfig.formation`` (see :mod:`uasep_env.sim.formation`).
 FORMATION_PATTERNS = ("line_abreast", "paper", "column", "v", "wedge", "grid", "circle")
 
 

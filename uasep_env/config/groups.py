@@ -168,7 +168,7 @@ class ObstacleConfig:
     Scenarios that randomise obstacles draw around these values (see
     :mod:`uasep_env.scenarios`); the ``paper`` scenario uses them as given. With
     ``model="replay"`` (the ``real_traffic`` scenario, which requires it) every obstacle flies
-    a recorded track instead (:mod:`uasep_env.replay`); ``speed``, ``max_turn_rate`` and
+    a recorded track instead (:mod:`uasep_env.sim.replay`); ``speed``, ``max_turn_rate`` and
     ``max_climb_rate`` then only shape its predicted reachable set (the speed: the placed
     track's median), as the predictor assumes a Dubins aircraft of these bounds.
 
@@ -246,7 +246,7 @@ class AirspaceConfig:
     Altitudes are positive up (m; NED ``z = -altitude``). Every scenario places its
     obstacles between ``ground_altitude + obstacle_margin`` and ``ceiling_altitude`` (a
     climbing obstacle climbs more slowly rather than start lower), and the obstacle model
-    (:mod:`uasep_env.obstacles`) never flies below ``ground_altitude``: near the ground its
+    (:mod:`uasep_env.sim.obstacles`) never flies below ``ground_altitude``: near the ground its
     descent command is bounded. The scenarios' formations fly at 100 m, which must lie
     between the two.
 
@@ -328,7 +328,7 @@ class PredictionConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class ObservationConfig:
-    """What each agent observes (see :mod:`uasep_env.observation`).
+    """What each agent observes (see :mod:`uasep_env.interface.observation`).
 
     Attributes:
         k_uavs: Number of nearest other UAVs observed (``None``: all others, at most 6).
@@ -341,8 +341,8 @@ class ObservationConfig:
         sensing_range: Obstacles and UAVs farther than this are not observed (m); at most
             ``clip * position_scale``, the farthest distance an observation can express.
         optional_features: Optional features to add to the vector (keys of
-            :data:`uasep_env.observation_layout.OPTIONAL_FEATURES`; checked when the layout
-            is built). None by default.
+            :data:`uasep_env.interface.observation_layout.OPTIONAL_FEATURES`; checked when the
+            layout is built). None by default.
     """
 
     k_uavs: int | None = None
@@ -380,7 +380,7 @@ class ObservationConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class RewardWeights:
-    """Weights of the named reward terms (see :mod:`uasep_env.rewards`).
+    """Weights of the named reward terms (see :mod:`uasep_env.interface.rewards`).
 
     Each agent's reward is ``sum_k w_k * term_k`` over its own terms, mixed with the
     team's mean by ``shared``: ``r_i = (1 - shared) * own_i + shared * mean_j(own_j)``.
@@ -398,7 +398,7 @@ class RewardWeights:
     """
 
     # Defaults: a step's reward is in [0, 1] and a collision costs a whole episode (why:
-    # uasep_env.rewards).
+    # uasep_env.interface.rewards).
     separation_inner: float = 0.25
     separation_obstacle: float = 0.4
     separation_region: float = 0.05
@@ -420,8 +420,8 @@ class RewardWeights:
 
         The default weights of ``deviation``, ``control``, ``smoothness`` and ``progress``,
         every separation term and the collision term at 0: safety is left to the cost
-        channel (:mod:`uasep_env.costs`) and its constraint. A step alive still earns
-        between 0.75 and 1 (``uasep_env.rewards.reward_bounds``), so ending an episode
+        channel (:mod:`uasep_env.interface.costs`) and its constraint. A step alive still earns
+        between 0.75 and 1 (``uasep_env.interface.rewards.reward_bounds``), so ending an episode
         early (a collision, a lost UAV) never pays. ``make_config(reward="task")``.
         """
         return cls(separation_inner=0.0, separation_obstacle=0.0, separation_region=0.0,
@@ -445,12 +445,12 @@ REWARD_PRESETS = ("default", "task")
 
 @dataclass(frozen=True, kw_only=True)
 class CostWeights:
-    """Weights of the named cost terms (see :mod:`uasep_env.costs`).
+    """Weights of the named cost terms (see :mod:`uasep_env.interface.costs`).
 
     Each agent's cost in a step is ``sum_k w_k * term_k``, each term an indicator (1 in a
     step in which the condition holds, else 0), so a weight is a cost per environment step
     (dimensionless). The cost changes no reward and no episode; constrained training
-    (:mod:`uasep_env.lagrangian`) bounds its expected sum over an episode.
+    (:mod:`uasep_env.training.lagrangian`) bounds its expected sum over an episode.
 
     Attributes:
         separation_uav: Cost per step in loss of separation with another UAV (closer than
@@ -471,13 +471,13 @@ class CostWeights:
             check_positive(f"cost.{f.name}", getattr(self, f.name), allow_zero=True, hi=MAX_WEIGHT)
 
 
-#: Names accepted for ``ActionConfig.mode`` (see :mod:`uasep_env.actions`).
+#: Names accepted for ``ActionConfig.mode`` (see :mod:`uasep_env.interface.actions`).
 ACTION_MODES = ("direct", "residual_apf")
 
 
 @dataclass(frozen=True, kw_only=True)
 class ActionConfig:
-    """What an agent's action means (see :mod:`uasep_env.actions`).
+    """What an agent's action means (see :mod:`uasep_env.interface.actions`).
 
     Attributes:
         mode: ``"direct"``: the action is the commanded acceleration, as a fraction of

@@ -23,7 +23,7 @@ class ViewMixin:
 
     @property
     def world(self) -> Any:
-        """The underlying batched :class:`~uasep_env.world.World` (``core.world``)."""
+        """The underlying batched :class:`~uasep_env.sim.world.World` (``core.world``)."""
         return self.core.world
 
     def render(self) -> np.ndarray | None:

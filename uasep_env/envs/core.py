@@ -1,10 +1,10 @@
 """The batched environment core shared by every environment view.
 
-:class:`EnvCore` wraps a :class:`~uasep_env.world.World` and adds what an RL environment
+:class:`EnvCore` wraps a :class:`~uasep_env.sim.world.World` and adds what an RL environment
 needs on top of the physics: action validation and scaling, observations, named rewards,
 termination (a collision, or a UAV lost: farther than ``uav.lost_distance`` from its
 plan), truncation (time limit / end of the plan), the per-step safety figures and the
-cost channel of constrained RL (:mod:`uasep_env.costs`). The
+cost channel of constrained RL (:mod:`uasep_env.interface.costs`). The
 PettingZoo env, the Gymnasium env, the vector env and the SB3 adapter are thin views of
 it; none of them steps the world another way.
 """
@@ -17,16 +17,16 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.actions import ResidualAPF
-from uasep_env.capacity import check_count
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import is_real
-from uasep_env.costs import COST_TERMS
 from uasep_env.envs._infos import row_dicts
-from uasep_env.observation import ObservationLayout, build_observations, global_state
-from uasep_env.outcome import compute_outcome
-from uasep_env.rewards import REWARD_TERMS, share_rewards
-from uasep_env.world import World
+from uasep_env.interface.actions import ResidualAPF
+from uasep_env.interface.costs import COST_TERMS
+from uasep_env.interface.observation import ObservationLayout, build_observations, global_state
+from uasep_env.interface.outcome import compute_outcome
+from uasep_env.interface.rewards import REWARD_TERMS, share_rewards
+from uasep_env.runtime.capacity import check_count
+from uasep_env.sim.world import World
 
 __all__ = [
     "ACTION_TOLERANCE",
@@ -236,7 +236,7 @@ class StepResult:
             ``uav.lost_distance`` from its planned position).
         truncated: ``(E,)`` an episode ended by the time limit or the end of the plan.
         safety: Per-step safety figures, name -> ``(E, N)``.
-        cost: ``(E, N)`` costs (>= 0; :mod:`uasep_env.costs`), in no reward.
+        cost: ``(E, N)`` costs (>= 0; :mod:`uasep_env.interface.costs`), in no reward.
         cost_terms: Unweighted cost terms, name -> ``(E, N)``.
         terms_array: ``(T, E, N)`` the reward terms in ``REWARD_TERMS`` order, whose rows
             :attr:`terms` holds (``None`` where a caller built only the dict).
@@ -267,7 +267,7 @@ class EnvCore:
 
     Raises:
         ValueError: ``n_envs`` is not a positive integer or would not fit in memory
-            (:func:`uasep_env.capacity.check_count`).
+            (:func:`uasep_env.runtime.capacity.check_count`).
     """
 
     def __init__(
@@ -346,10 +346,10 @@ class EnvCore:
         Args:
             actions: Accelerations as fractions of ``uav.max_accel`` per axis, or in the
                 ``residual_apf`` mode corrections to the APF's command (see
-                :mod:`uasep_env.actions`).
+                :mod:`uasep_env.interface.actions`).
             validate: Check the actions (shape, finite, in range) first.
             active: Optional ``(E,)`` mask of environments that move (see
-                :meth:`World.step <uasep_env.world.World.step>`).
+                :meth:`World.step <uasep_env.sim.world.World.step>`).
             reset: Optional ``(E,)`` mask of environments that start a new episode in this
                 step instead of moving (the same; their actions are ignored).
 

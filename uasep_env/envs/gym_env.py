@@ -9,10 +9,10 @@ import numpy as np
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_seed
-from uasep_env.costs import COST_TERMS
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
-from uasep_env.rewards import REWARD_TERMS
+from uasep_env.interface.costs import COST_TERMS
+from uasep_env.interface.rewards import REWARD_TERMS
 from uasep_env.viz.requirements import available_render_modes, checked_render_mode
 
 __all__ = ["FormationEnv"]
@@ -45,7 +45,7 @@ class FormationEnv(ViewMixin, gymnasium.Env):
         ``reward_terms``).
 
     Cost:
-        ``info["cost"]``: the mean of the agents' costs (:mod:`uasep_env.costs`; > 0
+        ``info["cost"]``: the mean of the agents' costs (:mod:`uasep_env.interface.costs`; > 0
         exactly when a UAV has lost separation, with the default ``cost`` weights),
         ``info["costs"]`` each agent's and ``info["cost_<term>"]`` the mean of each named
         term. In no reward.

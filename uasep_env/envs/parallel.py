@@ -21,7 +21,7 @@ from uasep_env.envs.core import (
     check_options,
     prepare_actions,
 )
-from uasep_env.observation import ObservationLayout, state_dim
+from uasep_env.interface.observation import ObservationLayout, state_dim
 from uasep_env.registration import ENV_VERSION
 from uasep_env.viz.requirements import available_render_modes, checked_render_mode
 
@@ -56,13 +56,13 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
 
     Observation space:
         ``Box(-clip, clip, (D,), float32)`` per agent, normalised; the features are listed
-        in :mod:`uasep_env.observation_layout` (own slot/plan offsets and velocities,
+        in :mod:`uasep_env.interface.observation_layout` (own slot/plan offsets and velocities,
         formation goal, the nearest UAVs, and the nearest obstacles' reachable ellipsoids
         with presence masks). :meth:`state` returns the global true state.
 
     Rewards:
-        Named terms per agent (:mod:`uasep_env.rewards`): separation between UAVs, from the
-        obstacles and from their reachable regions, deviation from the plan, control effort,
+        Named terms per agent (:mod:`uasep_env.interface.rewards`): separation between UAVs, from
+        the obstacles and from their reachable regions, deviation from the plan, control effort,
         smoothness, collision and an alive bonus, combined by ``reward`` weights. Each
         agent's unweighted terms are in ``infos[agent]["reward_terms"]``.
 
@@ -79,7 +79,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
         ``loss_of_separation_obstacle``, ``in_reachable_region``, ``collision``, ``lost``,
         ``clipped_actions``: how many components of the agent's action were clipped to the
         box, and the cost channel: ``cost`` and its unweighted ``cost_terms``
-        (:mod:`uasep_env.costs`; > 0 exactly when the UAV has lost separation, with the
+        (:mod:`uasep_env.interface.costs`; > 0 exactly when the UAV has lost separation, with the
         default ``cost`` weights; in no reward).
 
     Configuration:
@@ -159,7 +159,7 @@ class UAVSeparationParallelEnv(ViewMixin, ParallelEnv):
 
     @property
     def layout(self) -> Any:
-        """The :class:`~uasep_env.observation.ObservationLayout` of the observations."""
+        """The :class:`~uasep_env.interface.observation.ObservationLayout` of the observations."""
         return self.core.layout
 
     def reset(

@@ -11,7 +11,7 @@ largest true distance of a UAV from its planned position once the formation has 
 up, as in :mod:`uasep_env.metrics`), which training scripts report as they go. Every
 agent's info has ``clipped_actions``: how many components of its action were clipped to
 ``[-1, 1]`` (with ``action={"strict": True}``, out-of-box actions raise ``ValueError``
-instead), ``cost`` (float, the agent's cost of the step, :mod:`uasep_env.costs`; in no
+instead), ``cost`` (float, the agent's cost of the step, :mod:`uasep_env.interface.costs`; in no
 reward) and ``cost_terms`` (its named terms, floats).
 
 This module imports stable-baselines3; the rest of the package does not.
@@ -28,10 +28,10 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_seed
-from uasep_env.costs import COST_TERMS
 from uasep_env.envs._infos import row_dicts
 from uasep_env.envs.core import EnvCore, prepare_actions
 from uasep_env.envs.episode_safety import EpisodeSafety
+from uasep_env.interface.costs import COST_TERMS
 
 __all__ = ["UAVSharedVecEnv"]
 

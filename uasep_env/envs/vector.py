@@ -1,7 +1,7 @@
 """A native Gymnasium vector environment over the batched core.
 
 ``gymnasium.make_vec("uasep/Formation-v2", num_envs=4096)`` returns
-:class:`FormationVectorEnv`: one :class:`~uasep_env.world.World` of ``num_envs``
+:class:`FormationVectorEnv`: one :class:`~uasep_env.sim.world.World` of ``num_envs``
 environments stepped by array operations, with no Python loop over environments. Each
 environment is the centralised view of :class:`~uasep_env.envs.gym_env.FormationEnv`
 (joint observation and action of its UAVs).
@@ -18,10 +18,10 @@ from gymnasium.vector.utils import batch_space
 
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_positive_int, check_seed
-from uasep_env.costs import COST_TERMS
 from uasep_env.envs._view import ViewMixin
 from uasep_env.envs.core import EnvCore, check_options, clipped_counts, prepare_actions
-from uasep_env.rewards import REWARD_TERMS, team_mean
+from uasep_env.interface.costs import COST_TERMS
+from uasep_env.interface.rewards import REWARD_TERMS, team_mean
 from uasep_env.viz.requirements import (
     available_render_modes,
     checked_render_mode,
@@ -131,10 +131,10 @@ class FormationVectorEnv(ViewMixin, VectorEnv):
         **kwargs: :class:`~uasep_env.config.EnvConfig` fields.
 
     Infos are dicts of arrays with Gymnasium's ``_key`` masks: ``rewards`` (per UAV),
-    ``reward_<term>`` (team mean of each term of :data:`~uasep_env.rewards.REWARD_TERMS`),
+    ``reward_<term>`` (team mean of each term of :data:`~uasep_env.interface.rewards.REWARD_TERMS`),
     the safety figures per UAV, ``cost`` (the team mean of the agents' costs,
-    :mod:`uasep_env.costs`), ``costs`` (per UAV) and ``cost_<term>`` (team mean of each cost
-    term), and ``clipped_actions`` (per UAV, the action components
+    :mod:`uasep_env.interface.costs`), ``costs`` (per UAV) and ``cost_<term>`` (team mean of each
+    cost term), and ``clipped_actions`` (per UAV, the action components
     clipped to ``[-1, 1]``; with ``action={"strict": True}`` out-of-box actions raise
     ``ValueError`` instead). In every autoreset mode they are exactly what
     ``gymnasium.vector.SyncVectorEnv`` over :class:`~uasep_env.envs.gym_env.FormationEnv`

@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from uasep_env._numba import note_slow_kernels
-from uasep_env.atomic import output_kind
 from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.progress import progress_bar
@@ -27,6 +26,7 @@ from uasep_env.policies import (
 )
 from uasep_env.policies.checkpoint import ALGORITHMS as SB3_ALGORITHMS
 from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
+from uasep_env.runtime.atomic import output_kind
 from uasep_env.scenarios import scenario_names
 from uasep_env.viz.requirements import VIZ_HINT, matplotlib_available
 
@@ -124,9 +124,14 @@ def _output_problem(path: Path, directory: bool) -> str | None:
 
 def _size_problem(args: argparse.Namespace, cfg: Any, n_policies: int) -> str | None:
     """What in the run's sizes and times cannot work, checked before it starts, or None."""
-    from uasep_env.capacity import EPISODE_RESULT_BYTES, available_memory, check_count, record_bytes
     from uasep_env.config.checks import MAX_TIME
     from uasep_env.evaluation.runner import default_batch_size
+    from uasep_env.runtime.capacity import (
+        EPISODE_RESULT_BYTES,
+        available_memory,
+        check_count,
+        record_bytes,
+    )
 
     for flag, value in (("--settle-time", args.settle_time), ("--hold-time", args.hold_time)):
         if value > MAX_TIME:  # a time past the episode's end is clipped to it; not 1e308

@@ -1,4 +1,4 @@
-"""Writing an evaluation: strict JSON (the one writer, :mod:`uasep_env.jsonio`) and CSV."""
+"""Writing an evaluation: strict JSON (the one writer, :mod:`uasep_env.runtime.jsonio`) and CSV."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_output
 from uasep_env.evaluation.results import EvaluationResult
-from uasep_env.jsonio import dumps, write_json
 from uasep_env.metrics import flatten_metrics
+from uasep_env.runtime.atomic import atomic_output
+from uasep_env.runtime.jsonio import dumps, write_json
 
 __all__ = ["result_to_json", "write_csv", "write_json"]
 
@@ -21,7 +21,7 @@ def result_to_json(result: Any, **kwargs: Any) -> str:
     """Strict JSON of an :func:`evaluate` result (without the episodes kept for plots).
 
     Args:
-        result: An :class:`EvaluationResult` (or anything :func:`uasep_env.jsonio.to_plain`
+        result: An :class:`EvaluationResult` (or anything :func:`uasep_env.runtime.jsonio.to_plain`
             takes, e.g. a dict of results).
         **kwargs: Passed to :func:`json.dumps` (e.g. ``indent``).
 

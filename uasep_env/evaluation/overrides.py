@@ -7,7 +7,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from uasep_env.config import EnvConfig, make_config
-from uasep_env.jsonio import json_depth
+from uasep_env.runtime.jsonio import json_depth
 from uasep_env.scenarios import SCENARIO_DEFAULTS
 
 __all__ = ["build_config", "parse_config_overrides"]

@@ -7,9 +7,9 @@ import sys
 from collections.abc import Mapping
 from typing import Any
 
-from uasep_env.dynamics import AXES
 from uasep_env.evaluation.results import EvaluationResult
-from uasep_env.tables import render_table
+from uasep_env.runtime.tables import render_table
+from uasep_env.sim.dynamics import AXES
 
 __all__ = ["format_summary", "summary_rows"]
 

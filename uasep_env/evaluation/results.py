@@ -1,7 +1,7 @@
 """What :func:`~uasep_env.evaluation.evaluate` returns: typed results, and their JSON layout.
 
 The JSON files (``uasep-eval --json``, ``baselines/results/*.json[.gz]``) are these dataclasses
-through :func:`uasep_env.jsonio.to_plain`, field by field, in declaration order::
+through :func:`uasep_env.runtime.jsonio.to_plain`, field by field, in declaration order::
 
     {"version", "config" (EnvConfig.to_dict()), "policies" (labels),
      "policy_specs" (label -> name/path/class), "seeds", "settings" {...},
@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from uasep_env.config import EnvConfig
-from uasep_env.jsonio import OMIT, PLAIN, dumps, to_plain
 from uasep_env.metrics import EpisodeMetrics
+from uasep_env.runtime.jsonio import OMIT, PLAIN, dumps, to_plain
 
 if TYPE_CHECKING:
     from uasep_env.rollout import Episode

@@ -274,7 +274,7 @@ def evaluate(
 
     Returns:
         The typed result (:class:`EvaluationResult`: per policy the episodes and their
-        aggregate); its ``to_json()`` / :func:`uasep_env.jsonio.write_json` give the JSON
+        aggregate); its ``to_json()`` / :func:`uasep_env.runtime.jsonio.write_json` give the JSON
         layout, without the episodes kept whole for plots.
 
     Raises:

@@ -1,6 +1,6 @@
 """UAV-UAV and UAV-obstacle centre distances over a recorded episode (NED, metres).
 
-The world's own helpers (:mod:`uasep_env.geometry`), so the metrics measure exactly the
+The world's own helpers (:mod:`uasep_env.sim.geometry`), so the metrics measure exactly the
 distances the world's safety checks use (same summation order, same numbers).
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from uasep_env.geometry import obstacle_distances, uav_distances
+from uasep_env.sim.geometry import obstacle_distances, uav_distances
 
 __all__ = ["obstacle_distances", "pairwise_uav_distances"]
 

@@ -1,7 +1,7 @@
 """The result types of the episode metrics: per-UAV families, per-UAV and episode summaries.
 
 Each is a frozen dataclass whose :meth:`~_Plain.to_dict` is its JSON layout (through
-:func:`uasep_env.jsonio.to_plain`): nested results become dicts, per-axis triples
+:func:`uasep_env.runtime.jsonio.to_plain`): nested results become dicts, per-axis triples
 ``{"x": ..., "y": ..., "z": ...}``. Definitions of every quantity: :mod:`uasep_env.metrics`.
 """
 
@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from uasep_env.dynamics import AXES
-from uasep_env.jsonio import PLAIN, dumps, to_plain
+from uasep_env.runtime.jsonio import PLAIN, dumps, to_plain
+from uasep_env.sim.dynamics import AXES
 
 __all__ = [
     "Axis3",

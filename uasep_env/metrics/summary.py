@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.metrics.results import EpisodeMetrics
-from uasep_env.tables import render_table
+from uasep_env.runtime.tables import render_table
 
 __all__ = ["format_table", "summary_table"]
 
@@ -125,7 +125,7 @@ def format_table(
     headers: Sequence[str] | None = None,
     floatfmt: str = ".4g",
 ) -> str:
-    """Format rows as a plain-text table (:func:`uasep_env.tables.render_table`).
+    """Format rows as a plain-text table (:func:`uasep_env.runtime.tables.render_table`).
 
     Text columns are left-aligned, numeric columns right-aligned; a dashed rule separates
     the header. Floats use ``floatfmt``, booleans print as ``yes``/``no``.

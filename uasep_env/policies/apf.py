@@ -1,7 +1,7 @@
 """The paper's improved artificial potential field (APF) and its two comparison methods.
 
 All three act on the environments' observations (decoded to SI units by
-:class:`~uasep_env.observation.ObservationLayout`), batched over any leading shape such as
+:class:`~uasep_env.interface.observation.ObservationLayout`), batched over any leading shape such as
 ``(n_envs, n_uavs)``, and return normalised accelerations in ``[-1, 1]^3``.
 
 :class:`APF` -- the proposed method (paper eqs. 19-32, with the notes' errata):
@@ -61,7 +61,7 @@ from uasep_env._deprecation import RenamedAttributes, warn_renamed
 from uasep_env._numba import compiled_twin
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import check_positive
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies.nominal import bounded_action, plan_tracking
 from uasep_env.policies.registry import register_policy
 from uasep_env.reachable.distance import _N_NEWTON

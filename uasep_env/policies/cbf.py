@@ -45,7 +45,7 @@ import numpy as np
 
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import MAX_DIST, check_int_in, check_positive
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies.apf import APFGains
 from uasep_env.policies.nominal import bounded_action, plan_tracking
 from uasep_env.policies.qp import solve_filter_qp

@@ -26,10 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_output
 from uasep_env.config import EnvConfig, make_config
-from uasep_env.jsonio import dumps
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.observation import ObservationLayout
+from uasep_env.runtime.atomic import atomic_output
+from uasep_env.runtime.jsonio import dumps
 
 __all__ = [
     "CHECKPOINT_FORMAT",

@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from uasep_env._numba import compiled_twin
-from uasep_env.actions import ResidualAPF
 from uasep_env.config import EnvConfig
+from uasep_env.interface.actions import ResidualAPF
 from uasep_env.policies.checkpoint import META, CheckpointError, PolicyCheckpoint, StoredLayout
 from uasep_env.policies.checkpoint_reader import read_checkpoint
 
@@ -101,7 +101,7 @@ class LearnedPolicy:
 
     The policy acts in an environment whose config is ``config``. A ``residual_apf``
     policy in a ``direct`` environment computes the APF's command itself and returns the
-    corrected command (:class:`~uasep_env.actions.ResidualAPF`, the same numbers as the
+    corrected command (:class:`~uasep_env.interface.actions.ResidualAPF`, the same numbers as the
     ``residual_apf`` environment), so it is evaluated beside the APFs on the same seeds;
     in a ``residual_apf`` environment it returns its correction. (The corrected command is
     returned in float64, the precision the residual environment adds it in.)

@@ -21,8 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.boundedzip import HOSTILE_FILE_ERRORS, check_members, read_member
-from uasep_env.jsonio import DuplicateKeyError, json_depth, loads_unique
 from uasep_env.policies.checkpoint import (
     ACTIVATIONS,
     CHECKPOINT_ALGORITHMS,
@@ -34,6 +32,8 @@ from uasep_env.policies.checkpoint import (
     PolicyCheckpoint,
     StoredLayout,
 )
+from uasep_env.runtime.boundedzip import HOSTILE_FILE_ERRORS, check_members, read_member
+from uasep_env.runtime.jsonio import DuplicateKeyError, json_depth, loads_unique
 
 __all__ = ["LIMITS", "CheckpointLimits", "read_checkpoint"]
 

@@ -41,7 +41,7 @@ import numpy as np
 from uasep_env import reachable
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import check, check_one_of, check_positive
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies.apf import APF, APFGains
 from uasep_env.policies.nominal import bounded_action, plan_tracking
 from uasep_env.policies.registry import register_policy

@@ -39,7 +39,7 @@ def plan_tracking(o: dict[str, np.ndarray], gains: TrackingGains) -> np.ndarray:
     ``F = K_g sat(p_g - p_o) + K_p (p_d - p) + K_v (v_d - v) - K_d (v - v_o)``.
 
     Args:
-        o: Decoded observations (:meth:`~uasep_env.observation.ObservationLayout.decode`).
+        o: Decoded observations (:meth:`~uasep_env.interface.observation.ObservationLayout.decode`).
         gains: The attraction gains.
 
     Returns:

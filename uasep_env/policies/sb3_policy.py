@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.config import EnvConfig
-from uasep_env.observation import ObservationLayout
+from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies.checkpoint import ALGORITHMS, CheckpointError
 
 __all__ = ["SB3Policy", "load_sb3_policy"]

@@ -37,8 +37,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from uasep_env.config.groups import CALIBRATED_HORIZONS
-from uasep_env.jsonio import json_depth
-from uasep_env.obstacles import AIRCRAFT_CLASSES, UNKNOWN_CLASS
+from uasep_env.runtime.jsonio import json_depth
+from uasep_env.sim.obstacles import AIRCRAFT_CLASSES, UNKNOWN_CLASS
 
 __all__ = [
     "CALIBRATED_HORIZONS",
@@ -76,7 +76,7 @@ class CalibrationTable:
         path: Where it was read from.
         horizons: The calibrated horizons (s).
         coef: ``{mode: (n_classes, n_horizons, 3, 2)}``: ``(a, b)`` per class code
-            (:data:`uasep_env.obstacles.AIRCRAFT_CLASSES`), horizon and axis; the unknown
+            (:data:`uasep_env.sim.obstacles.AIRCRAFT_CLASSES`), horizon and axis; the unknown
             class's row (and any class whose cell is not calibrated) is the per-axis maximum
             over the calibrated classes.
         inflation: The inflation the table was calibrated with (m): obstacle radius plus three
@@ -226,7 +226,7 @@ def calibrated_region(
     """The calibrated region of obstacles from their estimates.
 
     Args:
-        aircraft_class: ``(...)`` class codes (:data:`uasep_env.obstacles.AIRCRAFT_CLASSES`);
+        aircraft_class: ``(...)`` class codes (:data:`uasep_env.sim.obstacles.AIRCRAFT_CLASSES`);
             codes outside the table are treated as unknown.
         est_pos: ``(..., 3)`` estimated positions (m, NED).
         est_vel: ``(..., 3)`` estimated ground velocities (m/s, NED).

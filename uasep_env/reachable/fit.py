@@ -19,7 +19,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from uasep_env._numba import compiled_twin
-from uasep_env.obstacles import _EPS
 from uasep_env.reachable.sets import (
     FloatArray,
     Mode,
@@ -30,6 +29,7 @@ from uasep_env.reachable.sets import (
     _out,
     _unit_factors,
 )
+from uasep_env.sim.obstacles import _EPS
 
 __all__ = ["Fit", "ellipse", "ellipsoid"]
 

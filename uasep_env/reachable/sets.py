@@ -13,7 +13,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from uasep_env.obstacles import sinc
+from uasep_env.sim.obstacles import sinc
 
 __all__ = ["FloatArray", "Mode", "boundary", "front_curve", "support"]
 

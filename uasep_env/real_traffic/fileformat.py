@@ -15,7 +15,7 @@ Integers (cm, ms) make the file independent of the last bits of the platform's m
 zip entries carry a fixed date, so rebuilding gives the same bytes. Reading is bounded: the
 file, each member, all members together and the JSON have size limits and the members a
 compression-ratio limit, checked on the zip's directory before anything is inflated
-(:mod:`uasep_env.boundedzip`, shared with the policy checkpoints); each array's header is
+(:mod:`uasep_env.runtime.boundedzip`, shared with the policy checkpoints); each array's header is
 checked (dtype, dimensions, a size that matches its data) before its data is used; the
 JSON's nesting, its number of arrays and objects and its keys are checked before it is
 parsed. Whatever the bytes, the one error is a :class:`RealTrafficFileError` of one line.
@@ -32,9 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_write
-from uasep_env.boundedzip import HOSTILE_FILE_ERRORS, check_member, check_members, read_member
-from uasep_env.jsonio import DuplicateKeyError, json_shape, loads_unique
+from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.boundedzip import (
+    HOSTILE_FILE_ERRORS,
+    check_member,
+    check_members,
+    read_member,
+)
+from uasep_env.runtime.jsonio import DuplicateKeyError, json_shape, loads_unique
 
 __all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz", "write_npz"]
 

@@ -57,10 +57,8 @@ from pathlib import Path
 from typing import Any
 
 from uasep_env import make_config
-from uasep_env.atomic import atomic_write
 from uasep_env.config import EnvConfig
 from uasep_env.evaluation import evaluate
-from uasep_env.jsonio import write_json
 from uasep_env.policies import (
     POLICIES,
     SHIELDS,
@@ -71,6 +69,8 @@ from uasep_env.policies import (
     split_shield,
 )
 from uasep_env.reporting.scaling_views import APFS, METRICS, figure, markdown
+from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.jsonio import write_json
 from uasep_env.scenarios import HELD_OUT_SEEDS, SCALING_SEEDS
 
 __all__ = [

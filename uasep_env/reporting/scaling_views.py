@@ -12,9 +12,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-from uasep_env.atomic import atomic_output
 from uasep_env.metrics.statistics import no_worse_rate
-from uasep_env.tables import render_table
+from uasep_env.runtime.atomic import atomic_output
+from uasep_env.runtime.tables import render_table
 
 APFS = ("apf", "motion-state-apf", "traditional-apf")
 #: (dotted aggregate key, label, unit): safety first, then deviation.

@@ -32,7 +32,6 @@ import numpy as np
 
 from uasep_env._numba import compiled_twin
 from uasep_env.config.groups import FLIGHT_ALTITUDE
-from uasep_env.formation import PlannedTrajectory, pattern_slots, segment_offsets
 from uasep_env.scenarios.building import (
     _ALT_BAND_HALF_WIDTH_M,
     _SHRINK_FACTORS,
@@ -51,6 +50,7 @@ from uasep_env.scenarios.building import (
 )
 from uasep_env.scenarios.registry import Mix, get_family
 from uasep_env.scenarios.spec import N_WAYPOINTS, ScenarioBatch
+from uasep_env.sim.formation import PlannedTrajectory, pattern_slots, segment_offsets
 
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
@@ -562,7 +562,7 @@ def scenario_geometry(
         ``(waypoints, cum, direction, offsets, uav_pos, uav_vel, obstacle_pos,
         obstacle_heading, climb_rate, hold_until, alt_band)``: the plan's way-points
         ``(B, W, 3)``, arc lengths ``(B, W)`` and directions ``(B, W - 1, 3)``
-        (:class:`~uasep_env.formation.PlannedTrajectory`), the slots rotated along each
+        (:class:`~uasep_env.sim.formation.PlannedTrajectory`), the slots rotated along each
         segment ``(B, W - 1, N, 3)``, the UAVs' starts ``(B, N, 3)``, the obstacles' starts
         ``(B, M, 3)``, headings (wrapped to ``[-pi, pi)``), climb rates and times they fly
         straight ``(B, M)`` and altitude bands ``(B, M, 2)``.

@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from uasep_env.config.groups import FLIGHT_ALTITUDE
-from uasep_env.formation import PlannedTrajectory, pattern_slots, segment_offsets
 from uasep_env.scenarios.spec import N_WAYPOINTS, ScenarioSpec
+from uasep_env.sim.formation import PlannedTrajectory, pattern_slots, segment_offsets
 
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
@@ -87,7 +87,7 @@ class Layout:
         """Planned UAV positions ``(n_uavs, 3)`` (m) and the plan's unit direction at ``t``.
 
         The numbers of :func:`planned_position` and ``plan.heading_velocity``, bit for bit
-        (the slots rotated once per segment, :func:`~uasep_env.formation.segment_offsets`,
+        (the slots rotated once per segment, :func:`~uasep_env.sim.formation.segment_offsets`,
         as the world does): a scenario asks this several times per episode.
         """
         return _planned_at(self.plan, self.slots, t, self.offsets)

@@ -21,7 +21,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from uasep_env.formation import pattern_slots
 from uasep_env.scenarios import real_traffic as _real_traffic
 from uasep_env.scenarios.batched import DrawTables, EpisodeDraws, draw_encounters, draw_tables
 from uasep_env.scenarios.building import (
@@ -41,6 +40,7 @@ from uasep_env.scenarios.building import (
 )
 from uasep_env.scenarios.registry import FAMILIES, Mix, ScenarioFamily, register
 from uasep_env.scenarios.spec import ScenarioSpec
+from uasep_env.sim.formation import pattern_slots
 
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig

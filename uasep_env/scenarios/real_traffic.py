@@ -2,7 +2,7 @@
 
 Every obstacle slot replays a recorded track of the real-traffic dataset
 (:mod:`uasep_env.real_traffic`; flights of ``obstacle.replay_split`` only, a distinct track
-per slot) flown by :mod:`uasep_env.replay`. The formation's side is a random layout as in
+per slot) flown by :mod:`uasep_env.sim.replay`. The formation's side is a random layout as in
 the synthetic families. Each obstacle is aimed, like theirs, at a random UAV's planned
 position at a meeting time ``t_c`` of 60-140 s on the 200 s timeline, now with a miss
 distance ``d`` of 0-10 m:
@@ -36,8 +36,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from uasep_env.formation import PlannedTrajectory
-from uasep_env.obstacles import aircraft_class_code
 from uasep_env.scenarios.building import (
     MEET_TIME_RANGE,
     TIMELINE_S,
@@ -48,6 +46,8 @@ from uasep_env.scenarios.building import (
     random_layout,
 )
 from uasep_env.scenarios.spec import ScenarioSpec
+from uasep_env.sim.formation import PlannedTrajectory
+from uasep_env.sim.obstacles import aircraft_class_code
 
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
@@ -104,7 +104,7 @@ class ReplaySpec(ScenarioSpec):
         obstacle_miss_distance: ``(M,)`` the distance then (m).
 
     :attr:`obstacle_aircraft_class` gives the recorded tracks' class codes
-    (:data:`uasep_env.obstacles.AIRCRAFT_CLASSES`).
+    (:data:`uasep_env.sim.obstacles.AIRCRAFT_CLASSES`).
     """
 
     obstacle_track: np.ndarray
@@ -137,7 +137,7 @@ def _durations(config: EnvConfig) -> tuple[int, float]:
 
     The stretch is the 200 s timeline, whatever the episode's length: a shorter episode is
     the start of the same encounter (as in the synthetic families), and in a longer one the
-    obstacle flies on level at its last horizontal velocity (:mod:`uasep_env.replay`).
+    obstacle flies on level at its last horizontal velocity (:mod:`uasep_env.sim.replay`).
     """
     n = round(TIMELINE_S / config.dt)
     return min(config.max_steps * config.decision_interval, n) + 1, n * config.dt

@@ -13,11 +13,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from uasep_env.obstacles import DUBINS_CLASS, ObstacleState
+from uasep_env.sim.obstacles import DUBINS_CLASS, ObstacleState
 
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
-    from uasep_env.formation import PlannedTrajectory
+    from uasep_env.sim.formation import PlannedTrajectory
 
 __all__ = ["N_WAYPOINTS", "ScenarioBatch", "ScenarioSpec", "place_obstacles"]
 
@@ -103,7 +103,7 @@ class ScenarioBatch:
             batched form; their extra fields, such as a replayed track, stay on them).
         plan: The plans of ``waypoints`` and ``cruise_speed``, if made already.
         plan_offsets: ``(B, W - 1, N, 3)`` the slots rotated along each segment
-            (:func:`~uasep_env.formation.segment_offsets`), if made already.
+            (:func:`~uasep_env.sim.formation.segment_offsets`), if made already.
     """
 
     families: list[str]

@@ -14,6 +14,9 @@ folder's rules in :mod:`~uasep_env.training.rundir`:
   critic and a Lagrange multiplier, the separation a constraint
   (:mod:`~uasep_env.training.constraint`).
 
+What every recipe shares: the PID Lagrange multiplier (:mod:`~uasep_env.training.lagrangian`)
+and its SB3 callback (:mod:`~uasep_env.training.sb3_lagrangian`).
+
 torch, stable-baselines3 and skrl (the ``train`` extra) are imported when a recipe runs,
 never on import, so ``uasep-train --help`` works on a core install.
 """

@@ -1,9 +1,9 @@
 """The Lagrangian recipes' constraint: its options, its cost limit, its multiplier, its costs.
 
 Shared by MAPPO-Lagrangian (:mod:`~uasep_env.training.mappo_lagrangian`) and PPO-Lagrangian.
-The constraint keeps the expected episode cost per agent (:mod:`uasep_env.costs`: steps in
+The constraint keeps the expected episode cost per agent (:mod:`uasep_env.interface.costs`: steps in
 loss of separation) at most a limit, with a PID Lagrange multiplier
-(:class:`uasep_env.lagrangian.PIDLagrangian`) moved once per rollout:
+(:class:`uasep_env.training.lagrangian.PIDLagrangian`) moved once per rollout:
 
 * :class:`LagrangianArgs`: the options, a dataclass mixin placed before the recipe's
   ``Args`` (``class Args(LagrangianArgs, mappo.Args)``); each flag carries its validator,
@@ -13,12 +13,12 @@ loss of separation) at most a limit, with a PID Lagrange multiplier
 * :func:`cost_limit`, :func:`make_lagrangian`, :func:`measure_budget` (``budget.json``);
 * :class:`CostTracker`: the agents' running episode costs, the multiplier's update at the
   end of each rollout, the ``cost_progress.csv`` rows
-  (:data:`uasep_env.sb3_lagrangian.COST_FIELDS`) and the state a checkpoint keeps.
+  (:data:`uasep_env.training.sb3_lagrangian.COST_FIELDS`) and the state a checkpoint keeps.
 
 ``--cost-limit``: a number >= 0 (steps in loss of separation per agent and episode),
 ``apf`` (the APF's mean episode cost on ``--budget-episodes`` validation encounters) or
 ``apf-rate`` (the APF's loss-of-separation rate over the formation size; see
-:class:`uasep_env.lagrangian.CostBudget`).
+:class:`uasep_env.training.lagrangian.CostBudget`).
 
 This module imports neither torch nor stable-baselines3.
 """
@@ -36,9 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.costs import COST_TERMS
-from uasep_env.lagrangian import PIDLagrangian, check_cost_limit
+from uasep_env.interface.costs import COST_TERMS
 from uasep_env.training.args import non_negative_float, positive_int
+from uasep_env.training.lagrangian import PIDLagrangian, check_cost_limit
 
 __all__ = [
     "COST_FILES",
@@ -172,9 +172,9 @@ def make_lagrangian(args: Any, limit: float) -> PIDLagrangian:
 
 def measure_budget(args: Any, config: Any, out: Path) -> float:
     """The cost limit of ``args`` (the APF's budget measured if asked); ``budget.json``."""
-    from uasep_env.atomic import atomic_write
-    from uasep_env.lagrangian import apf_cost_budget
+    from uasep_env.runtime.atomic import atomic_write
     from uasep_env.scenarios import VALIDATION_SEEDS
+    from uasep_env.training.lagrangian import apf_cost_budget
 
     limit = cost_limit(args)
     record: dict[str, Any] = {"cost_limit_option": args.cost_limit}
@@ -229,7 +229,7 @@ class CostTracker:
         """Move the multiplier with the mean cost of the rollout's episodes (if any ended).
 
         Returns:
-            The ``cost_progress.csv`` row (:data:`uasep_env.sb3_lagrangian.COST_FIELDS`).
+            The ``cost_progress.csv`` row (:data:`uasep_env.training.sb3_lagrangian.COST_FIELDS`).
         """
         batch = float(np.mean(self._batch)) if self._batch else math.nan
         if self._batch:

@@ -70,7 +70,7 @@ def save_checkpoint(state: Any, config: Any, args: Args, directory: Path, info: 
 def _write_checkpoint(state: Any, config: Any, args: Args, tmp: Path, info: dict) -> None:
     import torch
 
-    from uasep_env.atomic import atomic_write
+    from uasep_env.runtime.atomic import atomic_write
     from uasep_env.training import ppo_lean
     from uasep_env.training.rundir import normalization_bytes
 
@@ -280,7 +280,7 @@ class _RunHooks(Hooks):
                 **window_summary(self.window)}  # fmt: skip
 
     def checkpoint(self, state: Any) -> None:
-        from uasep_env.atomic import atomic_symlink
+        from uasep_env.runtime.atomic import atomic_symlink
 
         d = self.out / "checkpoints" / f"step_{state.agent_steps}"
         window = [[float(x) for x in e] for e in self.window]

@@ -15,7 +15,7 @@ conventions of ``uasep-train ppo_shared`` (every flag of it applies where it mea
   PPO recipes), seen by skrl as one multi-agent environment with ``num_envs = n_envs``:
   agent ``uav_i`` observes its own K-nearest observation; its critic reads the
   agent-specific global state: the global true state
-  (:func:`uasep_env.observation.global_state`) and the agent's own observation, normalised
+  (:func:`uasep_env.interface.observation.global_state`) and the agent's own observation, normalised
   by skrl's ``RunningStandardScaler``.
 * Networks: the actor is an MLP (``--hidden``, ``--activation``) giving the Gaussian's mean,
   with a state-independent log-std, **shared by every UAV** (parameter sharing; skrl updates
@@ -328,7 +328,7 @@ def save_checkpoint(
     """
     import torch
 
-    from uasep_env.atomic import atomic_write
+    from uasep_env.runtime.atomic import atomic_write
     from uasep_env.training.rundir import save_checkpoint_dir
 
     def write(tmp: Path) -> None:
@@ -408,7 +408,7 @@ def train(args: Args, config: Any, out: Path, hooks: Hooks | None = None) -> tup
     """The training loop (skrl's trainer loop, with the recipes' bookkeeping and ``hooks``)."""
     import torch
 
-    from uasep_env.atomic import atomic_symlink
+    from uasep_env.runtime.atomic import atomic_symlink
     from uasep_env.training.rundir import ProgressLog, check_checkpoint, rewind
 
     hooks = hooks or Hooks()

@@ -3,7 +3,7 @@
 The recipe of ``uasep-train mappo`` (:mod:`uasep_env.training.mappo`: every flag applies)
 with the task reward (``--config reward=task``: deviation, control, smoothness and the
 alive bonus, no separation or collision term) and the separation kept as a constraint on
-the cost channel instead: the expected episode cost per agent (:mod:`uasep_env.costs`:
+the cost channel instead: the expected episode cost per agent (:mod:`uasep_env.interface.costs`:
 steps in loss of separation) must stay at most ``--cost-limit``.
 
     uasep-train mappo_lagrangian                            # limit: the APF's mean cost
@@ -25,7 +25,7 @@ The algorithm is MAPPO-Lagrangian as in SafePO and OmniSafe, on skrl's MAPPO (a 
   reward advantage (standardised: mean 0, std 1) and ``A_c`` centred but not scaled
   (OmniSafe's rule: a rollout without cost has a near-zero ``A_c``, which standardising
   would blow up to unit noise; SafePO's MAPPO-L standardises both);
-* the multiplier ``lambda`` (:class:`uasep_env.lagrangian.PIDLagrangian`; ``--pid-kp 0
+* the multiplier ``lambda`` (:class:`uasep_env.training.lagrangian.PIDLagrangian`; ``--pid-kp 0
   --pid-kd 0`` is plain gradient ascent) moves once per rollout, before the rollout's
   update, with the mean episode cost per agent of the episodes that ended in it.
 
@@ -266,7 +266,7 @@ class LagrangianHooks(mappo.Hooks):
     """
 
     def __init__(self, args: Args, limit: float) -> None:
-        from uasep_env.sb3_lagrangian import cost_reader
+        from uasep_env.training.sb3_lagrangian import cost_reader
 
         self.agent_class = agent_class()
         self.args = args
@@ -278,8 +278,8 @@ class LagrangianHooks(mappo.Hooks):
 
     def start(self, agent: Any, env: mappo.SkrlView, out: Path, resumed: dict) -> None:
         """Restore the constraint from ``resumed`` (rewinding ``cost_progress.csv``)."""
-        from uasep_env.sb3_lagrangian import COST_FIELDS
         from uasep_env.training.rundir import ProgressLog, rewind_csv
+        from uasep_env.training.sb3_lagrangian import COST_FIELDS
 
         self.agent = agent
         self.tracker = constraint.CostTracker(self.lagrangian, self.args.cost, env.num_envs * env.n)
@@ -346,7 +346,6 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     args = parse_args(argv, defaults)
     import torch  # lazy: the training extra
 
-    from uasep_env.sb3_lagrangian import plot_cost_curves
     from uasep_env.training.rundir import (
         RunError,
         check_checkpoint,
@@ -354,6 +353,7 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
         plot_curves,
         prepare_out_dir,
     )
+    from uasep_env.training.sb3_lagrangian import plot_cost_curves
 
     torch.set_num_threads(args.torch_threads)
     config = ppo_shared.make_env_config(args)

@@ -3,11 +3,11 @@
 The recipe of :mod:`~uasep_env.training.ppo_shared` (every flag applies), with the task
 reward (``--config reward=task``: deviation, control, smoothness and the alive bonus, no
 separation or collision term) and the separation kept as a constraint on the cost channel
-instead: the expected episode cost per agent (:mod:`uasep_env.costs`: steps in loss of
+instead: the expected episode cost per agent (:mod:`uasep_env.interface.costs`: steps in loss of
 separation) must stay at most ``--cost-limit``. The multiplier is the PID Lagrangian of
-Stooke et al. (2020) (:mod:`uasep_env.lagrangian`; ``--pid-kp 0 --pid-kd 0`` is plain
+Stooke et al. (2020) (:mod:`uasep_env.training.lagrangian`; ``--pid-kp 0 --pid-kd 0`` is plain
 gradient ascent), applied to PPO's rollouts by
-:class:`uasep_env.sb3_lagrangian.LagrangianCallback`.
+:class:`uasep_env.training.sb3_lagrangian.LagrangianCallback`.
 
     uasep-train ppo_lagrangian                               # pure policy, limit: the APF's
     uasep-train ppo_lagrangian_residual                      # residual on the APF
@@ -21,7 +21,7 @@ gradient ascent), applied to PPO's rollouts by
 ``apf`` (the APF's mean episode cost on ``--budget-episodes`` validation encounters: as
 many steps in loss of separation as the APF on average) or ``apf-rate`` (the APF's
 loss-of-separation rate ``r`` over the formation size ``N``: meeting it bounds the policy's
-loss rate by ``r``; see :class:`uasep_env.lagrangian.CostBudget`). The budget is measured
+loss rate by ``r``; see :class:`uasep_env.training.lagrangian.CostBudget`). The budget is measured
 at the start with the project's evaluation code and written to ``budget.json`` (a resumed
 run keeps its checkpoint's limit).
 
@@ -88,8 +88,8 @@ class Constraint:
 
     def start(self, out: Path, config: Any, resumed: dict) -> list:
         """The multiplier's callback, its state restored from ``resumed`` if any."""
-        from uasep_env.sb3_lagrangian import COST_FIELDS, LagrangianCallback
         from uasep_env.training.rundir import rewind_csv
+        from uasep_env.training.sb3_lagrangian import COST_FIELDS, LagrangianCallback
 
         task = config.reward == config.reward.task()
         print(f"reward: {'the task reward' if task else config.reward} "
@@ -121,7 +121,7 @@ class Constraint:
 
     def finish(self, out: Path) -> None:
         """Draw ``cost_curves.png`` from ``cost_progress.csv``."""
-        from uasep_env.sb3_lagrangian import plot_cost_curves
+        from uasep_env.training.sb3_lagrangian import plot_cost_curves
 
         if (out / "cost_progress.csv").exists():
             plot_cost_curves(out / "cost_progress.csv", out / "cost_curves.png", self.title)

@@ -492,7 +492,7 @@ def train(
     import torch
 
     from uasep_env.envs.core import EnvCore
-    from uasep_env.observation import state_dim
+    from uasep_env.interface.observation import state_dim
     from uasep_env.scenarios import check_training_seeds
 
     hooks = hooks or Hooks()

@@ -1,8 +1,8 @@
 """Train a PPO residual on the APF: the shared policy learns corrections to the APF's command.
 
 The recipe of :mod:`~uasep_env.training.ppo_shared` with ``action.mode="residual_apf"`` (see
-:mod:`uasep_env.actions`): a zero action flies the paper's APF, so training starts from the
-reference controller. Every flag of ``uasep-train ppo_shared`` applies; the defaults that
+:mod:`uasep_env.interface.actions`): a zero action flies the paper's APF, so training starts from
+the reference controller. Every flag of ``uasep-train ppo_shared`` applies; the defaults that
 differ are :data:`RESIDUAL_DEFAULTS`.
 
     uasep-train ppo_residual_apf [--total-timesteps N] [--max-minutes M] ...

@@ -189,7 +189,7 @@ def _write_checkpoint(
 ) -> None:
     import torch
 
-    from uasep_env.atomic import atomic_write
+    from uasep_env.runtime.atomic import atomic_write
 
     state = {
         "policy": model.policy.state_dict(),
@@ -242,7 +242,7 @@ def make_callback(
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from uasep_env.atomic import atomic_symlink
+    from uasep_env.runtime.atomic import atomic_symlink
     from uasep_env.training.rundir import ProgressLog
 
     resumed = resumed or {}

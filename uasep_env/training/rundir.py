@@ -4,13 +4,13 @@ Shared by the recipes (:mod:`~uasep_env.training.ppo_shared`, its residual varia
 :mod:`~uasep_env.training.mappo`): :func:`prepare_out_dir` is where a run's folder is
 claimed and created. The rules:
 
-* A run claims its ``--out-dir`` for its whole life (:mod:`uasep_env.runlock`): a second
+* A run claims its ``--out-dir`` for its whole life (:mod:`uasep_env.runtime.runlock`): a second
   run started into the same folder fails at once, naming it.
 * A fresh run refuses a non-empty ``--out-dir`` (a previous run's files would be mixed with
   its own); ``--overwrite`` first deletes the files a run writes there (``progress.csv``,
   ``curves.png``, ``policy.zip``, ``validation.json``, ``checkpoints/``, ``tb/``; nothing
   else), ``--resume CHECKPOINT`` continues the run.
-* Every file is written atomically (:mod:`uasep_env.atomic`); a checkpoint folder's
+* Every file is written atomically (:mod:`uasep_env.runtime.atomic`); a checkpoint folder's
   ``state.json`` is written last, so a folder without it (a kill while saving) is incomplete,
   and ``checkpoints/latest`` is swapped to a folder only once it is complete.
 * ``progress.csv`` is appended (one row per PPO iteration, flushed and ``fsync``-ed); a kill
@@ -41,8 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_output, atomic_symlink, atomic_write, fsync_dir
-from uasep_env.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder
+from uasep_env.runtime.atomic import atomic_output, atomic_symlink, atomic_write, fsync_dir
+from uasep_env.runtime.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder
 from uasep_env.training.args import Args, hidden, make_env_config
 
 #: What a run writes in its folder (``--overwrite`` deletes these, and only these).
@@ -93,7 +93,7 @@ def save_checkpoint_dir(
     ``directory`` is either the old checkpoint or the new one. On any error the temporary
     folder goes and the previous checkpoint stays as it was.
     """
-    from uasep_env.jsonio import dumps
+    from uasep_env.runtime.jsonio import dumps
 
     directory.parent.mkdir(parents=True, exist_ok=True)
     tmp = directory.with_name(f".{directory.name}.tmp-{os.getpid()}")
@@ -434,10 +434,10 @@ def export_actor(
 
 def write_validation(out: Path, config: Any, policy_path: Path, info: dict, episodes: int) -> dict:
     """The policy and the APF on ``episodes`` validation encounters: ``validation.json``."""
-    from uasep_env.atomic import atomic_write
     from uasep_env.evaluation import evaluate
-    from uasep_env.jsonio import dumps
     from uasep_env.policies import load_policy
+    from uasep_env.runtime.atomic import atomic_write
+    from uasep_env.runtime.jsonio import dumps
     from uasep_env.scenarios import VALIDATION_SEEDS
 
     eval_cfg = config.replace(action={"mode": "direct"})

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_output
-from uasep_env.geometry import obstacle_distances
 from uasep_env.metrics import trajectory_deviation
+from uasep_env.runtime.atomic import atomic_output
+from uasep_env.sim.geometry import obstacle_distances
 from uasep_env.viz.style import COLLISION_COLOUR, OBSTACLE_COLOUR, SEPARATION_COLOUR
 
 if TYPE_CHECKING:

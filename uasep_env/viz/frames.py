@@ -1,4 +1,4 @@
-"""Live frames: matplotlib rendering of one environment of a :class:`~uasep_env.world.World`.
+"""Live frames: matplotlib rendering of one environment of a :class:`~uasep_env.sim.world.World`.
 
 :class:`Renderer` draws a 3D view of the formation and the obstacles next to a top view
 (north up), following the formation:
@@ -36,13 +36,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from uasep_env.formation import rotation_from_velocity
+from uasep_env.sim.formation import rotation_from_velocity
 from uasep_env.viz.frame_artists import build_artists
 from uasep_env.viz.shapes import SPHERE_LINES, SPHERE_QUADS, ellipsoid_points, enu, unit_ring
 from uasep_env.viz.style import OBSTACLE_COLOUR
 
 if TYPE_CHECKING:
-    from uasep_env.world import World
+    from uasep_env.sim.world import World
 
 __all__ = ["RENDER_MODES", "Renderer", "save_frame"]
 
@@ -72,7 +72,7 @@ class _History:
 
 
 class Renderer:
-    """Draws one environment of a :class:`~uasep_env.world.World` with matplotlib.
+    """Draws one environment of a :class:`~uasep_env.sim.world.World` with matplotlib.
 
     Args:
         mode: ``"rgb_array"`` (:meth:`render` returns an ``(H, W, 3)`` uint8 array) or
@@ -225,7 +225,7 @@ class Renderer:
         """Draw environment ``env`` of ``world``.
 
         Args:
-            world: The world (after :meth:`~uasep_env.world.World.reset`).
+            world: The world (after :meth:`~uasep_env.sim.world.World.reset`).
             env: Index of the environment to draw.
 
         Returns:
@@ -374,7 +374,7 @@ class Renderer:
         """
         if self.fig is None or not self._art:
             raise RuntimeError("nothing rendered yet: call render(world) first")
-        from uasep_env.atomic import atomic_output  # all or nothing, like every output
+        from uasep_env.runtime.atomic import atomic_output  # all or nothing, like every output
 
         path = Path(path)
         with atomic_output(path) as fh:

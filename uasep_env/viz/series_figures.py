@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from uasep_env.dynamics import AXES
-from uasep_env.geometry import uav_distances
 from uasep_env.metrics import ConflictTimeline, conflict_timelines, trajectory_deviation
+from uasep_env.sim.dynamics import AXES
+from uasep_env.sim.geometry import uav_distances
 from uasep_env.viz.figure_parts import (
     _fig_legend,
     _finish_time_axes,

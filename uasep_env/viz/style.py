@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from uasep_env.dynamics import AXES
+from uasep_env.sim.dynamics import AXES
 
 __all__ = [
     "AXIS_NAMES",

@@ -3,9 +3,9 @@
 :class:`LagrangianCallback` turns any SB3 on-policy recipe (PPO over
 :class:`~uasep_env.envs.sb3.UAVSharedVecEnv`, ``train/ppo_shared.py``) into a Lagrangian one
 without a new PPO: at every step it reads each agent's cost from the infos
-(:mod:`uasep_env.costs`), replaces the reward PPO stores by
+(:mod:`uasep_env.interface.costs`), replaces the reward PPO stores by
 ``(r - lambda c) / (1 + lambda)``, adds the cost to the running episode's, and at the end of
-every rollout moves ``lambda`` (:class:`~uasep_env.lagrangian.PIDLagrangian`) with the mean
+every rollout moves ``lambda`` (:class:`~uasep_env.training.lagrangian.PIDLagrangian`) with the mean
 cost of the episodes that ended during it.
 
 Why this and not a cost critic. OmniSafe's PPOLag / CPPOPID and SafePO's PPO-Lag learn a
@@ -40,9 +40,9 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
-from uasep_env.costs import COST_TERMS
-from uasep_env.lagrangian import PIDLagrangian
+from uasep_env.interface.costs import COST_TERMS
 from uasep_env.training.constraint import CostTracker
+from uasep_env.training.lagrangian import PIDLagrangian
 
 __all__ = ["COST_FIELDS", "LagrangianCallback", "cost_reader", "plot_cost_curves"]
 
@@ -65,7 +65,7 @@ def cost_reader(cost: str) -> Any:
 
     Args:
         cost: ``"cost"`` (the weighted total) or one of the named terms
-            (:data:`~uasep_env.costs.COST_TERMS`, read from ``info["cost_terms"]``).
+            (:data:`~uasep_env.interface.costs.COST_TERMS`, read from ``info["cost_terms"]``).
 
     Raises:
         ValueError: A cost the environments do not report, named with the ones they do.
@@ -202,7 +202,7 @@ def plot_cost_curves(csv_path: Path, png_path: Path, title: str = "") -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from uasep_env.atomic import atomic_output
+    from uasep_env.runtime.atomic import atomic_output
 
     with Path(csv_path).open(newline="", encoding="utf-8") as fh:
         rows = [r for r in csv.DictReader(fh) if r.get("agent_steps", "").isdigit()]

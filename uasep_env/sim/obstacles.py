@@ -24,7 +24,7 @@ length ``v dt sinc(omega dt / 2)`` and direction ``psi + omega dt / 2``), so the
 model hold exactly and the reachable-set prediction (:mod:`uasep_env.reachable`) is sound.
 
 Arrays are batch-first: ``(n_envs, n_obstacles)``. Randomness comes in as pre-drawn
-uniforms (see :mod:`uasep_env.world`), never from global state.
+uniforms (see :mod:`uasep_env.sim.world`), never from global state.
 """
 
 from __future__ import annotations

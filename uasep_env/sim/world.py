@@ -8,18 +8,18 @@ a ``World``; none moves anything itself.
 One environment step (``decision_interval`` physics steps of ``dt``) does, per physics step:
 
 1. UAVs: the commanded accelerations, bounded per axis, plus process noise, through the
-   double integrator with the speed limit (:mod:`uasep_env.dynamics`, eqs. 1-4);
-2. obstacles: the 3D Dubins model with random pilot commands (:mod:`uasep_env.obstacles`),
-   or recorded tracks replayed (``obstacle.model="replay"``, :mod:`uasep_env.replay`);
+   double integrator with the speed limit (:mod:`uasep_env.sim.dynamics`, eqs. 1-4);
+2. obstacles: the 3D Dubins model with random pilot commands (:mod:`uasep_env.sim.obstacles`),
+   or recorded tracks replayed (``obstacle.model="replay"``, :mod:`uasep_env.sim.replay`);
 3. sensing and estimation: noisy measurements of every UAV and obstacle, Kalman filtered
-   (:mod:`uasep_env.estimation`);
+   (:mod:`uasep_env.sim.estimation`);
 4. safety: the minimum UAV-UAV and UAV-obstacle distances over the physics steps, so that a
    collision inside a long decision interval is not missed;
 
 and then predicts each obstacle's reachable ellipsoid over the horizon from its estimate
 (:mod:`uasep_env.reachable`, eqs. 8-18; or, with ``prediction.fit="calibrated"``, the
 conformal region of its aircraft class, :mod:`uasep_env.reachable.calibrated`). Steps 1-4
-are one function, :func:`uasep_env.physics_step.physics_step` (three compiled kernels when
+are one function, :func:`uasep_env.sim.physics_step.physics_step` (three compiled kernels when
 numba is in use).
 
 A reset (of all environments, or of those whose episodes ended) draws each environment's
@@ -30,7 +30,7 @@ cost a few rows.
 Randomness: each environment owns a :class:`numpy.random.Generator`, seeded at reset
 (``seed + i`` for environment ``i`` when one seed is given for the batch, the Gymnasium
 vector convention). Noise is drawn from it in blocks of ``noise_block`` physics steps, per
-environment (:class:`uasep_env.noise.NoiseStreams`), so environment ``i`` of a batch
+environment (:class:`uasep_env.sim.noise.NoiseStreams`), so environment ``i`` of a batch
 follows exactly the same episode as a single environment seeded with ``seed + i``, bit for
 bit.
 """
@@ -47,19 +47,19 @@ from uasep_env import reachable
 from uasep_env._deprecation import RENAMED_WORLD_ATTRIBUTES, RenamedAttributes
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import check_positive_int, check_seed, is_int
-from uasep_env.dynamics import measure
-from uasep_env.estimation import KalmanModel
-from uasep_env.formation import PlannedTrajectory, planned_state, segment_offsets
-from uasep_env.geometry import nearest_separations, obstacle_distances, uav_distances
-from uasep_env.noise import NoiseStreams
-from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity
-from uasep_env.physics_step import PhysicsArrays, PhysicsParams, physics_step
 from uasep_env.reachable import calibrated
-from uasep_env.replay import ReplayTracks
 from uasep_env.scenarios import N_WAYPOINTS, place_obstacles
 from uasep_env.scenarios.batched import sample_batch
 from uasep_env.scenarios.real_traffic import check_replay_tracks, replay_samples
 from uasep_env.scenarios.spec import ScenarioBatch
+from uasep_env.sim.dynamics import measure
+from uasep_env.sim.estimation import KalmanModel
+from uasep_env.sim.formation import PlannedTrajectory, planned_state, segment_offsets
+from uasep_env.sim.geometry import nearest_separations, obstacle_distances, uav_distances
+from uasep_env.sim.noise import NoiseStreams
+from uasep_env.sim.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity
+from uasep_env.sim.physics_step import PhysicsArrays, PhysicsParams, physics_step
+from uasep_env.sim.replay import ReplayTracks
 
 __all__ = ["World"]
 
@@ -579,7 +579,7 @@ class World(RenamedAttributes):
         """Each UAV's distance to the nearest other UAV and to the nearest active obstacle.
 
         True positions; ``inf`` where there is none
-        (:func:`uasep_env.geometry.nearest_separations`).
+        (:func:`uasep_env.sim.geometry.nearest_separations`).
 
         Returns:
             ``(uav, obstacle)``, each ``(E, N)`` (m).

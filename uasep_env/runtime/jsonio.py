@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.atomic import atomic_write
+from uasep_env.runtime.atomic import atomic_write
 
 __all__ = [
     "OMIT",
@@ -97,7 +97,7 @@ def write_json(value: Any, path: str | Path) -> Path:
 
     A path ending in ``.gz`` is gzip-compressed with a zero time stamp, so the same value
     gives the same bytes (per-episode results of large banks shrink about tenfold). The file
-    is written atomically (:func:`uasep_env.atomic.atomic_write`).
+    is written atomically (:func:`uasep_env.runtime.atomic.atomic_write`).
 
     Args:
         value: Anything :func:`to_plain` takes.

@@ -1,6 +1,6 @@
 """Per-environment random streams, their noise drawn in blocks (on threads for large batches).
 
-Each environment of a :class:`~uasep_env.world.World` owns a
+Each environment of a :class:`~uasep_env.sim.world.World` owns a
 :class:`numpy.random.Generator`. :class:`NoiseStreams` draws from it ``noise_block``
 physics steps of noise at once (Gaussian noise, already scaled, and uniforms), per
 environment, so that environment ``i`` of a batch reads exactly the numbers a single
@@ -19,7 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from uasep_env._numba import compiled_twin
-from uasep_env.cores import process_share
+from uasep_env.runtime.cores import process_share
 
 __all__ = ["REFILL_CHUNK", "NoiseStreams", "refill_noise"]
 

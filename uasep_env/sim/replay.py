@@ -5,10 +5,10 @@ A replayed obstacle flies a recorded track (:mod:`uasep_env.real_traffic`) that 
 step ``dt`` and placed: ``(K, 3)`` positions, one per physics step from the reset (``K``:
 the episode's physics steps + 1, at most the 200 s timeline's). :class:`ReplayTracks` holds
 them for the batch, ``(E, M, K, 3)``. After the Dubins step (:meth:`ReplayTracks.step`,
-called from :meth:`uasep_env.world.World.step`) it writes each replayed obstacle's state
-into the world's :class:`~uasep_env.obstacles.ObstacleState`: the position from the track,
+called from :meth:`uasep_env.sim.world.World.step`) it writes each replayed obstacle's state
+into the world's :class:`~uasep_env.sim.obstacles.ObstacleState`: the position from the track,
 and heading, airspeed and climb rate such that
-:func:`~uasep_env.obstacles.obstacle_velocity` gives the track's velocity (central
+:func:`~uasep_env.sim.obstacles.obstacle_velocity` gives the track's velocity (central
 differences of the positions; one-sided at the ends). Everything downstream (sensing, the
 Kalman filter, the reachable-set prediction, the observations) reads that state as it reads
 a Dubins obstacle's.
@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.obstacles import ObstacleState
+from uasep_env.sim.obstacles import ObstacleState
 
 __all__ = ["ReplayTracks", "track_velocities"]
 

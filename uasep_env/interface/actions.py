@@ -8,7 +8,7 @@
 ``command = clip(apf(obs) + action.residual_scale * action, -1, 1)``. A zero action flies
 the APF exactly, so a learner starts from the reference controller and only learns where
 to depart from it (the usual start of safety-critical RL). The observation then ends with
-the APF's command (``base_action``, see :mod:`uasep_env.observation`), so a policy sees
+the APF's command (``base_action``, see :mod:`uasep_env.interface.observation`), so a policy sees
 what it corrects.
 
 :class:`ResidualAPF` is the one implementation of the mode: the environments use it to

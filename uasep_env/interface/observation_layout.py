@@ -37,7 +37,7 @@ per nearest obstacle (K_o)  16    reachable-ellipsoid centre relative to the UAV
                                   signed distance from the UAV to the ellipsoid (1, m),
                                   presence mask (1)
 ``obstacle_class``          5     optional, per nearest obstacle: its aircraft class,
-                                  one-hot over :data:`uasep_env.obstacles.AIRCRAFT_CLASSES`
+                                  one-hot over :data:`uasep_env.sim.obstacles.AIRCRAFT_CLASSES`
                                   (unknown, dubins, glider, helicopter, fixed_wing), like
                                   ADS-B's emitter category
 ==========================  ====  ======================================================
@@ -51,7 +51,7 @@ defaults (``clip * position_scale`` = 1,200 m; a default plan's final way-point 
 (a higher ``cruise_speed`` or a longer ``episode_duration``) reads that bound until the
 formation comes within it. None of the APF controllers uses it.
 
-In the ``residual_apf`` action mode (``action.mode``, see :mod:`uasep_env.actions`) the
+In the ``residual_apf`` action mode (``action.mode``, see :mod:`uasep_env.interface.actions`) the
 vector ends with one more feature, ``base_action`` (3): the APF's normalised command for
 the rest of the vector, the command the agent's action corrects. It is not clipped.
 """

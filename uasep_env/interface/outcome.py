@@ -1,9 +1,9 @@
 """A step's outcome, read off the world just stepped: rewards, episode ends, safety, costs.
 
 :func:`step_outcome` is what :meth:`uasep_env.envs.core.EnvCore.step` needs after the world
-moved, in one call: the reward terms and their weighted sum (:mod:`uasep_env.rewards`), each
-UAV's collision and lost tests (the episode ends), the safety flags of the step and the
-costs weighted from them (:mod:`uasep_env.costs`). Its numpy reference composes those
+moved, in one call: the reward terms and their weighted sum (:mod:`uasep_env.interface.rewards`),
+each UAV's collision and lost tests (the episode ends), the safety flags of the step and the
+costs weighted from them (:mod:`uasep_env.interface.costs`). Its numpy reference composes those
 modules' functions; its compiled twin (``_kernels.rewards.step_outcome``) computes it all in
 one pass over the agents, so that a small batch's step does not pay a dozen numpy calls
 for it.
@@ -18,9 +18,9 @@ import numpy as np
 
 from uasep_env._numba import compiled_twin
 from uasep_env.config import CostWeights
-from uasep_env.costs import TERMS as COST_TABLE
-from uasep_env.costs import weighted_cost
-from uasep_env.rewards import (
+from uasep_env.interface.costs import TERMS as COST_TABLE
+from uasep_env.interface.costs import weighted_cost
+from uasep_env.interface.rewards import (
     _TERM_INDEX,
     _collided,
     _Constants,
@@ -32,7 +32,7 @@ from uasep_env.rewards import (
 
 if TYPE_CHECKING:
     from uasep_env.config import EnvConfig
-    from uasep_env.world import World
+    from uasep_env.sim.world import World
 
 __all__ = [
     "SAFETY_FLAGS",
@@ -105,7 +105,8 @@ def step_outcome(x: _Inputs, c: _Constants, w: np.ndarray, o: OutcomeConstants) 
     """The reward terms, episode-end tests, safety flags and costs of a step.
 
     Args:
-        x: The world's arrays the reward terms read (:func:`uasep_env.rewards._gather_inputs`).
+        x: The world's arrays the reward terms read
+            (:func:`uasep_env.interface.rewards._gather_inputs`).
         c: The reward terms' constants.
         w: One reward weight per term.
         o: The other constants.

@@ -48,8 +48,8 @@ _PER_ENV_BYTES = 16 * 1024  # whatever the config does not scale: plans, episode
 
 def env_bytes(config: EnvConfig) -> int:
     """Estimated peak memory of one environment of a batch (bytes), from ``config``."""
-    from uasep_env.observation_layout import ObservationLayout
-    from uasep_env.obstacles import N_UNIFORMS
+    from uasep_env.interface.observation_layout import ObservationLayout
+    from uasep_env.sim.obstacles import N_UNIFORMS
 
     n, m = config.n_uavs, config.n_obstacles
     width = ObservationLayout.from_config(config).dim

@@ -1,7 +1,7 @@
 """The Lagrange multiplier of constrained training, and the cost budget it enforces.
 
 Constrained RL maximises the return ``J_r`` subject to ``J_c <= d``, with ``J_c`` the
-expected episode cost (:mod:`uasep_env.costs`, per agent) and ``d`` the cost limit. The
+expected episode cost (:mod:`uasep_env.interface.costs`, per agent) and ``d`` the cost limit. The
 Lagrangian relaxation ``max_pi min_{lambda >= 0} J_r - lambda (J_c - d)`` trains the policy
 on ``r - lambda c`` and moves ``lambda`` up while the measured episode cost is above ``d``
 and down (to 0 at least) while it is below.
@@ -23,7 +23,7 @@ update of OmniSafe's and SafePO's PPO-Lag up to their use of Adam on ``lambda``.
 :func:`apf_cost_budget` measures the limit ``d`` from the reference APF on validation
 encounters with the project's evaluation code (:func:`uasep_env.evaluation.evaluate`).
 The SB3 side (the callback that applies the multiplier to PPO's rollouts) is
-:mod:`uasep_env.sb3_lagrangian`.
+:mod:`uasep_env.training.sb3_lagrangian`.
 """
 
 from __future__ import annotations

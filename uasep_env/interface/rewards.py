@@ -57,8 +57,8 @@ The task reward of constrained training, ``make_config(reward="task")``
 (:meth:`RewardWeights.task() <uasep_env.config.RewardWeights.task>`), keeps only the task:
 the default weights of ``deviation``, ``control``, ``smoothness`` and ``progress``, and no
 separation, region or collision term; safety is the cost channel's
-(:mod:`uasep_env.costs`), bounded as a constraint (:mod:`uasep_env.lagrangian`). From the
-term table (:func:`step_reward_bounds`) a step alive earns between 0.75 and 1 (the default
+(:mod:`uasep_env.interface.costs`), bounded as a constraint (:mod:`uasep_env.training.lagrangian`).
+From the term table (:func:`step_reward_bounds`) a step alive earns between 0.75 and 1 (the default
 weights: between 0 and 1), so ending an episode early never pays there either.
 """
 
@@ -72,7 +72,7 @@ import numpy as np
 
 from uasep_env._numba import compiled_twin
 from uasep_env.config import RewardWeights, UAVConfig
-from uasep_env.world import World
+from uasep_env.sim.world import World
 
 __all__ = [
     "DEVIATION_SCALE_M",

@@ -1,10 +1,10 @@
 """Per-agent observations built from what each UAV knows (its Kalman estimates).
 
 Every agent gets one flat ``float32`` vector; which features it holds, in which order, and
-their scales are the config's :class:`~uasep_env.observation_layout.ObservationLayout`
-(the feature table, :data:`~uasep_env.observation_layout.FEATURES`, is documented in
-:mod:`uasep_env.observation_layout`). This module computes them: :func:`build_observations`
-(the numpy reference, with a bit-identical compiled twin in
+their scales are the config's :class:`~uasep_env.interface.observation_layout.ObservationLayout`
+(the feature table, :data:`~uasep_env.interface.observation_layout.FEATURES`, is documented in
+:mod:`uasep_env.interface.observation_layout`). This module computes them:
+:func:`build_observations` (the numpy reference, with a bit-identical compiled twin in
 :mod:`uasep_env._kernels.observations`) and the centralised critics' :func:`global_state`.
 """
 
@@ -17,11 +17,11 @@ import numpy as np
 
 from uasep_env._numba import compiled_twin
 from uasep_env.config import EnvConfig
-from uasep_env.formation import MIN_FRAME_SPEED, formation_center, slot_positions
-from uasep_env.observation_layout import FEATURES, Feature, ObservationLayout
-from uasep_env.obstacles import AIRCRAFT_CLASSES
+from uasep_env.interface.observation_layout import FEATURES, Feature, ObservationLayout
 from uasep_env.reachable.distance import _N_NEWTON, region_distances
-from uasep_env.world import World
+from uasep_env.sim.formation import MIN_FRAME_SPEED, formation_center, slot_positions
+from uasep_env.sim.obstacles import AIRCRAFT_CLASSES
+from uasep_env.sim.world import World
 
 __all__ = [
     "FEATURES",
@@ -59,7 +59,7 @@ class _Inputs(NamedTuple):
     sin_h: np.ndarray  # (E, M) sine of the ellipsoid heading
     heading: np.ndarray  # (E, M) the ellipsoid heading (rad)
     active: np.ndarray  # (E, M) bool, obstacle present
-    aircraft_class: np.ndarray  # (E, M) int64 class code (uasep_env.obstacles.AIRCRAFT_CLASSES)
+    aircraft_class: np.ndarray  # (E, M) int64 class code (uasep_env.sim.obstacles.AIRCRAFT_CLASSES)
 
 
 def build_observations(

@@ -1,6 +1,6 @@
 """Distances between UAVs and from UAVs to obstacle centres: the one set of helpers.
 
-The world's safety check (:meth:`uasep_env.world.World.separations`), the metrics of a
+The world's safety check (:meth:`uasep_env.sim.world.World.separations`), the metrics of a
 recorded episode and the figures all measure with these functions, so a distance is the same
 number wherever it is reported. The norm is numpy's ``sqrt(einsum("...i,...i"))``, whose
 summation order the compiled kernels reproduce (:mod:`uasep_env._kernels`).

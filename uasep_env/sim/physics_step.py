@@ -1,11 +1,11 @@
 """One physics step of every world: UAVs, obstacles, sensing, Kalman filters and safety.
 
 :func:`physics_step` is the numpy reference of the whole physics step of
-:class:`uasep_env.world.World`, in the order of :mod:`uasep_env.world`'s steps 1-4: the
-double integrator with its process noise (:mod:`uasep_env.dynamics`), the obstacles' Dubins
-motion (:mod:`uasep_env.obstacles`, or a replay's recorded tracks), the noisy measurements
-and both Kalman filters (:mod:`uasep_env.estimation`), and the running minimum separations
-(:mod:`uasep_env.geometry`). It composes those modules' numpy functions; its compiled twin
+:class:`uasep_env.sim.world.World`, in the order of :mod:`uasep_env.sim.world`'s steps 1-4: the
+double integrator with its process noise (:mod:`uasep_env.sim.dynamics`), the obstacles' Dubins
+motion (:mod:`uasep_env.sim.obstacles`, or a replay's recorded tracks), the noisy measurements
+and both Kalman filters (:mod:`uasep_env.sim.estimation`), and the running minimum separations
+(:mod:`uasep_env.sim.geometry`). It composes those modules' numpy functions; its compiled twin
 (``_kernels.physics.physics_step``) does the same arithmetic in three kernels between
 numpy's sines and cosines, so that a step costs three compiled calls instead of a dozen
 numpy and compiled ones (the Python between them is most of a small batch's step).
@@ -18,10 +18,10 @@ from typing import NamedTuple, Protocol
 import numpy as np
 
 from uasep_env._numba import compiled_twin
-from uasep_env.dynamics import measure, step_double_integrator
-from uasep_env.estimation import gain_table, kalman_correct
-from uasep_env.geometry import nearest_separations
-from uasep_env.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
+from uasep_env.sim.dynamics import measure, step_double_integrator
+from uasep_env.sim.estimation import gain_table, kalman_correct
+from uasep_env.sim.geometry import nearest_separations
+from uasep_env.sim.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity, step_obstacles
 
 __all__ = ["PhysicsArrays", "PhysicsParams", "physics_step"]
 
@@ -67,7 +67,7 @@ class PhysicsParams(NamedTuple):
         max_accel: Per-axis acceleration bound (m/s^2).
         kalman: Whether the estimates are Kalman filtered (else the measurements).
         uav_gains: ``(K, 2, 2)`` the UAV tracks' gain table
-            (:attr:`uasep_env.estimation.KalmanModel.gains`).
+            (:attr:`uasep_env.sim.estimation.KalmanModel.gains`).
         obstacle_gains: ``(K', 2, 2)`` the obstacle tracks' gain table.
     """
 
@@ -80,7 +80,7 @@ class PhysicsParams(NamedTuple):
 
 
 class Replay(Protocol):
-    """Moves replayed obstacles after the Dubins step (:class:`uasep_env.replay.ReplayTracks`)."""
+    """Moves replayed obstacles after the Dubins step (:class:`~.replay.ReplayTracks`)."""
 
     def step(self, obs: ObstacleState, time: np.ndarray) -> None: ...
 
@@ -99,7 +99,7 @@ def physics_step(
     Args:
         w: The world's arrays (updated).
         obs: The obstacles' state (updated; ``heading``, ``turn_rate`` and ``climb_rate``
-            get new arrays, as :func:`uasep_env.obstacles.step_obstacles` gives them).
+            get new arrays, as :func:`uasep_env.sim.obstacles.step_obstacles` gives them).
         normals: ``(E, K)`` this step's scaled Gaussian noise: each UAV's acceleration
             (``3 N`` columns), then each UAV's and each obstacle's measured position and
             velocity (6 columns each).
