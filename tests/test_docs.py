@@ -379,3 +379,29 @@ def test_css_rules_are_read():
         "article table.docutils": {"display": "block", "overflow-x": "auto"},
         ".w": {"display": "block", "overflow-x": "auto"},
     }
+
+
+# --- The user pages hold today's figures; their history is benchmarks/RESULTS_LOG.md ---------
+
+#: What marks lab notes: a machine letter, a round's name, a commit hash, an issue
+#: number, a scratch folder.
+_LAB_NOTES = re.compile(
+    r"machine [A-C]\b|\bthe [\w-]+ round\b|`[0-9a-f]{7,40}`|\bissue \d+|\(#\d+\)|/tmp/"
+)
+
+
+@pytest.mark.parametrize("name", ["speed.md", "training.md"])
+def test_the_speed_and_training_pages_carry_no_lab_notes(name):
+    text = (DOCS / name).read_text()
+    assert _LAB_NOTES.findall(text) == [], f"docs/{name}: move history to RESULTS_LOG.md"
+    assert "../benchmarks/RESULTS_LOG.md" in (DOCS / "speed.md").read_text()
+    assert (ROOT / "benchmarks" / "RESULTS_LOG.md").is_file()
+    if name == "speed.md":
+        assert len(text.splitlines()) < 250, "docs/speed.md: a page read in five minutes"
+
+
+def test_the_lab_notes_check_sees_them():
+    found = _LAB_NOTES.findall(
+        "on machine B (the boundary round, `e80e694`, issue 30) in /tmp/s8/x; a machine"
+    )
+    assert found == ["machine B", "the boundary round", "`e80e694`", "issue 30", "/tmp/"]
