@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import posixpath
 import re
 import sys
 from pathlib import Path
@@ -65,7 +66,9 @@ REPOSITORY_FILES = "https://github.com/uasep/uasep-env/blob/main/"
 
 html_theme = "furo"
 html_title = "uasep-env"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+# Wide tables scroll sideways in the content column (docs/_static/tables.css).
+html_css_files = ["tables.css"]
 
 
 def _canonical(target: str, module: str | None) -> str | None:
@@ -176,16 +179,41 @@ def _write_api_pages(app) -> None:  # noqa: ANN001 (Sphinx's hook)
             page.unlink()  # a module that was removed or renamed
 
 
-_OUTSIDE_DOCS = re.compile(r"\]\(\.\./([^)\s]+)\)")
+_RELATIVE_UP = re.compile(r"\]\((\.\./[^)\s]+)\)")
+
+
+def repository_link(docname: str, target: str) -> str | None:
+    """Where a page's ``../`` link points on the site: a repository URL, or None (a page).
+
+    The target is resolved against the page's own folder (``envs/Formation`` links to
+    ``../environment.md``, a page of the site, which MyST resolves and which must stay on
+    the site); only a path that leaves docs/ (``../tests/a.py`` from ``speed``) becomes
+    the repository's file.
+
+    >>> repository_link("envs/Formation", "../environment.md#scenarios") is None
+    True
+    >>> repository_link("speed", "../benchmarks/bench_peers.py")
+    'https://github.com/uasep/uasep-env/blob/main/benchmarks/bench_peers.py'
+    """
+    path = posixpath.normpath(posixpath.join(posixpath.dirname(docname), target))
+    if not path.startswith("../"):
+        return None
+    return REPOSITORY_FILES + path.removeprefix("../")
 
 
 def _link_outside_docs(app, docname, source):  # noqa: ANN001, ANN202 (Sphinx's hook)
     """``[x](../tests/a.py)`` (right on GitHub's view of a page) -> the repository's file.
 
-    The site holds only docs/: a page's relative link to a repository file becomes a link
-    to that file in the repository, so pages keep plain relative links.
+    The site holds only docs/: a page's relative link to a repository file outside docs/
+    becomes a link to that file in the repository, so pages keep plain relative links
+    (which also work on GitHub). Links between pages stay on the site.
     """
-    source[0] = _OUTSIDE_DOCS.sub(lambda m: f"]({REPOSITORY_FILES}{m[1]})", source[0])
+
+    def replace(m: re.Match) -> str:
+        link = repository_link(docname, m[1])
+        return m[0] if link is None else f"]({link})"
+
+    source[0] = _RELATIVE_UP.sub(replace, source[0])
 
 
 def setup(app):  # noqa: ANN001, ANN201 (Sphinx's entry point)

@@ -13,6 +13,7 @@ import importlib
 import inspect
 import pkgutil
 import re
+import runpy
 
 import pytest
 from conftest import ROOT
@@ -201,3 +202,206 @@ def test_the_table_check_sees_a_row_broken_over_lines():
 @pytest.mark.parametrize("page", [*PAGES, ROOT / "train" / "README.md"], ids=lambda p: p.name)
 def test_the_pages_tables_have_every_row_on_one_line(page):
     assert broken_table_rows(page.read_text()) == []
+
+
+# --- Links between pages, and to the repository's files --------------------------------------
+
+DOCS = ROOT / "docs"
+#: docs/conf.py as Sphinx reads it: its link hook's rule, the static files it registers.
+CONF = runpy.run_path(str(DOCS / "conf.py"))
+#: The site's Markdown pages (figures/*.md are results files the pages include).
+SITE_PAGES = sorted(
+    p for p in DOCS.rglob("*.md") if not {"_build", "figures"} & set(p.relative_to(DOCS).parts)
+)
+ENV_CARDS = sorted((DOCS / "envs").glob("*.md"))
+_FENCED = re.compile(r"^(`{3,}|~{3,}).*?^\1", re.DOTALL | re.MULTILINE)
+_LINK_TARGET = re.compile(r"\]\(([^)\s]+)\)")
+_HEADING = re.compile(r"^(#{1,6})\s+(.+?)\s*#*\s*$", re.MULTILINE)
+
+
+def markdown_links(text: str) -> list[str]:
+    """The targets of a page's Markdown links and images, outside code."""
+    text = re.sub(r"`[^`\n]*`", "", _FENCED.sub("", text))
+    return _LINK_TARGET.findall(text)
+
+
+_INCLUDE = re.compile(r"^```\{include\} (\S+)\n((?::[\w-]+:.*\n)*)```", re.MULTILINE)
+
+
+def page_headings(page) -> list[tuple[int, str]]:
+    """A page's headings (level, text) in order, those of the files it includes among them."""
+    text, found = page.read_text(), []
+    pieces = re.split(_INCLUDE, text)  # text, (path, options, text)...
+    for i in range(0, len(pieces), 3):
+        found += [(len(h), t) for h, t in _HEADING.findall(_FENCED.sub("", pieces[i]))]
+        if i + 1 < len(pieces):
+            offset = re.search(r":heading-offset: (\d+)", pieces[i + 1] + pieces[i + 2])
+            shift = int(offset[1]) if offset else 0
+            found += [(level + shift, t) for level, t in page_headings(page.parent / pieces[i + 1])]
+    return found
+
+
+def heading_anchors(page) -> set[str]:
+    """The anchors MyST gives a page's headings (``myst_heading_anchors`` levels deep).
+
+    MyST's slug (``default_slugify``, GitHub's): the heading's text, lower case, spaces to
+    ``-``, everything but word characters and ``-`` dropped; a repeated slug gets ``-1``...
+    """
+    depth = CONF["myst_heading_anchors"]
+    found: set[str] = set()
+    for level, title in page_headings(page):
+        if level > depth:
+            continue
+        text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", title).replace("`", "")
+        slug = re.sub(r"[^\w\u4e00-\u9fff\- ]", "", text.lower().replace(" ", "-"))
+        unique, n = slug, 0
+        while unique in found:
+            n += 1
+            unique = f"{slug}-{n}"
+        found.add(unique)
+    return found
+
+
+def broken_links(page) -> list[str]:
+    """A page's relative links that do not resolve where the built site puts them.
+
+    The rule is the site's (``docs/conf.py``'s ``repository_link``, the hook Sphinx runs):
+    a link that stays inside docs/ must name an existing page (and one of its headings'
+    anchors) or file of the site; one that leaves docs/ becomes a repository link, whose
+    file must exist. A repository URL written out must name an existing file too.
+    """
+    docname = page.relative_to(DOCS).with_suffix("").as_posix()
+    bad = []
+    for target in markdown_links(page.read_text()):
+        path, _, anchor = target.partition("#")
+        if target.startswith(CONF["REPOSITORY_FILES"]) or "/uasep-env/tree/main/" in target:
+            repo_path = re.sub(r"^https://github\.com/uasep/uasep-env/(blob|tree)/main/", "", path)
+            if not (ROOT / repo_path).exists():
+                bad.append(f"{target} (no such repository file)")
+            continue
+        if re.match(r"^[a-z][a-z0-9+.-]*:", target):  # another site, mailto:
+            continue
+        if not path:  # an anchor of the page itself
+            if anchor not in heading_anchors(page):
+                bad.append(f"{target} (no such heading)")
+            continue
+        link = CONF["repository_link"](docname, path)
+        if link is not None:
+            repo_path = link.removeprefix(CONF["REPOSITORY_FILES"])
+            if not (ROOT / repo_path).exists():
+                bad.append(f"{target} -> {link} (no such repository file)")
+            continue
+        site_file = (page.parent / path).resolve()
+        if not site_file.is_relative_to(DOCS) or not site_file.exists():
+            bad.append(f"{target} (no such page on the site)")
+        elif anchor and site_file.suffix == ".md" and anchor not in heading_anchors(site_file):
+            bad.append(f"{target} (no heading #{anchor} in {site_file.name})")
+    return bad
+
+
+def test_the_link_check_applies_the_sites_rule():
+    # From an env card, ../environment.md is a page of the site: it must stay on the site.
+    assert CONF["repository_link"]("envs/Formation", "../environment.md#scenarios") is None
+    assert CONF["repository_link"]("speed", "../benchmarks/bench_peers.py") == (
+        CONF["REPOSITORY_FILES"] + "benchmarks/bench_peers.py"
+    )
+    assert CONF["repository_link"]("envs/Formation", "../../tests/conftest.py") == (
+        CONF["REPOSITORY_FILES"] + "tests/conftest.py"
+    )
+    source = ["[S](../environment.md#scenarios) [t](../../tests/conftest.py)"]
+    CONF["_link_outside_docs"](None, "envs/Formation", source)
+    assert source[0] == (
+        f"[S](../environment.md#scenarios) [t]({CONF['REPOSITORY_FILES']}tests/conftest.py)"
+    )
+    assert "scenarios" in heading_anchors(DOCS / "environment.md")
+    assert "the-lean-loop---trainer-lean" in heading_anchors(DOCS / "training.md")
+    assert markdown_links("[a](x.md) `[b](y.md)`\n```\n[c](z.md)\n```\n") == ["x.md"]
+
+
+@pytest.mark.parametrize("page", ENV_CARDS, ids=lambda p: p.name)
+def test_env_cards_links_resolve_on_the_site(page):
+    assert ENV_CARDS, "no env cards found"
+    links = markdown_links(page.read_text())
+    if page.name != "index.md":
+        # The card's links to the environment page's sections must be among those checked.
+        assert any(link.startswith("../environment.md#") for link in links), links
+    assert broken_links(page) == []
+
+
+@pytest.mark.parametrize("page", SITE_PAGES, ids=lambda p: p.relative_to(DOCS).as_posix())
+def test_every_pages_links_resolve_on_the_site(page):
+    assert broken_links(page) == []
+
+
+# --- Wide tables ---------------------------------------------------------------------------
+
+
+def css_rules(css: str) -> dict[str, dict[str, str]]:
+    """A stylesheet's rules: each selector of a rule -> its declarations (comments dropped)."""
+    css = re.sub(r"/\*.*?\*/", "", css, flags=re.DOTALL)
+    rules: dict[str, dict[str, str]] = {}
+    for selectors, body in re.findall(r"([^{}]+)\{([^{}]*)\}", css):
+        declarations = dict(
+            (k.strip(), v.strip())
+            for k, _, v in (d.partition(":") for d in body.split(";"))
+            if k.strip()
+        )
+        for selector in selectors.split(","):
+            rules.setdefault(" ".join(selector.split()), {}).update(declarations)
+    return rules
+
+
+def test_wide_tables_scroll_sideways_on_the_site():
+    # The results tables have a dozen columns: at 1280 px they must scroll inside the
+    # content column, not run past it and hide their last columns.
+    registered = [
+        DOCS / folder / name
+        for folder in CONF["html_static_path"]
+        for name in CONF.get("html_css_files", [])
+        if (DOCS / folder / name).is_file()
+    ]
+    assert registered, "docs/conf.py registers no stylesheet of docs/_static (html_css_files)"
+    rules: dict[str, dict[str, str]] = {}
+    for sheet in registered:
+        rules.update(css_rules(sheet.read_text()))
+    tables = {s: d for s, d in rules.items() if re.search(r"\btable\b", s)}
+    assert any(
+        d.get("overflow-x") in ("auto", "scroll")
+        and d.get("display") == "block"
+        and d.get("max-width") == "100%"
+        for d in tables.values()
+    ), f"no rule makes the pages' tables scroll sideways: {tables}"
+
+
+def test_css_rules_are_read():
+    css = "/* a { x: y } */\narticle table.docutils,\n.w { display: block; overflow-x: auto }"
+    assert css_rules(css) == {
+        "article table.docutils": {"display": "block", "overflow-x": "auto"},
+        ".w": {"display": "block", "overflow-x": "auto"},
+    }
+
+
+# --- The user pages hold today's figures; their history is benchmarks/RESULTS_LOG.md ---------
+
+#: What marks lab notes: a machine letter, a round's name, a commit hash, an issue
+#: number, a scratch folder.
+_LAB_NOTES = re.compile(
+    r"machine [A-C]\b|\bthe [\w-]+ round\b|`[0-9a-f]{7,40}`|\bissue \d+|\(#\d+\)|/tmp/"
+)
+
+
+@pytest.mark.parametrize("name", ["speed.md", "training.md"])
+def test_the_speed_and_training_pages_carry_no_lab_notes(name):
+    text = (DOCS / name).read_text()
+    assert _LAB_NOTES.findall(text) == [], f"docs/{name}: move history to RESULTS_LOG.md"
+    assert "../benchmarks/RESULTS_LOG.md" in (DOCS / "speed.md").read_text()
+    assert (ROOT / "benchmarks" / "RESULTS_LOG.md").is_file()
+    if name == "speed.md":
+        assert len(text.splitlines()) < 250, "docs/speed.md: a page read in five minutes"
+
+
+def test_the_lab_notes_check_sees_them():
+    found = _LAB_NOTES.findall(
+        "on machine B (the boundary round, `e80e694`, issue 30) in /tmp/s8/x; a machine"
+    )
+    assert found == ["machine B", "the boundary round", "`e80e694`", "issue 30", "/tmp/"]
