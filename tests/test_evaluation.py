@@ -388,12 +388,13 @@ def test_scenario_brings_its_defaults_large_formation_flies_eight(tmp_path):
     assert json.loads(out.read_text())["config"]["n_uavs"] == 8
 
 
-def test_episode_cost_in_the_table_csv_and_json(tmp_path):
+@pytest.mark.parametrize("scenario", ["random", "collision_head_on"])  # the last: ends in a crash
+def test_episode_cost_in_the_table_csv_and_json(tmp_path, scenario):
     """Each episode's cost per UAV and for the team: the core's per-step costs, summed."""
     from uasep_env.envs.core import EnvCore
     from uasep_env.evaluation import format_summary, write_csv
 
-    cfg = make_config(scenario="random", episode_duration=60.0)
+    cfg = make_config(scenario=scenario, episode_duration=60.0)
     seeds = [5_000_000, 5_000_001]
     res = evaluate("zero", cfg, seeds)
     # the same episodes stepped by hand: each UAV's cost summed while its episode runs

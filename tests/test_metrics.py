@@ -780,6 +780,7 @@ def _wilson(k: int, n: int) -> dict[str, float]:
         ((0, 50), (0, 50), "met"),  # 0 of 50 each: the bound 7.1 % is within 10 points
         ((1, 500), (3, 500), "met"),  # lower, and tightly bounded
         ((1, 50), (0, 50), "not shown"),  # 2 % vs 0 %: the point estimate is worse
+        ((3, 500), (1, 500), "not shown"),  # tightly bounded, but worse
         ((40, 50), (0, 50), "not met"),  # 80 % [67, 89] wholly above [0, 7.1]
         ((11, 50), (0, 50), "not met"),
     ],
