@@ -386,3 +386,49 @@ def test_scenario_brings_its_defaults_large_formation_flies_eight(tmp_path):
     args = ["--scenario", "large_formation", "--config", "episode_duration=2", "--json", str(out)]
     assert main([*args, "--quiet"]) == 0
     assert json.loads(out.read_text())["config"]["n_uavs"] == 8
+
+
+@pytest.mark.parametrize("scenario", ["random", "collision_head_on"])  # the last: ends in a crash
+def test_episode_cost_in_the_table_csv_and_json(tmp_path, scenario):
+    """Each episode's cost per UAV and for the team: the core's per-step costs, summed."""
+    from uasep_env.envs.core import EnvCore
+    from uasep_env.evaluation import format_summary, write_csv
+
+    cfg = make_config(scenario=scenario, episode_duration=60.0)
+    seeds = [5_000_000, 5_000_001]
+    res = evaluate("zero", cfg, seeds)
+    # the same episodes stepped by hand: each UAV's cost summed while its episode runs
+    core = EnvCore(cfg, n_envs=len(seeds))
+    core.reset(seed=seeds)
+    done = np.zeros(len(seeds), dtype=bool)
+    summed = np.zeros((len(seeds), cfg.n_uavs))
+    while not done.all():
+        step = core.step(np.zeros((len(seeds), cfg.n_uavs, 3)), active=~done)
+        summed[~done] += step.cost[~done]
+        done |= step.terminated | step.truncated
+    assert summed.max() > 0  # the zero policy loses separation in the first encounter
+    episodes = res.results["zero"].episodes
+    for e, want in zip(episodes, summed, strict=True):
+        assert [u.cost for u in e.metrics.uavs] == pytest.approx(want)
+        assert e.metrics.episode.cost == pytest.approx(want.mean())
+        assert e.metrics.episode.max_uav_cost == pytest.approx(want.max())
+    agg = res.results["zero"].aggregate
+    assert agg["episode.cost"]["mean"] == pytest.approx(summed.mean())
+    assert agg["uav.uav_0.cost"]["ci_high"] >= agg["uav.uav_0.cost"]["mean"]
+    # the JSON: per episode, per UAV and for the team, and the aggregate
+    doc = _strict_json(result_to_json(res))["results"]["zero"]
+    assert doc["episodes"][0]["metrics"]["episode"]["cost"] == pytest.approx(summed[0].mean())
+    assert doc["episodes"][0]["metrics"]["uavs"][2]["cost"] == pytest.approx(summed[0, 2])
+    assert "episode.max_uav_cost" in doc["aggregate"]
+    # the CSV: one column per UAV and the team's
+    with write_csv(res, tmp_path / "r.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert float(rows[0]["episode.cost"]) == pytest.approx(summed[0].mean())
+    assert float(rows[0]["uav.uav_1.cost"]) == pytest.approx(summed[0, 1])
+    assert float(rows[1]["episode.max_uav_cost"]) == pytest.approx(summed[1].max())
+    # the table: the team's and the worst UAV's (mean ± half-width), and each UAV's
+    titles = {r[0]: r[1] for r in summary_rows(res)}
+    assert titles["episode cost, team mean"].startswith(f"{summed.mean():.2f} ")
+    assert titles["episode cost, worst UAV"].startswith(f"{summed.max(axis=1).mean():.2f} ")
+    assert titles["uav_0 episode cost"].startswith(f"{summed[:, 0].mean():.2f} ")
+    assert "episode cost = a UAV's per-step costs summed" in format_summary(res)

@@ -715,6 +715,9 @@ BAD = [
     ("uav_names", lambda kw: kw.update(uav_names=("a",))),
     ("uav_names", lambda kw: kw.update(uav_names=("a", "a"))),
     ("uav_names", lambda kw: kw.update(uav_names="ab")),
+    ("step_cost", lambda kw: kw.update(step_cost=np.zeros((6, 2)))),  # one row per step: 5
+    ("step_cost", lambda kw: kw.update(step_cost=np.full((5, 2), -1.0))),
+    ("step_cost", lambda kw: kw.update(step_cost=np.full((5, 2), np.nan))),
 ]
 
 
@@ -739,3 +742,64 @@ def test_no_worse_rate_is_the_overlap_rule():
         no_worse_rate({"rate": 0.1}, apf)
     with pytest.raises(ValueError, match="NaN"):
         no_worse_rate({"ci_low": math.nan}, apf)
+
+
+def test_episode_cost_is_each_uavs_summed_step_cost_and_the_team_mean():
+    """Per UAV the sum over steps; the episode: the mean over UAVs and the worst UAV."""
+    pos = np.zeros((4, 3, 3))
+    pos[:, :, 0] = [0.0, 50.0, 100.0]
+    step_cost = np.array([[1.0, 0.0, 2.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.5]])  # 3 steps
+    m = episode_metrics(make_record(pos, 1.0, step_cost=step_cost))
+    assert [u.cost for u in m.uavs] == [2.0, 0.0, 2.5]
+    assert m.episode.cost == pytest.approx(4.5 / 3)
+    assert m.episode.max_uav_cost == 2.5
+    flat = flatten_metrics(m)
+    assert flat["episode.cost"] == pytest.approx(1.5) and flat["uav.uav_2.cost"] == 2.5
+    agg = aggregate([m, episode_metrics(make_record(pos, 1.0, step_cost=0 * step_cost))])
+    assert agg["episode.cost"]["mean"] == pytest.approx(0.75)
+    assert agg["episode.cost"]["kind"] == "mean" and agg["episode.cost"]["n_valid"] == 2
+    # a record without the cost channel: NaN, never 0 (and not counted as a value)
+    bare = episode_metrics(make_record(pos, 1.0))
+    assert math.isnan(bare.uavs[0].cost) and math.isnan(bare.episode.cost)
+    assert json.loads(bare.to_json())["episode"]["cost"] is None
+    assert aggregate([m, bare])["episode.cost"]["n_valid"] == 1
+
+
+def _wilson(k: int, n: int) -> dict[str, float]:
+    from uasep_env.metrics.statistics import wilson_interval
+
+    low, high = wilson_interval(k, n)
+    return {"rate": k / n, "ci_low": low, "ci_high": high, "n_valid": n}
+
+
+@pytest.mark.parametrize(
+    ("policy", "apf", "verdict"),
+    [
+        ((4, 5), (0, 5), "not shown"),  # 80 % [37.6, 96.4] vs 0 % [0, 43.4]: overlap, worse
+        ((0, 5), (0, 5), "not shown"),  # equal, but 5 episodes cannot rule out 43 %
+        ((0, 50), (0, 50), "met"),  # 0 of 50 each: the bound 7.1 % is within 10 points
+        ((1, 500), (3, 500), "met"),  # lower, and tightly bounded
+        ((1, 50), (0, 50), "not shown"),  # 2 % vs 0 %: the point estimate is worse
+        ((3, 500), (1, 500), "not shown"),  # tightly bounded, but worse
+        ((40, 50), (0, 50), "not met"),  # 80 % [67, 89] wholly above [0, 7.1]
+        ((11, 50), (0, 50), "not met"),
+    ],
+)
+def test_rate_verdict_never_says_met_on_wide_intervals(policy, apf, verdict):
+    from uasep_env.metrics.statistics import rate_verdict
+
+    assert rate_verdict(_wilson(*policy), _wilson(*apf)) == verdict
+
+
+def test_rate_verdict_reads_means_and_rejects_bad_input():
+    from uasep_env.metrics.statistics import rate_verdict
+
+    seeds = {"mean": 0.0, "ci_low": 0.0, "ci_high": 0.01}  # a bootstrap interval: no "rate"
+    assert rate_verdict(seeds, seeds) == "met"
+    assert rate_verdict(_wilson(0, 50), _wilson(0, 50), margin=0.05) == "not shown"
+    with pytest.raises(ValueError, match="margin"):
+        rate_verdict(seeds, seeds, margin=-0.1)
+    with pytest.raises(ValueError, match="NaN"):
+        rate_verdict(seeds | {"mean": math.nan}, seeds)
+    with pytest.raises(ValueError, match="ci_low and ci_high"):
+        rate_verdict({"rate": 0.1}, seeds)

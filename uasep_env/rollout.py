@@ -2,7 +2,8 @@
 
 :func:`run_episodes` plays one episode per seed, many at once in one batched
 :class:`~uasep_env.envs.core.EnvCore` (no Python loop over environments inside a step),
-and returns an :class:`~uasep_env.metrics.EpisodeRecord` of true states per episode. The
+and returns an :class:`~uasep_env.metrics.EpisodeRecord` of true states per episode, with
+each UAV's per-step cost as the core computed it (``EpisodeRecord.step_cost``). The
 same seeds give the same scenarios (obstacles, noise) for every policy, so policies are
 compared on identical encounters.
 """
@@ -118,6 +119,7 @@ def _run_batch(
         "region_distance": np.zeros((t_max, e, n, m)),
         "pred_center": np.zeros((t_max, e, m, 3)),
         "pred_heading": np.zeros((t_max, e, m)),
+        "cost": np.zeros((t_max, e, n)),  # row k: the step ending at sample k (row 0 unused)
     }
 
     def record(k: int) -> None:
@@ -146,6 +148,7 @@ def _run_batch(
         live = ~done
         returns[live] += res.rewards[live].mean(axis=1)
         record(k)
+        rec["cost"][k] = res.cost
         length[live] = k + 1
         terminated |= live & res.terminated
         done |= res.terminated | res.truncated
@@ -170,6 +173,7 @@ def _run_batch(
             obstacle_separation=cfg.uav.obstacle_separation,
             deviation_threshold=deviation_threshold,
             settle_time=settle,
+            step_cost=rec["cost"][1:t, i],
         )
         episodes.append(
             Episode(

@@ -44,7 +44,10 @@ def write_csv(result: EvaluationResult, path: str | Path) -> Path:
 
     Columns: ``policy, seed, family, steps, terminated, episode_return`` and then every key
     of :func:`uasep_env.metrics.flatten_metrics` (e.g. ``episode.min_obstacle_distance``,
-    ``uav.uav_2.timeline.t_leave``). Empty cells are NaN / undefined.
+    ``uav.uav_2.timeline.t_leave``), among them the episode cost: ``uav.<name>.cost`` (the
+    UAV's per-step costs summed over the episode), ``episode.cost`` (their mean over UAVs,
+    the team's) and ``episode.max_uav_cost`` (the worst UAV's). Empty cells are NaN /
+    undefined.
 
     Args:
         result: An :func:`evaluate` result.

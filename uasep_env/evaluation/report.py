@@ -22,6 +22,8 @@ _EPISODE_ROWS: tuple[tuple[str, str, int], ...] = (
     ("loss-of-separation events UAV-UAV", "episode.uav_los_events", -2),
     ("loss-of-separation events UAV-obstacle", "episode.obstacle_los_events", -2),
     ("collision events", "episode.collision_events", -2),
+    ("episode cost, team mean", "episode.cost", 2),
+    ("episode cost, worst UAV", "episode.max_uav_cost", 2),
     ("max deviation (m)", "episode.max_deviation", 2),
     ("RMS deviation, worst UAV (m)", "episode.max_rms_deviation", 2),
     ("max conflict duration (s)", "episode.max_conflict_duration", 1),
@@ -73,7 +75,9 @@ def summary_rows(result: EvaluationResult) -> list[list[str]]:
 
     With one episode the cells are the values; with more, ``mean ± half-width`` of the
     confidence interval of the mean (``n=`` when some episodes had no value, e.g. no UAV
-    left its track) and ``k/n`` for rates (episodes with a collision).
+    left its track) and ``k/n`` for rates (episodes with a collision). The episode cost (the
+    cost channel, :mod:`uasep_env.interface.costs`) is each UAV's per-step cost summed over
+    the episode; the team's is the mean of its UAVs' (:class:`uasep_env.metrics.EpisodeSummary`).
 
     Args:
         result: An :func:`evaluate` result.
@@ -113,6 +117,7 @@ def summary_rows(result: EvaluationResult) -> list[list[str]]:
         rows.append(row(f"{name} conflict duration (s)", f"{pre}.timeline.conflict_duration", 1))
         rows.append(row(f"{name} max deviation (m)", f"{pre}.deviation.max_norm", 2))
         rows.append(row(f"{name} acc std z (m/s²)", f"{pre}.fluctuation.acc_std.z", 3))
+        rows.append(row(f"{name} episode cost", f"{pre}.cost", 2))
     rows.append(row("episode return", "episode.episode_return", 1))
     return rows
 
@@ -147,6 +152,8 @@ def format_summary(result: EvaluationResult) -> str:
         f"{uav.separation_distance:g} m / UAV-obstacle {uav.obstacle_separation:g} m; "
         f"deviation and fluctuation after t = {settings.settle_time:g} s, "
         f"off-track beyond {settings.deviation_threshold:g} m; "
+        f"episode cost = a UAV's per-step costs summed (cost.* weights; by default its "
+        f"steps in loss of separation), team = mean over UAVs; "
         f"'-' = undefined (e.g. never left the track)"
         + ("; (n=k): only k episodes had a value." if n > 1 else ".")
     )

@@ -18,6 +18,10 @@ types in :mod:`.results`), and aggregates them over many episodes (:func:`aggreg
 * **Velocity and acceleration fluctuation** (section 4.4.2, figures 12-14): per-axis standard
   deviation and largest change per second.
 * **Path-length ratio**: flown path length over planned path length.
+* **Cost** (the cost channel of constrained RL, :mod:`uasep_env.interface.costs`): each
+  UAV's episode cost, its per-step costs (``EpisodeRecord.step_cost``) summed over the
+  episode; for the episode the team mean over UAVs and the worst UAV's. NaN when the record
+  carries no cost.
 
 Frame: NED (x north, y east, z down); metres, seconds, m/s, m/s^2. All arrays are numpy float64.
 

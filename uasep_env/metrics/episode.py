@@ -19,7 +19,7 @@ from uasep_env.metrics.families import (
 from uasep_env.metrics.record import EpisodeRecord
 from uasep_env.metrics.results import Axis3, EpisodeMetrics, EpisodeSummary, UAVMetrics
 
-__all__ = ["episode_metrics"]
+__all__ = ["episode_costs", "episode_metrics"]
 
 
 def _masked_argmin(values: np.ndarray) -> tuple[float, tuple[int, ...]]:
@@ -168,6 +168,20 @@ def _episode_safety(record: EpisodeRecord, p: _Pairs) -> dict[str, object]:
     }
 
 
+def episode_costs(record: EpisodeRecord) -> np.ndarray:
+    """Each UAV's episode cost: its per-step costs summed over the episode (all NaN without).
+
+    Args:
+        record: The episode.
+
+    Returns:
+        ``(N,)`` float64 (0 for an episode of one sample: no step).
+    """
+    if record.step_cost is None:
+        return np.full(record.n_uavs, math.nan)
+    return record.step_cost.sum(axis=0)
+
+
 def episode_metrics(record: EpisodeRecord, hold_time: float = 2.0) -> EpisodeMetrics:
     """Compute every metric of one episode.
 
@@ -185,6 +199,7 @@ def episode_metrics(record: EpisodeRecord, hold_time: float = 2.0) -> EpisodeMet
     timelines = conflict_timelines(record, hold_time=hold_time)
     flucts = fluctuation_stats(record)
     flown, planned, ratio = path_lengths(record)
+    costs = episode_costs(record)
     uavs = tuple(
         UAVMetrics(
             name=record.names[i],
@@ -196,6 +211,7 @@ def episode_metrics(record: EpisodeRecord, hold_time: float = 2.0) -> EpisodeMet
             path_length=float(flown[i]),
             planned_path_length=float(planned[i]),
             path_length_ratio=float(ratio[i]),
+            cost=float(costs[i]),
         )
         for i in range(record.n_uavs)
     )
@@ -215,6 +231,8 @@ def episode_metrics(record: EpisodeRecord, hold_time: float = 2.0) -> EpisodeMet
         max_vel_rate=_axis_max([f.vel_max_rate for f in flucts]),
         max_acc_rate=_axis_max([f.acc_max_rate for f in flucts]),
         max_path_length_ratio=_nanmax(list(ratio)),
+        cost=float(costs.mean()),
+        max_uav_cost=float(costs.max()),
     )
     config = {
         "dt": record.dt,

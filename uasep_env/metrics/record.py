@@ -75,6 +75,10 @@ class EpisodeRecord:
         settle_time: Samples before this time (s) are ignored by the deviation, timeline,
             fluctuation and path-length statistics; must not exceed ``time[-1]``.
         uav_names: Optional UAV names (N unique strings); default ``("uav_0", "uav_1", ...)``.
+        step_cost: Optional (T-1, N) cost of each UAV in each step (the cost channel,
+            :mod:`uasep_env.interface.costs`): row ``k`` is the cost of the step from sample
+            ``k`` to sample ``k + 1``; finite and ``>= 0``. None (a record made without the
+            cost channel) leaves the cost metrics NaN.
     """
 
     time: NDArray[np.float64]
@@ -92,6 +96,7 @@ class EpisodeRecord:
     deviation_threshold: float = 1.0
     settle_time: float = 0.0
     uav_names: tuple[str, ...] | None = None
+    step_cost: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         """Convert and validate every field; raise ValueError naming the bad field."""
@@ -189,6 +194,13 @@ class EpisodeRecord:
             if len(set(names)) != n_uav:
                 raise ValueError("uav_names: names must be unique")
         setf(self, "uav_names", names)
+
+        if self.step_cost is not None:
+            cost = _as_float_array("step_cost", self.step_cost)
+            _check_shape("step_cost", cost, (n_t - 1, n_uav))
+            if not np.all(np.isfinite(cost)) or np.any(cost < 0.0):
+                raise ValueError("step_cost: must be finite and >= 0")
+            setf(self, "step_cost", cost)
 
     @property
     def n_steps(self) -> int:

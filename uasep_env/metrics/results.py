@@ -7,6 +7,7 @@ Each is a frozen dataclass whose :meth:`~_Plain.to_dict` is its JSON layout (thr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -159,6 +160,11 @@ class UAVMetrics(_Plain):
         path_length: Flown path length after ``settle_time`` (m).
         planned_path_length: Planned path length over the same samples (m).
         path_length_ratio: ``path_length / planned_path_length``; NaN if the plan is static.
+        cost: The UAV's episode cost: the sum over the episode's steps of its per-step cost
+            (the cost channel, :mod:`uasep_env.interface.costs`; ``infos[agent]["cost"]``),
+            a weighted number of steps, whole episode (``settle_time`` does not apply).
+            With the default weights, the steps it spent in loss of separation. NaN when
+            the record has no cost (:attr:`EpisodeRecord.step_cost` None).
     """
 
     name: str
@@ -185,6 +191,7 @@ class UAVMetrics(_Plain):
     path_length: float
     planned_path_length: float
     path_length_ratio: float
+    cost: float = math.nan
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -232,6 +239,12 @@ class EpisodeSummary(_Plain):
         max_vel_rate: Per-axis largest ``|dv|/dt`` over UAVs (m/s^2).
         max_acc_rate: Per-axis largest ``|da|/dt`` over UAVs (m/s^3).
         max_path_length_ratio: Largest path-length ratio over UAVs.
+        cost: The team's episode cost: the mean over UAVs of their episode costs
+            (:attr:`UAVMetrics.cost`), i.e. the sum over steps of the centralised
+            ``info["cost"]`` (the mean of the agents' costs, as the reward is the mean of
+            theirs). NaN without a recorded cost.
+        max_uav_cost: The largest episode cost of one UAV (the worst agent's). NaN without
+            a recorded cost.
     """
 
     duration: float
@@ -273,6 +286,8 @@ class EpisodeSummary(_Plain):
     max_vel_rate: Axis3 = field(metadata=_PER_AXIS)
     max_acc_rate: Axis3 = field(metadata=_PER_AXIS)
     max_path_length_ratio: float
+    cost: float = math.nan
+    max_uav_cost: float = math.nan
 
 
 @dataclass(frozen=True, kw_only=True)

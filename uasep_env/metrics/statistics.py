@@ -16,10 +16,15 @@ from numpy.typing import ArrayLike
 from scipy import stats
 
 __all__ = [
+    "MET",
+    "NOT_MET",
+    "NOT_SHOWN",
+    "NO_WORSE_MARGIN",
     "check_probability",
     "iqm",
     "no_worse_rate",
     "normal_quantile",
+    "rate_verdict",
     "stratified_bootstrap_iqm",
     "t_interval",
     "t_quantile",
@@ -126,12 +131,25 @@ def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[f
     return float(ci.low), float(ci.high)
 
 
+def _bounds(name: str, stats: Mapping[str, float], *keys: str) -> tuple[float, ...]:
+    """The numeric, non-NaN values of ``keys`` in ``stats``; ValueError naming ``name``."""
+    try:
+        vals = tuple(float(stats[k]) for k in keys)
+    except (KeyError, TypeError, ValueError):
+        raise ValueError(f"{name}: both need numeric {' and '.join(keys)}") from None
+    if any(math.isnan(v) for v in vals):
+        raise ValueError(f"{name}: an interval bound or rate is NaN {vals}")
+    return vals
+
+
 def no_worse_rate(policy: Mapping[str, float], reference: Mapping[str, float]) -> bool:
-    """The project's one rule for "a rate no worse than the reference's" (e.g. the APF's).
+    """Whether the data leave the policy's rate possibly no worse than the reference's.
 
     The two 95 % intervals overlap, or the policy's lies below: the policy's lower bound is
-    at most the reference's upper bound. Every comparison script (held-out, scaling, across
-    seeds) judges its "as safe as the APF" targets by this rule.
+    at most the reference's upper bound. This only says the policy is **not shown worse**;
+    wide intervals (few episodes) always pass it, so it is not a verdict that a target is
+    met. Its negation is the "not met" of :func:`rate_verdict`, the rule reports judge
+    their "no worse than the APF" targets by.
 
     Args:
         policy: The policy's interval (``ci_low``, ``ci_high``: a Wilson interval, or a
@@ -139,7 +157,7 @@ def no_worse_rate(policy: Mapping[str, float], reference: Mapping[str, float]) -
         reference: The reference's interval, the same keys.
 
     Returns:
-        Whether the policy's rate is no worse than the reference's.
+        Whether the policy's rate is not shown worse than the reference's.
 
     Raises:
         ValueError: An interval without ``ci_low`` / ``ci_high`` or with a NaN bound.
@@ -151,6 +169,58 @@ def no_worse_rate(policy: Mapping[str, float], reference: Mapping[str, float]) -
     if math.isnan(low) or math.isnan(high):
         raise ValueError(f"no_worse_rate: an interval bound is NaN ({low}, {high})")
     return low <= high
+
+
+#: Non-inferiority margin of :func:`rate_verdict`: a rate up to this much (a fraction, here
+#: 10 percentage points) above the reference's still counts as "no worse".
+NO_WORSE_MARGIN = 0.10
+
+#: The three verdicts of a target.
+MET, NOT_MET, NOT_SHOWN = "met", "not met", "not shown"
+
+
+def rate_verdict(
+    policy: Mapping[str, float],
+    reference: Mapping[str, float],
+    margin: float = NO_WORSE_MARGIN,
+) -> str:
+    """The verdict on "the policy's rate is no worse than the reference's" (e.g. the APF's).
+
+    Read from each side's rate (``rate``, else ``mean``) and its 95 % interval (``ci_low``,
+    ``ci_high``):
+
+    * ``"not met"``: the policy's interval lies wholly above the reference's (its lower
+      bound above the reference's upper bound): the policy is worse;
+    * ``"met"``: the policy's rate is at most the reference's **and** its interval's upper
+      bound at most the reference's rate plus ``margin``: the data rule out the policy
+      being more than ``margin`` worse (with no event in either, 0 of n against 0 of n,
+      the Wilson upper bound is ``z^2 / (n + z^2)``: 35 episodes at the 10-point margin);
+    * ``"not shown"``: anything else: the point estimate is worse but the intervals
+      overlap, or the policy's interval is too wide to rule out a rate more than
+      ``margin`` above the reference's. Too few episodes never give "met".
+
+    Args:
+        policy: The policy's aggregate (a Wilson interval, or a bootstrap one across seeds).
+        reference: The reference's, the same keys.
+        margin: The non-inferiority margin (a rate difference, ``>= 0``).
+
+    Returns:
+        ``"met"``, ``"not met"`` or ``"not shown"``.
+
+    Raises:
+        ValueError: A missing or NaN rate or bound, or a negative margin.
+    """
+    margin = float(margin)
+    if not margin >= 0.0:
+        raise ValueError(f"margin: must be >= 0, got {margin}")
+    if not no_worse_rate(policy, reference):
+        return NOT_MET
+    key = "rate" if "rate" in policy and "rate" in reference else "mean"
+    p_rate, p_high = _bounds("rate_verdict", policy, key, "ci_high")
+    (r_rate,) = _bounds("rate_verdict", reference, key)
+    if p_rate <= r_rate and p_high <= r_rate + margin:
+        return MET
+    return NOT_SHOWN
 
 
 def iqm(values: ArrayLike) -> float:

@@ -40,9 +40,13 @@ Writes ``<out>.md`` (one table per sweep: rates with 95 % Wilson intervals, mean
 95 % Student-t intervals, from :func:`uasep_env.metrics.aggregate`), ``<out>.json`` (every
 aggregate of every cell) and ``<out>.png`` (every metric against the number of UAVs and of
 obstacles, with the intervals), and prints the targets: at 8 and 32 UAVs, each
-non-APF policy's collision rate no worse than the APF's (the 95 % Wilson intervals overlap
-or the policy's is lower: :func:`uasep_env.metrics.statistics.no_worse_rate`). An existing
-output is refused unless ``--force``.
+non-APF policy's collision rate no worse than the APF's, each "met", "not met" or "not
+shown" with the episodes behind it (:func:`uasep_env.metrics.statistics.rate_verdict`: met
+only if the policy's rate is no higher and its 95 % Wilson interval rules out a rate more
+than 10 percentage points above the APF's; not met if its interval lies wholly above the
+APF's; not shown otherwise, e.g. too few episodes). The tables carry each episode's cost
+(the cost channel: a UAV's per-step costs summed, the team mean and the worst UAV). An
+existing output is refused unless ``--force``.
 """
 
 from __future__ import annotations

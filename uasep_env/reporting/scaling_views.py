@@ -12,12 +12,14 @@ import math
 from pathlib import Path
 from typing import Any
 
-from uasep_env.metrics.statistics import no_worse_rate
+from uasep_env.metrics.statistics import NO_WORSE_MARGIN, rate_verdict
 from uasep_env.runtime.atomic import atomic_output
 from uasep_env.runtime.tables import render_table
 
 APFS = ("apf", "motion-state-apf", "traditional-apf")
-#: (dotted aggregate key, label, unit): safety first, then deviation.
+#: (dotted aggregate key, label, unit): safety first, then deviation, then the episode cost
+#: (:class:`uasep_env.metrics.EpisodeSummary`: each UAV's per-step costs summed over the
+#: episode; the team's the mean over UAVs, and the worst UAV's).
 METRICS: tuple[tuple[str, str, str], ...] = (
     ("episode.collision", "episodes with a collision", "rate"),
     ("episode.loss_of_separation", "episodes with loss of separation", "rate"),
@@ -30,7 +32,11 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("episode.max_conflict_duration", "max conflict duration", "s"),
     ("episode.max_deviation", "max deviation", "m"),
     ("episode.max_rms_deviation", "RMS deviation, worst UAV", "m"),
+    ("episode.cost", "episode cost, team mean", "cost"),
+    ("episode.max_uav_cost", "episode cost, worst UAV", "cost"),
 )
+#: The non-inferiority margin of the targets, in words.
+_MARGIN = f"{100 * NO_WORSE_MARGIN:g} percentage points"
 #: UAV counts the size target is checked at.
 TARGET_UAVS = (8, 32)
 
@@ -43,10 +49,19 @@ def _fmt(stats: dict[str, Any] | None, unit: str) -> str:
         return "-"
     if unit == "rate":
         return f"{mean:.1%} [{lo:.1%}, {hi:.1%}]"
-    digits = 2 if unit == "count" else 1
+    digits = 2 if unit in ("count", "cost") else 1
     if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
         return f"{mean:.{digits}f}"
     return f"{mean:.{digits}f} ± {0.5 * (hi - lo):.{digits}f}"
+
+
+def shown_metrics(result: dict[str, Any]) -> list[tuple[str, str, str]]:
+    """The :data:`METRICS` some row of ``result`` holds.
+
+    A result written before a metric joined them (e.g. the episode cost) renders without it.
+    """
+    rows = [*result["rows"], *result.get("held_out", [])]
+    return [m for m in METRICS if any(m[0] in r["metrics"] for r in rows)]
 
 
 def sweeps(result: dict[str, Any]) -> dict[str, list[dict[str, Any]]]:
@@ -60,10 +75,21 @@ def sweeps(result: dict[str, Any]) -> dict[str, list[dict[str, Any]]]:
     }
 
 
-def targets(result: dict[str, Any]) -> list[tuple[str, str, bool | None]]:
-    """At 8 and 32 UAVs: each non-APF policy's collision rate no worse than the APF's."""
+def targets(result: dict[str, Any]) -> list[tuple[str, str, str]]:
+    """At 8 and 32 UAVs: each non-APF policy's collision rate no worse than the APF's.
+
+    Each target's verdict is :func:`uasep_env.metrics.statistics.rate_verdict`'s: ``met``
+    (the policy's rate is at most the APF's and its 95 % Wilson interval rules out a rate
+    more than :data:`~uasep_env.metrics.statistics.NO_WORSE_MARGIN` above the APF's),
+    ``not met`` (its interval lies wholly above the APF's) or ``not shown`` (neither: too
+    few episodes for the intervals to decide), followed by the episodes behind it; ``not
+    evaluated`` when the cell lacks the APF or the policy.
+
+    Returns:
+        ``(target, measured, verdict)`` per target.
+    """
     by = {(r["n_uavs"], r["n_obstacles"], r["policy"]): r for r in result["rows"]}
-    out: list[tuple[str, str, bool | None]] = []
+    out: list[tuple[str, str, str]] = []
     others = [p["label"] for p in result["policies"] if p["label"] not in APFS]
     for n in TARGET_UAVS:
         ms = sorted({r["n_obstacles"] for r in result["rows"] if r["n_uavs"] == n})
@@ -72,13 +98,15 @@ def targets(result: dict[str, Any]) -> list[tuple[str, str, bool | None]]:
             for label in others:
                 mine = by.get((n, m, label))
                 what = f"{label}: collisions at {n} UAVs no worse than the APF's"
-                what += " (95 % intervals overlap or lower)"
                 if apf is None or mine is None:
-                    out.append((what, "not evaluated (needs apf and the policy)", None))
+                    out.append((what, "-", "not evaluated (needs apf and the policy)"))
                     continue
                 a, b = apf["metrics"]["episode.collision"], mine["metrics"]["episode.collision"]
-                met = no_worse_rate(b, a)
-                out.append((what, f"{_fmt(b, 'rate')} vs APF {_fmt(a, 'rate')}", met))
+                verdict = rate_verdict(b, a)
+                episodes = f"{b['n_valid']} vs {a['n_valid']} episodes"
+                out.append(
+                    (what, f"{_fmt(b, 'rate')} vs APF {_fmt(a, 'rate')}", f"{verdict} ({episodes})")
+                )
     return out
 
 
@@ -103,19 +131,20 @@ def markdown(result: dict[str, Any], command: str, elapsed_s: float) -> str:
                 f"obstacle(s), observes the {p['layout'][0]} nearest UAVs and "
                 f"{p['layout'][1]} nearest obstacle(s); other cells are zero-shot."
             )
-    headers = ["UAVs", "obstacles", "policy", *(label for _, label, _ in METRICS)]
+    metrics = shown_metrics(result)
+    headers = ["UAVs", "obstacles", "policy", *(label for _, label, _ in metrics)]
     for key, title in (("n_uavs", "By formation size"), ("n_obstacles", "By obstacle count")):
         rows = [
             [str(r["n_uavs"]), str(r["n_obstacles"]), r["policy"]]
-            + [_fmt(r["metrics"].get(k), unit) for k, _, unit in METRICS]
+            + [_fmt(r["metrics"].get(k), unit) for k, _, unit in metrics]
             for r in sweeps(result)[key]
         ]
-        align = ["right", "right", "left"] + ["right"] * len(METRICS)
+        align = ["right", "right", "left"] + ["right"] * len(metrics)
         lines += ["", f"## {title}", "", render_table(headers, rows, align=align, markdown=True)]
     if result.get("held_out"):
         rows = [
             [str(r["n_uavs"]), str(r["n_obstacles"]), r["policy"]]
-            + [_fmt(r["metrics"].get(k), unit) for k, _, unit in METRICS]
+            + [_fmt(r["metrics"].get(k), unit) for k, _, unit in metrics]
             for r in result["held_out"]
         ]
         n_held = result["held_out"][0]["metrics"]["episode.collision"]["n"]
@@ -128,16 +157,17 @@ def markdown(result: dict[str, Any], command: str, elapsed_s: float) -> str:
             "",
             render_table(headers, rows, align=align, markdown=True),
         ]
-    body = [
-        [t, m, "n/a" if ok is None else ("met" if ok else "not met")]
-        for t, m, ok in targets(result)
-    ]
+    body = [list(t) for t in targets(result)]
     if body:
         lines += [
             "",
             "## Targets",
             "",
-            render_table(["target", "measured", "met"], body, markdown=True),
+            "Met: the policy's rate is no higher than the APF's and its 95 % interval rules out "
+            f"a rate more than {_MARGIN} above it; not met: the interval "
+            "lies wholly above the APF's; not shown: neither (too few episodes to decide).",
+            "",
+            render_table(["target", "measured", "verdict"], body, markdown=True),
         ]
     return "\n".join(lines) + "\n"
 
@@ -148,10 +178,11 @@ def figure(result: dict[str, Any], path: Path) -> Path:
 
     sw = sweeps(result)
     labels = [p["label"] for p in result["policies"]]
-    n_rows = math.ceil(len(METRICS) / 2)
+    metrics = shown_metrics(result)
+    n_rows = math.ceil(len(metrics) / 2)
     fig = Figure(figsize=(16, 2.6 * n_rows), layout="constrained")
     axes = fig.subplots(n_rows, 4, squeeze=False)
-    for i, (key, title, unit) in enumerate(METRICS):
+    for i, (key, title, unit) in enumerate(metrics):
         for j, axis in enumerate(("n_uavs", "n_obstacles")):
             ax = axes[i // 2, 2 * (i % 2) + j]
             for label in labels:
@@ -169,7 +200,7 @@ def figure(result: dict[str, Any], path: Path) -> Path:
                 ]
                 ax.errorbar(xs, ys, yerr=[lo, hi], marker="o", capsize=3, label=label)
             ax.set_title(
-                f"{title}" + ("" if unit in ("rate", "count") else f" ({unit})"), fontsize=8
+                f"{title}" + ("" if unit in ("rate", "count", "cost") else f" ({unit})"), fontsize=8
             )
             ax.set_xlabel("UAVs" if axis == "n_uavs" else "obstacles", fontsize=8)
             if axis == "n_uavs":
@@ -177,7 +208,7 @@ def figure(result: dict[str, Any], path: Path) -> Path:
             ax.set_xticks(sorted({r[axis] for r in sw[axis]}))
             ax.set_xticklabels([str(x) for x in sorted({r[axis] for r in sw[axis]})])
             ax.tick_params(labelsize=7)
-    for k in range(len(METRICS), 2 * n_rows):
+    for k in range(len(metrics), 2 * n_rows):
         for j in range(2):
             axes[k // 2, 2 * (k % 2) + j].axis("off")
     axes[0, 0].legend(fontsize=7)

@@ -62,7 +62,8 @@ def env_bytes(config: EnvConfig) -> int:
 def record_bytes(config: EnvConfig) -> int:
     """Memory of one environment's recorded episode in an evaluation (bytes)."""
     n, m = config.n_uavs, config.n_obstacles
-    per_step = 8 * (1 + 4 * 3 * n + 3 * m + n * m + 3 * m + m) + m
+    # float64: time, 4 (N, 3) UAV arrays, obstacles, regions, predictions, cost (N); bool flags
+    per_step = 8 * (1 + 4 * 3 * n + 3 * m + n * m + 3 * m + m + n) + m
     return (config.max_steps + 1) * per_step
 
 
