@@ -120,12 +120,18 @@ def _hidden(args: Args) -> list[int]:
     return hidden(args)
 
 
+#: The options handed to SB3's ``PPO`` under their own names.
+_PPO_OPTIONS = ("n_steps", "batch_size", "n_epochs", "learning_rate", "gamma", "gae_lambda",
+                "clip_range", "ent_coef")  # fmt: skip
+
+
 def build(args: Args, config: Any) -> tuple[Any, Any]:
     """The vectorised env (normalised) and a fresh PPO model for ``args``."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
+    from uasep_env.config.options import pick
     from uasep_env.envs.sb3 import UAVSharedVecEnv
     from uasep_env.scenarios import check_training_seeds
 
@@ -139,14 +145,7 @@ def build(args: Args, config: Any) -> tuple[Any, Any]:
     model = PPO(
         "MlpPolicy",
         venv,
-        n_steps=args.n_steps,
-        batch_size=args.batch_size,
-        n_epochs=args.n_epochs,
-        learning_rate=args.learning_rate,
-        gamma=args.gamma,
-        gae_lambda=args.gae_lambda,
-        clip_range=args.clip_range,
-        ent_coef=args.ent_coef,
+        **pick(args, *_PPO_OPTIONS),
         target_kl=args.target_kl or None,
         policy_kwargs={
             "net_arch": {"pi": hidden, "vf": hidden},

@@ -141,7 +141,12 @@ class RunFolder:
             RunError: One line: the checkpoint is missing, incomplete or refused, or the
                 folder is another run's or in use (:func:`prepare_out_dir`).
         """
-        run = cls.attach(args, check, same_trainer=same_trainer)
+        run = cls.attach(args)
+        if run.resume is not None:
+            if same_trainer:
+                check_trainer(run.resume, args, run.resumed)
+            if check is not None:
+                check(run.resume, run.resumed)
         prepare_out_dir(run.out, args.resume, args.overwrite)
         if args.overwrite:
             for name in own_files:
@@ -149,27 +154,16 @@ class RunFolder:
         return run
 
     @classmethod
-    def attach(
-        cls,
-        args: Any,
-        check: Callable[[Path, dict], None] | None = None,
-        *,
-        same_trainer: bool = False,
-        out: Path | None = None,
-    ) -> RunFolder:
-        """The folder of a run claimed elsewhere (a benchmark's, a test's): checked, not claimed.
+    def attach(cls, args: Any, out: Path | None = None) -> RunFolder:
+        """The folder of a run claimed elsewhere (a benchmark's, a test's): not claimed here.
 
-        ``--resume``'s checkpoint is checked (:func:`check_checkpoint`, then the trainer's
-        and ``check``) and its ``state.json`` read; ``out`` defaults to ``args.out_dir``.
+        ``--resume``'s checkpoint is checked (:func:`check_checkpoint`) and its
+        ``state.json`` read; ``out`` defaults to ``args.out_dir``.
         """
         resume, resumed = None, {}
         if args.resume:
             resume = check_checkpoint(Path(args.resume))
             resumed = read_state(resume)
-            if same_trainer:
-                check_trainer(resume, args, resumed)
-            if check is not None:
-                check(resume, resumed)
         return cls(args, Path(args.out_dir) if out is None else out, resume, resumed)
 
     def rewind(self, agent_steps: int) -> None:
