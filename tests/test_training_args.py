@@ -3,6 +3,7 @@
 No torch needed: the parsers run before anything is imported from the train extra.
 """
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -38,6 +39,9 @@ BAD = [
     ("--log-std-init", "inf"),
     ("--hidden", "128,0"),
     ("--hidden", "abc"),
+    ("--hidden", "0"),
+    ("--hidden", "-5"),
+    ("--hidden", "1000000000"),  # more memory than any machine: refused before torch runs
     ("--activation", "sigmoid"),
     ("--action-mode", "bogus"),
     ("--scenario", "nowhere"),
@@ -241,3 +245,49 @@ def test_a_recipe_may_extend_args_with_fields_of_its_own(capsys):
     assert (args.cost_limit, args.lagrange_steps, args.dual) == (0.5, 3, False)
     _refused(lambda argv: parse_args(argv, Mine()), ["--cost-limit", "nan"], capsys,
              "--cost-limit")  # fmt: skip
+
+
+@pytest.mark.parametrize("recipe", sorted(RECIPES))
+@pytest.mark.parametrize("width", ["1000000000", "100000,100000", "0", "-5"])
+def test_a_hidden_width_that_cannot_train_is_one_line_naming_it(recipe, width, capsys):
+    err = _refused(RECIPES[recipe], ["--hidden", width], capsys, "--hidden")
+    assert repr(width) in err, err
+
+
+def test_the_hidden_width_limit_follows_the_memory_available(monkeypatch, capsys):
+    from uasep_env.runtime import capacity
+
+    assert ppo_shared.parse_args(["--hidden", "4096,4096"]).hidden == "4096,4096"
+    monkeypatch.setattr(capacity, "available_memory", lambda: 10**8)
+    err = _refused(ppo_shared.parse_args, ["--hidden", "4096,4096"], capsys, "--hidden")
+    assert "100 MB available" in err, err
+    assert ppo_shared.parse_args(["--hidden", "64,64"]).hidden == "64,64"
+
+
+@pytest.mark.parametrize("recipe", sorted(RECIPES))
+@pytest.mark.parametrize(
+    "variable, value", [("UASEP_THREADS", "0"), ("UASEP_THREADS", "x"), ("UASEP_WORKERS", "-2")]
+)
+def test_a_bad_thread_variable_is_one_line_naming_it(recipe, variable, value, monkeypatch, capsys):
+    monkeypatch.setenv(variable, value)
+    with pytest.raises(SystemExit) as info:
+        RECIPES[recipe]([])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{variable}={value!r}" in err, err
+
+
+@pytest.mark.parametrize(
+    "variable, value", [("UASEP_THREADS", "0"), ("UASEP_WORKERS", "0"), ("UASEP_THREADS", "-1")]
+)
+def test_uasep_eval_refuses_a_bad_thread_variable_in_one_line_status_2(variable, value):
+    """A subprocess: the variables are read once per process (as the kernels read them)."""
+    code = "from uasep_env.evaluation import main; raise SystemExit(main(['--episodes', '1']))"
+    env = {**os.environ, variable: value, "PYTHONPATH": str(ROOT)}
+    res = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True,
+        timeout=HANG_GUARD_S,
+    )  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.count("\n") == 1, res.stderr
+    assert f"uasep-eval: error: {variable}={value!r}" in res.stderr, res.stderr

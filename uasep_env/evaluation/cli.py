@@ -319,9 +319,21 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: The options handed to :func:`~uasep_env.evaluation.evaluate` under their own names.
+_EVALUATE_OPTIONS = ("workers", "batch_size", "deviation_threshold", "settle_time", "hold_time",
+                     "allow_pickle", "ray", "algorithm")  # fmt: skip
+
+
 def _run(argv: Sequence[str] | None) -> int:
+    from uasep_env.config.options import pick
+    from uasep_env.runtime.cores import check_variables
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    try:  # read by the kernels deep in a run: checked here, one line
+        check_variables()
+    except ValueError as err:
+        parser.error(str(err))
 
     names = _split_policy_args(args.policy or ["apf"])
     if not names:
@@ -389,16 +401,9 @@ def _run(argv: Sequence[str] | None) -> int:
             names,
             cfg,
             seeds,
-            workers=args.workers,
-            batch_size=args.batch_size,
-            deviation_threshold=args.deviation_threshold,
-            settle_time=args.settle_time,
-            hold_time=args.hold_time,
             keep_episodes=1 if args.plot is not None else 0,
             progress=bar.update if bar is not None else None,
-            allow_pickle=args.allow_pickle,
-            ray=args.ray,
-            algorithm=args.algorithm,
+            **pick(args, *_EVALUATE_OPTIONS),
         )
     finally:
         if bar is not None:

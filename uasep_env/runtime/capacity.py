@@ -17,6 +17,7 @@ UAVs, 1 obstacle); 466 KB and 720 KB with 32 UAVs and 8 obstacles.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -36,6 +37,8 @@ __all__ = [
     "available_memory",
     "check_count",
     "env_bytes",
+    "memory_problem",
+    "network_bytes",
     "record_bytes",
 ]
 
@@ -44,6 +47,8 @@ __all__ = [
 EPISODE_RESULT_BYTES = 32 * 1024
 _NOISE_BLOCK = 64  # physics steps of noise drawn at once (World's default)
 _PER_ENV_BYTES = 16 * 1024  # whatever the config does not scale: plans, episode draws
+#: Training memory per network parameter: float32 weight, gradient and Adam's two moments.
+_PARAM_BYTES = 16
 
 
 def env_bytes(config: EnvConfig) -> int:
@@ -148,3 +153,23 @@ def check_count(
             f"more than the {_size(free)} available; use fewer"
         )
     return count
+
+
+def network_bytes(widths: list[int], n_in: int, n_out: int, batch: int) -> int:
+    """The least memory training an MLP takes: ``n_in -> widths -> n_out``, ``batch`` rows.
+
+    Its parameters with their gradients and Adam's moments, and one minibatch's hidden
+    activations (forward, their gradients and the activation's output; float32). An
+    actor-critic needs it twice.
+    """
+    sizes = [n_in, *widths, n_out]
+    params = sum((a + 1) * b for a, b in itertools.pairwise(sizes))
+    return params * _PARAM_BYTES + 3 * 4 * batch * sum(widths)
+
+
+def memory_problem(need: int, what: str) -> str | None:
+    """Why ``need`` bytes (for ``what``) cannot be had here, or None when they fit."""
+    free = available_memory()
+    if need <= free:
+        return None
+    return f"needs about {_size(need)} of memory ({what}), more than the {_size(free)} available"

@@ -18,6 +18,7 @@ __all__ = [
     "PARALLEL_MIN_THREADS_OTHER",
     "THREADS_VARIABLE",
     "WORKERS_VARIABLE",
+    "check_variables",
     "core_share",
     "decide_threads",
     "explicit_threads",
@@ -61,6 +62,22 @@ def explicit_threads(environ: Mapping[str, str] | None = None) -> int | None:
     env = os.environ if environ is None else environ
     value = env.get(THREADS_VARIABLE, "").strip()
     return _positive_int(THREADS_VARIABLE, value) if value else None
+
+
+def check_variables(environ: Mapping[str, str] | None = None) -> None:
+    """Check ``UASEP_THREADS`` and ``UASEP_WORKERS`` up front (a command's first step).
+
+    Both are read only when the first kernel runs, deep in a run; a command checks them at
+    its start so that a bad value is one line, not a traceback from inside the kernels.
+
+    Raises:
+        ValueError: For a set variable that is not a whole number >= 1, naming it.
+    """
+    env = os.environ if environ is None else environ
+    explicit_threads(env)
+    workers = env.get(WORKERS_VARIABLE, "").strip()
+    if workers:
+        _positive_int(WORKERS_VARIABLE, workers)
 
 
 def core_share(environ: Mapping[str, str] | None = None, cores: int | None = None) -> int:

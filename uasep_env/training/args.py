@@ -32,12 +32,14 @@ __all__ = [
     "device_problem",
     "finite_float",
     "hidden_sizes",
+    "network_problem",
     "non_negative_float",
     "non_negative_int",
     "out_path",
     "parse_args",
     "positive_float",
     "positive_int",
+    "threads_problem",
     "to_argv",
     "torch_device",
     "unit_interval",
@@ -361,7 +363,40 @@ def parse_args(
     problem = device_problem(args.device)
     if problem:
         parser.error(f"argument --device: {problem}")
+    problem = network_problem(args)
+    if problem:
+        parser.error(f"argument --hidden: {args.hidden!r} {problem}; use narrower layers")
+    problem = threads_problem()
+    if problem:
+        parser.error(problem)
     return args
+
+
+def network_problem(args: Args) -> str | None:
+    """Why the actor and critic of ``--hidden`` cannot be trained here (memory), or None.
+
+    Checked before torch allocates them (a width of 10^9 would otherwise end in torch's
+    allocation error, many lines long).
+    """
+    from uasep_env.interface.observation_layout import ObservationLayout
+    from uasep_env.runtime.capacity import memory_problem, network_bytes
+
+    n_in = ObservationLayout.from_config(make_env_config(args)).dim
+    # The critic may read more than the observation (MAPPO's global state): a generous 4x.
+    need = network_bytes(hidden(args), n_in, 3, args.batch_size)
+    need += network_bytes(hidden(args), 4 * n_in, 1, args.batch_size)
+    return memory_problem(need, "the actor and the critic, their gradients and Adam's state")
+
+
+def threads_problem() -> str | None:
+    """A bad ``UASEP_THREADS`` or ``UASEP_WORKERS`` (one line naming it), or None."""
+    from uasep_env.runtime.cores import check_variables
+
+    try:
+        check_variables()
+    except ValueError as err:
+        return str(err)
+    return None
 
 
 #: The fields that say where one run goes and how it is driven, not what it learns.

@@ -158,16 +158,18 @@ def cost_limit(args: Any) -> float | str:
 
 def make_lagrangian(args: Any, limit: float) -> PIDLagrangian:
     """The multiplier's controller for ``args`` and the limit ``limit``."""
+    from uasep_env.config.options import pick
+
     return PIDLagrangian(
         limit,
-        kp=args.pid_kp,
-        ki=args.pid_ki,
-        kd=args.pid_kd,
-        ema_p=args.pid_ema,
-        ema_d=args.pid_ema,
-        init=args.multiplier_init,
         max_multiplier=args.multiplier_max if args.multiplier_max > 0 else math.inf,
+        **pick(args, **_PID_OPTIONS),
     )
+
+
+#: The controller's keywords and the flags that give them.
+_PID_OPTIONS = {"kp": "pid_kp", "ki": "pid_ki", "kd": "pid_kd", "ema_p": "pid_ema",
+                "ema_d": "pid_ema", "init": "multiplier_init"}  # fmt: skip
 
 
 def measure_budget(args: Any, config: Any, out: Path) -> float:

@@ -42,7 +42,7 @@ import numpy as np
 from uasep_env.training.args import Args
 from uasep_env.training.ppo_lean import Hooks
 
-__all__ = ["check_algorithm", "load_checkpoint", "save_checkpoint", "train"]
+__all__ = ["check_algorithm", "load_checkpoint", "restore", "save_checkpoint", "train"]
 
 #: The networks' parts in ``state.pt``.
 _PARTS = ("pi", "vf", "mu", "v")
@@ -118,10 +118,9 @@ def check_algorithm(directory: Path, info: dict, args: Args, central: bool) -> N
         RunError: One line naming both (the checkpoint's ``policy.zip`` says which it is,
             its ``state.json`` its flags).
     """
-    from uasep_env.policies.learned import read_checkpoint
-    from uasep_env.training.rundir import RunError, check_switch
+    from uasep_env.training.rundir import RunError, check_switch, read_policy
 
-    theirs = read_checkpoint(directory / "policy.zip")[0].algorithm
+    theirs = read_policy(directory).algorithm
     ours = "MAPPO" if central else "PPO"
     if theirs != ours:
         raise RunError(f"--resume {directory}: a {theirs} checkpoint, not {ours}'s")
@@ -139,20 +138,27 @@ def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:
         RunError: The folder is incomplete, a checkpoint of SB3's (or skrl's) trainer, or
             of MAPPO resumed as PPO or the reverse (one line).
     """
-    import torch
-
-    from uasep_env.training.rundir import (
-        RunError,
-        check_checkpoint,
-        check_trainer,
-        load_normalization,
-    )
+    from uasep_env.training.rundir import check_checkpoint, check_trainer
 
     directory = check_checkpoint(directory)
     info = check_trainer(directory, args)
+    check_algorithm(directory, info, args, state.critic_norm is not None)
+    restore(state, directory, info)
+    return info
+
+
+def restore(state: Any, directory: Path, info: dict) -> None:
+    """Load a checked checkpoint folder (``state.json``: ``info``) into ``state``.
+
+    Raises:
+        RunError: Its ``state.pt`` is a PPO run's and ``state`` MAPPO's, or the reverse.
+    """
+    import torch
+
+    from uasep_env.training.rundir import RunError, load_normalization, read_tensors
+
     central = state.critic_norm is not None
-    check_algorithm(directory, info, args, central)
-    saved = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
+    saved = read_tensors(directory)
     if ("central" in saved) != central:  # a policy.zip swapped in: still one line
         raise RunError(f"--resume {directory}: its state.pt and policy.zip disagree")
     learner = state.learner
@@ -174,7 +180,6 @@ def load_checkpoint(state: Any, directory: Path, args: Args) -> dict:
     state.updates = int(info["updates"])
     state.episodes = int(info["episodes"])
     state.wall_s = float(info["wall_s"])
-    return info
 
 
 def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
@@ -189,61 +194,52 @@ def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
     """
     if plugin is not None:
         raise ValueError(f"trainer 'lean': the {plugin.title} recipe trains on SB3 only")
-    from uasep_env.training import ppo_lean
-    from uasep_env.training.rundir import (
-        CSV_FIELDS,
-        plot_curves,
-        rewind,
-        start_run,
-        write_validation,
-    )
+    import torch
 
-    config, out, resume = start_run(args, lambda ck, info: check_algorithm(ck, info, args, central))
-    hooks = _RunHooks(args, config, out)
+    from uasep_env.training import ppo_lean
+    from uasep_env.training.args import make_env_config
+    from uasep_env.training.rundir import RunFolder
+
+    torch.set_num_threads(args.torch_threads)
+    config = make_env_config(args)
+    run = RunFolder.start(args, lambda ck, info: check_algorithm(ck, info, args, central))
+    hooks = _RunHooks(run, config)
 
     def prepare(state: Any) -> None:
         hooks.last_state = state
-        if resume is not None:
-            hooks.resumed = load_checkpoint(state, resume, args)
-            rewind(out, CSV_FIELDS, state.agent_steps)
-            print(f"resumed from {resume} at {state.agent_steps:,} agent-steps")
+        if run.resume is not None:
+            restore(state, run.resume, run.resumed)
+            run.rewind(state.agent_steps)
 
     nets, norm, facts = ppo_lean.train(args, config, hooks, prepare, central=central)
-    trained = resume is None or facts["updates"] > int(hooks.resumed.get("updates", 0))
-    if trained:
-        if hooks.saved_at != hooks.last_state.agent_steps:
+    if run.resume is None or facts["updates"] > int(run.resumed.get("updates", 0)):
+        if run.saved_at != hooks.last_state.agent_steps:
             hooks.checkpoint(hooks.last_state)  # the final one (after the last update)
         info = hooks.info(hooks.last_state)
     else:  # resumed at the end: only the final outputs are (re)written
-        info = {k: v for k, v in hooks.resumed.items() if k not in ("window", "args")}
+        info = run.resumed_info()
     hooks.close()
-    policy_path = ppo_lean.export_policy(nets, norm, config, args, out / "policy.zip", info)
     title = "MAPPO, lean loop" if central else f"PPO, lean loop ({args.action_mode})"
-    plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS, title)
-    return write_validation(out, config, policy_path, info, args.eval_episodes)
+    return run.publish(
+        lambda path: ppo_lean.export_policy(nets, norm, config, args, path, info),
+        config, info, title,
+    )  # fmt: skip
 
 
 class _RunHooks(Hooks):
     """The run's learning curve, progress bar and checkpoints around the lean loop."""
 
-    def __init__(self, args: Args, config: Any, out: Path) -> None:
-        self.args, self.config, self.out = args, config, out
-        self.resumed: dict = {}  # the resumed checkpoint's state.json
+    def __init__(self, run: Any, config: Any) -> None:
+        self.run, self.args, self.config = run, run.args, config
         self.last_state: Any = None  # the loop's State
-        self.saved_at = -1  # agent-steps of the last checkpoint saved
-        self.csv: Any = None
         self.bar: Any = None
 
     def start(self, nets: Any, norm: Any) -> None:
-        from uasep_env.training.rundir import CSV_FIELDS, ProgressLog
-
-        args, resumed = self.args, self.resumed
-        self.window: collections.deque = collections.deque(
-            (tuple(e) for e in resumed.get("window", ())), maxlen=200
-        )
-        steps = int(resumed.get("agent_steps", 0))
-        self.next_ckpt = (steps // args.checkpoint_every + 1) * args.checkpoint_every
-        self.csv = ProgressLog(self.out / "progress.csv", CSV_FIELDS)
+        args, run = self.args, self.run
+        self.window: collections.deque = run.episode_window()
+        steps = int(run.resumed.get("agent_steps", 0))
+        self.next_ckpt = run.next_checkpoint(steps)
+        self.csv = run.progress_log()
         if args.progress:
             from tqdm import tqdm
 
@@ -269,8 +265,7 @@ class _RunHooks(Hooks):
         # The last one is saved at the end, not twice.
         if self.next_ckpt <= state.agent_steps < self.args.total_timesteps:
             self.checkpoint(state)
-            every = self.args.checkpoint_every
-            self.next_ckpt = (state.agent_steps // every + 1) * every
+            self.next_ckpt = self.run.next_checkpoint(state.agent_steps)
 
     def info(self, state: Any) -> dict:
         from uasep_env.training.rundir import window_summary
@@ -280,16 +275,12 @@ class _RunHooks(Hooks):
                 **window_summary(self.window)}  # fmt: skip
 
     def checkpoint(self, state: Any) -> None:
-        from uasep_env.runtime.atomic import atomic_symlink
-
-        d = self.out / "checkpoints" / f"step_{state.agent_steps}"
-        window = [[float(x) for x in e] for e in self.window]
-        save_checkpoint(state, self.config, self.args, d, {**self.info(state), "window": window})
-        self.saved_at = state.agent_steps
-        atomic_symlink(d.name, self.out / "checkpoints" / "latest")  # once d is complete
+        self.run.save_checkpoint(
+            state.agent_steps, self.info(state), self.window,
+            lambda d, info: save_checkpoint(state, self.config, self.args, d, info),
+        )  # fmt: skip
 
     def close(self) -> None:
-        if self.csv is not None:
-            self.csv.close()
+        self.run.close()
         if self.bar is not None:
             self.bar.close()

@@ -47,18 +47,19 @@ in the PPO recipes, ``--device`` runs the update, and its checkpoints resume wit
 
 from __future__ import annotations
 
-import collections
 import io
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from uasep_env.training import ppo_shared
 from uasep_env.training.args import parse_args as _parse_args
+
+if TYPE_CHECKING:
+    from uasep_env.training.rundir import RunFolder
 
 __all__ = ["Args", "Hooks", "SkrlView", "build", "export_policy", "load_checkpoint", "main",
            "parse_args", "ppo_shared", "run", "save_checkpoint", "train"]  # fmt: skip
@@ -348,19 +349,22 @@ def load_checkpoint(agent: Any, venv: Any, directory: Path) -> dict:
     """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling)."""
     import torch
 
-    from uasep_env.training.rundir import check_checkpoint
+    from uasep_env.training.rundir import (
+        check_checkpoint,
+        load_normalization,
+        read_state,
+        read_tensors,
+    )
 
     directory = check_checkpoint(directory)
-    state = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
+    state = read_tensors(directory)
     for uid, mods in agent.checkpoint_modules.items():
         for k, v in mods.items():
             if v is not None:
                 v.load_state_dict(state["agent"][uid][k])
     torch.set_rng_state(state["torch_rng"])
-    with np.load(directory / "normalization.npz", allow_pickle=False) as z:
-        venv.obs_rms.mean, venv.obs_rms.var = z["obs_mean"], z["obs_var"]
-        venv.obs_rms.count = float(z["obs_count"])
-    return json.loads((directory / "state.json").read_text())
+    load_normalization(venv, directory / "normalization.npz")  # the observations' only
+    return read_state(directory)
 
 
 class Hooks:
@@ -404,30 +408,33 @@ class Hooks:
         return False
 
 
-def train(args: Args, config: Any, out: Path, hooks: Hooks | None = None) -> tuple[Any, Any, dict]:
-    """The training loop (skrl's trainer loop, with the recipes' bookkeeping and ``hooks``)."""
+def train(
+    args: Args, config: Any, out: Path | RunFolder, hooks: Hooks | None = None
+) -> tuple[Any, Any, dict]:
+    """The training loop (skrl's trainer loop, with the recipes' bookkeeping and ``hooks``).
+
+    ``out``: the run's :class:`~uasep_env.training.rundir.RunFolder`, or the folder of a run
+    claimed by the caller (its ``--resume`` checkpoint checked here).
+    """
     import torch
 
-    from uasep_env.runtime.atomic import atomic_symlink
-    from uasep_env.training.rundir import ProgressLog, check_checkpoint, rewind
+    from uasep_env.training.rundir import RunFolder
 
+    run = out if isinstance(out, RunFolder) else RunFolder.attach(args, out=out)
     hooks = hooks or Hooks()
     venv, env, agent = build(args, config, hooks.agent_class)
-    resumed: dict = {}
-    if args.resume:
-        resumed = load_checkpoint(agent, venv, check_checkpoint(Path(args.resume)))
-        rewind(out, ppo_shared.CSV_FIELDS, int(resumed["agent_steps"]))
-        print(f"resumed from {args.resume} at {int(resumed['agent_steps']):,} agent-steps")
-    hooks.start(agent, env, out, resumed)
+    if run.resume is not None:
+        load_checkpoint(agent, venv, run.resume)
+        run.rewind(int(run.resumed["agent_steps"]))
+    resumed = run.resumed
+    hooks.start(agent, env, run.out, resumed)
     steps, wall_offset = int(resumed.get("agent_steps", 0)), float(resumed.get("wall_s", 0.0))
     per_step = args.n_envs * env.n
     t0 = time.perf_counter() - wall_offset
-    window: collections.deque = collections.deque(
-        (tuple(e) for e in resumed.get("window", ())), maxlen=200
-    )
+    window = run.episode_window()
     episodes = int(resumed.get("episodes", 0))
-    log = ProgressLog(out / "progress.csv", ppo_shared.CSV_FIELDS)
-    next_ckpt = (steps // args.checkpoint_every + 1) * args.checkpoint_every
+    log = run.progress_log()
+    next_ckpt = run.next_checkpoint(steps)
     bar = None
     if args.progress:
         from tqdm import tqdm
@@ -464,11 +471,10 @@ def train(args: Args, config: Any, out: Path, hooks: Hooks | None = None) -> tup
         }
 
     def checkpoint() -> None:
-        d = out / "checkpoints" / f"step_{steps}"
-        window_rows = [[float(x) for x in e] for e in window]
-        state = {**facts(), "window": window_rows, **hooks.state()}
-        save_checkpoint(agent, venv, config, args, d, state)
-        atomic_symlink(d.name, out / "checkpoints" / "latest")
+        run.save_checkpoint(
+            steps, {**facts(), **hooks.state()}, window,
+            lambda d, state: save_checkpoint(agent, venv, config, args, d, state),
+        )  # fmt: skip
 
     obs, _ = env.reset()
     states = env.state()
@@ -536,7 +542,7 @@ def train(args: Args, config: Any, out: Path, hooks: Hooks | None = None) -> tup
                     dev=f"{s['max_deviation_mean']:.1f}m",
                 )
     checkpoint()
-    log.close()
+    run.close()
     hooks.close()
     if bar is not None:
         bar.close()
@@ -552,26 +558,20 @@ def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
         return lean_recipe.train(args, central=True)
     import torch  # lazy: the training extra
 
-    torch.set_num_threads(args.torch_threads)
-    from uasep_env.training.rundir import (
-        check_checkpoint,
-        check_switch,
-        check_trainer,
-        plot_curves,
-        prepare_out_dir,
-    )
+    from uasep_env.training.rundir import RunFolder, check_switch
 
+    torch.set_num_threads(args.torch_threads)
     config = ppo_shared.make_env_config(args)
-    out = Path(args.out_dir)
-    if args.resume:  # the lean loop's checkpoints are not skrl's
-        directory = check_checkpoint(Path(args.resume))
-        # skrl saves the value preprocessor's statistics under --value-norm only.
-        check_switch(directory, check_trainer(directory, args), args, "value_norm", default=True)
-    prepare_out_dir(out, args.resume, args.overwrite)
-    agent, venv, info = train(args, config, out)
-    policy_path = export_policy(agent, venv, config, args, out / "policy.zip", info)
-    plot_curves(out / "progress.csv", out / "curves.png", ppo_shared.CSV_FIELDS, "MAPPO (skrl)")
-    return ppo_shared.write_validation(out, config, policy_path, info, args.eval_episodes)
+    # The lean loop's checkpoints are not skrl's; skrl saves the value preprocessor's
+    # statistics under --value-norm only.
+    run = RunFolder.start(
+        args, lambda ck, info: check_switch(ck, info, args, "value_norm", default=True)
+    )
+    agent, venv, info = train(args, config, run)
+    return run.publish(
+        lambda path: export_policy(agent, venv, config, args, path, info),
+        config, info, "MAPPO (skrl)",
+    )  # fmt: skip
 
 
 def cli(argv: list[str] | None = None) -> None:

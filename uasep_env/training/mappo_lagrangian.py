@@ -51,15 +51,17 @@ rescale the reward but not the cost). Requires the ``train`` extra and skrl.
 from __future__ import annotations
 
 import functools
-import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from uasep_env.training import constraint, mappo, ppo_shared
 from uasep_env.training.args import parse_args as _parse_args
+
+if TYPE_CHECKING:
+    from uasep_env.training.rundir import RunFolder
 
 __all__ = ["Args", "LagrangianHooks", "agent_class", "combine_advantages", "main",
            "parse_args", "run", "train"]  # fmt: skip
@@ -325,7 +327,9 @@ class LagrangianHooks(mappo.Hooks):
             self.log.close()
 
 
-def train(args: Args, config: Any, out: Path, limit: float) -> tuple[Any, Any, dict, Any]:
+def train(
+    args: Args, config: Any, out: Path | RunFolder, limit: float
+) -> tuple[Any, Any, dict, Any]:
     """:func:`uasep_env.training.mappo.train` under the constraint; also returns the hooks."""
     hooks = LagrangianHooks(args, limit)
     agent, venv, info = mappo.train(args, config, out, hooks)
@@ -341,42 +345,43 @@ def _limit(args: Args, config: Any, out: Path, resumed: dict) -> float:
     return constraint.measure_budget(args, config, out)
 
 
+def _check_resume(directory: Path, info: dict, args: Args) -> None:
+    """Refuse a checkpoint of plain MAPPO, or of the other ``--value-norm`` (one line)."""
+    from uasep_env.training.rundir import RunError, check_switch
+
+    if "lagrangian" not in info:  # plain MAPPO's has no cost critic, no multiplier
+        raise RunError(f"--resume {args.resume}: not a MAPPO-Lagrangian checkpoint")
+    check_switch(directory, info, args, "value_norm", default=True)
+
+
 def main(argv: list[str] | None = None, defaults: Args | None = None) -> dict:
     """Train (or resume) under the constraint, export the actor, validate; the summary."""
     args = parse_args(argv, defaults)
     import torch  # lazy: the training extra
 
-    from uasep_env.training.rundir import (
-        RunError,
-        check_checkpoint,
-        check_switch,
-        plot_curves,
-        prepare_out_dir,
-    )
+    from uasep_env.training.rundir import RunFolder
     from uasep_env.training.sb3_lagrangian import plot_cost_curves
 
     torch.set_num_threads(args.torch_threads)
     config = ppo_shared.make_env_config(args)
     task = config.reward == config.reward.task()
     print(f"reward: {'the task reward' if task else config.reward} (--config {args.config!r})")
-    out = Path(args.out_dir)
-    resumed: dict = {}
-    if args.resume:
-        directory = check_checkpoint(Path(args.resume))
-        resumed = json.loads((directory / "state.json").read_text())
-        if "lagrangian" not in resumed:  # plain MAPPO's has no cost critic, no multiplier
-            raise RunError(f"--resume {args.resume}: not a MAPPO-Lagrangian checkpoint")
-        check_switch(directory, resumed, args, "value_norm", default=True)
-    prepare_out_dir(out, args.resume, args.overwrite)
-    if args.overwrite:  # prepare_out_dir deleted mappo's run files; these are ours
-        for name in constraint.COST_FILES:
-            (out / name).unlink(missing_ok=True)
-    agent, venv, info, _ = train(args, config, out, _limit(args, config, out, resumed))
-    policy_path = mappo.export_policy(agent, venv, config, args, out / "policy.zip", info)
+    run = RunFolder.start(
+        args,
+        lambda ck, info: _check_resume(ck, info, args),
+        same_trainer=False,  # as it always was: the Lagrangian check says it first
+        own_files=constraint.COST_FILES,  # --overwrite deletes the constraint's files too
+    )
+    limit = _limit(args, config, run.out, run.resumed)
+    agent, venv, info, _ = train(args, config, run, limit)
     title = "MAPPO-Lagrangian (skrl)"
-    plot_curves(out / "progress.csv", out / "curves.png", ppo_shared.CSV_FIELDS, title)
-    plot_cost_curves(out / "cost_progress.csv", out / "cost_curves.png", title)
-    return ppo_shared.write_validation(out, config, policy_path, info, args.eval_episodes)
+    return run.publish(
+        lambda path: mappo.export_policy(agent, venv, config, args, path, info),
+        config, info, title,
+        more=lambda out: plot_cost_curves(
+            out / "cost_progress.csv", out / "cost_curves.png", title
+        ),
+    )  # fmt: skip
 
 
 def cli(argv: list[str] | None = None) -> None:

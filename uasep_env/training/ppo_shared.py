@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import collections
 import io
-import json
 import sys
 import time
 from pathlib import Path
@@ -74,6 +73,7 @@ from uasep_env.training.rundir import (
 )
 
 __all__ = [
+    "CSV_FIELDS",
     "Args",
     "build",
     "cli",
@@ -86,6 +86,7 @@ __all__ = [
     "run",
     "save_checkpoint",
     "train",
+    "write_validation",
 ]
 
 
@@ -119,12 +120,18 @@ def _hidden(args: Args) -> list[int]:
     return hidden(args)
 
 
+#: The options handed to SB3's ``PPO`` under their own names.
+_PPO_OPTIONS = ("n_steps", "batch_size", "n_epochs", "learning_rate", "gamma", "gae_lambda",
+                "clip_range", "ent_coef")  # fmt: skip
+
+
 def build(args: Args, config: Any) -> tuple[Any, Any]:
     """The vectorised env (normalised) and a fresh PPO model for ``args``."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
+    from uasep_env.config.options import pick
     from uasep_env.envs.sb3 import UAVSharedVecEnv
     from uasep_env.scenarios import check_training_seeds
 
@@ -138,14 +145,7 @@ def build(args: Args, config: Any) -> tuple[Any, Any]:
     model = PPO(
         "MlpPolicy",
         venv,
-        n_steps=args.n_steps,
-        batch_size=args.batch_size,
-        n_epochs=args.n_epochs,
-        learning_rate=args.learning_rate,
-        gamma=args.gamma,
-        gae_lambda=args.gae_lambda,
-        clip_range=args.clip_range,
-        ent_coef=args.ent_coef,
+        **pick(args, *_PPO_OPTIONS),
         target_kl=args.target_kl or None,
         policy_kwargs={
             "net_arch": {"pi": hidden, "vf": hidden},
@@ -209,10 +209,10 @@ def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
     """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling)."""
     import torch
 
-    from uasep_env.training.rundir import check_checkpoint
+    from uasep_env.training.rundir import check_checkpoint, read_state, read_tensors
 
     directory = check_checkpoint(directory)
-    state = torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
+    state = read_tensors(directory)
     model.policy.load_state_dict(state["policy"])
     model.policy.optimizer.load_state_dict(state["optimizer"])
     if "torch_rng" in state:
@@ -220,7 +220,7 @@ def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
     if "cuda_rng" in state and model.device.type == "cuda":
         torch.cuda.set_rng_state(state["cuda_rng"], model.device)
     load_normalization(venv, directory / "normalization.npz")
-    info = json.loads((directory / "state.json").read_text())
+    info = read_state(directory)
     model.num_timesteps = int(info["agent_steps"])
     return info
 
@@ -233,21 +233,23 @@ def make_callback(
     total: int,
     resumed: dict | None = None,
     extra: Any = None,
+    run: Any = None,
 ) -> Any:
     """The SB3 callback: progress bar, learning curve rows, checkpoints, wall budget.
 
     ``resumed``: the ``state.json`` of the checkpoint a run resumes from (its episode count
     and 200-episode window continue). ``extra``: a function returning more facts for
     :meth:`info` and every checkpoint's ``state.json`` (a recipe's own state to resume).
+    ``run``: the run's :class:`~uasep_env.training.rundir.RunFolder` (default: ``--out-dir``'s,
+    claimed by the caller), which writes the curve's rows and the checkpoints.
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from uasep_env.runtime.atomic import atomic_symlink
-    from uasep_env.training.rundir import ProgressLog
+    from uasep_env.training.rundir import RunFolder
 
     resumed = resumed or {}
-
-    out = Path(args.out_dir)
+    if run is None:
+        run = RunFolder(args, Path(args.out_dir), resumed=resumed)
     n_uavs = config.n_uavs
 
     class Progress(BaseCallback):
@@ -263,14 +265,10 @@ def make_callback(
             self.iterations = self.num_timesteps // (args.n_envs * n_uavs * args.n_steps)
             for q in self._actor_params():
                 q.requires_grad_(self.iterations >= args.critic_warmup)
-            self.window: collections.deque = collections.deque(
-                (tuple(e) for e in resumed.get("window", ())), maxlen=200
-            )
+            self.window: collections.deque = run.episode_window()
             self.episodes = int(resumed.get("episodes", 0))
-            self.next_ckpt = (
-                self.num_timesteps // args.checkpoint_every + 1
-            ) * args.checkpoint_every
-            self.csv = ProgressLog(out / "progress.csv", CSV_FIELDS)
+            self.next_ckpt = run.next_checkpoint(self.num_timesteps)
+            self.csv = run.progress_log()
             self.bar = None
             if args.progress:
                 from tqdm import tqdm
@@ -323,15 +321,14 @@ def make_callback(
                     "episodes": self.episodes, **self.summary(), **more}  # fmt: skip
 
         def checkpoint(self) -> None:
-            info = self.info()
-            d = out / "checkpoints" / f"step_{self.num_timesteps}"
-            window = [[float(x) for x in e] for e in self.window]
-            save_checkpoint(self.model, venv, config, args, d, {**info, "window": window})
-            atomic_symlink(d.name, out / "checkpoints" / "latest")  # once d is complete
+            run.save_checkpoint(
+                self.num_timesteps, self.info(), self.window,
+                lambda d, state: save_checkpoint(self.model, venv, config, args, d, state),
+            )  # fmt: skip
 
         def _on_training_end(self) -> None:
             self.checkpoint()
-            self.csv.close()
+            run.close()
             if self.bar is not None:
                 self.bar.close()
 
@@ -358,40 +355,40 @@ def train(args: Args, plugin: Any = None) -> dict:
         from uasep_env.training import lean_recipe
 
         return lean_recipe.train(args, plugin)
+    import torch
     from stable_baselines3.common.callbacks import CallbackList  # lazy: the training extra
 
-    from uasep_env.training.rundir import plot_curves, rewind, start_run
+    from uasep_env.training.rundir import RunFolder
 
-    config, out, resume = start_run(args)
+    torch.set_num_threads(args.torch_threads)
+    config = make_env_config(args)
+    run = RunFolder.start(args)
     venv, model = build(args, config)
-    resumed: dict = {}
-    if resume is not None:
-        resumed = load_checkpoint(model, venv, resume)
-        rewind(out, CSV_FIELDS, model.num_timesteps)
-        print(f"resumed from {resume} at {model.num_timesteps:,} agent-steps")
-    before = plugin.start(out, config, resumed) if plugin is not None else []
+    if run.resume is not None:
+        load_checkpoint(model, venv, run.resume)
+        run.rewind(model.num_timesteps)
+    before = plugin.start(run.out, config, run.resumed) if plugin is not None else []
     remaining = max(0, args.total_timesteps - model.num_timesteps)
-    if remaining or resume is None:
+    if remaining or run.resume is None:
         callback = make_callback(
-            args, config, venv, float(resumed.get("wall_s", 0.0)), args.total_timesteps, resumed,
-            extra=plugin.facts if plugin is not None else None,
+            args, config, venv, float(run.resumed.get("wall_s", 0.0)), args.total_timesteps,
+            run.resumed, extra=plugin.facts if plugin is not None else None, run=run,
         )  # fmt: skip
         model.learn(
             total_timesteps=remaining,
             callback=CallbackList([*before, callback]),
-            reset_num_timesteps=resume is None,
+            reset_num_timesteps=run.resume is None,
             tb_log_name=args.action_mode,
         )
         info = callback.info()
     else:  # resumed at the end: only the final outputs are (re)written
-        info = {k: v for k, v in resumed.items() if k not in ("window", "args")}
-    policy_path = export_policy(model, venv, config, args, out / "policy.zip", info)
+        info = run.resumed_info()
     title = plugin.title if plugin is not None else "PPO"
-    plot_curves(out / "progress.csv", out / "curves.png", CSV_FIELDS,
-                f"{title} ({args.action_mode})")  # fmt: skip
-    if plugin is not None:
-        plugin.finish(out)
-    return write_validation(out, config, policy_path, info, args.eval_episodes)
+    return run.publish(
+        lambda path: export_policy(model, venv, config, args, path, info),
+        config, info, f"{title} ({args.action_mode})",
+        more=plugin.finish if plugin is not None else None,
+    )  # fmt: skip
 
 
 def cli(defaults: Args | None = None, argv: list[str] | None = None, entry: Any = None) -> None:

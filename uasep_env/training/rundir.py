@@ -1,8 +1,10 @@
 """A training run's folder: never mixed with another run, checkpoints that resume exactly.
 
-Shared by the recipes (:mod:`~uasep_env.training.ppo_shared`, its residual variant and
-:mod:`~uasep_env.training.mappo`): :func:`prepare_out_dir` is where a run's folder is
-claimed and created. The rules:
+Every recipe's loop (:mod:`~uasep_env.training.ppo_shared` and its variants,
+:mod:`~uasep_env.training.lean_recipe`, :mod:`~uasep_env.training.mappo`,
+:mod:`~uasep_env.training.mappo_lagrangian`) holds one :class:`RunFolder` for the run's
+life: claimed and checked (or resumed) at the start, checkpoints and ``progress.csv`` in the
+loop, the policy and ``validation.json`` published at the end. The rules:
 
 * A run claims its ``--out-dir`` for its whole life (:mod:`uasep_env.runtime.runlock`): a second
   run started into the same folder fails at once, naming it.
@@ -19,16 +21,16 @@ claimed and created. The rules:
   run continues from exactly the checkpoint's progress (agent-steps, episodes, the window of
   the last 200 episodes, wall time), not from where the killed process happened to stop.
 
-It also holds what every trainer (SB3's, skrl's, the lean loop's) writes the same way: the
-learning curve's columns (:data:`CSV_FIELDS`) and figures (:func:`window_summary`), a
-checkpoint's normalisation (:func:`normalization_bytes`) and policy (:func:`export_actor`),
-the check that a checkpoint resumes under the trainer that wrote it (:func:`check_trainer`),
-and ``validation.json`` (:func:`write_validation`).
+It also holds what every trainer (SB3's, skrl's, the lean loop's) writes the same way (the
+learning curve's files are :mod:`~uasep_env.training.curves`'): a checkpoint's
+normalisation (:func:`normalization_bytes`) and policy (:func:`export_actor`), the check
+that a checkpoint resumes under the trainer that wrote it (:func:`check_trainer`), and
+``validation.json`` (:func:`write_validation`).
 """
 
 from __future__ import annotations
 
-import csv
+import collections
 import dataclasses
 import io
 import json
@@ -41,9 +43,22 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.runtime.atomic import atomic_output, atomic_symlink, atomic_write, fsync_dir
+from uasep_env.runtime.atomic import atomic_symlink, atomic_write, fsync_dir
 from uasep_env.runtime.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder
 from uasep_env.training.args import Args, hidden, make_env_config
+
+# The learning curve's files (curves); imported by the recipes from here, as they always were.
+from uasep_env.training.curves import (  # noqa: F401
+    CSV_FIELDS,
+    MIN_PLOTTED_EPISODES,
+    WINDOW_EPISODES,
+    ProgressLog,
+    bar_postfix,
+    plot_curves,
+    read_progress,
+    window_summary,
+    write_rows,
+)
 
 #: What a run writes in its folder (``--overwrite`` deletes these, and only these).
 RUN_FILES = ("progress.csv", "curves.png", "policy.zip", "validation.json")
@@ -59,27 +74,180 @@ class RunError(SystemExit):
         super().__init__(f"{Path(sys.argv[0]).name}: error: {message}")
 
 
+class RunFolder:
+    """One training run's folder, from its claim to the published policy.
+
+    Every recipe's loop makes it once and calls it in order, so that a recipe reads as a
+    CleanRL script: set up, loop, save::
+
+        run = RunFolder.start(args)                  # checkpoint checked, folder claimed
+        ...build the model; if run.resume: restore it from run.resume...
+        run.rewind(agent_steps)                      # resuming: back to the checkpoint
+        log, window = run.progress_log(), run.episode_window()
+        ...loop: log.write(row); run.save_checkpoint(agent_steps, info, window, save)...
+        run.close()
+        return run.publish(export, config, info, title)
+
+    The folder's files are read through few functions only, the ones to harden:
+    :func:`check_checkpoint` (what a checkpoint folder holds), :func:`read_state`
+    (``state.json``), :func:`read_tensors` (``state.pt``), :func:`load_normalization`
+    (``normalization.npz``), :func:`read_policy` (``policy.zip``'s metadata) and
+    :func:`read_progress` (the CSVs).
+
+    Attributes:
+        args: The run's options.
+        out: The run's folder (``--out-dir``).
+        resume: The checked checkpoint folder to resume from, or None (a fresh run).
+        resumed: Its ``state.json`` (``{}`` for a fresh run).
+        fields: The columns of ``progress.csv``.
+        saved_at: Agent-steps of the last checkpoint saved (-1: none yet).
+    """
+
+    def __init__(
+        self,
+        args: Any,
+        out: Path,
+        resume: Path | None = None,
+        resumed: dict | None = None,
+        fields: tuple[str, ...] = (),
+    ) -> None:
+        self.args, self.out, self.resume = args, Path(out), resume
+        self.resumed: dict = resumed or {}
+        self.fields = fields or CSV_FIELDS
+        self.saved_at = -1
+        self._log: ProgressLog | None = None
+
+    @classmethod
+    def start(
+        cls,
+        args: Any,
+        check: Callable[[Path, dict], None] | None = None,
+        *,
+        same_trainer: bool = True,
+        own_files: tuple[str, ...] = (),
+    ) -> RunFolder:
+        """Check the checkpoint to resume (if any), then claim and prepare ``--out-dir``.
+
+        Args:
+            args: The run's options (``out_dir``, ``resume``, ``overwrite``, ``trainer``).
+            check: The recipe's own check of the checkpoint: ``check(folder, state.json)``,
+                raising :class:`RunError`; after the trainer's.
+            same_trainer: Refuse a checkpoint of the other ``--trainer``
+                (:func:`check_trainer`).
+            own_files: The recipe's files beyond :data:`RUN_FILES` that ``--overwrite``
+                deletes too.
+
+        Raises:
+            RunError: One line: the checkpoint is missing, incomplete or refused, or the
+                folder is another run's or in use (:func:`prepare_out_dir`).
+        """
+        run = cls.attach(args)
+        if run.resume is not None:
+            if same_trainer:
+                check_trainer(run.resume, args, run.resumed)
+            if check is not None:
+                check(run.resume, run.resumed)
+        prepare_out_dir(run.out, args.resume, args.overwrite)
+        if args.overwrite:
+            for name in own_files:
+                (run.out / name).unlink(missing_ok=True)
+        return run
+
+    @classmethod
+    def attach(cls, args: Any, out: Path | None = None) -> RunFolder:
+        """The folder of a run claimed elsewhere (a benchmark's, a test's): not claimed here.
+
+        ``--resume``'s checkpoint is checked (:func:`check_checkpoint`) and its
+        ``state.json`` read; ``out`` defaults to ``args.out_dir``.
+        """
+        resume, resumed = None, {}
+        if args.resume:
+            resume = check_checkpoint(Path(args.resume))
+            resumed = read_state(resume)
+        return cls(args, Path(args.out_dir) if out is None else out, resume, resumed)
+
+    def rewind(self, agent_steps: int) -> None:
+        """Make the folder what it was at the resumed checkpoint (:func:`rewind`); say so."""
+        rewind(self.out, self.fields, agent_steps)
+        print(f"resumed from {self.resume} at {agent_steps:,} agent-steps")
+
+    def episode_window(self) -> collections.deque:
+        """The last 200 finished episodes: the resumed checkpoint's, or none."""
+        return collections.deque(
+            (tuple(e) for e in self.resumed.get("window", ())), maxlen=WINDOW_EPISODES
+        )
+
+    def next_checkpoint(self, agent_steps: int) -> int:
+        """The first multiple of ``--checkpoint-every`` after ``agent_steps``."""
+        every = self.args.checkpoint_every
+        return (agent_steps // every + 1) * every
+
+    def progress_log(self) -> ProgressLog:
+        """``progress.csv`` opened for appending (closed by :meth:`close`)."""
+        self._log = ProgressLog(self.out / "progress.csv", self.fields)
+        return self._log
+
+    def save_checkpoint(
+        self,
+        agent_steps: int,
+        info: dict,
+        window: Any,
+        save: Callable[[Path, dict], None],
+    ) -> Path:
+        """``checkpoints/step_<agent_steps>`` and ``checkpoints/latest`` pointing at it.
+
+        ``save(folder, state)`` writes the trainer's checkpoint (complete or not at all:
+        :func:`save_checkpoint_dir`); ``state`` is ``info`` with the episode ``window``.
+        """
+        folder = self.out / "checkpoints" / f"step_{agent_steps}"
+        save(folder, {**info, "window": [[float(x) for x in e] for e in window]})
+        self.saved_at = agent_steps
+        atomic_symlink(folder.name, self.out / "checkpoints" / "latest")  # once it is complete
+        return folder
+
+    def resumed_info(self) -> dict:
+        """The resumed checkpoint's facts, for a run resumed at its end (nothing to train)."""
+        return {k: v for k, v in self.resumed.items() if k not in ("window", "args")}
+
+    def close(self) -> None:
+        """Close ``progress.csv``."""
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+
+    def publish(
+        self,
+        export: Callable[[Path], Path],
+        config: Any,
+        info: dict,
+        title: str,
+        more: Callable[[Path], None] | None = None,
+    ) -> dict:
+        """The run's end: ``policy.zip``, ``curves.png``, ``more(out)``, ``validation.json``.
+
+        ``export(path)`` writes the final policy there (returning its path); ``more`` draws
+        a recipe's own figures. Returns the summary :func:`write_validation` writes.
+        """
+        policy_path = export(self.out / "policy.zip")
+        plot_curves(self.out / "progress.csv", self.out / "curves.png", self.fields, title)
+        if more is not None:
+            more(self.out)
+        return write_validation(self.out, config, policy_path, info, self.args.eval_episodes)
+
+
 def start_run(
     args: Args, check: Callable[[Path, dict], None] | None = None
 ) -> tuple[Any, Path, Path | None]:
-    """What every PPO trainer does first: ``(config, out_dir, checkpoint to resume or None)``.
+    """``(config, out_dir, checkpoint to resume or None)``: :meth:`RunFolder.start`'s, kept.
 
-    Sets torch's threads, builds the env config, checks the checkpoint (that it is this
-    trainer's, then ``check(checkpoint, its state.json)``, which raises :class:`RunError`)
-    before the output folder is claimed (:func:`prepare_out_dir`).
+    Sets torch's threads and builds the env config first, as the recipes do.
     """
     import torch
 
     torch.set_num_threads(args.torch_threads)
     config = make_env_config(args)
-    out = Path(args.out_dir)
-    resume = check_checkpoint(Path(args.resume)) if args.resume else None
-    if resume is not None:
-        info = check_trainer(resume, args)
-        if check is not None:
-            check(resume, info)
-    prepare_out_dir(out, args.resume, args.overwrite)
-    return config, out, resume
+    run = RunFolder.start(args, check)
+    return config, run.out, run.resume
 
 
 def save_checkpoint_dir(
@@ -155,25 +323,23 @@ def check_checkpoint(directory: Path) -> Path:
     return directory.resolve()
 
 
-def read_progress(path: Path) -> list[dict[str, str]]:
-    """The rows of ``progress.csv``; a torn last line (a kill mid-write) is dropped."""
-    if not path.exists():
-        return []
-    text = path.read_text(encoding="utf-8", errors="replace")
-    if text and not text.endswith("\n"):
-        text = text[: text.rfind("\n") + 1]  # the torn last row
-    rows = list(csv.DictReader(io.StringIO(text)))
-    return [r for r in rows if None not in r.values() and None not in r]
+def read_state(directory: Path) -> dict:
+    """A checkpoint folder's ``state.json`` (the counters, the episode window, the options)."""
+    return json.loads((directory / "state.json").read_text())
 
 
-def write_rows(path: Path, fields: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
-    """Write ``rows`` as a whole CSV file, atomically."""
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: r.get(k, "") for k in fields})
-    atomic_write(path, buf.getvalue())
+def read_tensors(directory: Path) -> dict:
+    """A checkpoint folder's ``state.pt``, loaded weights-only (no unpickling)."""
+    import torch
+
+    return torch.load(directory / "state.pt", map_location="cpu", weights_only=True)
+
+
+def read_policy(directory: Path) -> Any:
+    """The metadata of a checkpoint folder's ``policy.zip`` (its algorithm, its options)."""
+    from uasep_env.policies.learned import read_checkpoint
+
+    return read_checkpoint(directory / "policy.zip")[0]
 
 
 def rewind(out: Path, fields: tuple[str, ...], agent_steps: int) -> None:
@@ -227,99 +393,8 @@ def publish_dir(tmp: Path, final: Path) -> None:
     fsync_dir(final.parent)
 
 
-class ProgressLog:
-    """``progress.csv`` opened for appending: a header when new, each row flushed and synced."""
-
-    def __init__(self, path: Path, fields: tuple[str, ...]) -> None:
-        new = not path.exists() or path.stat().st_size == 0
-        if new:
-            write_rows(path, fields, [])
-        self._fh = path.open("a", newline="", encoding="utf-8")
-        self._csv = csv.DictWriter(self._fh, fieldnames=fields, lineterminator="\n")
-
-    def write(self, row: dict[str, Any]) -> None:
-        """Append one row, durably."""
-        self._csv.writerow(row)
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
-
-    def close(self) -> None:
-        """Close the file."""
-        self._fh.close()
-
-
-#: Episodes a progress row's window must hold to be plotted (the run's first rows are noise).
-MIN_PLOTTED_EPISODES = 20
-
-
-def plot_curves(
-    csv_path: Path, png_path: Path, fields: tuple[str, ...], title: str = ""
-) -> Path | None:
-    """Learning curves (return, collision and loss-of-separation rates, deviation) as PNG.
-
-    Returns:
-        The figure's path, or None when nothing was written: no row of ``progress.csv``
-        holds :data:`MIN_PLOTTED_EPISODES` finished episodes yet (a short run), or
-        matplotlib is missing; either is said in one line on stderr, never a blank figure.
-    """
-    rows = [
-        r
-        for r in read_progress(csv_path)
-        if r.get("return_mean") and int(r["episodes"]) >= MIN_PLOTTED_EPISODES
-    ]
-    if not rows:
-        print(
-            f"{png_path.name} not written: no row of {csv_path.name} has "
-            f"{MIN_PLOTTED_EPISODES} finished episodes yet (a longer run has curves)",
-            file=sys.stderr,
-        )
-        return None
-    try:
-        import matplotlib
-    except ImportError:
-        print(f"{png_path.name} not written: it needs matplotlib (the viz extra)", file=sys.stderr)
-        return None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    data = {k: np.array([float(r[k]) for r in rows]) for k in fields}
-    fig, axes = plt.subplots(2, 4, figsize=(16, 6.5), sharey="col")
-    panels = (
-        ("return_mean", "mean return per agent"),
-        ("collision_rate", "collision rate"),
-        ("loss_of_separation_rate", "loss-of-separation rate"),
-        ("max_deviation_mean", "mean max deviation (m)"),
-    )
-    for row, (x_key, x_label, scale) in enumerate(
-        (("agent_steps", "agent-steps (millions)", 1e-6), ("wall_s", "wall time (min)", 1 / 60))
-    ):
-        for col, (key, label) in enumerate(panels):
-            ax = axes[row, col]
-            ax.plot(data[x_key] * scale, data[key], lw=1.2)
-            ax.set_xlabel(x_label)
-            ax.set_title(label, fontsize=10)
-            ax.grid(alpha=0.3)
-    fig.suptitle(title or csv_path.parent.name)
-    fig.tight_layout()
-    with atomic_output(png_path) as fh:
-        fig.savefig(fh, format="png", dpi=90)
-    plt.close(fig)
-    return png_path
-
-
-# What every trainer writes the same way: the learning curve's columns and figures, the
-# normalisation and policy files of a checkpoint, and validation.json.
-
-CSV_FIELDS = (
-    "agent_steps",
-    "wall_s",
-    "episodes",
-    "return_mean",
-    "collision_rate",
-    "loss_of_separation_rate",
-    "max_deviation_mean",
-    "episode_length_mean",
-)
+# What every trainer writes the same way: the normalisation and policy files of a
+# checkpoint, and validation.json.
 
 
 def normalization_bytes(norm: Any) -> bytes:
@@ -339,21 +414,26 @@ def normalization_bytes(norm: Any) -> bytes:
 
 
 def load_normalization(norm: Any, path: Path) -> None:
-    """Restore :func:`normalization_bytes`' statistics into ``norm`` (no unpickling)."""
+    """Restore :func:`normalization_bytes`' statistics into ``norm`` (no unpickling).
+
+    The return statistics only where the file has them (skrl's MAPPO saves the
+    observations' alone).
+    """
     with np.load(path, allow_pickle=False) as z:
         norm.obs_rms.mean, norm.obs_rms.var = z["obs_mean"], z["obs_var"]
         norm.obs_rms.count = float(z["obs_count"])
-        norm.ret_rms.mean, norm.ret_rms.var = z["ret_mean"], z["ret_var"]
-        norm.ret_rms.count = float(z["ret_count"])
+        if "ret_mean" in z:
+            norm.ret_rms.mean, norm.ret_rms.var = z["ret_mean"], z["ret_var"]
+            norm.ret_rms.count = float(z["ret_count"])
 
 
-def check_trainer(directory: Path, args: Args) -> dict:
-    """``directory``'s ``state.json``, once its trainer is ``args.trainer``'s.
+def check_trainer(directory: Path, args: Args, info: dict | None = None) -> dict:
+    """``directory``'s ``state.json`` (``info`` if read already), once its trainer is ours.
 
     Raises:
         RunError: The checkpoint was written by the other trainer (one line).
     """
-    info = json.loads((directory / "state.json").read_text())
+    info = read_state(directory) if info is None else info
     theirs = info.get("args", {}).get("trainer", "default")
     if theirs != args.trainer:
         raise RunError(
@@ -376,34 +456,6 @@ def check_switch(directory: Path, info: dict, args: Any, name: str, default: boo
     if saved != getattr(args, name):
         flag = "--" + ("" if saved else "no-") + name.replace("_", "-")
         raise RunError(f"--resume {directory}: a checkpoint of {flag}; resume it with {flag}")
-
-
-def window_summary(window: Any) -> dict:
-    """The learning curve's figures over the finished episodes of ``window``.
-
-    ``window`` holds ``(return, collision, loss_of_separation, max_deviation, length)``
-    tuples; ``{}`` when it is empty.
-    """
-    w = list(window)
-    if not w:
-        return {}
-    return {
-        "return_mean": float(np.mean([e[0] for e in w])),
-        "collision_rate": float(np.mean([e[1] for e in w])),
-        "loss_of_separation_rate": float(np.mean([e[2] for e in w])),
-        "max_deviation_mean": float(np.mean([e[3] for e in w])),
-        "episode_length_mean": float(np.mean([e[4] for e in w])),
-    }
-
-
-def bar_postfix(summary: dict) -> dict:
-    """The progress bar's figures of a :func:`window_summary`."""
-    return {
-        "ret": f"{summary['return_mean']:.0f}",
-        "coll": f"{summary['collision_rate']:.1%}",
-        "los": f"{summary['loss_of_separation_rate']:.1%}",
-        "dev": f"{summary['max_deviation_mean']:.1f}m",
-    }
 
 
 def export_actor(

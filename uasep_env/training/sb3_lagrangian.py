@@ -203,9 +203,9 @@ def plot_cost_curves(csv_path: Path, png_path: Path, title: str = "") -> Path:
     import matplotlib.pyplot as plt
 
     from uasep_env.runtime.atomic import atomic_output
+    from uasep_env.training.curves import read_progress
 
-    with Path(csv_path).open(newline="", encoding="utf-8") as fh:
-        rows = [r for r in csv.DictReader(fh) if r.get("agent_steps", "").isdigit()]
+    rows = [r for r in read_progress(Path(csv_path)) if r.get("agent_steps", "").isdigit()]
     x = np.array([int(r["agent_steps"]) for r in rows]) * 1e-6
     col = {k: np.array([float(r[k]) for r in rows]) for k in COST_FIELDS[2:]}
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4))

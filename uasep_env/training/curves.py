@@ -1,0 +1,178 @@
+"""The learning curve every trainer writes the same way: ``progress.csv`` and ``curves.png``.
+
+The columns (:data:`CSV_FIELDS`), one row per update appended durably (:class:`ProgressLog`:
+flushed and ``fsync``-ed, so a kill tears at most the last line, which :func:`read_progress`
+drops), the figures of the last finished episodes (:func:`window_summary`,
+:func:`bar_postfix`) and the figure drawn at the end (:func:`plot_curves`). A run's folder
+(:class:`~uasep_env.training.rundir.RunFolder`) opens and rewinds these files.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uasep_env.runtime.atomic import atomic_output, atomic_write
+
+__all__ = [
+    "CSV_FIELDS",
+    "MIN_PLOTTED_EPISODES",
+    "WINDOW_EPISODES",
+    "ProgressLog",
+    "bar_postfix",
+    "plot_curves",
+    "read_progress",
+    "window_summary",
+    "write_rows",
+]
+
+
+def read_progress(path: Path) -> list[dict[str, str]]:
+    """The rows of ``progress.csv``; a torn last line (a kill mid-write) is dropped."""
+    if not path.exists():
+        return []
+    text = path.read_text(encoding="utf-8", errors="replace")
+    if text and not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]  # the torn last row
+    rows = list(csv.DictReader(io.StringIO(text)))
+    return [r for r in rows if None not in r.values() and None not in r]
+
+
+def write_rows(path: Path, fields: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
+    """Write ``rows`` as a whole CSV file, atomically."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: r.get(k, "") for k in fields})
+    atomic_write(path, buf.getvalue())
+
+
+class ProgressLog:
+    """``progress.csv`` opened for appending: a header when new, each row flushed and synced."""
+
+    def __init__(self, path: Path, fields: tuple[str, ...]) -> None:
+        new = not path.exists() or path.stat().st_size == 0
+        if new:
+            write_rows(path, fields, [])
+        self._fh = path.open("a", newline="", encoding="utf-8")
+        self._csv = csv.DictWriter(self._fh, fieldnames=fields, lineterminator="\n")
+
+    def write(self, row: dict[str, Any]) -> None:
+        """Append one row, durably."""
+        self._csv.writerow(row)
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        """Close the file."""
+        self._fh.close()
+
+
+#: Finished episodes the learning curve's figures are taken over (a checkpoint keeps them).
+WINDOW_EPISODES = 200
+
+#: Episodes a progress row's window must hold to be plotted (the run's first rows are noise).
+MIN_PLOTTED_EPISODES = 20
+
+
+def plot_curves(
+    csv_path: Path, png_path: Path, fields: tuple[str, ...], title: str = ""
+) -> Path | None:
+    """Learning curves (return, collision and loss-of-separation rates, deviation) as PNG.
+
+    Returns:
+        The figure's path, or None when nothing was written: no row of ``progress.csv``
+        holds :data:`MIN_PLOTTED_EPISODES` finished episodes yet (a short run), or
+        matplotlib is missing; either is said in one line on stderr, never a blank figure.
+    """
+    rows = [
+        r
+        for r in read_progress(csv_path)
+        if r.get("return_mean") and int(r["episodes"]) >= MIN_PLOTTED_EPISODES
+    ]
+    if not rows:
+        print(
+            f"{png_path.name} not written: no row of {csv_path.name} has "
+            f"{MIN_PLOTTED_EPISODES} finished episodes yet (a longer run has curves)",
+            file=sys.stderr,
+        )
+        return None
+    try:
+        import matplotlib
+    except ImportError:
+        print(f"{png_path.name} not written: it needs matplotlib (the viz extra)", file=sys.stderr)
+        return None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = {k: np.array([float(r[k]) for r in rows]) for k in fields}
+    fig, axes = plt.subplots(2, 4, figsize=(16, 6.5), sharey="col")
+    panels = (
+        ("return_mean", "mean return per agent"),
+        ("collision_rate", "collision rate"),
+        ("loss_of_separation_rate", "loss-of-separation rate"),
+        ("max_deviation_mean", "mean max deviation (m)"),
+    )
+    for row, (x_key, x_label, scale) in enumerate(
+        (("agent_steps", "agent-steps (millions)", 1e-6), ("wall_s", "wall time (min)", 1 / 60))
+    ):
+        for col, (key, label) in enumerate(panels):
+            ax = axes[row, col]
+            ax.plot(data[x_key] * scale, data[key], lw=1.2)
+            ax.set_xlabel(x_label)
+            ax.set_title(label, fontsize=10)
+            ax.grid(alpha=0.3)
+    fig.suptitle(title or csv_path.parent.name)
+    fig.tight_layout()
+    with atomic_output(png_path) as fh:
+        fig.savefig(fh, format="png", dpi=90)
+    plt.close(fig)
+    return png_path
+
+
+#: The columns of ``progress.csv`` (every trainer's).
+CSV_FIELDS = (
+    "agent_steps",
+    "wall_s",
+    "episodes",
+    "return_mean",
+    "collision_rate",
+    "loss_of_separation_rate",
+    "max_deviation_mean",
+    "episode_length_mean",
+)
+
+
+def window_summary(window: Any) -> dict:
+    """The learning curve's figures over the finished episodes of ``window``.
+
+    ``window`` holds ``(return, collision, loss_of_separation, max_deviation, length)``
+    tuples; ``{}`` when it is empty.
+    """
+    w = list(window)
+    if not w:
+        return {}
+    return {
+        "return_mean": float(np.mean([e[0] for e in w])),
+        "collision_rate": float(np.mean([e[1] for e in w])),
+        "loss_of_separation_rate": float(np.mean([e[2] for e in w])),
+        "max_deviation_mean": float(np.mean([e[3] for e in w])),
+        "episode_length_mean": float(np.mean([e[4] for e in w])),
+    }
+
+
+def bar_postfix(summary: dict) -> dict:
+    """The progress bar's figures of a :func:`window_summary`."""
+    return {
+        "ret": f"{summary['return_mean']:.0f}",
+        "coll": f"{summary['collision_rate']:.1%}",
+        "los": f"{summary['loss_of_separation_rate']:.1%}",
+        "dev": f"{summary['max_deviation_mean']:.1f}m",
+    }
