@@ -6,6 +6,9 @@
     # the same command again resumes: finished seeds are kept, interrupted ones continue
     # from their checkpoints/latest; flags after "--" go to the recipe unchanged:
     python train/seeds.py --recipe shared --seeds 2 --out-dir /tmp/s -- --max-minutes 1
+    # the report again from its stored figures (no training, no episode; the verdicts are
+    # judged again): rewrites baselines/results/seeds_mappo.md and the JSON's targets
+    python train/seeds.py --from-json baselines/results/seeds_mappo.json
 
 Stages (each skipped when its output exists, so an interrupted run picks up where it was):
 
@@ -25,8 +28,9 @@ Stages (each skipped when its output exists, so an interrupted run picks up wher
    intervals, means with Student-t intervals), and across seeds the interquartile mean with
    a 95 % stratified bootstrap interval (runs resampled within each scenario family, as
    ``rliable`` does; :func:`uasep_env.metrics.statistics.stratified_bootstrap_iqm`), the
-   targets (met / not met, from these numbers) and ``curves.png``, the learning curves of all
-   seeds in one figure; ``--publish PREFIX`` copies them (and the scaling tables) to
+   targets (met / not met / not shown, from these numbers: a rate held to the APF's by
+   :func:`uasep_env.metrics.statistics.rate_verdict`) and ``curves.png``, the learning
+   curves of all seeds in one figure; ``--publish PREFIX`` copies them (and the scaling tables) to
    ``PREFIX.md`` etc. for the repository. ``--scaling-episodes N`` adds
    ``baselines/scaling.py`` over the selected checkpoints (``<out>/scaling.*``, kept when
    it exists). ``seeds.json`` records the recipe's options (``recipe_args``, from seed 0's
