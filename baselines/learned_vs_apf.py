@@ -29,7 +29,7 @@ from typing import Any
 
 from uasep_env import make_config
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
-from uasep_env.metrics.statistics import no_worse_rate
+from uasep_env.metrics.statistics import MET, NOT_MET, VERDICT_LEGEND, stated_rate_verdict
 from uasep_env.policies import load_policy, reference_controllers
 from uasep_env.runtime.atomic import atomic_write
 from uasep_env.runtime.tables import render_table
@@ -64,15 +64,20 @@ def compared_policies() -> dict[str, str]:
     return {name: name for name in names}
 
 
-def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, str, bool | None]]:
-    """The issue's targets: (target, measured, met); ``None`` where the policy is missing."""
+def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, str, str]]:
+    """The issue's targets: ``(target, measured, verdict)``; ``n/a`` where the policy is missing.
+
+    A rate held to the APF's gets :func:`~uasep_env.metrics.statistics.rate_verdict`'s verdict
+    (``met``, ``not met`` or ``not shown``) with the episodes behind it; the other targets
+    are ``met`` or ``not met``.
+    """
     res = {k: v.aggregate for k, v in bank.results.items()}
     apf = res["apf"]
-    out: list[tuple[str, str, bool | None]] = []
+    out: list[tuple[str, str, str]] = []
     for name in LEARNED:
         if name not in meta:
             if name not in OPTIONAL:
-                out.append((f"{name}: trained and shipped", "missing", None))
+                out.append((f"{name}: trained and shipped", "missing", "n/a"))
             continue
         facts, note = meta[name], ""
         if "reproduces" in facts:  # retrained to a report's checkpoint: the original run's
@@ -85,7 +90,7 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
         steps = int(facts.get("agent_steps", 0))
         out.append(
             (f"{name}: trains in <= 60 min", f"{wall / 60:.1f} min, {steps:,} agent-steps{note}",
-             wall <= TRAINING_BUDGET_S)
+             _met(wall <= TRAINING_BUDGET_S))
         )  # fmt: skip
     for name, what in (("ppo_residual_apf", "residual"), ("ppo_lagrangian", "PPO-Lagrangian")):
         if name in res:
@@ -97,18 +102,24 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
             c = res[name]["episode.collision"]
             out.append(
                 (f"{what}: collision rate <= 5 %",
-                 f"{c['rate']:.1%} [{c['ci_low']:.1%}, {c['ci_high']:.1%}]", c["rate"] <= 0.05)
+                 f"{c['rate']:.1%} [{c['ci_low']:.1%}, {c['ci_high']:.1%}]",
+                 _met(c["rate"] <= 0.05))
             )  # fmt: skip
     return out
 
 
+def _met(ok: bool) -> str:
+    return MET if ok else NOT_MET
+
+
 def _as_safe_and_closer(
     what: str, r: dict[str, Any], apf: dict[str, Any], cut: float
-) -> list[tuple[str, str, bool]]:
+) -> list[tuple[str, str, str]]:
     """The targets of a policy held to the APF's safety.
 
-    Collision and loss-of-separation rates no worse than the APF's (Wilson intervals
-    overlapping or lower), and mean max deviation at least ``cut`` below the APF's.
+    Collision and loss-of-separation rates no worse than the APF's (judged by
+    :func:`~uasep_env.metrics.statistics.rate_verdict` on the Wilson intervals), and mean
+    max deviation at least ``cut`` below the APF's.
     """
     out = []
     for key, name in (("episode.collision", "collision"),
@@ -117,13 +128,13 @@ def _as_safe_and_closer(
             (f"{what}: {name} rate no worse than the APF's",
              f"{r[key]['rate']:.1%} [{r[key]['ci_low']:.1%}, {r[key]['ci_high']:.1%}] vs "
              f"{apf[key]['rate']:.1%} [{apf[key]['ci_low']:.1%}, {apf[key]['ci_high']:.1%}]",
-             no_worse_rate(r[key], apf[key]))
+             stated_rate_verdict(r[key], apf[key]))
         )  # fmt: skip
     d, da = r["episode.max_deviation"]["mean"], apf["episode.max_deviation"]["mean"]
     goal = f">= {cut * 100:.0f} % below the APF's" if cut else "no larger than the APF's"
     out.append(
         (f"{what}: mean max deviation {goal}",
-         f"{d:.1f} m vs {da:.1f} m ({(1 - d / da):+.0%} lower)", d <= (1.0 - cut) * da)
+         f"{d:.1f} m vs {da:.1f} m ({(1 - d / da):+.0%} lower)", _met(d <= (1.0 - cut) * da))
     )  # fmt: skip
     return out
 
@@ -204,13 +215,11 @@ def render(results: dict[str, Any], meta: dict[str, dict]) -> str:
             table(result, TABLE_ROWS),
         ]
     if "random" in results:
-        body = [
-            [target, measured, "n/a" if met is None else ("met" if met else "not met")]
-            for target, measured, met in targets(results["random"], meta)
-        ]
+        body = [list(t) for t in targets(results["random"], meta)]
         sections += [
             "### Targets (held-out bank)",
-            render_table(["target", "measured", "met"], body, markdown=True),
+            VERDICT_LEGEND,
+            render_table(["target", "measured", "verdict"], body, markdown=True),
         ]
     return "\n\n".join(sections) + "\n"
 

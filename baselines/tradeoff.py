@@ -59,7 +59,7 @@ from uasep_env.config import AS_PUBLISHED, EnvConfig
 from uasep_env.config.checks import check_positive_int
 from uasep_env.evaluation import PolicyResult, evaluate
 from uasep_env.metrics import t_interval
-from uasep_env.metrics.statistics import no_worse_rate
+from uasep_env.metrics.statistics import NOT_MET, rate_verdict
 from uasep_env.policies import (
     APF,
     REGISTRY,
@@ -324,13 +324,16 @@ def pareto(safety: np.ndarray, cost: np.ndarray, higher_is_safer: bool) -> np.nd
 def knee_distances(rows: list[dict[str, Any]]) -> list[tuple[dict[str, Any], float]]:
     """The front of :func:`knee`, each setting with its distance from the chord.
 
-    Both axes scaled to [0, 1]; settings off the front or colliding more often than the
-    safest one are left out. With fewer than 3 settings on the front, the safest has 1.
+    Both axes scaled to [0, 1]; settings off the front or shown to collide more often
+    than the safest one are left out. With fewer than 3 settings on the front, the safest has 1.
     """
     rows = sorted(rows, key=lambda r: r["value"])
     safest = min(r["collision"] for r in rows)
     safest_hi = min(r["collision_hi"] for r in rows if r["collision"] == safest)
-    ok = [r for r in rows if no_worse_rate({"ci_low": r["collision_lo"]}, {"ci_high": safest_hi})]
+    ref = {"rate": safest, "ci_low": safest, "ci_high": safest_hi}
+    # Eligible unless shown worse (rate_verdict's "not met"): the knee is a choice among
+    # settings, not a claim that a target is met, so "not shown" settings stay candidates.
+    ok = [r for r in rows if rate_verdict(_collision(r), ref) != NOT_MET]
     s = np.array([r["min_obstacle_distance"] for r in ok])
     c = np.array([r["max_deviation"] for r in ok])
     front = [r for r, k in zip(ok, pareto(s, c, True), strict=True) if k]
@@ -346,13 +349,19 @@ def knee_distances(rows: list[dict[str, Any]]) -> list[tuple[dict[str, Any], flo
     return [(r, float(di)) for r, di in zip(front, d, strict=True)]
 
 
+def _collision(row: dict[str, Any]) -> dict[str, float]:
+    """A CSV row's collision rate as the interval :func:`rate_verdict` reads."""
+    return {"rate": row["collision"], "ci_low": row["collision_lo"], "ci_high": row["collision_hi"]}
+
+
 def knee(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """The knee of a method's front of max deviation against min obstacle distance.
 
-    Among the settings that collide no more often than the method's safest setting (the
-    Wilson intervals overlap) and are on the Pareto front, the point farthest from the
-    chord between the front's ends, both axes scaled to [0, 1] (the "kneedle" rule): past
-    it, more distance costs more deviation per metre than before it.
+    Among the settings not shown to collide more often than the method's safest setting
+    (:func:`~uasep_env.metrics.statistics.rate_verdict` is not ``not met``: the Wilson
+    intervals overlap, or the setting's lies below) and on the Pareto front, the point
+    farthest from the chord between the front's ends, both axes scaled to [0, 1] (the
+    "kneedle" rule): past it, more distance costs more deviation per metre than before it.
     """
     return max(knee_distances(rows), key=lambda rd: rd[1])[0]
 

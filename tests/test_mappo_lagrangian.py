@@ -221,8 +221,6 @@ def test_resume_restores_cost_critic_and_multiplier(tmp_path):
 
 
 def test_seed_driver_targets(monkeypatch):
-    from types import SimpleNamespace
-
     from conftest import ROOT
 
     monkeypatch.syspath_prepend(str(ROOT / "train"))
@@ -234,24 +232,21 @@ def test_seed_driver_targets(monkeypatch):
     def rates(rate, dev):
         agg = {k: {"rate": rate, "ci_low": rate / 2, "ci_high": rate * 2 + 0.01, "n": 100}
                for k in ("episode.collision", "episode.loss_of_separation")}  # fmt: skip
-        return SimpleNamespace(aggregate={**agg, "episode.max_deviation": {"mean": dev}})
+        return {**agg, "episode.max_deviation": {"mean": dev}}
 
     def measured(dev_iqm):
-        result = SimpleNamespace(
-            policies=["apf", "seed_0"],
-            results={"apf": rates(0.02, 40.0), "seed_0": rates(0.02, 30.0)},
-        )
+        per_seed = {"apf": rates(0.02, 40.0), "seed_0": rates(0.02, 30.0)}
         agg = {"episode.max_deviation": {"iqm": dev_iqm, "ci_low": 1.0, "ci_high": 99.0,
                                          "apf_iqm": 40.0}}  # fmt: skip
-        return {t: ok for t, _, ok in seeds.targets("mappo_lagrangian", result, agg)}
+        return {t: v for t, _, v in seeds.targets("mappo_lagrangian", per_seed, agg)}
 
     met = measured(35.0)
     assert [t.split(":")[0] for t in met] == [
         "collision", "loss_of_separation", "mean max deviation no larger than the APF's (keeps "
         "the formation; IQM over seeds x families, the APF through the same statistic)"
     ]  # fmt: skip
-    assert all(met.values())
-    assert list(measured(45.0).values()) == [True, True, False]  # wider than the APF: not met
+    assert list(met.values()) == ["met (100 vs 100 episodes)"] * 2 + ["met"]
+    assert list(measured(45.0).values())[2] == "not met"  # wider than the APF: not met
 
 
 def test_resume_from_a_plain_mappo_checkpoint_is_refused(tmp_path, capsys):

@@ -803,3 +803,20 @@ def test_rate_verdict_reads_means_and_rejects_bad_input():
         rate_verdict(seeds | {"mean": math.nan}, seeds)
     with pytest.raises(ValueError, match="ci_low and ci_high"):
         rate_verdict({"rate": 0.1}, seeds)
+
+
+def test_stated_and_weakest_verdicts():
+    from uasep_env.metrics.statistics import stated_rate_verdict, weakest_verdict
+
+    assert stated_rate_verdict(_wilson(1, 5), _wilson(0, 5)) == "not shown (5 vs 5 episodes)"
+    assert stated_rate_verdict(_wilson(0, 50), _wilson(0, 40)) == "met (50 vs 40 episodes)"
+    assert stated_rate_verdict({"rate": 0.0, "ci_low": 0.0, "ci_high": 0.0}, _wilson(0, 5)) == (
+        "met (? vs 5 episodes)"
+    )
+    assert weakest_verdict(["met", "not shown", "met"]) == "not shown"
+    assert weakest_verdict(["not shown", "not met"]) == "not met"
+    assert weakest_verdict(["met"]) == "met"
+    with pytest.raises(ValueError, match="verdicts"):
+        weakest_verdict([])
+    with pytest.raises(ValueError, match="verdicts"):
+        weakest_verdict(["met", "n/a"])

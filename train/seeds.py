@@ -6,6 +6,9 @@
     # the same command again resumes: finished seeds are kept, interrupted ones continue
     # from their checkpoints/latest; flags after "--" go to the recipe unchanged:
     python train/seeds.py --recipe shared --seeds 2 --out-dir /tmp/s -- --max-minutes 1
+    # the report again from its stored figures (no training, no episode; the verdicts are
+    # judged again): rewrites baselines/results/seeds_mappo.md and the JSON's targets
+    python train/seeds.py --from-json baselines/results/seeds_mappo.json
 
 Stages (each skipped when its output exists, so an interrupted run picks up where it was):
 
@@ -25,8 +28,9 @@ Stages (each skipped when its output exists, so an interrupted run picks up wher
    intervals, means with Student-t intervals), and across seeds the interquartile mean with
    a 95 % stratified bootstrap interval (runs resampled within each scenario family, as
    ``rliable`` does; :func:`uasep_env.metrics.statistics.stratified_bootstrap_iqm`), the
-   targets (met / not met, from these numbers) and ``curves.png``, the learning curves of all
-   seeds in one figure; ``--publish PREFIX`` copies them (and the scaling tables) to
+   targets (met / not met / not shown, from these numbers: a rate held to the APF's by
+   :func:`uasep_env.metrics.statistics.rate_verdict`) and ``curves.png``, the learning
+   curves of all seeds in one figure; ``--publish PREFIX`` copies them (and the scaling tables) to
    ``PREFIX.md`` etc. for the repository. ``--scaling-episodes N`` adds
    ``baselines/scaling.py`` over the selected checkpoints (``<out>/scaling.*``, kept when
    it exists). ``seeds.json`` records the recipe's options (``recipe_args``, from seed 0's
@@ -37,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import os
 import subprocess
@@ -47,7 +52,15 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.metrics.statistics import no_worse_rate
+from uasep_env.metrics.statistics import (
+    MET,
+    NOT_MET,
+    NOT_SHOWN,
+    VERDICT_LEGEND,
+    episodes_behind,
+    rate_verdict,
+    weakest_verdict,
+)
 from uasep_env.runtime.atomic import atomic_output, atomic_write
 from uasep_env.runtime.runlock import RunFolderBusy, claim_run_folder
 from uasep_env.training.args import HelpFormatter, OneLineParser, non_negative_int, positive_int
@@ -264,31 +277,41 @@ def across_seeds(result: Any, seeds: int) -> dict[str, dict[str, Any]]:
 
 
 def targets(
-    recipe: str, result: Any, agg: dict[str, dict[str, Any]]
-) -> list[tuple[str, str, bool]]:
-    """The issue's targets for ``recipe``, from the measured aggregate across seeds."""
-    apf = result.results["apf"].aggregate
-    labels = [lab for lab in result.policies if lab != "apf"]
+    recipe: str, per_seed: dict[str, dict[str, Any]], agg: dict[str, dict[str, Any]]
+) -> list[tuple[str, str, str]]:
+    """The issue's targets for ``recipe``: ``(target, measured, verdict)``.
+
+    ``per_seed`` maps ``apf`` and each ``seed_<k>`` to its aggregate on the held-out bank,
+    ``agg`` is :func:`across_seeds`'. A rate held to the APF's gets
+    :func:`~uasep_env.metrics.statistics.rate_verdict`'s verdict (``met``, ``not met`` or
+    ``not shown``) with the episodes behind it; the other targets are ``met`` or ``not met``.
+    """
+    apf = per_seed["apf"]
+    labels = [lab for lab in per_seed if lab != "apf"]
     out = []
     if recipe in AS_SAFE_AS_APF:
         for key in ("episode.collision", "episode.loss_of_separation"):
             # Every seed on its own (Wilson intervals over the same encounters as the APF's):
-            # stricter than the IQM, which trims the families where a seed does worst.
+            # stricter than the IQM, which trims the families where a seed does worst. The
+            # seed shown is the one that decides: the weakest verdict, then the highest rate.
             a = apf[key]
-            worst = max(labels, key=lambda lab: result.results[lab].aggregate[key]["ci_low"])
-            w = result.results[worst].aggregate[key]
+            verdicts = {lab: rate_verdict(per_seed[lab][key], a) for lab in labels}
+            rank = (NOT_MET, NOT_SHOWN, MET)
+            worst = min(labels, key=lambda lab: (rank.index(verdicts[lab]),
+                                                 -per_seed[lab][key]["rate"]))  # fmt: skip
+            w = per_seed[worst][key]
             out.append(
                 (
                     f"{key.removeprefix('episode.')}: every seed as safe as the APF "
-                    "(intervals overlap or lower)",
+                    "(the weakest seed's verdict)",
                     f"worst {worst}: {w['rate']:.1%} [{w['ci_low']:.1%}, {w['ci_high']:.1%}] "
                     f"vs APF {a['rate']:.1%} [{a['ci_low']:.1%}, {a['ci_high']:.1%}]",
-                    all(no_worse_rate(result.results[lab].aggregate[key], a) for lab in labels),
+                    f"{weakest_verdict(verdicts.values())} ({episodes_behind(w, a)})",
                 )
             )
         d = agg["episode.max_deviation"]
         cut = 1.0 - d["iqm"] / d["apf_iqm"]
-        means = [result.results[lab].aggregate["episode.max_deviation"]["mean"] for lab in labels]
+        means = [per_seed[lab]["episode.max_deviation"]["mean"] for lab in labels]
         plain = apf["episode.max_deviation"]["mean"]
         if recipe == "mappo_lagrangian":
             # The constraint buys the APF's safety; the task reward must keep the formation.
@@ -299,7 +322,7 @@ def targets(
                     f"IQM {d['iqm']:.1f} m [{d['ci_low']:.1f}, {d['ci_high']:.1f}] vs APF "
                     f"{d['apf_iqm']:.1f} m; plain means {min(means):.1f}-{max(means):.1f} m "
                     f"vs {plain:.1f} m",
-                    d["iqm"] <= d["apf_iqm"],
+                    _met(d["iqm"] <= d["apf_iqm"]),
                 )
             )
             return out
@@ -311,7 +334,7 @@ def targets(
                 f"{d['apf_iqm']:.1f} m ({cut:+.1%} less); plain means {min(means):.1f}-"
                 f"{max(means):.1f} m vs {plain:.1f} m ({1 - max(means) / plain:+.1%} to "
                 f"{1 - min(means) / plain:+.1%})",
-                cut >= 0.25,
+                _met(cut >= 0.25),
             )
         )
     else:
@@ -321,10 +344,14 @@ def targets(
                 "at most 5 % collisions (IQM across seeds)",
                 f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] (early ends, "
                 f"collision or lost UAV: {agg['episode.terminated']['iqm']:.1%})",
-                s["iqm"] <= 0.05,
+                _met(s["iqm"] <= 0.05),
             )
         )
     return out
+
+
+def _met(ok: bool) -> str:
+    return MET if ok else NOT_MET
 
 
 def iqm_cell(stats: dict[str, Any], kind: str) -> str:
@@ -341,8 +368,6 @@ def _fmt(stats: dict[str, Any], kind: str) -> str:
 
 
 def _training_facts(run: Path) -> dict[str, Any]:
-    import json
-
     try:
         return json.loads((run / "validation.json").read_text())["training"]
     except (OSError, ValueError, KeyError):
@@ -378,32 +403,69 @@ def report(
     curves_name: str = "curves.png",
 ) -> tuple[str, dict]:
     """Stage 4: the markdown and JSON of every seed and of the aggregate."""
+    agg = across_seeds(result, seeds)
+    per_seed = {
+        lab: {k: result.results[lab].aggregate[k] for k, _, _ in METRICS} for lab in result.policies
+    }
+    data = {
+        "recipe": recipe,
+        "command": command,
+        "recipe_args": recipe_args(out),
+        "seeds": seeds,
+        "held_out_seeds": {"first": result.seeds[0], "count": len(result.seeds)},
+        "per_seed": per_seed,
+        "across_seeds": agg,
+        "targets": _target_records(targets(recipe, per_seed, agg)),
+        "shipped": shipped,
+        "training": {f"seed_{k}": _training_facts(seed_dir(out, k)) for k in range(seeds)},
+    }
+    return render_report(data, curves_name), data
+
+
+def _target_records(tg: list[tuple[str, str, str]]) -> list[dict[str, str]]:
+    return [{"target": t, "measured": m, "verdict": v} for t, m, v in tg]
+
+
+def _nan_back(value: Any) -> Any:
+    """A JSON report's statistics with NaN for null (its writer's NaN), to be formatted."""
+    if isinstance(value, dict):
+        return {k: _nan_back(v) for k, v in value.items()}
+    return math.nan if value is None else value
+
+
+def render_report(data: dict[str, Any], curves_name: str = "curves.png") -> str:
+    """The markdown of a report from its JSON data (:func:`report`'s, or a stored one).
+
+    The targets are judged again from the data's figures (:func:`targets`), so that a report
+    written under an older rule reads the current one; ``data["targets"]`` is set to them.
+    """
     from uasep_env.runtime.tables import render_table
 
-    agg = across_seeds(result, seeds)
+    per_seed = _nan_back(data["per_seed"])
+    agg = _nan_back(data["across_seeds"])
+    tg = targets(data["recipe"], per_seed, agg)
+    data["targets"] = _target_records(tg)
     headers = ["policy", "agent-steps", "train (min)", *(label for _, label, _ in METRICS)]
     rows = []
-    for label in result.policies:
-        a = result.results[label].aggregate
-        facts = _training_facts(seed_dir(out, int(label[5:]))) if label != "apf" else {}
+    for label, a in per_seed.items():
+        facts = data["training"].get(label) or {}
         steps = f"{facts['agent_steps']:,}" if "agent_steps" in facts else "-"
         wall = f"{facts['wall_s'] / 60:.1f}" if "wall_s" in facts else "-"
         rows.append([label, steps, wall, *(_fmt(a[k], kind) for k, _, kind in METRICS)])
-    iqm_row = ["IQM across seeds", "", "", *(iqm_cell(agg[key], kind) for key, _, kind in METRICS)]
-    rows.append(iqm_row)
+    rows.append(["IQM across seeds", "", "", *(iqm_cell(agg[k], kind) for k, _, kind in METRICS)])
     apf_row = ["apf, the same IQM over families", "", ""]
     for key, _, kind in METRICS:
         v = agg[key]["apf_iqm"]
         apf_row.append(f"{v:.1%}" if kind == "rate" else f"{v:.1f}")
     rows.append(apf_row)
-    tg = targets(recipe, result, agg)
-    n = len(result.seeds)
-    text = "\n".join(
+    first, n = data["held_out_seeds"]["first"], data["held_out_seeds"]["count"]
+    rated = data["recipe"] in AS_SAFE_AS_APF  # rates judged by rate_verdict: say what it means
+    return "\n".join(
         [
-            f"# {recipe}: {seeds} training seeds",
+            f"# {data['recipe']}: {data['seeds']} training seeds",
             "",
-            f"Made by `{command}`. Each seed's checkpoint chosen on validation encounters only; "
-            f"{n} held-out encounters (seeds {result.seeds[0]:,}-{result.seeds[-1]:,}). Per "
+            f"Made by `{data['command']}`. Each seed's checkpoint chosen on validation "
+            f"encounters only; {n} held-out encounters (seeds {first:,}-{first + n - 1:,}). Per "
             "seed: rates with 95 % Wilson intervals, means with 95 % Student-t intervals. Across "
             "seeds: interquartile mean (IQM) of the per-family scores, 95 % stratified bootstrap "
             "interval (seeds resampled within each scenario family).",
@@ -416,13 +478,10 @@ def report(
             "",
             "## Targets",
             "",
-            render_table(
-                ["target", "measured", "met"],
-                [[t, m, "met" if ok else "not met"] for t, m, ok in tg],
-                markdown=True,
-            ),
+            *([VERDICT_LEGEND, ""] if rated else []),
+            render_table(["target", "measured", "verdict"], [list(t) for t in tg], markdown=True),
             "",
-            f"Chosen to ship: seed {shipped['seed']}'s checkpoint, chosen across seeds on "
+            f"Chosen to ship: seed {data['shipped']['seed']}'s checkpoint, chosen across seeds on "
             "the validation encounters only, by the rule that chose each seed's checkpoint "
             "(no less safe than the APF, then the lowest mean max deviation; "
             "`train/select_checkpoint.py`).",
@@ -431,22 +490,31 @@ def report(
             "",
         ]
     )
-    data = {
-        "recipe": recipe,
-        "command": command,
-        "recipe_args": recipe_args(out),
-        "seeds": seeds,
-        "held_out_seeds": {"first": result.seeds[0], "count": n},
-        "per_seed": {
-            lab: {k: result.results[lab].aggregate[k] for k, _, _ in METRICS}
-            for lab in result.policies
-        },
-        "across_seeds": agg,
-        "targets": [{"target": t, "measured": m, "met": ok} for t, m, ok in tg],
-        "shipped": shipped,
-        "training": {f"seed_{k}": _training_facts(seed_dir(out, k)) for k in range(seeds)},
-    }
-    return text, data
+
+
+def rerender(path: Path) -> str:
+    """``--from-json``: rewrite a report's ``.md`` (and its JSON's targets) from its ``.json``.
+
+    No episode is played: the figures are the JSON's; only the verdicts are judged again.
+    The curves' file is the one beside it (``<stem>_curves.png``, ``curves.png`` in a run
+    folder).
+
+    Raises:
+        SystemExit: If ``path`` is not a report's JSON.
+    """
+    from uasep_env.runtime.jsonio import write_json
+
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise SystemExit(f"--from-json {path}: not a train/seeds.py report ({err})") from None
+    if not isinstance(data, dict) or not {"per_seed", "across_seeds"} <= data.keys():
+        raise SystemExit(f"--from-json {path}: not a train/seeds.py report (no per_seed)")
+    curves = "curves.png" if path.stem == "seeds" else f"{path.stem}_curves.png"
+    text = render_report(data, curves)
+    atomic_write(path.with_suffix(".md"), text)
+    write_json(data, path)
+    return text
 
 
 def read_curve(path: Path) -> dict[str, np.ndarray]:
@@ -518,10 +586,10 @@ def command_line(script: str, argv: list[str], extra: list[str]) -> str:
 def build_parser() -> argparse.ArgumentParser:
     """This driver's flags (validated: a bad value is one line naming the flag)."""
     p = OneLineParser(description=__doc__, formatter_class=HelpFormatter)
-    p.add_argument("--recipe", choices=sorted(RECIPES), required=True, help="the recipe")
+    p.add_argument("--recipe", choices=sorted(RECIPES), help="the recipe (required)")
     p.add_argument("--seeds", type=positive_int, default=3, help="number of training seeds")
     p.add_argument("--parallel", type=positive_int, default=1, help="seeds trained side by side")
-    p.add_argument("--out-dir", type=Path, required=True, help="the seeds' folders")
+    p.add_argument("--out-dir", type=Path, help="the seeds' folders (required)")
     p.add_argument("--select-episodes", type=positive_int, default=100,
                    help="validation encounters per checkpoint")  # fmt: skip
     p.add_argument("--episodes", type=positive_int, default=500, help="held-out encounters")
@@ -538,6 +606,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--force", action="store_true", help="replace the --publish and --ship-to files")
     p.add_argument(
+        "--from-json",
+        type=Path,
+        default=None,
+        metavar="JSON",
+        help="only rewrite a report's .md (and its JSON's targets) from its seeds.json or "
+        "published PREFIX.json: no training, no episode (the other flags are not read)",
+    )
+    p.add_argument(
         "--ship-to",
         type=Path,
         default=None,
@@ -553,6 +629,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     argv, extra = split_recipe_args(argv)
     p = build_parser()
     args = p.parse_args(argv)
+    if args.from_json is not None:
+        text = rerender(args.from_json)
+        print(text)
+        return json.loads(args.from_json.read_text())
+    missing = [f for f in ("recipe", "out_dir") if getattr(args, f) is None]
+    if missing:
+        p.error(f"the following arguments are required: --{missing[0].replace('_', '-')}")
     if args.seeds > MAX_SEEDS:
         p.error(f"argument --seeds: at most {MAX_SEEDS} (seed k trains on 1000*k + e)")
     for flag in ("--seed", "--out-dir", "--resume"):
@@ -627,8 +710,6 @@ SCALING_FILES = (".md", ".json", ".png")
 
 def scaling_done(out: Path, episodes: int) -> bool:
     """Whether ``<out>/scaling.*`` holds a complete sweep of ``episodes`` per cell."""
-    import json
-
     if not all((out / f"scaling{ext}").exists() for ext in SCALING_FILES):
         return False
     try:

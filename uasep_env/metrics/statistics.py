@@ -9,7 +9,7 @@ with a stratified percentile bootstrap interval (the statistics of ``rliable``, 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -20,14 +20,18 @@ __all__ = [
     "NOT_MET",
     "NOT_SHOWN",
     "NO_WORSE_MARGIN",
+    "VERDICT_LEGEND",
     "check_probability",
+    "episodes_behind",
     "iqm",
     "no_worse_rate",
     "normal_quantile",
     "rate_verdict",
+    "stated_rate_verdict",
     "stratified_bootstrap_iqm",
     "t_interval",
     "t_quantile",
+    "weakest_verdict",
     "wilson_interval",
 ]
 
@@ -221,6 +225,43 @@ def rate_verdict(
     if p_rate <= r_rate and p_high <= r_rate + margin:
         return MET
     return NOT_SHOWN
+
+
+#: What each verdict of :func:`rate_verdict` means, as the reports print it above their targets.
+VERDICT_LEGEND = (
+    "Met: the policy's rate is no higher than the APF's and its 95 % interval rules out "
+    f"a rate more than {100 * NO_WORSE_MARGIN:g} percentage points above it; not met: the "
+    "interval lies wholly above the APF's; not shown: neither (too few episodes to decide)."
+)
+
+
+def stated_rate_verdict(
+    policy: Mapping[str, float],
+    reference: Mapping[str, float],
+    margin: float = NO_WORSE_MARGIN,
+) -> str:
+    """:func:`rate_verdict` followed by the episodes behind it: ``"met (500 vs 500 episodes)"``."""
+    return f"{rate_verdict(policy, reference, margin)} ({episodes_behind(policy, reference)})"
+
+
+def episodes_behind(policy: Mapping[str, float], reference: Mapping[str, float]) -> str:
+    """``"500 vs 500 episodes"``: each side's ``n_valid`` (else ``n``; ``?`` without either)."""
+    counts = [side.get("n_valid", side.get("n")) for side in (policy, reference)]
+    shown = [str(int(c)) if c is not None else "?" for c in counts]
+    return f"{shown[0]} vs {shown[1]} episodes"
+
+
+def weakest_verdict(verdicts: Iterable[str]) -> str:
+    """The verdict on "every one of them": ``not met`` if any is, else ``not shown`` if any is.
+
+    Raises:
+        ValueError: No verdict, or one that is not ``met`` / ``not met`` / ``not shown``.
+    """
+    order = (NOT_MET, NOT_SHOWN, MET)
+    verdicts = list(verdicts)
+    if not verdicts or any(v not in order for v in verdicts):
+        raise ValueError(f"verdicts: need one or more of {order}, got {verdicts}")
+    return min(verdicts, key=order.index)
 
 
 def iqm(values: ArrayLike) -> float:

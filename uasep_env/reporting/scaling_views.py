@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from uasep_env.metrics.statistics import NO_WORSE_MARGIN, rate_verdict
+from uasep_env.metrics.statistics import VERDICT_LEGEND, stated_rate_verdict
 from uasep_env.runtime.atomic import atomic_output
 from uasep_env.runtime.tables import render_table
 
@@ -35,8 +35,6 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("episode.cost", "episode cost, team mean", "cost"),
     ("episode.max_uav_cost", "episode cost, worst UAV", "cost"),
 )
-#: The non-inferiority margin of the targets, in words.
-_MARGIN = f"{100 * NO_WORSE_MARGIN:g} percentage points"
 #: UAV counts the size target is checked at.
 TARGET_UAVS = (8, 32)
 
@@ -102,10 +100,8 @@ def targets(result: dict[str, Any]) -> list[tuple[str, str, str]]:
                     out.append((what, "-", "not evaluated (needs apf and the policy)"))
                     continue
                 a, b = apf["metrics"]["episode.collision"], mine["metrics"]["episode.collision"]
-                verdict = rate_verdict(b, a)
-                episodes = f"{b['n_valid']} vs {a['n_valid']} episodes"
                 out.append(
-                    (what, f"{_fmt(b, 'rate')} vs APF {_fmt(a, 'rate')}", f"{verdict} ({episodes})")
+                    (what, f"{_fmt(b, 'rate')} vs APF {_fmt(a, 'rate')}", stated_rate_verdict(b, a))
                 )
     return out
 
@@ -163,9 +159,7 @@ def markdown(result: dict[str, Any], command: str, elapsed_s: float) -> str:
             "",
             "## Targets",
             "",
-            "Met: the policy's rate is no higher than the APF's and its 95 % interval rules out "
-            f"a rate more than {_MARGIN} above it; not met: the interval "
-            "lies wholly above the APF's; not shown: neither (too few episodes to decide).",
+            VERDICT_LEGEND,
             "",
             render_table(["target", "measured", "verdict"], body, markdown=True),
         ]
