@@ -29,7 +29,13 @@ from typing import Any
 
 from uasep_env import make_config
 from uasep_env.evaluation import EvaluationResult, evaluate, write_json
-from uasep_env.metrics.statistics import MET, NOT_MET, VERDICT_LEGEND, stated_rate_verdict
+from uasep_env.metrics.statistics import (
+    MET,
+    NOT_MET,
+    VERDICT_LEGEND,
+    limit_verdict,
+    stated_rate_verdict,
+)
 from uasep_env.policies import load_policy, reference_controllers
 from uasep_env.runtime.atomic import atomic_write
 from uasep_env.runtime.tables import render_table
@@ -103,7 +109,7 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
             out.append(
                 (f"{what}: collision rate <= 5 %",
                  f"{c['rate']:.1%} [{c['ci_low']:.1%}, {c['ci_high']:.1%}]",
-                 _met(c["rate"] <= 0.05))
+                 limit_verdict(c, 0.05))
             )  # fmt: skip
     return out
 
@@ -130,11 +136,14 @@ def _as_safe_and_closer(
              f"{apf[key]['rate']:.1%} [{apf[key]['ci_low']:.1%}, {apf[key]['ci_high']:.1%}]",
              stated_rate_verdict(r[key], apf[key]))
         )  # fmt: skip
-    d, da = r["episode.max_deviation"]["mean"], apf["episode.max_deviation"]["mean"]
+    dev = r["episode.max_deviation"]
+    d, da = dev["mean"], apf["episode.max_deviation"]["mean"]
     goal = f">= {cut * 100:.0f} % below the APF's" if cut else "no larger than the APF's"
     out.append(
         (f"{what}: mean max deviation {goal}",
-         f"{d:.1f} m vs {da:.1f} m ({(1 - d / da):+.0%} lower)", _met(d <= (1.0 - cut) * da))
+         f"{d:.1f} m [{dev['ci_low']:.1f}, {dev['ci_high']:.1f}] vs {da:.1f} m "
+         f"({(1 - d / da):+.0%} lower)",
+         limit_verdict(dev, (1.0 - cut) * da, key="mean"))
     )  # fmt: skip
     return out
 

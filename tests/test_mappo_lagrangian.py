@@ -234,9 +234,10 @@ def test_seed_driver_targets(monkeypatch):
                for k in ("episode.collision", "episode.loss_of_separation")}  # fmt: skip
         return {**agg, "episode.max_deviation": {"mean": dev}}
 
-    def measured(dev_iqm):
+    def measured(dev_iqm, half_width=1.0):
         per_seed = {"apf": rates(0.02, 40.0), "seed_0": rates(0.02, 30.0)}
-        agg = {"episode.max_deviation": {"iqm": dev_iqm, "ci_low": 1.0, "ci_high": 99.0,
+        agg = {"episode.max_deviation": {"iqm": dev_iqm, "ci_low": dev_iqm - half_width,
+                                         "ci_high": dev_iqm + half_width,
                                          "apf_iqm": 40.0}}  # fmt: skip
         return {t: v for t, _, v in seeds.targets("mappo_lagrangian", per_seed, agg)}
 
@@ -247,6 +248,8 @@ def test_seed_driver_targets(monkeypatch):
     ]  # fmt: skip
     assert list(met.values()) == ["met (100 vs 100 episodes)"] * 2 + ["met"]
     assert list(measured(45.0).values())[2] == "not met"  # wider than the APF: not met
+    # An interval straddling the APF's deviation decides nothing, whatever the point says.
+    assert list(measured(35.0, half_width=10.0).values())[2] == "not shown"
 
 
 def test_resume_from_a_plain_mappo_checkpoint_is_refused(tmp_path, capsys):

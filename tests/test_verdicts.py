@@ -127,3 +127,21 @@ def test_learned_and_shielded_render_give_back_the_shipped_files(tmp_path):
     )
     with gzip.open(tmp_path / "shielded_vs_apf.json.gz", "rt") as fh:
         assert "meta" not in fh.read(200)  # render rewrites the .md only
+
+
+def test_a_fixed_limit_is_met_only_when_the_whole_interval_is_within_it():
+    from uasep_env.metrics.statistics import MET, NOT_MET, NOT_SHOWN, limit_verdict
+
+    # The pure policy's 4.0 % [2.6 %, 6.1 %] against "at most 5 %": the point is below, the
+    # interval straddles the limit.
+    assert limit_verdict({"rate": 0.04, "ci_low": 0.026, "ci_high": 0.061}, 0.05) == NOT_SHOWN
+    assert limit_verdict({"rate": 0.006, "ci_low": 0.002, "ci_high": 0.017}, 0.05) == MET
+    assert limit_verdict({"rate": 0.09, "ci_low": 0.06, "ci_high": 0.12}, 0.05) == NOT_MET
+    dev = {"iqm": 31.0, "ci_low": 30.9, "ci_high": 31.2}
+    assert limit_verdict(dev, 0.75 * 35.0, key="iqm") == NOT_MET
+    assert limit_verdict(dev, 40.0, key="iqm") == MET
+    assert limit_verdict(dev, 31.1, key="iqm") == NOT_SHOWN
+    assert limit_verdict(dev, 31.1, key="iqm", at_most=False) == NOT_SHOWN
+    assert limit_verdict(dev, 20.0, key="iqm", at_most=False) == MET
+    with pytest.raises(ValueError, match="limit_verdict"):
+        limit_verdict({"rate": 0.1}, 0.05)

@@ -58,6 +58,7 @@ from uasep_env.metrics.statistics import (
     NOT_SHOWN,
     VERDICT_LEGEND,
     episodes_behind,
+    limit_verdict,
     rate_verdict,
     weakest_verdict,
 )
@@ -284,7 +285,8 @@ def targets(
     ``per_seed`` maps ``apf`` and each ``seed_<k>`` to its aggregate on the held-out bank,
     ``agg`` is :func:`across_seeds`'. A rate held to the APF's gets
     :func:`~uasep_env.metrics.statistics.rate_verdict`'s verdict (``met``, ``not met`` or
-    ``not shown``) with the episodes behind it; the other targets are ``met`` or ``not met``.
+    ``not shown``) with the episodes behind it; a fixed limit (5 % collisions, 25 % less
+    deviation) :func:`~uasep_env.metrics.statistics.limit_verdict`'s, read off the interval.
     """
     apf = per_seed["apf"]
     labels = [lab for lab in per_seed if lab != "apf"]
@@ -322,7 +324,7 @@ def targets(
                     f"IQM {d['iqm']:.1f} m [{d['ci_low']:.1f}, {d['ci_high']:.1f}] vs APF "
                     f"{d['apf_iqm']:.1f} m; plain means {min(means):.1f}-{max(means):.1f} m "
                     f"vs {plain:.1f} m",
-                    _met(d["iqm"] <= d["apf_iqm"]),
+                    limit_verdict(d, d["apf_iqm"], key="iqm"),
                 )
             )
             return out
@@ -334,7 +336,7 @@ def targets(
                 f"{d['apf_iqm']:.1f} m ({cut:+.1%} less); plain means {min(means):.1f}-"
                 f"{max(means):.1f} m vs {plain:.1f} m ({1 - max(means) / plain:+.1%} to "
                 f"{1 - min(means) / plain:+.1%})",
-                _met(cut >= 0.25),
+                limit_verdict(d, 0.75 * d["apf_iqm"], key="iqm"),
             )
         )
     else:
@@ -344,7 +346,7 @@ def targets(
                 "at most 5 % collisions (IQM across seeds)",
                 f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] (early ends, "
                 f"collision or lost UAV: {agg['episode.terminated']['iqm']:.1%})",
-                _met(s["iqm"] <= 0.05),
+                limit_verdict(s, 0.05, key="iqm"),
             )
         )
     return out
@@ -459,7 +461,6 @@ def render_report(data: dict[str, Any], curves_name: str = "curves.png") -> str:
         apf_row.append(f"{v:.1%}" if kind == "rate" else f"{v:.1f}")
     rows.append(apf_row)
     first, n = data["held_out_seeds"]["first"], data["held_out_seeds"]["count"]
-    rated = data["recipe"] in AS_SAFE_AS_APF  # rates judged by rate_verdict: say what it means
     return "\n".join(
         [
             f"# {data['recipe']}: {data['seeds']} training seeds",
@@ -478,7 +479,8 @@ def render_report(data: dict[str, Any], curves_name: str = "curves.png") -> str:
             "",
             "## Targets",
             "",
-            *([VERDICT_LEGEND, ""] if rated else []),
+            VERDICT_LEGEND,  # every verdict is read off intervals: say how
+            "",
             render_table(["target", "measured", "verdict"], [list(t) for t in tg], markdown=True),
             "",
             f"Chosen to ship: seed {data['shipped']['seed']}'s checkpoint, chosen across seeds on "

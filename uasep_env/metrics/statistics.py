@@ -24,6 +24,7 @@ __all__ = [
     "check_probability",
     "episodes_behind",
     "iqm",
+    "limit_verdict",
     "no_worse_rate",
     "normal_quantile",
     "rate_verdict",
@@ -231,8 +232,46 @@ def rate_verdict(
 VERDICT_LEGEND = (
     "Met: the policy's rate is no higher than the APF's and its 95 % interval rules out "
     f"a rate more than {100 * NO_WORSE_MARGIN:g} percentage points above it; not met: the "
-    "interval lies wholly above the APF's; not shown: neither (too few episodes to decide)."
+    "interval lies wholly above the APF's; not shown: neither (too few episodes to decide). "
+    "A target with a fixed limit is met when the whole 95 % interval is within it, not met "
+    "when the whole interval is beyond it, and not shown otherwise."
 )
+
+
+def limit_verdict(
+    stats: Mapping[str, float], limit: float, key: str = "rate", at_most: bool = True
+) -> str:
+    """The verdict on a fixed limit ("at most 5 % collisions"), read off the 95 % interval.
+
+    * ``"met"``: the whole interval is within the limit (``ci_high <= limit`` for an upper
+      limit), so the data rule out missing it;
+    * ``"not met"``: the whole interval is beyond it (``ci_low > limit``);
+    * ``"not shown"``: the interval straddles the limit, whatever the point estimate: a wide
+      interval never gives "met".
+
+    Args:
+        stats: The aggregate: the estimate under ``key`` and ``ci_low``, ``ci_high``.
+        limit: The limit, in the estimate's units.
+        key: The estimate's key (``rate``, ``mean`` or ``iqm``).
+        at_most: True for an upper limit (the usual), False for a lower one.
+
+    Returns:
+        ``"met"``, ``"not met"`` or ``"not shown"``.
+
+    Raises:
+        ValueError: A missing or NaN estimate or bound, or a NaN limit.
+    """
+    limit = float(limit)
+    if limit != limit:
+        raise ValueError("limit_verdict: limit: must be a number, got nan")
+    _, low, high = _bounds("limit_verdict", stats, key, "ci_low", "ci_high")
+    if not at_most:
+        low, high, limit = -high, -low, -limit
+    if high <= limit:
+        return MET
+    if low > limit:
+        return NOT_MET
+    return NOT_SHOWN
 
 
 def stated_rate_verdict(
