@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from uasep_env.config import EnvConfig
+from uasep_env.policies.guard import finite_observations
 
 __all__ = ["POLICIES", "REGISTRY", "RegisteredPolicy", "reference_controllers", "register_policy"]
 
@@ -81,8 +82,13 @@ def register_policy(
             name of one class (``mvp-region``).
         summary: One line for the docs' table (default: the docstring's first line).
 
+    A registered class refuses observations that are not finite
+    (:func:`~uasep_env.policies.guard.finite_observations` wraps its ``__call__``): every
+    controller behaves alike on them without checking them itself. A ``factory`` must make
+    instances of such a class (``tests/test_policy_inputs.py`` plays every name on them).
+
     Returns:
-        A decorator returning the class unchanged.
+        A decorator returning the class, its ``__call__`` checked.
 
     Raises:
         ValueError: If ``name`` is taken.
@@ -91,6 +97,8 @@ def register_policy(
     def add(obj: Any) -> Any:
         if name in REGISTRY:
             raise ValueError(f"policy {name!r} is already registered")
+        if isinstance(obj, type):
+            finite_observations(obj)
         make = factory if factory is not None else obj
         doc = (getattr(obj, "__doc__", None) or "").strip().splitlines()
         REGISTRY[name] = RegisteredPolicy(
