@@ -221,6 +221,11 @@ class _APFBase(ABC):
     def reset(self) -> None:  # noqa: B027 -- a deliberate no-op: the APFs are memoryless
         """The APFs are memoryless."""
 
+    @classmethod
+    def with_margin(cls, config: EnvConfig, scale: float) -> _APFBase:
+        """The method with its :attr:`margin_gains` scaled from the reference gains."""
+        return cls(config, APFGains().scaled(cls.margin_gains, scale))
+
     # -- pieces --------------------------------------------------------------------
     def attraction(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """Eqs. 19-22: goal, slot, velocity matching and damping (m/s^2).
@@ -259,14 +264,7 @@ class _APFBase(ABC):
         return self.bound(total, o["velocity"]).astype(np.float32)
 
 
-def _margin(cls: type[_APFBase]) -> Any:
-    """``(config, scale) -> cls`` with its margin gains scaled from the reference gains."""
-    return lambda config, s: cls(config, APFGains().scaled(cls.margin_gains, s))
-
-
-@register_policy(
-    "apf", label="APF (proposed)", reference=True, margin=lambda c, s: _margin(APF)(c, s)
-)
+@register_policy("apf", label="APF (proposed)", reference=True)
 class APF(_APFBase):
     """The paper's method: reachable-set repulsion with entry prediction (eqs. 19-32).
 
@@ -385,7 +383,6 @@ def _apf_actions(
     "motion-state-apf",
     label="motion-state APF",
     reference=True,
-    margin=lambda c, s: _margin(MotionStateAPF)(c, s),
     default_margin=1.5,
 )
 class MotionStateAPF(_APFBase):
@@ -424,7 +421,6 @@ class MotionStateAPF(_APFBase):
     "traditional-apf",
     label="traditional APF",
     reference=True,
-    margin=lambda c, s: _margin(TraditionalAPF)(c, s),
     default_margin=0.75,
     knob="range scale",
 )

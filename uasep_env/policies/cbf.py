@@ -46,10 +46,10 @@ import numpy as np
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import MAX_DIST, check_int_in, check_positive
 from uasep_env.interface.observation import ObservationLayout
-from uasep_env.policies.apf import APFGains
-from uasep_env.policies.nominal import bounded_action, plan_tracking
+from uasep_env.policies.nominal import plan_tracking
 from uasep_env.policies.qp import solve_filter_qp
 from uasep_env.policies.registry import register_policy
+from uasep_env.policies.tracking import TrackingController
 
 __all__ = ["CBFQP", "CBFFilter", "CBFParams"]
 
@@ -266,13 +266,8 @@ class CBFFilter:
         return np.clip((command - base) / self.residual_scale, -1.0, 1.0).astype(np.float32)
 
 
-@register_policy(
-    "cbf-qp",
-    label="CBF-QP",
-    reference=True,
-    margin=lambda c, s: CBFQP(c, CBFParams(margin_scale=s)),
-)
-class CBFQP:
+@register_policy("cbf-qp", label="CBF-QP", reference=True)
+class CBFQP(TrackingController):
     """CBF-QP: a nominal plan-tracking command, filtered by :class:`CBFFilter`.
 
     The nominal command is the shared plan tracking
@@ -286,28 +281,21 @@ class CBFQP:
     """
 
     name = "cbf-qp"
+    params_type = CBFParams
 
     def __init__(self, config: EnvConfig, params: CBFParams | None = None) -> None:
-        self.config = config
         self.cbf = CBFFilter(config, params)
-        self.params = self.cbf.params
-        self.gains = APFGains()  # the tracking gains of every reference controller
-        self.max_speed, self.max_accel = config.uav.max_speed, config.uav.max_accel
-        self.dt = config.step_duration
-
-    def reset(self) -> None:
-        """Memoryless."""
+        super().__init__(config, self.cbf.params)
 
     def nominal(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """The plan-tracking command, normalised ``(..., 3)``."""
-        accel = plan_tracking(o, self.gains)
-        return bounded_action(accel, o["velocity"], self.max_speed, self.max_accel, self.dt)
+        return self.bounded(plan_tracking(o, self.tracking), o["velocity"])
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         """Normalised accelerations ``(..., 3)`` float32 for observations ``(..., obs_dim)``."""
-        o = self.cbf.layout.decode(np.asarray(observations))
+        o = self.layout.decode(np.asarray(observations))
         command = self.cbf.filter_command(o, self.nominal(o))
-        if not self.cbf.layout.base_action:
+        if not self.layout.base_action:
             return command.astype(np.float32)
         base = o["base_action"]
         residual = (command - base) / self.cbf.residual_scale

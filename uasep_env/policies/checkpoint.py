@@ -32,7 +32,9 @@ from uasep_env.runtime.atomic import atomic_output
 from uasep_env.runtime.jsonio import dumps
 
 __all__ = [
+    "ALGORITHMS",
     "CHECKPOINT_FORMAT",
+    "META",
     "READABLE_FORMATS",
     "CheckpointError",
     "PolicyCheckpoint",

@@ -34,6 +34,7 @@ from uasep_env.config import EnvConfig
 from uasep_env.interface.actions import ResidualAPF
 from uasep_env.policies.checkpoint import META, CheckpointError, PolicyCheckpoint, StoredLayout
 from uasep_env.policies.checkpoint_reader import read_checkpoint
+from uasep_env.policies.guard import finite_observations
 
 if TYPE_CHECKING:
     from uasep_env.policies.apf import APFGains
@@ -96,6 +97,7 @@ _ACTIVATIONS = {
 }
 
 
+@finite_observations  # as every registered policy
 class LearnedPolicy:
     """A checkpoint's actor (an MLP in numpy) behind the common policy interface.
 

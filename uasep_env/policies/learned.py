@@ -9,47 +9,16 @@ Importing this module does not import stable-baselines3 or torch.
 
 from __future__ import annotations
 
-from uasep_env.policies.checkpoint import (
-    ALGORITHMS,
-    CHECKPOINT_FORMAT,
-    META,
-    CheckpointError,
-    PolicyCheckpoint,
-    StoredLayout,
-    save_policy,
-)
-from uasep_env.policies.checkpoint_policy import (
-    LearnedPolicy,
-    checkpoint_config,
-    checkpoint_path,
-    dense,
-    dense_sums,
-    is_policy_checkpoint,
-    load_policy,
-    observed_config,
-)
-from uasep_env.policies.checkpoint_reader import LIMITS, CheckpointLimits, read_checkpoint
-from uasep_env.policies.sb3_policy import SB3Policy, load_sb3_policy
+# Each module's public names are listed once, in its own ``__all__``.
+from uasep_env.policies import checkpoint, checkpoint_policy, checkpoint_reader, sb3_policy
+from uasep_env.policies.checkpoint import *  # noqa: F403
+from uasep_env.policies.checkpoint_policy import *  # noqa: F403
+from uasep_env.policies.checkpoint_reader import *  # noqa: F403
+from uasep_env.policies.sb3_policy import *  # noqa: F403
 
 __all__ = [
-    "ALGORITHMS",
-    "CHECKPOINT_FORMAT",
-    "LIMITS",
-    "META",
-    "CheckpointError",
-    "CheckpointLimits",
-    "LearnedPolicy",
-    "PolicyCheckpoint",
-    "SB3Policy",
-    "StoredLayout",
-    "checkpoint_config",
-    "checkpoint_path",
-    "dense",
-    "dense_sums",
-    "is_policy_checkpoint",
-    "load_policy",
-    "load_sb3_policy",
-    "observed_config",
-    "read_checkpoint",
-    "save_policy",
+    *checkpoint.__all__,
+    *checkpoint_policy.__all__,
+    *checkpoint_reader.__all__,
+    *sb3_policy.__all__,
 ]

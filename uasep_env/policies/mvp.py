@@ -41,10 +41,9 @@ import numpy as np
 from uasep_env import reachable
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import check, check_one_of, check_positive
-from uasep_env.interface.observation import ObservationLayout
-from uasep_env.policies.apf import APF, APFGains
-from uasep_env.policies.nominal import bounded_action, plan_tracking
+from uasep_env.policies.nominal import norm, plan_tracking
 from uasep_env.policies.registry import register_policy
+from uasep_env.policies.tracking import TrackingController
 
 __all__ = ["MVP", "MVPParams", "mvp_velocity_change"]
 
@@ -106,10 +105,6 @@ class MVPParams:
         check(self.margin_factor >= 1.0, "mvp.margin_factor", self.margin_factor, "must be >= 1")
 
 
-def _norm(v: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.einsum("...i,...i->...", v, v))
-
-
 def mvp_velocity_change(
     rel_pos: np.ndarray,
     rel_vel: np.ndarray,
@@ -133,17 +128,17 @@ def mvp_velocity_change(
     Returns:
         ``(..., K, 3)`` velocity changes of the ownship (m/s).
     """
-    dist = _norm(rel_pos)
+    dist = norm(rel_pos)
     w2 = np.einsum("...i,...i->...", rel_vel, rel_vel)
     closing = -np.einsum("...i,...i->...", rel_pos, rel_vel)
     t_cpa = np.where(w2 > 1e-12, closing / np.maximum(w2, 1e-12), 0.0)
     t_ahead = np.maximum(t_cpa, 0.0)  # diverging: the CPA is now
     d_cpa = rel_pos + rel_vel * t_ahead[..., None]
-    miss = _norm(d_cpa)
+    miss = norm(d_cpa)
     conflict = mask & (((t_cpa > 0.0) & (t_cpa < look_ahead) & (miss < radius)) | (dist < radius))
     # Head-on: resolve sideways, perpendicular to d in the horizontal plane (odd in d).
     side = np.stack([rel_pos[..., 1], -rel_pos[..., 0], np.zeros_like(dist)], axis=-1)
-    side_n = _norm(side)
+    side_n = norm(side)
     head_on = miss < head_on_distance
     side_dir = side / np.maximum(side_n, 1e-12)[..., None]
     cpa_dir = np.where(head_on[..., None], side_dir, d_cpa / np.maximum(miss, 1e-12)[..., None])
@@ -188,13 +183,8 @@ def _region_velocity_change(
     return np.where(conflict[..., None], dv, 0.0)
 
 
-@register_policy(
-    "mvp",
-    label="MVP",
-    reference=True,
-    margin=lambda c, s: MVP(c, MVPParams(margin_scale=s)),
-)
-class MVP:
+@register_policy("mvp", label="MVP", reference=True)
+class MVP(TrackingController):
     """Modified Voltage Potential conflict resolution on the shared plan tracking.
 
     Args:
@@ -203,26 +193,16 @@ class MVP:
     """
 
     name = "mvp"
+    params_type = MVPParams
 
     def __init__(self, config: EnvConfig, params: MVPParams | None = None) -> None:
-        self.config = config
-        self.params = params if params is not None else MVPParams()
-        self.layout = ObservationLayout.from_config(config)
-        self.tracking: APFGains = APF.default_gains
+        super().__init__(config, params)
         p = self.params
-        sep = p.uav_separation if p.uav_separation is not None else config.uav.separation_distance
-        obs_sep = (
-            p.obstacle_separation
-            if p.obstacle_separation is not None
-            else config.uav.obstacle_separation
-        )
+        sep, obs_sep = self.separations(p.uav_separation, p.obstacle_separation)
         scale = p.margin_factor * p.margin_scale
         self.uav_radius = scale * sep  # m
         self.obstacle_radius = scale * obs_sep  # m, from the centre
         self.region_radius = scale * max(obs_sep - config.obstacle.radius, 0.0)  # m, surface
-
-    def reset(self) -> None:
-        """MVP is memoryless."""
 
     def velocity_change(self, o: dict[str, np.ndarray]) -> np.ndarray:
         """The summed resolution ``dv`` (m/s) for decoded observations, ``(..., 3)``."""
@@ -245,10 +225,7 @@ class MVP:
         o = self.layout.decode(np.asarray(observations))
         dv = self.velocity_change(o)
         accel = plan_tracking(o, self.tracking) + dv / self.params.response_time
-        c = self.config
-        return bounded_action(
-            accel, o["velocity"], c.uav.max_speed, c.uav.max_accel, c.step_duration
-        ).astype(np.float32)
+        return self.bounded(accel, o["velocity"]).astype(np.float32)
 
 
 register_policy(

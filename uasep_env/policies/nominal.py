@@ -15,7 +15,7 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["TrackingGains", "bounded_action", "plan_tracking"]
+__all__ = ["TrackingGains", "bounded_action", "norm", "plan_tracking"]
 
 
 class TrackingGains(Protocol):
@@ -28,8 +28,13 @@ class TrackingGains(Protocol):
     k_damp: float  # 1/s
 
 
+def norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last axis (the controllers' one form, so their sums agree)."""
+    return np.sqrt(np.einsum("...i,...i->...", v, v))
+
+
 def _cap_norm(f: np.ndarray, cap: float) -> np.ndarray:
-    n = np.sqrt(np.einsum("...i,...i->...", f, f))
+    n = norm(f)
     return f * np.minimum(1.0, cap / np.maximum(n, 1e-12))[..., None]
 
 
@@ -69,7 +74,7 @@ def bounded_action(
         max_accel: Per-axis bound (m/s^2).
         dt: Step duration (s).
     """
-    speed = np.sqrt(np.einsum("...i,...i->...", velocity, velocity))
+    speed = norm(velocity)
     v_hat = velocity / np.maximum(speed, 1e-9)[..., None]
     along = np.einsum("...i,...i->...", accel, v_hat)
     limit = (max_speed - speed) / dt  # most speed gain allowed this step

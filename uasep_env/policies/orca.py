@@ -42,10 +42,9 @@ import numpy as np
 
 from uasep_env.config import EnvConfig
 from uasep_env.config.checks import check, check_positive
-from uasep_env.interface.observation import ObservationLayout
-from uasep_env.policies.apf import APF, APFGains
-from uasep_env.policies.nominal import bounded_action, plan_tracking
+from uasep_env.policies.nominal import norm, plan_tracking
 from uasep_env.policies.registry import register_policy
+from uasep_env.policies.tracking import TrackingController
 
 __all__ = ["ORCA", "ORCAParams", "orca_planes", "solve_orca_lp"]
 
@@ -97,10 +96,6 @@ class ORCAParams:
             check(value <= 1.0, f"orca.{name}", value, "must be <= 1")
 
 
-def _norm(v: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.einsum("...i,...i->...", v, v))
-
-
 def orca_planes(
     rel_pos: np.ndarray,
     rel_vel: np.ndarray,
@@ -144,13 +139,13 @@ def orca_planes(
     a = np.maximum(dist_sq, 1e-12)
     t = (b + np.sqrt(np.maximum(b * b - a * c, 0.0))) / a
     w_cone = rel_vel - t[..., None] * rel_pos
-    wc_len = np.maximum(_norm(w_cone), 1e-12)
+    wc_len = np.maximum(norm(w_cone), 1e-12)
     n_cone = w_cone / wc_len[..., None]
     u_cone = (radius * t - wc_len)[..., None] * n_cone
     # Inside R: leave the sphere of one step (centre p / dt, radius R / dt).
     inv_dt = 1.0 / time_step
     w_in = rel_vel - inv_dt * rel_pos
-    wi_len = np.maximum(_norm(w_in), 1e-12)
+    wi_len = np.maximum(norm(w_in), 1e-12)
     n_in = w_in / wi_len[..., None]
     u_in = (radius * inv_dt - wi_len)[..., None] * n_in
     outside = (dist_sq > r_sq)[..., None]
@@ -333,13 +328,8 @@ def solve_orca_lp(
     return np.array(result, dtype=float)
 
 
-@register_policy(
-    "orca",
-    label="ORCA",
-    reference=True,
-    margin=lambda c, s: ORCA(c, ORCAParams(margin_scale=s)),
-)
-class ORCA:
+@register_policy("orca", label="ORCA", reference=True)
+class ORCA(TrackingController):
     """ORCA velocity selection on the shared plan tracking (batched numpy + small LPs).
 
     Args:
@@ -348,22 +338,14 @@ class ORCA:
     """
 
     name = "orca"
+    params_type = ORCAParams
 
     def __init__(self, config: EnvConfig, params: ORCAParams | None = None) -> None:
-        self.config = config
-        self.params = params if params is not None else ORCAParams()
-        self.layout = ObservationLayout.from_config(config)
-        self.tracking: APFGains = APF.default_gains
+        super().__init__(config, params)
         p = self.params
-        r_uav = p.uav_radius if p.uav_radius is not None else config.uav.separation_distance
-        r_obs = (
-            p.obstacle_radius if p.obstacle_radius is not None else config.uav.obstacle_separation
-        )
+        r_uav, r_obs = self.separations(p.uav_radius, p.obstacle_radius)
         self.uav_radius = p.margin_scale * r_uav  # m
         self.obstacle_radius = p.margin_scale * r_obs  # m
-
-    def reset(self) -> None:
-        """ORCA is memoryless."""
 
     def planes(self, o: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every agent's half-spaces: ``(normals, points, active)``, ``(..., K_u + K_o, ...)``."""
@@ -384,7 +366,7 @@ class ORCA:
         """ORCA's velocity for each agent, ``(..., 3)`` (m/s)."""
         normals, points, active = self.planes(o)
         vmax = self.config.uav.max_speed
-        speed = _norm(preferred)
+        speed = norm(preferred)
         start = preferred * np.minimum(1.0, vmax / np.maximum(speed, 1e-12))[..., None]
         slack = np.einsum("...ki,...ki->...k", normals, points - start[..., None, :])
         need = (active & (slack > 0.0)).any(axis=-1)
@@ -403,7 +385,4 @@ class ORCA:
         t = self.params.response_time
         v = o["velocity"]
         v_new = self.new_velocity(o, v + plan_tracking(o, self.tracking) * t)
-        c = self.config
-        return bounded_action(
-            (v_new - v) / t, v, c.uav.max_speed, c.uav.max_accel, c.step_duration
-        ).astype(np.float32)
+        return self.bounded((v_new - v) / t, v).astype(np.float32)

@@ -54,36 +54,6 @@ def _active_sets(n_rows: int, n_barriers: int) -> np.ndarray:
     return np.array(sets, dtype=np.intp)
 
 
-def _constraints(
-    u0: np.ndarray,
-    a: np.ndarray,
-    b: np.ndarray,
-    valid: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    root_rho: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Rows ``g . x >= h`` in the scaled offset ``x = L (z - z_0)``.
-
-    ``L = diag(1, 1, 1, sqrt(rho))``. Returns ``G (B, m, 4)`` and ``h (B, m)``; an invalid
-    barrier row is ``0 . x >= -1``.
-    """
-    batch, k = b.shape
-    m = k + 1 + 6
-    g = np.zeros((batch, m, _N))
-    h = np.zeros((batch, m))
-    g[:, :k, :3] = np.where(valid[..., None], a, 0.0)
-    g[:, :k, 3] = np.where(valid, 1.0 / root_rho, 0.0)
-    h[:, :k] = np.where(valid, b - np.einsum("bkj,bj->bk", a, u0), -1.0)
-    g[:, k, 3] = 1.0 / root_rho  # s >= 0, and s_0 = 0
-    for j in range(3):
-        g[:, k + 1 + 2 * j, j] = 1.0
-        h[:, k + 1 + 2 * j] = lower[:, j] - u0[:, j]
-        g[:, k + 2 + 2 * j, j] = -1.0
-        h[:, k + 2 + 2 * j] = u0[:, j] - upper[:, j]
-    return g, h
-
-
 def _dot(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """``sum_n p[..., n] q[..., n]`` over the last axis (4), added left to right."""
     return (
@@ -193,8 +163,22 @@ def solve_filter_qp(
     lo = np.asarray(lower, dtype=float).reshape(-1, 3)
     hi = np.asarray(upper, dtype=float).reshape(-1, 3)
     root_rho = float(np.sqrt(slack_penalty))
-    g, h = _constraints(u0f, af, bf, vf, lo, hi, root_rho)
-    x = np.zeros((u0f.shape[0], _N))
+    # Rows g . x >= h in the scaled offset x = L (z - z_0), L = diag(1, 1, 1, sqrt(rho)):
+    # the K barriers (an invalid one is 0 . x >= -1), s >= 0 (s_0 = 0), then each axis's
+    # lower and upper bound.
+    batch = u0f.shape[0]
+    g = np.zeros((batch, k + 7, _N))
+    h = np.zeros((batch, k + 7))
+    g[:, :k, :3] = np.where(vf[..., None], af, 0.0)
+    g[:, :k, 3] = np.where(vf, 1.0 / root_rho, 0.0)
+    h[:, :k] = np.where(vf, bf - np.einsum("bkj,bj->bk", af, u0f), -1.0)
+    g[:, k, 3] = 1.0 / root_rho
+    for j in range(3):
+        g[:, k + 1 + 2 * j, j] = 1.0
+        h[:, k + 1 + 2 * j] = lo[:, j] - u0f[:, j]
+        g[:, k + 2 + 2 * j, j] = -1.0
+        h[:, k + 2 + 2 * j] = u0f[:, j] - hi[:, j]
+    x = np.zeros((batch, _N))
     rows = np.flatnonzero((h > 0.0).any(axis=-1))  # u0 violates something: solve
     if rows.size:
         x[rows] = _enumerate(g[rows], h[rows], k)

@@ -7,9 +7,11 @@ benchmark scripts (``baselines/tradeoff.py``, ``scaling.py``, ``real_traffic_eva
 controller is its module plus the import of that module in ``uasep_env/policies/__init__.py``
 (``docs/extending.md``), for example::
 
-    @register_policy("mine", label="my method", reference=True,
-                     margin=lambda config, s: Mine(config, MineParams(margin_scale=s)))
-    class Mine: ...
+    @register_policy("mine", label="my method", reference=True)
+    class Mine:
+        @classmethod
+        def with_margin(cls, config, s):  # the trade-off sweep (or pass margin=)
+            return cls(config, MineParams(margin_scale=s))
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from uasep_env.config import EnvConfig
+from uasep_env.policies.guard import finite_observations
 
 __all__ = ["POLICIES", "REGISTRY", "RegisteredPolicy", "reference_controllers", "register_policy"]
 
@@ -74,15 +77,21 @@ def register_policy(
         name: The name ``--policy`` and :func:`~uasep_env.policies.make_policy` take.
         label: Its name in tables (default: ``name``).
         reference: Whether every comparison plays it.
-        margin: ``(config, scale) -> policy`` with its safety distances scaled.
+        margin: ``(config, scale) -> policy`` with its safety distances scaled (default: the
+            class's ``with_margin`` classmethod where it has one, else no sweep).
         default_margin: The scale of its default parameters.
         knob: The sweep's name in the trade-off tables.
         factory: ``config -> policy`` (default: the decorated class itself), for a second
             name of one class (``mvp-region``).
         summary: One line for the docs' table (default: the docstring's first line).
 
+    A registered class refuses observations that are not finite
+    (:func:`~uasep_env.policies.guard.finite_observations` wraps its ``__call__``): every
+    controller behaves alike on them without checking them itself. A ``factory`` must make
+    instances of such a class (``tests/test_policy_inputs.py`` plays every name on them).
+
     Returns:
-        A decorator returning the class unchanged.
+        A decorator returning the class, its ``__call__`` checked.
 
     Raises:
         ValueError: If ``name`` is taken.
@@ -91,14 +100,17 @@ def register_policy(
     def add(obj: Any) -> Any:
         if name in REGISTRY:
             raise ValueError(f"policy {name!r} is already registered")
+        if isinstance(obj, type):
+            finite_observations(obj)
         make = factory if factory is not None else obj
+        sweep = margin if margin is not None or factory is not None else _with_margin(obj)
         doc = (getattr(obj, "__doc__", None) or "").strip().splitlines()
         REGISTRY[name] = RegisteredPolicy(
             name=name,
             factory=make,
             label=label or name,
             reference=reference,
-            margin=margin,
+            margin=sweep,
             default_margin=default_margin,
             knob=knob,
             summary=summary if summary is not None else (doc[0] if doc else ""),
@@ -109,6 +121,11 @@ def register_policy(
     if factory is not None:
         add(factory)
     return add
+
+
+def _with_margin(obj: Any) -> Callable[[EnvConfig, float], Any] | None:
+    """A class's own margin sweep, ``cls.with_margin(config, scale)``, if it has one."""
+    return getattr(obj, "with_margin", None) if isinstance(obj, type) else None
 
 
 def reference_controllers() -> tuple[str, ...]:

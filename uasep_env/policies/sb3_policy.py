@@ -19,10 +19,12 @@ import numpy as np
 from uasep_env.config import EnvConfig
 from uasep_env.interface.observation import ObservationLayout
 from uasep_env.policies.checkpoint import ALGORITHMS, CheckpointError
+from uasep_env.policies.guard import finite_observations
 
 __all__ = ["SB3Policy", "load_sb3_policy"]
 
 
+@finite_observations  # as every registered policy
 class SB3Policy:
     """A shared-parameter SB3 policy acting on per-agent observations.
 

@@ -19,10 +19,12 @@ import numpy as np
 from uasep_env.config import EnvConfig
 from uasep_env.policies.base import Policy
 from uasep_env.policies.cbf import CBFFilter, CBFParams
+from uasep_env.policies.guard import finite_observations
 
 __all__ = ["SHIELDS", "Shielded", "split_shield"]
 
 
+@finite_observations  # as every registered policy (the filter would turn NaN in into NaN out)
 class Shielded:
     """A policy whose actions pass through the CBF filter.
 
