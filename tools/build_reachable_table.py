@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from uasep_env.reachable.fit import _load_table
 from uasep_env.reachable.optimal import optimal_shape
 from uasep_env.reachable.sets import FloatArray, _h_unit
+from uasep_env.reachable.shape_table import _load_table
 from uasep_env.runtime.atomic import atomic_write
 
 TABLE = Path(__file__).resolve().parents[1] / "uasep_env" / "data" / "ellipse_table.npz"

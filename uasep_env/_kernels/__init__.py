@@ -37,8 +37,9 @@ kernel receives as keyword arguments. These modules import nothing else of the p
   the environments' noise blocks, compiled);
 * :func:`encounter_draws` -- :func:`uasep_env.scenarios.batched.encounter_draws` (a
   partial reset's episodes' draws from their generators, numpy's algorithms on PCG64's
-  state) and :func:`scenario_geometry` -- :func:`uasep_env.scenarios.batched.scenario_geometry` (a
-  partial reset's episodes built from their draws: plans, starts, obstacles);
+  state) and :func:`scenario_geometry` --
+  :func:`uasep_env.scenarios.batch_geometry.scenario_geometry` (a partial reset's episodes
+  built from their draws: plans, starts, obstacles);
 * :func:`apf_actions` -- :func:`uasep_env.policies.apf._apf_actions` (the paper's APF's
   decision from the observations).
 """

@@ -92,20 +92,7 @@ def _nodes_row(th, sn, cs, vt, phi, ip, omc, sc, r, swept, c2, s2, d2, h):  # no
 
 @numba.njit(**_JIT)
 def _fit_rows(
-    th: np.ndarray,
-    sin: np.ndarray,
-    cos: np.ndarray,
-    vt: np.ndarray,
-    phi: np.ndarray,
-    ip: np.ndarray,
-    omc: np.ndarray,
-    sc: np.ndarray,
-    r: np.ndarray,
-    c0: np.ndarray,
-    half: np.ndarray,
-    lat0: np.ndarray,
-    lon0: np.ndarray,
-    eps_abs: np.ndarray,
+    inputs: tuple[np.ndarray, ...],
     swept: bool,
     iters: int,
     c_out: np.ndarray,
@@ -114,6 +101,8 @@ def _fit_rows(
     ok_out: np.ndarray,
     scratch: np.ndarray,
 ) -> None:
+    """Every row of :func:`fit_ellipse` (its fourteen arrays, ``inputs``) into the outputs."""
+    th, cos, sin, vt, phi, ip, omc, sc, r, c0, half, lat0, lon0, eps_abs = inputs
     k = cos.shape[1]
     g = (math.sqrt(5.0) - 1.0) / 2.0
     c2i, s2i, d2i, hi, rho, delta = (
@@ -213,8 +202,8 @@ def fit_ellipse(
     # One row's squared cosines, squared sines, spacings, support, and the margins' rho and
     # delta.
     scratch = np.empty((6, cos.shape[1]))
-    inputs = (th, sin, cos, vt, phi, ip, omc, sc, r, c, half, lat, lon, eps_abs)
-    _fit_rows(*(frozen(np.asarray(a, dtype=np.float64)) for a in inputs), bool(swept),
+    inputs = (th, cos, sin, vt, phi, ip, omc, sc, r, c, half, lat, lon, eps_abs)
+    _fit_rows(tuple(frozen(np.asarray(a, dtype=np.float64)) for a in inputs), bool(swept),
               golden_iters, c_out, lat_out, lon_out, ok, scratch)  # fmt: skip
     return c_out, lat_out, lon_out, ok
 

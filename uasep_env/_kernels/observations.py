@@ -192,17 +192,23 @@ def _observe_agent(e, i, frame, x, scales, clip, cols, region, out):  # noqa: AN
 
 
 @numba.njit(inline="always", **_JIT)
+def _put_relative(row, c, col, of, j, to, e, i, scale, clip):  # noqa: ANN001, ANN202
+    """``(of[e, j] - to[e, i]) / scale`` at column ``col`` of the block at ``c``.
+
+    Unless the layout lacks the feature (``col < 0``).
+    """
+    if col >= 0:
+        _put3(row, c + col, (of[e, j, 0] - to[e, i, 0]) / scale,
+              (of[e, j, 1] - to[e, i, 1]) / scale, (of[e, j, 2] - to[e, i, 2]) / scale,
+              clip)  # fmt: skip
+
+
+@numba.njit(inline="always", **_JIT)
 def _uav_features(row, e, i, c, cols, x, j, dist, ps, vs, clip):  # noqa: ANN001, ANN202
     """UAV ``j`` as UAV ``i`` observes it, into the block at column ``c`` (it is present)."""
     pos, vel = x.pos, x.vel
-    r = ((pos[e, j, 0] - pos[e, i, 0]) / ps, (pos[e, j, 1] - pos[e, i, 1]) / ps,
-         (pos[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
-    if cols.uav_rel_pos >= 0:
-        _put3(row, c + cols.uav_rel_pos, r[0], r[1], r[2], clip)
-    r = ((vel[e, j, 0] - vel[e, i, 0]) / vs, (vel[e, j, 1] - vel[e, i, 1]) / vs,
-         (vel[e, j, 2] - vel[e, i, 2]) / vs)  # fmt: skip
-    if cols.uav_rel_vel >= 0:
-        _put3(row, c + cols.uav_rel_vel, r[0], r[1], r[2], clip)
+    _put_relative(row, c, cols.uav_rel_pos, pos, j, pos, e, i, ps, clip)
+    _put_relative(row, c, cols.uav_rel_vel, vel, j, vel, e, i, vs, clip)
     if cols.uav_dist >= 0:
         _put(row, c + cols.uav_dist, dist / ps, clip)
     if cols.uav_mask >= 0:
@@ -216,11 +222,7 @@ def _obstacle_features(row, e, i, c, cols, x, dist, j, ps, vs, clip):  # noqa: A
     ``dist``: the UAV's distance to the obstacle's region (m).
     """
     pos, vel = x.pos, x.vel
-    if cols.obstacle_center >= 0:
-        pc = x.pred_center
-        r = ((pc[e, j, 0] - pos[e, i, 0]) / ps, (pc[e, j, 1] - pos[e, i, 1]) / ps,
-             (pc[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
-        _put3(row, c + cols.obstacle_center, r[0], r[1], r[2], clip)
+    _put_relative(row, c, cols.obstacle_center, x.pred_center, j, pos, e, i, ps, clip)
     if cols.obstacle_axes >= 0:
         ax = x.pred_axes
         r = (ax[e, j, 0] / ps, ax[e, j, 1] / ps, ax[e, j, 2] / ps)
@@ -228,16 +230,8 @@ def _obstacle_features(row, e, i, c, cols, x, dist, j, ps, vs, clip):  # noqa: A
     if cols.obstacle_heading_cs >= 0:
         _put(row, c + cols.obstacle_heading_cs, x.cos_h[e, j], clip)
         _put(row, c + cols.obstacle_heading_cs + 1, x.sin_h[e, j], clip)
-    if cols.obstacle_rel_pos >= 0:
-        op = x.obstacle_pos
-        r = ((op[e, j, 0] - pos[e, i, 0]) / ps, (op[e, j, 1] - pos[e, i, 1]) / ps,
-             (op[e, j, 2] - pos[e, i, 2]) / ps)  # fmt: skip
-        _put3(row, c + cols.obstacle_rel_pos, r[0], r[1], r[2], clip)
-    if cols.obstacle_rel_vel >= 0:
-        ov = x.obstacle_vel
-        r = ((ov[e, j, 0] - vel[e, i, 0]) / vs, (ov[e, j, 1] - vel[e, i, 1]) / vs,
-             (ov[e, j, 2] - vel[e, i, 2]) / vs)  # fmt: skip
-        _put3(row, c + cols.obstacle_rel_vel, r[0], r[1], r[2], clip)
+    _put_relative(row, c, cols.obstacle_rel_pos, x.obstacle_pos, j, pos, e, i, ps, clip)
+    _put_relative(row, c, cols.obstacle_rel_vel, x.obstacle_vel, j, vel, e, i, vs, clip)
     if cols.obstacle_region_dist >= 0:
         _put(row, c + cols.obstacle_region_dist, dist / ps, clip)
     if cols.obstacle_mask >= 0:

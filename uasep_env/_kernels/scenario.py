@@ -1,4 +1,4 @@
-"""A batch of episodes' geometry: :func:`uasep_env.scenarios.batched.scenario_geometry`.
+"""A batch of episodes' geometry: :func:`uasep_env.scenarios.batch_geometry.scenario_geometry`.
 
 A partial reset builds a dozen episodes a step; in numpy that is a few hundred calls on
 arrays of a dozen rows. The trigonometry is the generator's, Python's ``math`` functions
@@ -194,7 +194,7 @@ def scenario_geometry(
     band_half: float,
     shrink: np.ndarray,
 ) -> tuple[np.ndarray, ...]:
-    """Compiled :func:`uasep_env.scenarios.batched.scenario_geometry`.
+    """Compiled :func:`uasep_env.scenarios.batch_geometry.scenario_geometry`.
 
     Declines (``NotImplemented``: numpy builds them) plans flown on past the timeline and
     rows with a zero-length segment (which a random plan draws with probability 0).

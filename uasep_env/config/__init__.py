@@ -14,21 +14,9 @@ Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 
 from __future__ import annotations
 
+from uasep_env.config import groups
 from uasep_env.config.env import AS_PUBLISHED, FORMATION_PATTERNS, EnvConfig, make_config
-from uasep_env.config.groups import (
-    ACTION_MODES,
-    FLIGHT_ALTITUDE,
-    REWARD_PRESETS,
-    ActionConfig,
-    AirspaceConfig,
-    CostWeights,
-    NoiseConfig,
-    ObservationConfig,
-    ObstacleConfig,
-    PredictionConfig,
-    RewardWeights,
-    UAVConfig,
-)
+from uasep_env.config.groups import *  # noqa: F403 (the groups' public names, groups.__all__)
 
 
 def __getattr__(name: str) -> object:
@@ -41,21 +29,10 @@ def __getattr__(name: str) -> object:
 
 
 __all__ = [
-    "ACTION_MODES",
+    *groups.__all__,
     "AS_PUBLISHED",
-    "FLIGHT_ALTITUDE",
     "FORMATION_PATTERNS",
-    "REWARD_PRESETS",
-    "SCENARIOS",
-    "ActionConfig",
-    "AirspaceConfig",
-    "CostWeights",
+    "SCENARIOS",  # noqa: F405 (read by __getattr__ above)
     "EnvConfig",
-    "NoiseConfig",
-    "ObservationConfig",
-    "ObstacleConfig",
-    "PredictionConfig",
-    "RewardWeights",
-    "UAVConfig",
     "make_config",
 ]

@@ -37,6 +37,8 @@ edges of "off track" after ``settle_time`` (without hold-time hysteresis).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -88,6 +90,21 @@ def _axis3(values: np.ndarray) -> Axis3:
     return (float(values[0]), float(values[1]), float(values[2]))
 
 
+_R = TypeVar("_R")
+
+
+def _per_uav(result: Callable[..., _R], **columns: np.ndarray) -> list[_R]:
+    """One ``result`` per UAV, each field row ``i`` of its column.
+
+    ``(N, 3)`` columns give per-axis triples, ``(N,)`` ones floats.
+    """
+    n = len(next(iter(columns.values())))
+    return [
+        result(**{k: _axis3(v[i]) if v.ndim == 2 else float(v[i]) for k, v in columns.items()})
+        for i in range(n)
+    ]
+
+
 def deviation_stats(record: EpisodeRecord) -> list[DeviationStats]:
     """Deviation statistics per UAV over the samples with ``time >= settle_time``.
 
@@ -107,17 +124,15 @@ def deviation_stats(record: EpisodeRecord) -> list[DeviationStats]:
     max_abs = np.abs(dev).max(axis=0)  # (N, 3)
     rms = np.sqrt(np.mean(dev**2, axis=0))
     off = (norm > record.deviation_threshold).sum(axis=0) * record.dt
-    return [
-        DeviationStats(
-            max_norm=float(max_norm[i]),
-            rms_norm=float(rms_norm[i]),
-            max_abs=_axis3(max_abs[i]),
-            rms=_axis3(rms[i]),
-            time_off_track=float(off[i]),
-            max_norm_time=float(t[arg[i]]),
-        )
-        for i in range(record.n_uavs)
-    ]
+    return _per_uav(
+        DeviationStats,
+        max_norm=max_norm,
+        rms_norm=rms_norm,
+        max_abs=max_abs,
+        rms=rms,
+        time_off_track=off,
+        max_norm_time=t[arg],
+    )
 
 
 def _back_on_track(below: np.ndarray, hold_steps: int) -> np.ndarray:
@@ -265,17 +280,15 @@ def fluctuation_stats(record: EpisodeRecord) -> list[FluctuationStats]:
     else:
         vel_rate = np.full((record.n_uavs, 3), np.nan)
         acc_rate = np.full((record.n_uavs, 3), np.nan)
-    return [
-        FluctuationStats(
-            vel_std=_axis3(vel_std[i]),
-            acc_std=_axis3(acc_std[i]),
-            vel_max_rate=_axis3(vel_rate[i]),
-            acc_max_rate=_axis3(acc_rate[i]),
-            acc_max_abs=_axis3(acc_max_abs[i]),
-            speed_max=float(speed_max[i]),
-        )
-        for i in range(record.n_uavs)
-    ]
+    return _per_uav(
+        FluctuationStats,
+        vel_std=vel_std,
+        acc_std=acc_std,
+        vel_max_rate=vel_rate,
+        acc_max_rate=acc_rate,
+        acc_max_abs=acc_max_abs,
+        speed_max=speed_max,
+    )
 
 
 def path_lengths(

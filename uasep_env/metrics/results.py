@@ -7,9 +7,10 @@ Each is a frozen dataclass whose :meth:`~_Plain.to_dict` is its JSON layout (thr
 
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from uasep_env.runtime.jsonio import PLAIN, dumps, to_plain
 from uasep_env.sim.dynamics import AXES
@@ -34,6 +35,20 @@ def _axis_dict(value: Axis3) -> dict[str, float]:
 #: Metadata of a per-axis (x, y, z) field: written ``{"x": ..., "y": ..., "z": ...}``.
 _PER_AXIS = {PLAIN: _axis_dict}
 
+_T = TypeVar("_T")
+
+
+def _result(cls: type[_T]) -> type[_T]:
+    """A result type: a frozen, keyword-only dataclass whose ``Axis3`` fields are per-axis.
+
+    A field annotated ``Axis3`` gets :data:`_PER_AXIS` (written ``{"x", "y", "z"}``), so
+    that the annotation alone says so.
+    """
+    for name, annotation in inspect.get_annotations(cls).items():
+        if annotation == "Axis3":  # the annotations are strings (postponed evaluation)
+            setattr(cls, name, field(metadata=_PER_AXIS))
+    return dataclass(frozen=True, kw_only=True)(cls)
+
 
 class _Plain:
     """``to_dict`` of the result dataclasses: their JSON layout, NaN / inf kept as floats."""
@@ -48,7 +63,7 @@ class _Plain:
         return to_plain(self)
 
 
-@dataclass(frozen=True, kw_only=True)
+@_result
 class DeviationStats(_Plain):
     """Deviation from the planned trajectory of one UAV after ``settle_time`` (m, s).
 
@@ -63,13 +78,13 @@ class DeviationStats(_Plain):
 
     max_norm: float
     rms_norm: float
-    max_abs: Axis3 = field(metadata=_PER_AXIS)
-    rms: Axis3 = field(metadata=_PER_AXIS)
+    max_abs: Axis3
+    rms: Axis3
     time_off_track: float
     max_norm_time: float
 
 
-@dataclass(frozen=True, kw_only=True)
+@_result
 class ConflictTimeline(_Plain):
     """Conflict-resolution timeline of one UAV (s); see the module docstring for definitions.
 
@@ -106,7 +121,7 @@ class ConflictTimeline(_Plain):
     hold_time: float
 
 
-@dataclass(frozen=True, kw_only=True)
+@_result
 class FluctuationStats(_Plain):
     """Velocity and acceleration fluctuation of one UAV after ``settle_time``, per axis.
 
@@ -119,15 +134,15 @@ class FluctuationStats(_Plain):
         speed_max: Largest speed ``|v|`` (m/s).
     """
 
-    vel_std: Axis3 = field(metadata=_PER_AXIS)
-    acc_std: Axis3 = field(metadata=_PER_AXIS)
-    vel_max_rate: Axis3 = field(metadata=_PER_AXIS)
-    acc_max_rate: Axis3 = field(metadata=_PER_AXIS)
-    acc_max_abs: Axis3 = field(metadata=_PER_AXIS)
+    vel_std: Axis3
+    acc_std: Axis3
+    vel_max_rate: Axis3
+    acc_max_rate: Axis3
+    acc_max_abs: Axis3
     speed_max: float
 
 
-@dataclass(frozen=True, kw_only=True)
+@_result
 class UAVMetrics(_Plain):
     """Metrics of one UAV in one episode.
 
@@ -194,7 +209,7 @@ class UAVMetrics(_Plain):
     cost: float = math.nan
 
 
-@dataclass(frozen=True, kw_only=True)
+@_result
 class EpisodeSummary(_Plain):
     """Whole-episode summary (minima over UAVs, totals, any-flags).
 
@@ -281,16 +296,16 @@ class EpisodeSummary(_Plain):
     any_never_returned: bool
     first_t_leave: float
     max_conflict_duration: float
-    max_vel_std: Axis3 = field(metadata=_PER_AXIS)
-    max_acc_std: Axis3 = field(metadata=_PER_AXIS)
-    max_vel_rate: Axis3 = field(metadata=_PER_AXIS)
-    max_acc_rate: Axis3 = field(metadata=_PER_AXIS)
+    max_vel_std: Axis3
+    max_acc_std: Axis3
+    max_vel_rate: Axis3
+    max_acc_rate: Axis3
     max_path_length_ratio: float
     cost: float = math.nan
     max_uav_cost: float = math.nan
 
 
-@dataclass(frozen=True, kw_only=True)
+@_result
 class EpisodeMetrics(_Plain):
     """All metrics of one episode.
 

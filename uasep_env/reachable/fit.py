@@ -1,9 +1,10 @@
 """The heading-aligned ellipse and ellipsoid around a reachable set (eqs. 17-18).
 
 ``fit="enclosing"`` (the default) is certified to enclose the set and is steered towards the
-minimum area by a shipped shape table (``data/ellipse_table.npz``, rebuilt by
-``tools/build_reachable_table.py`` from :mod:`uasep_env.reachable.optimal`); ``fit="paper"``
-is eq. 17 as published. The certificate and the measured area factors are derived in
+minimum area by a shipped shape table (:mod:`uasep_env.reachable.shape_table`,
+``data/ellipse_table.npz``, rebuilt by ``tools/build_reachable_table.py`` from
+:mod:`uasep_env.reachable.optimal`); ``fit="paper"`` is eq. 17 as published. The certificate
+(:mod:`uasep_env.reachable.certificate`) and the measured area factors are derived in
 ``docs/reachable_sets.md``. The fit's search, axes and certificate (arithmetic and square roots
 only) have a compiled twin (``fit_ellipse``), so that the few rows of a partial reset cost
 little.
@@ -12,13 +13,13 @@ little.
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from uasep_env._numba import compiled_twin
+from uasep_env.reachable.certificate import _axes_for, _certified, _margins, _Nodes
 from uasep_env.reachable.sets import (
     FloatArray,
     Mode,
@@ -28,6 +29,13 @@ from uasep_env.reachable.sets import (
     _nonneg_all,
     _out,
     _unit_factors,
+)
+from uasep_env.reachable.shape_table import (  # noqa: F401 (_TAB: read from here too)
+    _CORNERS,
+    _TAB,
+    _TAB_LOGR,
+    _TAB_U,
+    _interp_table,
 )
 from uasep_env.sim.obstacles import _EPS
 
@@ -59,57 +67,6 @@ def _check_fit(fit: str) -> bool:
     return fit == "paper"
 
 
-# ---------------------------------------------------------------------------- shape table
-# Shape table (``data/ellipse_table.npz``): the minimum-area enclosing ellipse's centre c and
-# longitudinal semi-axis B as fractions of the set's extent along the heading (c from the back
-# end), and its lateral semi-axis A as a fraction of the set's half-width, for the swept ("s")
-# and the terminal ("t") set, on a grid of u = sqrt((2/pi) atan2(2 r / (v t), phi)) ("al";
-# 0: r = 0, 1: phi = 0; 33 nodes) and log10(hypot(phi, 2 r / (v t))) ("lr"; -3..3, 49 nodes).
-# Made by ``tools/build_reachable_table.py`` (about a minute). It only steers the fit towards the
-# minimum area: whatever it holds, the returned ellipse passes the enclosure certificate.
-def _load_table() -> tuple[FloatArray, FloatArray, dict[bool, FloatArray]]:
-    """The shipped shape table: ``(u nodes, log10 radius nodes, {swept: (33, 49, 3)})``."""
-    path = Path(__file__).parents[1] / "data" / "ellipse_table.npz"
-    with np.load(path) as data:
-        return (
-            np.asarray(data["al"], dtype=np.float64),
-            np.asarray(data["lr"], dtype=np.float64),
-            {True: np.asarray(data["s"], np.float64), False: np.asarray(data["t"], np.float64)},
-        )
-
-
-_TAB_U, _TAB_LOGR, _TAB = _load_table()
-
-
-def _corners(tab: FloatArray) -> FloatArray:
-    """``(na - 1, nl - 1, 4, 3)``: each cell's four corners, in the order of the interpolation."""
-    return np.stack([tab[:-1, :-1], tab[1:, :-1], tab[:-1, 1:], tab[1:, 1:]], axis=2)
-
-
-# One gather of a cell's four corners instead of four (a partial reset fits a few rows).
-_CORNERS = {swept: _corners(tab) for swept, tab in _TAB.items()}
-
-
-def _interp_table(swept: bool, u: FloatArray, logr: FloatArray) -> FloatArray:
-    """Bilinear interpolation of the shape table, ``(..., 3)`` = (c, B, A) fractions."""
-    na, nl = _TAB[swept].shape[:2]
-    fa = np.clip((u - _TAB_U[0]) / (_TAB_U[1] - _TAB_U[0]), 0.0, na - 1.0)
-    fl = np.clip((logr - _TAB_LOGR[0]) / (_TAB_LOGR[1] - _TAB_LOGR[0]), 0.0, nl - 1.0)
-    fl = np.where(np.isnan(fl), 0.0, fl)
-    i0 = np.minimum(fa.astype(np.intp), na - 2)
-    j0 = np.minimum(fl.astype(np.intp), nl - 2)
-    ta = (fa - i0)[..., None]
-    tl = (fl - j0)[..., None]
-    ua, ul = 1 - ta, 1 - tl
-    k = _CORNERS[swept][i0, j0]
-    return (
-        k[..., 0, :] * ua * ul
-        + k[..., 1, :] * ta * ul
-        + k[..., 2, :] * ua * tl
-        + k[..., 3, :] * ta * tl
-    )
-
-
 # ---------------------------------------------------------------------------- search
 def _golden_max(
     f: Callable[[FloatArray], FloatArray], lo: FloatArray, hi: FloatArray, iters: int
@@ -136,119 +93,6 @@ def _golden_max(
 
 
 # ---------------------------------------------------------------------------- ellipse fit
-class _Nodes:
-    """Certificate nodes on ``[0, pi]`` with their trigonometry and the set's support there.
-
-    ``cos``/``sin``: the nodes' cosines and sines (numpy's, as the fit's kernel gets them);
-    ``factors``: :func:`_unit_factors` of ``phi``.
-    """
-
-    def __init__(
-        self,
-        th: FloatArray,
-        vt: FloatArray,
-        phi: FloatArray,
-        r: FloatArray,
-        swept: bool,
-        cos: FloatArray,
-        sin: FloatArray,
-        factors: tuple[FloatArray, FloatArray, FloatArray],
-    ) -> None:
-        self.th = th
-        self.cos = cos
-        self.c2 = cos**2
-        self.s2 = sin**2
-        self.d2 = np.diff(th, axis=-1) ** 2 / 8.0
-        ip, omc, sc = factors
-        unit = _h_unit_of(
-            th, sin, cos, phi[..., None], ip[..., None], omc[..., None], sc[..., None], swept
-        )
-        self.h = r[..., None] + vt[..., None] * unit
-        self.cos_in = self.cos[..., 1:-1]
-        self.c2_in = self.c2[..., 1:-1]
-        self.inv_s2_in = 1.0 / self.s2[..., 1:-1]
-
-    def take(self, idx: NDArray[np.intp]) -> _Nodes:
-        """The nodes of the rows ``idx``."""
-        sub = object.__new__(_Nodes)
-        for name in ("th", "cos", "c2", "s2", "d2", "h", "cos_in", "c2_in", "inv_s2_in"):
-            setattr(sub, name, getattr(self, name)[idx])
-        return sub
-
-
-def _margins(
-    nd: _Nodes, lat: FloatArray, lon: FloatArray, r: FloatArray, eps_abs: FloatArray
-) -> FloatArray:
-    """Certificate margins ``max(max rho_E - r, 0) Delta^2 / 8`` at the nodes, ``(..., K)``."""
-    a2 = (lat * lat)[..., None]
-    b2 = (lon * lon)[..., None]
-    den = a2 * nd.s2
-    den += b2 * nd.c2
-    np.maximum(den, 1e-300, out=den)
-    rho = np.sqrt(den)
-    rho *= den
-    np.divide(a2 * b2, rho, out=rho)  # radius of curvature of the ellipse at the nodes
-    m_int = np.maximum(rho[..., 1:], rho[..., :-1])
-    m_int -= r[..., None]
-    np.maximum(m_int, 0.0, out=m_int)
-    m_int *= nd.d2
-    out = rho
-    out[..., 0] = m_int[..., 0]
-    out[..., -1] = m_int[..., -1]
-    np.maximum(m_int[..., 1:], m_int[..., :-1], out=out[..., 1:-1])
-    out += eps_abs[..., None]
-    return out
-
-
-def _axes_for(
-    nd: _Nodes, delta: FloatArray, c: FloatArray, lon: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Least axes ``(A, B >= lon)`` with ``h_E(theta_k) >= h_k + delta_k`` at every node."""
-    h = nd.h
-    lon = np.maximum(lon, h[..., 0] + delta[..., 0] - c)
-    lon = np.maximum(lon, h[..., -1] + delta[..., -1] + c)
-    need = c[..., None] * nd.cos_in
-    np.subtract(h[..., 1:-1], need, out=need)
-    need += delta[..., 1:-1]
-    np.maximum(need, 0.0, out=need)
-    need *= need
-    need -= (lon * lon)[..., None] * nd.c2_in
-    need *= nd.inv_s2_in
-    return np.sqrt(np.maximum(np.max(need, axis=-1), 0.0)), lon
-
-
-def _fit_axes(
-    nd: _Nodes,
-    c: FloatArray,
-    lat: FloatArray,
-    lon: FloatArray,
-    r: FloatArray,
-    eps_abs: FloatArray,
-) -> tuple[FloatArray, FloatArray]:
-    """Least axes for the centre ``c`` with the margins of ``(lat, lon)`` plus 25%.
-
-    ``B`` only grows (to meet the tip constraints at 0 and pi); ``A`` is the least value with
-    ``c cos theta_k + sqrt(A^2 sin^2 + B^2 cos^2) >= h_k + delta_k`` at the inner nodes.
-    """
-    return _axes_for(nd, 1.25 * _margins(nd, lat, lon, r, eps_abs), c, lon)
-
-
-def _certified(
-    nd: _Nodes,
-    c: FloatArray,
-    lat: FloatArray,
-    lon: FloatArray,
-    r: FloatArray,
-    eps_abs: FloatArray,
-) -> NDArray[np.bool_]:
-    """Whether ``(c, A, B)`` passes the enclosure certificate (``docs/reachable_sets.md``)."""
-    delta = _margins(nd, lat, lon, r, eps_abs)
-    he = c[..., None] * nd.cos + np.sqrt(
-        (lat * lat)[..., None] * nd.s2 + (lon * lon)[..., None] * nd.c2
-    )
-    return np.all(he - nd.h >= delta, axis=-1)
-
-
 # The directions of the extents: ahead, behind, to the side.
 _EXTENT_DIRECTIONS = np.array([0.0, np.pi, 0.5 * np.pi])
 
@@ -471,8 +315,9 @@ def _fit_certified(
         return -(a_ * b_)
 
     c = _golden_max(neg_area, c - half, c + half, _C_ITERS)
-    for _ in range(2):
-        lat, lon = _fit_axes(nd, c, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)
+    for _ in range(2):  # the margins at the previous axes, plus 25%; B only grows
+        margins = 1.25 * _margins(nd, np.maximum(lat, 1e-3 * lat_g), lon, r, eps_abs)
+        lat, lon = _axes_for(nd, margins, c, lon)
     return c, lat, lon, _certified(nd, c, lat, lon, r, eps_abs)
 
 

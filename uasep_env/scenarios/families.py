@@ -17,7 +17,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -155,8 +155,7 @@ def _encounter(kind: str) -> ScenarioFamily:
         summary=encounter.summary,
         parameters=encounter.parameters,
         generate=generate,
-        draws=draws if _batched(encounter, *ENCOUNTERS.values()) else None,
-        draw_tables=_tables_of(kind) if kind in RANDOM_MIX.names else None,
+        **_batched_form(draws, _tables_of(kind) if kind in RANDOM_MIX.names else None),
     )
 
 
@@ -222,6 +221,20 @@ def _large_formation_draws(rng: np.random.Generator, config: EnvConfig) -> Episo
 def _batched(*encounters: Encounter) -> bool:
     """Whether every one of ``encounters`` declares its draws (a batched form is possible)."""
     return all(e.draws is not None for e in encounters)
+
+
+def _batched_form(
+    draws: Callable[..., EpisodeDraws],
+    tables: Callable[[], tuple[DrawTables, int]] | None = None,
+) -> dict[str, Any]:
+    """A family's ``ScenarioFamily.draws`` and ``draw_tables``, as keyword arguments.
+
+    ``None`` both unless every encounter kind declares its draws (its background traffic
+    may be of any kind).
+    """
+    if not _batched(*ENCOUNTERS.values()):
+        return {"draws": None, "draw_tables": None}
+    return {"draws": draws, "draw_tables": tables}
 
 
 def _large_formation(rng: np.random.Generator, config: EnvConfig) -> ScenarioSpec:
@@ -323,10 +336,8 @@ def _random_tables() -> DrawTables:
     )
 
 
-def _tables_of(member: str | None) -> Callable[[], tuple[DrawTables, int]] | None:
+def _tables_of(member: str | None) -> Callable[[], tuple[DrawTables, int]]:
     """``ScenarioFamily.draw_tables`` of the ``random`` family or one of its members."""
-    if not _batched(*ENCOUNTERS.values()):
-        return None
     if member is None:
         return lambda: (_random_tables(), -1)
     return lambda: (_random_tables(), RANDOM_MIX.names.index(member))
@@ -354,8 +365,7 @@ register(
         generate=_random,
         gym_name="Formation",
         mix=RANDOM_MIX,
-        draws=_random_draws if _batched(*ENCOUNTERS.values()) else None,
-        draw_tables=_tables_of(None),
+        **_batched_form(_random_draws, _tables_of(None)),
     )
 )
 for _kind in ENCOUNTERS:
@@ -366,8 +376,7 @@ register(
         summary="Every obstacle slot aimed at the formation, each of a random kind.",
         parameters="Each slot's kind drawn from " + TRAFFIC_MIX.describe() + ".",
         generate=_multi_obstacle,
-        draws=_multi_obstacle_draws if _batched(*ENCOUNTERS.values()) else None,
-        draw_tables=_tables_of("multi_obstacle"),
+        **_batched_form(_multi_obstacle_draws, _tables_of("multi_obstacle")),
     )
 )
 register(
@@ -379,7 +388,7 @@ register(
             "`paper` pattern becomes a wedge."
         ),
         generate=_large_formation,
-        draws=_large_formation_draws if _batched(*ENCOUNTERS.values()) else None,
+        **_batched_form(_large_formation_draws),
         gym_name="LargeFormation",
         defaults={"n_uavs": 8, "formation": "wedge", "n_obstacles": 2},
     )

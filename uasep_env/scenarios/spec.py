@@ -25,17 +25,17 @@ __all__ = ["N_WAYPOINTS", "ScenarioBatch", "ScenarioSpec", "place_obstacles"]
 N_WAYPOINTS = 4
 
 
-@dataclass
-class ScenarioSpec:
-    """Initial conditions of one episode (NED, SI units).
+@dataclass(kw_only=True)
+class _InitialConditions:
+    """The arrays of an episode's initial conditions (NED, SI units), by keyword.
 
-    The ``obs_*`` names of the obstacle fields (``obs_pos``, ...) still read, with a
-    ``DeprecationWarning``, for one version.
+    The fields :class:`ScenarioSpec` (one episode's) and :class:`ScenarioBatch` (several
+    episodes', each with a leading axis of one row per episode) share; the shapes are one
+    episode's.
 
     Attributes:
-        family: Name of the family that generated it.
         waypoints: ``(N_WAYPOINTS, 3)`` planned trajectory of the formation centre (m).
-        cruise_speed: Speed along it (m/s).
+        cruise_speed: Speed along it (m/s): a float in a spec, ``(B,)`` in a batch.
         slots: ``(n_uavs, 3)`` formation pattern (m, formation frame).
         uav_pos: ``(n_uavs, 3)`` initial positions (m).
         uav_vel: ``(n_uavs, 3)`` initial velocities (m/s).
@@ -54,9 +54,8 @@ class ScenarioSpec:
         wind: ``(3,)`` steady wind (m/s, NED).
     """
 
-    family: str
     waypoints: np.ndarray
-    cruise_speed: float
+    cruise_speed: float | np.ndarray
     slots: np.ndarray
     uav_pos: np.ndarray
     uav_vel: np.ndarray
@@ -72,6 +71,25 @@ class ScenarioSpec:
     obstacle_active: np.ndarray
     obstacle_hold_until: np.ndarray
     wind: np.ndarray
+
+
+#: The array fields of a spec, stacked in a :class:`ScenarioBatch` (all but ``family``).
+_ARRAY_FIELDS = tuple(f.name for f in fields(_InitialConditions))
+
+
+@dataclass
+class ScenarioSpec(_InitialConditions):
+    """Initial conditions of one episode (NED, SI units).
+
+    The arrays (given by keyword) are :class:`_InitialConditions`'. The ``obs_*`` names of
+    the obstacle fields (``obs_pos``, ...) still read, with a ``DeprecationWarning``, for
+    one version.
+
+    Attributes:
+        family: Name of the family that generated it.
+    """
+
+    family: str
 
     def __getattr__(self, name: str) -> Any:
         # Only called for names that are not attributes: the deprecated obs_* aliases.
@@ -86,16 +104,14 @@ class ScenarioSpec:
 
 
 _FIELD_NAMES = frozenset(f.name for f in fields(ScenarioSpec))
-#: The array fields of a spec, stacked in a :class:`ScenarioBatch` (all but ``family``).
-_ARRAY_FIELDS = tuple(f.name for f in fields(ScenarioSpec) if f.name != "family")
 
 
 @dataclass
-class ScenarioBatch:
+class ScenarioBatch(_InitialConditions):
     """The initial conditions of several episodes: :class:`ScenarioSpec`'s fields stacked.
 
-    Every array field of :class:`ScenarioSpec` with a leading axis of one row per episode
-    (``cruise_speed`` is ``(B,)``), plus:
+    Every array field of :class:`ScenarioSpec` (:class:`_InitialConditions`, by keyword)
+    with a leading axis of one row per episode (``cruise_speed`` is ``(B,)``), plus:
 
     Attributes:
         families: Each episode's family name.
@@ -107,23 +123,6 @@ class ScenarioBatch:
     """
 
     families: list[str]
-    waypoints: np.ndarray
-    cruise_speed: np.ndarray
-    slots: np.ndarray
-    uav_pos: np.ndarray
-    uav_vel: np.ndarray
-    obstacle_pos: np.ndarray
-    obstacle_heading: np.ndarray
-    obstacle_speed: np.ndarray
-    obstacle_turn_rate: np.ndarray
-    obstacle_climb_rate: np.ndarray
-    obstacle_max_turn_rate: np.ndarray
-    obstacle_max_climb_rate: np.ndarray
-    obstacle_radius: np.ndarray
-    obstacle_alt_band: np.ndarray
-    obstacle_active: np.ndarray
-    obstacle_hold_until: np.ndarray
-    wind: np.ndarray
     specs: list[ScenarioSpec] | None = None
     plan: PlannedTrajectory | None = None
     plan_offsets: np.ndarray | None = None

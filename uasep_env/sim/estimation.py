@@ -72,22 +72,16 @@ class KalmanModel:
         self.gains = np.array(gains)
         self.covariances = np.array(covs)
 
-    def update(
-        self,
-        est_pos: np.ndarray,
-        est_vel: np.ndarray,
-        accel: np.ndarray | None,
-        meas_pos: np.ndarray,
-        meas_vel: np.ndarray,
-        count: np.ndarray,
-    ) -> None:
+    def update(self, *track: np.ndarray | None) -> None:
         """Predict with the known input then correct with the measurement, in place.
 
-        The arguments are :func:`kalman_correct`'s first six (``count`` >= 1 here); this
-        model supplies the gain table and the time step.
+        Args:
+            *track: :func:`kalman_correct`'s first six arguments, ``(est_pos, est_vel,
+                accel, meas_pos, meas_vel, count)`` (``count`` >= 1 here); this model
+                supplies the gain table and the time step.
         """
-        gains = gain_table(self.gains, count)
-        kalman_correct(est_pos, est_vel, accel, meas_pos, meas_vel, count, gains, self.dt)
+        count = track[5]
+        kalman_correct(*track, gain_table(self.gains, count), self.dt)
 
     def steady_state_position_std(self) -> float:
         """Posterior position standard deviation once the filter has converged (m)."""

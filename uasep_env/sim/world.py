@@ -22,6 +22,9 @@ conformal region of its aircraft class, :mod:`uasep_env.reachable.calibrated`). 
 are one function, :func:`uasep_env.sim.physics_step.physics_step` (three compiled kernels when
 numba is in use).
 
+The planned state now (centre, direction, each UAV's planned position and velocity) is
+computed on first read, once per step (:class:`uasep_env.sim.planned_now.PlannedNow`).
+
 A reset (of all environments, or of those whose episodes ended) draws each environment's
 scenario from its own generator and builds the geometry once over the reset rows
 (:mod:`uasep_env.scenarios.batched`), so that a few episode ends in a step of a large batch
@@ -54,11 +57,12 @@ from uasep_env.scenarios.real_traffic import check_replay_tracks, replay_samples
 from uasep_env.scenarios.spec import ScenarioBatch
 from uasep_env.sim.dynamics import measure
 from uasep_env.sim.estimation import KalmanModel
-from uasep_env.sim.formation import PlannedTrajectory, planned_state, segment_offsets
+from uasep_env.sim.formation import PlannedTrajectory, segment_offsets
 from uasep_env.sim.geometry import nearest_separations, obstacle_distances, uav_distances
 from uasep_env.sim.noise import NoiseStreams
 from uasep_env.sim.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity
 from uasep_env.sim.physics_step import PhysicsArrays, PhysicsParams, physics_step
+from uasep_env.sim.planned_now import PlannedNow
 from uasep_env.sim.replay import ReplayTracks
 
 __all__ = ["World"]
@@ -71,7 +75,7 @@ _REGION_INPUTS = ("uav_pos", "pred_center", "pred_axes", "pred_heading", "pred_c
 _region_views = operator.itemgetter(*_REGION_INPUTS)
 
 
-class World(RenamedAttributes):
+class World(PlannedNow, RenamedAttributes):
     """``n_envs`` batched worlds of UAVs and obstacles.
 
     Args:
@@ -388,73 +392,6 @@ class World(RenamedAttributes):
             raise ValueError(f"{name} must have shape ({self.n_envs},), got {mask.shape}")
         return mask
 
-    def _refresh_plan(self) -> None:
-        """Mark the plan stale; the next read of a ``plan_*`` attribute recomputes it.
-
-        Lazy, so that a reset followed by a step (the vector envs) evaluates it once.
-        """
-        self._plan_now: tuple[np.ndarray, ...] | None = None
-        self._plan_resets: list[tuple[np.ndarray, ScenarioBatch]] = []
-
-    def _reset_plan_rows(self, rows: np.ndarray, batch: ScenarioBatch) -> None:
-        """After a partial reset: the plan already computed is to get the ``rows`` at time 0.
-
-        The same numbers, row by row, as recomputing every environment's plan, which the
-        vector envs' autoresets would otherwise do for a few reset rows; applied at the next
-        read (:meth:`_plan_arrays`), so not at all when a step comes first (the vector envs'
-        next-step autoreset). Marks the plan stale instead when none was computed or the
-        scenarios did not bring their plans.
-        """
-        if self._plan_now is None or batch.plan is None or batch.plan_offsets is None:
-            self._refresh_plan()
-            return
-        self._plan_resets.append((rows, batch))
-
-    def _plan_arrays(self) -> tuple[np.ndarray, ...]:
-        """``(center, direction, pos, vel)`` of the plan now, computed once per step.
-
-        New arrays each time, read-only: what a caller keeps stays as it was.
-        """
-        if self._plan_now is None:
-            f = self.frozen_inputs()
-            center, direction, pos, vel = planned_state(
-                self.plan.frozen(), f["time"], f["_plan_offsets"]
-            )
-            for arr in (center, direction, pos, vel):
-                arr.flags.writeable = False
-            self._plan_now = (center, direction, pos, vel)
-        elif self._plan_resets:
-            arrays = [old.copy() for old in self._plan_now]  # what a caller kept stays
-            for rows, batch in self._plan_resets:
-                fresh = planned_state(batch.plan, np.zeros(len(rows)), batch.plan_offsets)
-                for arr, new in zip(arrays, fresh, strict=True):
-                    arr[rows] = new
-            for arr in arrays:
-                arr.flags.writeable = False
-            self._plan_now = tuple(arrays)
-        self._plan_resets.clear()
-        return self._plan_now
-
-    @property
-    def plan_center(self) -> np.ndarray:
-        """``(E, 3)`` planned formation centre now (m), read-only."""
-        return self._plan_arrays()[0]
-
-    @property
-    def plan_dir(self) -> np.ndarray:
-        """``(E, 3)`` unit direction of the planned path now, read-only."""
-        return self._plan_arrays()[1]
-
-    @property
-    def plan_pos(self) -> np.ndarray:
-        """``(E, N, 3)`` each UAV's planned position now (m), read-only."""
-        return self._plan_arrays()[2]
-
-    @property
-    def plan_vel(self) -> np.ndarray:
-        """``(E, N, 3)`` each UAV's planned velocity now (m/s), read-only."""
-        return self._plan_arrays()[3]
-
     _RENAMED: ClassVar[dict[str, str]] = RENAMED_WORLD_ATTRIBUTES  # read with a warning
     _STATE = (
         "time",
@@ -621,11 +558,3 @@ class World(RenamedAttributes):
     def obstacle_velocities(self) -> np.ndarray:
         """``(E, M, 3)`` true obstacle ground velocities (m/s)."""
         return obstacle_velocity(self.obstacles)
-
-    def planned(self) -> tuple[np.ndarray, np.ndarray]:
-        """Each UAV's planned position and velocity now, ``(E, N, 3)`` each (read-only)."""
-        return self.plan_pos, self.plan_vel
-
-    def plan_finished(self) -> np.ndarray:
-        """``(E,)`` whether the planned trajectory has been flown to its end."""
-        return self.plan.finished(self.time)

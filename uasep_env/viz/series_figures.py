@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
+    from uasep_env.metrics.record import EpisodeRecord
     from uasep_env.rollout import Episode
 
 __all__ = [
@@ -44,6 +45,20 @@ __all__ = [
     "plot_uav_distances",
     "plot_velocity_acceleration",
 ]
+
+
+def _uav_lines(
+    ax: Axes, record: EpisodeRecord, values: np.ndarray, lw: float, label: bool = True
+) -> None:
+    """One line per UAV of ``values`` ``(T, N)`` over time, in its colour (named if ``label``)."""
+    for i in range(record.n_uavs):
+        ax.plot(
+            record.time,
+            values[:, i],
+            color=uav_colour(i),
+            lw=lw,
+            label=record.names[i] if label else None,
+        )
 
 
 def plot_obstacle_distances(episode: Episode, label: str = "") -> Figure:
@@ -71,9 +86,8 @@ def plot_obstacle_distances(episode: Episode, label: str = "") -> Figure:
     fig = _new_figure((11.0, 7.5))
     ax, bx = fig.subplots(2, 1, sharex=True, height_ratios=(1.2, 1.0))
     if np.isfinite(d).any():
-        for i in range(r.n_uavs):
-            ax.plot(r.time, d[:, i, 0], color=uav_colour(i), lw=1.4, label=r.names[i])
-            bx.plot(r.time, reg[:, i, 0], color=uav_colour(i), lw=1.4, label=r.names[i])
+        _uav_lines(ax, r, d[:, :, 0], lw=1.4)
+        _uav_lines(bx, r, reg[:, :, 0], lw=1.4)
     _threshold_lines(ax, r.collision_distance, r.obstacle_separation)
     if np.isfinite(d).any():
         ax.set_yscale("log")
@@ -193,14 +207,7 @@ def plot_deviation(episode: Episode, label: str = "") -> Figure:
     axs = fig.subplots(3, 1, sharex=True)
     for a, ax in enumerate(axs):
         _shade_settle(ax, episode, label=a == 0)
-        for i in range(r.n_uavs):
-            ax.plot(
-                r.time,
-                dev[:, i, a],
-                color=uav_colour(i),
-                lw=1.4,
-                label=r.names[i] if a == 0 else None,
-            )
+        _uav_lines(ax, r, dev[:, :, a], lw=1.4, label=a == 0)
         _timeline_lines(ax, tl, r.names[worst], label=a == 0)
         ax.axhline(0.0, color="0.3", lw=0.6)
         ax.set_ylabel(f"{AXIS_NAMES[AXES[a]]} deviation (m)")
@@ -246,15 +253,8 @@ def plot_velocity_acceleration(
         for ax in (vax, aax):
             _shade_settle(ax, episode, label=(a == 0 and ax is vax))
             _shade_region(ax, episode, label=(a == 0 and ax is aax))
-        for i in range(r.n_uavs):
-            vax.plot(
-                r.time,
-                r.uav_vel[:, i, a],
-                color=uav_colour(i),
-                lw=1.2,
-                label=r.names[i] if a == 0 else None,
-            )
-            aax.plot(r.time, r.uav_acc[:, i, a], color=uav_colour(i), lw=1.2)
+        _uav_lines(vax, r, r.uav_vel[:, :, a], lw=1.2, label=a == 0)
+        _uav_lines(aax, r, r.uav_acc[:, :, a], lw=1.2, label=False)
         if accel_limit is not None:
             for s in (-1.0, 1.0):
                 aax.axhline(
