@@ -21,6 +21,11 @@ What the target already is decides how it is written (:func:`output_kind`):
 * a character device or a FIFO (``/dev/null``, a named pipe): written through, in place;
 * anything else (a block device, a socket, a folder): refused, nothing written.
 
+A run folder's own files (``progress.csv``, ``validation.json``, checkpoints) are written
+with ``replace_links=True``: whatever the entry is (a link, a FIFO, a device), it is replaced
+by a regular file, never written through; a run folder copied from elsewhere cannot make a
+run write outside it. A user's ``--json``/``--csv`` target keeps the rules above.
+
 Written-through outputs are not atomic (a stream cannot be rolled back): that is what the
 user asked for by naming one. A special file is never replaced by a regular one.
 """
@@ -133,13 +138,28 @@ def _one_line(path: Path, err: OSError, *, kept: bool = True) -> OSError:
     return type(err)(err.errno, message) if err.errno else OSError(message)
 
 
+def _own_kind(path: Path) -> str:
+    """:func:`output_kind` for a run folder's own file: the entry itself is replaced."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return "new"
+    if stat.S_ISDIR(st.st_mode):
+        raise IsADirectoryError(errno.EISDIR, f"cannot write {path}: it is a directory")
+    return "file" if stat.S_ISREG(st.st_mode) else "new"  # a link or special: replaced
+
+
 @contextlib.contextmanager
-def atomic_output(path: str | Path, mode: str = "wb", **kwargs: Any) -> Iterator[IO[Any]]:
+def atomic_output(
+    path: str | Path, mode: str = "wb", *, replace_links: bool = False, **kwargs: Any
+) -> Iterator[IO[Any]]:
     """Open a temporary file beside ``path``; on a clean exit it replaces ``path``.
 
     Args:
         path: The target (its folders are created).
         mode: ``"wb"`` or ``"w"`` (text).
+        replace_links: A run folder's own file: a link, FIFO or device at ``path`` is
+            replaced by the new file, never written through (module docstring).
         **kwargs: Passed to :func:`open` (``newline``, ``encoding``).
 
     Yields:
@@ -155,7 +175,7 @@ def atomic_output(path: str | Path, mode: str = "wb", **kwargs: Any) -> Iterator
     target = Path(path)
     if mode == "w":
         kwargs.setdefault("encoding", "utf-8")
-    kind = output_kind(target)
+    kind = _own_kind(target) if replace_links else output_kind(target)
     if kind in ("stream", "device"):
         with _through(target, kind, mode, kwargs) as fh:
             yield fh
@@ -221,12 +241,13 @@ def _through(target: Path, kind: str, mode: str, kwargs: dict[str, Any]) -> Iter
         raise _one_line(target, err, kept=False) from err
 
 
-def atomic_write(path: str | Path, data: bytes | str) -> Path:
+def atomic_write(path: str | Path, data: bytes | str, *, replace_links: bool = False) -> Path:
     """Write ``data`` (bytes, or text as UTF-8) to ``path`` atomically.
 
     Args:
         path: The target (its folders are created).
         data: The whole content.
+        replace_links: A run folder's own file: see :func:`atomic_output`.
 
     Returns:
         The path written.
@@ -235,7 +256,7 @@ def atomic_write(path: str | Path, data: bytes | str) -> Path:
         OSError: See :func:`atomic_output`.
     """
     raw = data.encode("utf-8") if isinstance(data, str) else data
-    with atomic_output(path, "wb") as fh:
+    with atomic_output(path, "wb", replace_links=replace_links) as fh:
         fh.write(raw)
     return Path(path)
 

@@ -33,6 +33,7 @@ __all__ = [
     "dumps",
     "json_depth",
     "json_shape",
+    "loads_bounded",
     "loads_unique",
     "to_plain",
     "write_json",
@@ -189,3 +190,47 @@ def loads_unique(text: str | bytes) -> Any:
         json.JSONDecodeError: Not JSON.
     """
     return json.loads(text, object_pairs_hook=_unique_pairs)
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number (strict JSON has no NaN or Infinity)")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):  # 1e999 parses to inf
+        raise ValueError(f"{text[:40]} is beyond the float range")
+    return value
+
+
+def loads_bounded(text: str | bytes, *, max_depth: int = 16, max_containers: int = 100_000) -> Any:
+    """Strict JSON from elsewhere, within limits: the one reader of untrusted JSON text.
+
+    Nesting and the number of arrays and objects are bounded before parsing
+    (:func:`json_shape`), a repeated key is refused (:func:`loads_unique`), and so are
+    ``NaN`` and ``Infinity`` and numbers beyond the float range (Python's :mod:`json` accepts
+    them; strict JSON does not).
+
+    Raises:
+        ValueError: Not UTF-8, not JSON, too deep, too many containers, a repeated key or a
+            non-finite constant: one line without the path (the caller adds it).
+    """
+    if isinstance(text, bytes):
+        try:
+            text = text.decode("utf-8")
+        except UnicodeDecodeError as err:
+            raise ValueError(f"not UTF-8 ({err.reason} at byte {err.start})") from None
+    depth, containers = json_shape(text)
+    if depth > max_depth:
+        raise ValueError(f"nests {depth} levels deep, limit {max_depth}")
+    if containers > max_containers:
+        raise ValueError(f"holds {containers:,} arrays and objects, limit {max_containers:,}")
+    try:
+        return json.loads(
+            text,
+            object_pairs_hook=_unique_pairs,
+            parse_constant=_no_constant,
+            parse_float=_finite_float,
+        )
+    except json.JSONDecodeError as err:
+        raise ValueError(f"not JSON ({err.msg} at line {err.lineno} column {err.colno})") from None

@@ -19,12 +19,20 @@ import socket
 import time
 from pathlib import Path
 
+from uasep_env.runtime.runfiles import open_lock
+
 try:
     import fcntl
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
-__all__ = ["LOCK_NAME", "RunFolderBusy", "claim_run_folder", "release_run_folder"]
+__all__ = [
+    "LOCK_NAME",
+    "RunFolderBusy",
+    "claim_run_folder",
+    "is_own_lock",
+    "release_run_folder",
+]
 
 #: The lock file a claimed folder holds (not a run's output: ignored when a folder's
 #: emptiness is checked).
@@ -52,6 +60,8 @@ def claim_run_folder(folder: str | Path) -> Path:
     Raises:
         RunFolderBusy: Another live process holds it: one line naming the folder and that
             process (pid, host, start time).
+        RunFileRefused: The lock file is a link or not a regular file (one line; nothing
+            is written through it).
         OSError: The folder or the lock file cannot be made.
     """
     folder = Path(folder)
@@ -60,7 +70,7 @@ def claim_run_folder(folder: str | Path) -> Path:
     if key in _HELD or fcntl is None:
         return lock
     folder.mkdir(parents=True, exist_ok=True)
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    fd = open_lock(lock)  # never through a link, never a FIFO (runfiles)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
@@ -88,3 +98,20 @@ def release_run_folder(folder: str | Path) -> None:
     fd = _HELD.pop(Path(folder).resolve(), None)
     if fd is not None:
         os.close(fd)
+
+
+def is_own_lock(path: str | Path) -> bool:
+    """Whether ``path`` is the lock file this process holds (not merely a file of its name).
+
+    A folder's emptiness ignores the lock only then: anything else named
+    :data:`LOCK_NAME` (a link, a FIFO, another file) counts as content.
+    """
+    path = Path(path)
+    fd = _HELD.get(path.parent.resolve())
+    if fd is None:
+        return False
+    try:
+        st, held = os.lstat(path), os.fstat(fd)
+    except OSError:
+        return False
+    return (st.st_dev, st.st_ino) == (held.st_dev, held.st_ino)

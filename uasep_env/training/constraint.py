@@ -187,7 +187,7 @@ def measure_budget(args: Any, config: Any, out: Path) -> float:
                       rate_limit=budget.rate_limit)  # fmt: skip
         limit = budget.parity_limit if limit == "apf" else budget.rate_limit
     record["cost_limit"] = limit
-    atomic_write(out / "budget.json", json.dumps(record, indent=2) + "\n")
+    atomic_write(out / "budget.json", json.dumps(record, indent=2) + "\n", replace_links=True)
     print(f"cost limit {limit:.4g} per agent and episode ({args.cost_limit})")
     return float(limit)
 
@@ -266,9 +266,16 @@ class CostTracker:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore :meth:`state_dict` (running episodes start anew, as the environments do)."""
-        self.lagrangian.load_state_dict(state)
+        from uasep_env.config.checks import check, check_int_in, check_positive
+
+        self.lagrangian.load_state_dict(state)  # checked there (the multiplier's range)
+        check_int_in("episodes", state["episodes"], 0, 2**62)
+        window = state["window"]
+        check(isinstance(window, list), "window", window, "must be a list of episode costs")
+        for c in window:
+            check_positive("window[]", c, allow_zero=True, hi=1e300)
         self.episodes = int(state["episodes"])
         self.window.clear()
-        self.window.extend(float(c) for c in state["window"])
+        self.window.extend(float(c) for c in window)
         self._batch = []
         self._running[:] = 0.0

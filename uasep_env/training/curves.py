@@ -33,15 +33,50 @@ __all__ = [
 ]
 
 
-def read_progress(path: Path) -> list[dict[str, str]]:
-    """The rows of ``progress.csv``; a torn last line (a kill mid-write) is dropped."""
-    if not path.exists():
-        return []
-    text = path.read_text(encoding="utf-8", errors="replace")
+#: The largest CSV of a run folder read (a row is about 100 bytes: a million rows).
+MAX_CSV_BYTES = 128 * 1024 * 1024
+
+
+def read_progress(path: Path, root: Path | None = None) -> list[dict[str, str]]:
+    """The rows of ``progress.csv``; a torn last line (a kill mid-write) is dropped.
+
+    With ``root`` (the run folder, when ``--resume`` reads it) the file is untrusted input:
+    read through :func:`~uasep_env.runtime.runfiles.read_inside` (inside ``root``, a
+    regular file, at most :data:`MAX_CSV_BYTES`), as UTF-8, and every kept row's
+    ``agent_steps`` must be a whole number.
+
+    Raises:
+        ValueError: A NUL byte or another CSV error, or (with ``root``) a refused entry,
+            bytes that are not UTF-8, a bad ``agent_steps``: one line naming the file.
+    """
+    if root is None:
+        if not path.exists():
+            return []
+        text = path.read_text(encoding="utf-8", errors="replace")
+    else:
+        from uasep_env.runtime.runfiles import read_inside
+
+        if not os.path.lexists(path):
+            return []
+        try:
+            text = read_inside(root, path, MAX_CSV_BYTES).decode("utf-8")
+        except UnicodeDecodeError as err:
+            raise ValueError(f"{path}: not UTF-8 text (byte {err.start})") from None
     if text and not text.endswith("\n"):
         text = text[: text.rfind("\n") + 1]  # the torn last row
-    rows = list(csv.DictReader(io.StringIO(text)))
-    return [r for r in rows if None not in r.values() and None not in r]
+    try:
+        rows = list(csv.DictReader(io.StringIO(text)))
+    except csv.Error as err:  # a NUL byte
+        raise ValueError(f"{path}: not a CSV file ({err})") from None
+    rows = [r for r in rows if None not in r.values() and None not in r]
+    if root is not None:
+        for k, r in enumerate(rows, start=2):
+            steps = r.get("agent_steps")
+            if steps is None or not (steps.isascii() and steps.isdigit()):
+                raise ValueError(
+                    f"{path}: line {k}: agent_steps {steps!r:.40} is not a whole number"
+                )
+    return rows
 
 
 def write_rows(path: Path, fields: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
@@ -51,17 +86,28 @@ def write_rows(path: Path, fields: tuple[str, ...], rows: list[dict[str, Any]]) 
     w.writeheader()
     for r in rows:
         w.writerow({k: r.get(k, "") for k in fields})
-    atomic_write(path, buf.getvalue())
+    atomic_write(path, buf.getvalue(), replace_links=True)  # a run folder's own file
 
 
 class ProgressLog:
-    """``progress.csv`` opened for appending: a header when new, each row flushed and synced."""
+    """``progress.csv`` opened for appending: a header when new, each row flushed and synced.
+
+    A run folder's own file: a link or a special file there is replaced by a new file (with
+    the header), never appended to through it.
+    """
 
     def __init__(self, path: Path, fields: tuple[str, ...]) -> None:
-        new = not path.exists() or path.stat().st_size == 0
+        import stat
+
+        try:
+            st = os.lstat(path)
+            new = not stat.S_ISREG(st.st_mode) or st.st_size == 0
+        except FileNotFoundError:
+            new = True
         if new:
             write_rows(path, fields, [])
-        self._fh = path.open("a", newline="", encoding="utf-8")
+        flags = os.O_WRONLY | os.O_APPEND | getattr(os, "O_NOFOLLOW", 0)
+        self._fh = open(os.open(path, flags), "a", newline="", encoding="utf-8")  # noqa: SIM115
         self._csv = csv.DictWriter(self._fh, fieldnames=fields, lineterminator="\n")
 
     def write(self, row: dict[str, Any]) -> None:
@@ -131,7 +177,7 @@ def plot_curves(
             ax.grid(alpha=0.3)
     fig.suptitle(title or csv_path.parent.name)
     fig.tight_layout()
-    with atomic_output(png_path) as fh:
+    with atomic_output(png_path, replace_links=True) as fh:
         fig.savefig(fh, format="png", dpi=90)
     plt.close(fig)
     return png_path

@@ -149,12 +149,34 @@ class PIDLagrangian:
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`state_dict` (the gains and the limit are the constructor's)."""
+        """Restore :meth:`state_dict` (the gains and the limit are the constructor's).
+
+        A state from a file is checked first: the multiplier and the integral in
+        ``[0, max_multiplier]``, the smoothed terms finite (costs >= 0), ``updates`` a
+        count.
+
+        Raises:
+            ValueError: A value out of range, named (``multiplier=nan: must be ...``).
+            KeyError: A missing field.
+        """
+        bound = self.max_multiplier
+        for name in ("integral", "multiplier"):
+            value = state[name]
+            check_finite(name, value)
+            check(0.0 <= value <= bound, name, value, f"must be in [0, {bound:g}]")
+        check_finite("delta_p", state["delta_p"])
+        check_positive("cost_d", state["cost_d"], allow_zero=True, hi=_MAX)
+        costs_d = state["costs_d"]
+        check(isinstance(costs_d, list) and 0 < len(costs_d) <= self.delay, "costs_d",
+              costs_d, f"must be a list of 1 to {self.delay} costs")  # fmt: skip
+        for c in costs_d:
+            check_positive("costs_d[]", c, allow_zero=True, hi=_MAX)
+        check_int_in("updates", state["updates"], 0, 2**62)
         self.integral = float(state["integral"])
         self.multiplier = float(state["multiplier"])
         self._delta_p = float(state["delta_p"])
         self._cost_d = float(state["cost_d"])
-        self._costs_d = deque((float(c) for c in state["costs_d"]), maxlen=self.delay)
+        self._costs_d = deque((float(c) for c in costs_d), maxlen=self.delay)
         self.updates = int(state["updates"])
 
 

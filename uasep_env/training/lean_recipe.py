@@ -102,10 +102,49 @@ def _rms(rms: Any) -> dict:
     return {k: np.asarray(getattr(rms, k), dtype=np.float64) for k in ("mean", "var", "count")}
 
 
-def _restore_rms(rms: Any, saved: dict, prefix: str) -> None:
-    rms.mean = saved[prefix + "mean"].numpy().astype(np.float64)
-    rms.var = saved[prefix + "var"].numpy().astype(np.float64)
-    rms.count = float(saved[prefix + "count"])
+class _LogStd:
+    """The learner's ``log_std`` as a module of one tensor (checked and restored alike)."""
+
+    def __init__(self, log_std: Any) -> None:
+        self.log_std = log_std
+
+    def state_dict(self) -> dict:
+        return {"log_std": self.log_std.detach()}
+
+    def load_state_dict(self, saved: dict) -> None:
+        import torch
+
+        with torch.no_grad():
+            self.log_std.copy_(saved["log_std"])
+
+
+def _restore_rms(directory: Path, rms: Any, saved: dict, prefix: str) -> None:
+    """A ``RunningMeanStd`` from ``state.pt``'s ``central`` (checked: shapes, finite, > 0)."""
+    import torch
+
+    from uasep_env.training.rundir import RunFolderError, restore_module
+
+    own = {k: torch.as_tensor(v) for k, v in _rms(rms).items()}  # float64, rms's shapes
+    part = {k: saved.get(prefix + k) for k in own} if isinstance(saved, dict) else saved
+    restore_module(directory, f"central.{prefix}", _Stats(own), part)
+    if (own["var"] < 0).any() or not own["count"] > 0:
+        raise RunFolderError(directory, f"state.pt: central.{prefix}var/count out of range")
+    rms.mean = own["mean"].numpy().copy()
+    rms.var = own["var"].numpy().copy()
+    rms.count = float(own["count"])
+
+
+class _Stats:
+    """A dict of tensors as a module (restore_module checks keys, shapes, dtypes, finite)."""
+
+    def __init__(self, tensors: dict) -> None:
+        self.tensors = tensors
+
+    def state_dict(self) -> dict:
+        return dict(self.tensors)
+
+    def load_state_dict(self, saved: dict) -> None:
+        self.tensors.update(saved)
 
 
 def check_algorithm(directory: Path, info: dict, args: Args, central: bool) -> None:
@@ -155,27 +194,37 @@ def restore(state: Any, directory: Path, info: dict) -> None:
     """
     import torch
 
-    from uasep_env.training.rundir import RunError, load_normalization, read_tensors
+    from uasep_env.training.rundir import (
+        RunError,
+        load_normalization,
+        read_tensors,
+        restore_module,
+        restore_optimizer,
+        restore_rng,
+        tensor_part,
+    )
 
     central = state.critic_norm is not None
-    saved = read_tensors(directory)
+    saved = read_tensors(directory)  # every tensor checked as it is restored
     if ("central" in saved) != central:  # a policy.zip swapped in: still one line
         raise RunError(f"--resume {directory}: its state.pt and policy.zip disagree")
     learner = state.learner
     for part in _PARTS:
-        getattr(learner, part).load_state_dict(saved["nets"][part])
-    with torch.no_grad():
-        learner.log_std.copy_(saved["nets"]["log_std"])
-    state.opt.load_state_dict(saved["optimizer"])
-    torch.set_rng_state(saved["torch_rng"])
+        net = tensor_part(directory, saved, "nets", part)
+        restore_module(directory, f"nets.{part}", getattr(learner, part), net)
+    log_std = tensor_part(directory, saved, "nets", "log_std")
+    restore_module(directory, "nets", _LogStd(learner.log_std), {"log_std": log_std})
+    restore_optimizer(directory, "optimizer", state.opt, tensor_part(directory, saved, "optimizer"))
+    restore_rng(directory, "torch_rng", tensor_part(directory, saved, "torch_rng"))
     device = learner.log_std.device
     if "cuda_rng" in saved and device.type == "cuda":
         torch.cuda.set_rng_state(saved["cuda_rng"], device)
     load_normalization(state.norm, directory / "normalization.npz")
     if central:
-        _restore_rms(state.critic_norm.obs_rms, saved["central"], "critic_")
+        stats = tensor_part(directory, saved, "central")
+        _restore_rms(directory, state.critic_norm.obs_rms, stats, "critic_")
         if state.value_scale is not None:
-            _restore_rms(state.value_scale.rms, saved["central"], "value_")
+            _restore_rms(directory, state.value_scale.rms, stats, "value_")
     state.agent_steps = int(info["agent_steps"])
     state.updates = int(info["updates"])
     state.episodes = int(info["episodes"])

@@ -354,15 +354,27 @@ def load_checkpoint(agent: Any, venv: Any, directory: Path) -> dict:
         load_normalization,
         read_state,
         read_tensors,
+        restore_json,
+        restore_module,
+        restore_optimizer,
+        restore_rng,
+        tensor_part,
     )
 
     directory = check_checkpoint(directory)
-    state = read_tensors(directory)
+    state = read_tensors(directory)  # every tensor checked as it is restored
     for uid, mods in agent.checkpoint_modules.items():
         for k, v in mods.items():
-            if v is not None:
-                v.load_state_dict(state["agent"][uid][k])
-    torch.set_rng_state(state["torch_rng"])
+            if v is None:
+                continue
+            saved, where = tensor_part(directory, state, "agent", uid, k), f"agent.{uid}.{k}"
+            if isinstance(v, torch.nn.Module):
+                restore_module(directory, where, v, saved)
+            elif isinstance(v, torch.optim.Optimizer):
+                restore_optimizer(directory, where, v, saved)
+            else:  # a plain state (the cost sampler's seed): its own checks, one line
+                restore_json(directory, where, v.load_state_dict, saved, "state.pt")
+    restore_rng(directory, "torch_rng", tensor_part(directory, state, "torch_rng"))
     load_normalization(venv, directory / "normalization.npz")  # the observations' only
     return read_state(directory)
 

@@ -280,14 +280,15 @@ class LagrangianHooks(mappo.Hooks):
 
     def start(self, agent: Any, env: mappo.SkrlView, out: Path, resumed: dict) -> None:
         """Restore the constraint from ``resumed`` (rewinding ``cost_progress.csv``)."""
-        from uasep_env.training.rundir import ProgressLog, rewind_csv
+        from uasep_env.training.rundir import ProgressLog, restore_json, rewind_csv
         from uasep_env.training.sb3_lagrangian import COST_FIELDS
 
         self.agent = agent
         self.tracker = constraint.CostTracker(self.lagrangian, self.args.cost, env.num_envs * env.n)
         path = out / "cost_progress.csv"
         if resumed:
-            self.tracker.load_state_dict(resumed["lagrangian"])
+            folder = Path(self.args.resume)
+            restore_json(folder, "lagrangian", self.tracker.load_state_dict, resumed["lagrangian"])
             rewind_csv(path, COST_FIELDS, int(resumed["agent_steps"]))
         agent.multiplier = self.lagrangian.multiplier
         self.log = ProgressLog(path, COST_FIELDS)
@@ -340,8 +341,13 @@ def _limit(args: Args, config: Any, out: Path, resumed: dict) -> float:
     """The cost limit: the checkpoint's when resuming with the same option, else measured."""
     lag = resumed.get("lagrangian")
     if lag is not None and resumed.get("args", {}).get("cost_limit") == args.cost_limit:
-        print(f"cost limit {lag['cost_limit']:.4g} per agent and episode (the checkpoint's)")
-        return float(lag["cost_limit"])
+        from uasep_env.training.lagrangian import check_cost_limit
+        from uasep_env.training.rundir import restore_json
+
+        limit = lag.get("cost_limit")
+        restore_json(Path(args.resume), "lagrangian.cost_limit", check_cost_limit, limit)
+        print(f"cost limit {limit:.4g} per agent and episode (the checkpoint's)")
+        return float(limit)
     return constraint.measure_budget(args, config, out)
 
 

@@ -48,6 +48,7 @@ from uasep_env.training.constraint import (
     make_lagrangian,
     measure_budget,
 )
+from uasep_env.training.lagrangian import check_cost_limit
 from uasep_env.training.ppo_residual_apf import RESIDUAL_DEFAULTS
 
 __all__ = ["COST_FILES", "Args", "Constraint", "cost_limit", "main", "parse_args", "run",
@@ -88,7 +89,7 @@ class Constraint:
 
     def start(self, out: Path, config: Any, resumed: dict) -> list:
         """The multiplier's callback, its state restored from ``resumed`` if any."""
-        from uasep_env.training.rundir import rewind_csv
+        from uasep_env.training.rundir import restore_json, rewind_csv
         from uasep_env.training.sb3_lagrangian import COST_FIELDS, LagrangianCallback
 
         task = config.reward == config.reward.task()
@@ -98,15 +99,18 @@ class Constraint:
             for name in COST_FILES:  # --overwrite: ppo_shared's files are gone, ours too
                 (out / name).unlink(missing_ok=True)
         kept = resumed.get("lagrangian", {})
+        folder = Path(self.args.resume) if resumed else out
         if resumed and kept.get("cost_limit_option") == self.args.cost_limit:
-            limit = float(kept["cost_limit"])  # the run's own, not measured again
+            limit = kept.get("cost_limit")  # the run's own, not measured again
+            restore_json(folder, "lagrangian.cost_limit", check_cost_limit, limit)
         else:
             limit = measure_budget(self.args, config, out)
-        lagrangian = make_lagrangian(self.args, limit)
+        lagrangian = make_lagrangian(self.args, float(limit))
         path = out / "cost_progress.csv"
         self.callback = LagrangianCallback(lagrangian, self.args.cost, path)
         if resumed:
-            self.callback.load_state_dict(resumed["lagrangian"]["state"])
+            state = kept.get("state")
+            restore_json(folder, "lagrangian.state", self.callback.load_state_dict, state)
             # Rows of the abandoned continuation go, as progress.csv's.
             rewind_csv(path, COST_FIELDS, int(resumed["agent_steps"]))
         return [self.callback]

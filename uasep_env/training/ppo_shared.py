@@ -209,14 +209,24 @@ def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
     """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling)."""
     import torch
 
-    from uasep_env.training.rundir import check_checkpoint, read_state, read_tensors
+    from uasep_env.training.rundir import (
+        check_checkpoint,
+        read_state,
+        read_tensors,
+        restore_module,
+        restore_optimizer,
+        restore_rng,
+        tensor_part,
+    )
 
     directory = check_checkpoint(directory)
-    state = read_tensors(directory)
-    model.policy.load_state_dict(state["policy"])
-    model.policy.optimizer.load_state_dict(state["optimizer"])
+    state = read_tensors(directory)  # every tensor checked as it is restored
+    restore_module(directory, "policy", model.policy, tensor_part(directory, state, "policy"))
+    restore_optimizer(
+        directory, "optimizer", model.policy.optimizer, tensor_part(directory, state, "optimizer")
+    )
     if "torch_rng" in state:
-        torch.set_rng_state(state["torch_rng"])
+        restore_rng(directory, "torch_rng", state["torch_rng"])
     if "cuda_rng" in state and model.device.type == "cuda":
         torch.cuda.set_rng_state(state["cuda_rng"], model.device)
     load_normalization(venv, directory / "normalization.npz")

@@ -31,8 +31,6 @@ This module imports stable-baselines3; the rest of the package does not.
 from __future__ import annotations
 
 import collections
-import csv
-import os
 from pathlib import Path
 from typing import Any
 
@@ -152,13 +150,11 @@ class LagrangianCallback(BaseCallback):
                 )
             env = getattr(env, "venv", None)
         self.tracker.start(self.training_env.num_envs)
-        if self.csv_path is not None:
-            new = not self.csv_path.exists() or self.csv_path.stat().st_size == 0
+        if self.csv_path is not None:  # appended durably; a link there is replaced
+            from uasep_env.training.curves import ProgressLog
+
             self.csv_path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = self.csv_path.open("a", newline="", encoding="utf-8")
-            self._csv = csv.DictWriter(self._fh, fieldnames=COST_FIELDS, lineterminator="\n")
-            if new:
-                self._csv.writeheader()
+            self._fh = ProgressLog(self.csv_path, COST_FIELDS)
 
     def _costs(self, infos: list[dict]) -> np.ndarray:
         try:
@@ -185,9 +181,7 @@ class LagrangianCallback(BaseCallback):
         for key in ("episode_cost_mean", "episode_cost_window", "multiplier"):
             self.logger.record(f"lagrangian/{key}", row[key])
         if self._fh is not None:
-            self._csv.writerow(row)
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
+            self._fh.write(row)
 
     def _on_training_end(self) -> None:
         if self._fh is not None:
@@ -221,7 +215,7 @@ def plot_cost_curves(csv_path: Path, png_path: Path, title: str = "") -> Path:
         ax.grid(alpha=0.3)
     fig.suptitle(title or Path(csv_path).parent.name)
     fig.tight_layout()
-    with atomic_output(Path(png_path)) as fh:
+    with atomic_output(Path(png_path), replace_links=True) as fh:
         fig.savefig(fh, format="png", dpi=90)
     plt.close(fig)
     return Path(png_path)
