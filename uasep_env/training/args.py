@@ -17,6 +17,7 @@ import argparse
 import dataclasses
 import math
 import re
+import textwrap
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -86,6 +87,41 @@ def plain_text(text: str) -> str:
     return text
 
 
+def _refill(text: str, width: int) -> str:
+    """``text``'s paragraphs and bullets re-wrapped to ``width``; examples as they are.
+
+    The markup :func:`plain_text` drops leaves the docstring's lines ragged.
+    """
+    blocks = []
+    for block in text.split("\n\n"):
+        lines = block.splitlines()
+        indented = any(line[:1].isspace() for line in lines)
+        if not lines or (indented and not lines[0].startswith("* ")):  # an example: as written
+            blocks.append(block)
+            continue
+        items: list[list[str]] = []  # a paragraph, or one list item each
+        for line in lines:
+            if line.startswith("* ") or not items:
+                items.append([line])
+            elif line[:1].isspace() or not items[-1][0].startswith("* "):
+                items[-1].append(line.strip())
+            else:
+                items.append([line])
+        blocks.append(
+            "\n".join(
+                textwrap.fill(
+                    " ".join(item),
+                    width,
+                    subsequent_indent="  " if item[0][:2] == "* " else "",
+                    break_long_words=False,
+                    break_on_hyphens=False,  # a flag stays whole
+                )
+                for item in items
+            )
+        )
+    return "\n\n".join(blocks)
+
+
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     """``--help`` with every flag's default, the description's lines as written, in plain text.
 
@@ -94,7 +130,7 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescript
     """
 
     def _fill_text(self, text: str, width: int, indent: str) -> str:
-        return super()._fill_text(plain_text(text), width, indent)
+        return super()._fill_text(_refill(plain_text(text), width), width, indent)
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = super()._get_help_string(action)
