@@ -250,12 +250,23 @@ def _cost_rows(out):
         return list(csv.DictReader(f))
 
 
-def test_recipe_resumes_the_multiplier_and_its_cost_log(recipe, tmp_path):
+def test_recipe_resumes_the_multiplier_and_its_cost_log(recipe, tmp_path, capsys):
     """A resumed run continues the multiplier of its checkpoint, not --multiplier-init."""
     out = tmp_path / "run"
-    recipe.main([*TINY, "--total-timesteps", "768", "--out-dir", str(out)])
+    recipe.main([*TINY, "--total-timesteps", "700", "--out-dir", str(out)])
     rows = _cost_rows(out)
     assert [int(r["agent_steps"]) for r in rows] == [128 * k for k in range(1, 7)]
+    assert int(rows[-1]["agent_episodes"]) > 0  # each UAV's episodes, named so
+    # The log: the rounding of the budget said once, then one line a checkpoint with the
+    # summary figures (never the 200-episode windows), one for the validation.
+    log = capsys.readouterr().out.splitlines()
+    notice = "--total-timesteps 700 rounded up to 768: whole rollouts of 128 agent-steps"
+    assert sum(notice in line for line in log) == 1
+    ticks = [line for line in log if line.startswith("step_")]
+    assert [t.split(":")[0] for t in ticks] == ["step_256", "step_512", "step_768"]
+    assert all("episode cost" in t and "(limit 0.5), λ " in t for t in ticks), ticks
+    assert sum(line.startswith("validation on 1 encounters") for line in log) == 1
+    assert all(len(line) < 300 and "[" not in line for line in log), log
     # On a collision course the cost exceeds the limit: the multiplier moved off its start.
     assert any(float(r["multiplier"]) != 0.25 for r in rows)
     ckpt = out / "checkpoints" / "step_256"
@@ -285,3 +296,39 @@ def test_recipe_resumes_the_multiplier_and_its_cost_log(recipe, tmp_path):
     lag = summary["training"]["lagrangian"]
     assert lag["cost_limit"] == 0.5 and lag["multiplier"] == float(rows[-1]["multiplier"])
     assert (out / "budget.json").exists() and (out / "cost_curves.png").exists()
+
+
+def test_a_checkpoint_is_one_line_of_figures_not_its_windows():
+    from uasep_env.training.curves import checkpoint_line
+
+    window = [(1.0, 0.0, 1.0, 20.0, 1000.0)] * 200
+    info = {"agent_steps": 2_000_000, "wall_s": 600.0, "episodes": 321, "return_mean": 812.25,
+            "collision_rate": 0.01, "loss_of_separation_rate": 0.25, "max_deviation_mean": 20.0}
+    ppo = {"lagrangian": {"cost_limit": 0.5, "multiplier": 1.843,
+                          "state": {"episode_cost_window": 0.857, "window": [1.0] * 200}}}
+    mappo = {"lagrangian": {"cost_limit": 0.5, "multiplier": 1.843,
+                            "episode_cost_window": 0.857, "window": [1.0] * 200}}  # fmt: skip
+    for lag in (ppo, mappo):
+        line = checkpoint_line("step_2000000", {**info, **lag}, window)
+        assert line == (
+            "step_2000000: 2,000,000 agent-steps, 10.0 min, 321 episodes; the last 200: "
+            "return 812.2, collisions 1.0%, loss of separation 25.0%, deviation 20.0 m; "
+            "episode cost 0.857 (limit 0.5), λ 1.84"
+        )
+
+
+def test_rewinding_an_older_cost_log_names_its_agent_episodes(tmp_path):
+    """``cost_progress.csv`` once called its agent-episodes ``episodes``: resume renames it."""
+    pytest.importorskip("stable_baselines3")
+    from uasep_env.training.rundir import read_progress, rewind_csv
+    from uasep_env.training.sb3_lagrangian import COST_FIELDS
+
+    path = tmp_path / "cost_progress.csv"
+    path.write_text(
+        "agent_steps,episodes,episode_cost_mean,episode_cost_window,cost_limit,multiplier\n"
+        "128,4,1.0,1.0,0.5,1.2\n256,8,0.5,0.75,0.5,1.3\n384,12,0.0,0.5,0.5,1.1\n"
+    )
+    rewind_csv(path, COST_FIELDS, 256)
+    rows = read_progress(path)
+    assert tuple(rows[0]) == COST_FIELDS and "agent_episodes" in COST_FIELDS
+    assert [r["agent_episodes"] for r in rows] == ["4", "8"]

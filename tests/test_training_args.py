@@ -3,7 +3,9 @@
 No torch needed: the parsers run before anything is imported from the train extra.
 """
 
+import importlib
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -11,6 +13,7 @@ from pathlib import Path
 import pytest
 from conftest import HANG_GUARD_S
 
+from uasep_env.training import RECIPES as COMMANDS
 from uasep_env.training import mappo, ppo_shared
 from uasep_env.training.ppo_residual_apf import RESIDUAL_DEFAULTS
 
@@ -291,3 +294,62 @@ def test_uasep_eval_refuses_a_bad_thread_variable_in_one_line_status_2(variable,
     assert res.returncode == 2, res.stderr
     assert res.stderr.count("\n") == 1, res.stderr
     assert f"uasep-eval: error: {variable}={value!r}" in res.stderr, res.stderr
+
+
+#: What reStructuredText or the issue tracker leave in a text for people: roles, literals,
+#: strong emphasis, issue numbers.
+MARKUP = re.compile(r":[a-z]+:`|``|\*\*|\bissue \d+", re.IGNORECASE)
+
+
+@pytest.mark.parametrize("recipe", list(COMMANDS))
+def test_recipe_help_is_plain_text_of_its_own(recipe, capsys):
+    """``uasep-train RECIPE --help``: no markup, no issue numbers, its own description."""
+    from uasep_env.training.args import plain_text
+    from uasep_env.training.cli import main
+
+    assert main([recipe, "--help"]) == 0
+    text = capsys.readouterr().out
+    assert not MARKUP.findall(text), MARKUP.findall(text)
+    description = text.split("\n\n")[1]  # after the usage
+    first = importlib.import_module(COMMANDS[recipe][0]).__doc__.splitlines()[0]
+    assert " ".join(description.split()).startswith(plain_text(first))
+    # The short trial run is named, and the rounding of the step budget said.
+    assert f"\n  uasep-train {recipe} --total-timesteps 20000" in text
+    assert f"\n    uasep-train {recipe}" in text  # the examples keep their lines
+    assert "rounded up to whole rollouts" in " ".join(text.split())
+
+
+def test_eval_and_report_help_are_plain_text():
+    from uasep_env.evaluation.cli import build_parser as eval_parser
+    from uasep_env.reporting.scaling import build_parser as report_parser
+
+    for parser in (eval_parser(), report_parser("uasep-report")):
+        text = parser.format_help()
+        assert not MARKUP.findall(text), MARKUP.findall(text)
+
+
+def test_plain_text_renders_the_markup_as_sphinx_shows_it():
+    from uasep_env.training.args import plain_text
+
+    doc = (
+        "by :class:`~a.b.Callback` (:mod:`uasep_env.costs`; :func:`title <a.f>`), "
+        "``--x 1``, a **cost\ncritic**; an example::\n\n    code"
+    )
+    assert plain_text(doc) == (
+        "by Callback (uasep_env.costs; title), --x 1, a cost\ncritic; an example:\n\n    code"
+    )
+
+
+def test_the_step_budget_is_rounded_up_to_whole_rollouts_and_said_once():
+    from uasep_env.training.args import Args, budget_notice, rounded_budget
+
+    args = Args(total_timesteps=150_000)  # 32 environments x 3 UAVs x 256 steps: 24,576
+    assert rounded_budget(args, 3) == 172_032
+    assert budget_notice(args, 3) == (
+        "--total-timesteps 150000 rounded up to 172032: whole rollouts of 24576 agent-steps "
+        "(--n-envs 32 x 3 UAVs x --n-steps 256)"
+    )
+    assert budget_notice(Args(total_timesteps=7 * 24_576), 3) is None  # nothing to say
+    # A resumed run counts its rollouts from its checkpoint's agent-steps.
+    assert rounded_budget(args, 3, start=150) == 150 + 7 * 24_576
+    assert budget_notice(args, 3, start=200_000) is None  # past the budget: nothing to train

@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import re
+import textwrap
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +29,7 @@ __all__ = [
     "Args",
     "HelpFormatter",
     "OneLineParser",
+    "budget_notice",
     "build_parser",
     "choice",
     "device_problem",
@@ -37,11 +40,15 @@ __all__ = [
     "non_negative_int",
     "out_path",
     "parse_args",
+    "plain_text",
     "positive_float",
     "positive_int",
+    "rollout_steps",
+    "rounded_budget",
     "threads_problem",
     "to_argv",
     "torch_device",
+    "trial_run",
     "unit_interval",
 ]
 
@@ -55,8 +62,79 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+#: A Sphinx cross-reference: ``:role:`target```, ``:role:`~a.b.name``` or ``:role:`text <target>```.
+_ROLE = re.compile(r":(?:py:)?[a-z]+:`(~?)([^`<]*?)\s*(?:<([^`>]+)>)?`")
+
+
+def _role_text(match: re.Match) -> str:
+    short, text, target = match.groups()
+    if target is not None:  # :role:`text <target>`: the text
+        return text
+    return text.rsplit(".", 1)[-1] if short else text  # ~: the last name, as Sphinx shows it
+
+
+def plain_text(text: str) -> str:
+    """``text`` (a docstring in reStructuredText) as a person reads it on a terminal.
+
+    Cross-references become their target as Sphinx shows it (``:class:`~a.B``` -> ``B``,
+    ``:mod:`a.b``` -> ``a.b``), inline literals and strong emphasis lose their markup, and a
+    paragraph's literal-block marker ``::`` becomes ``:``. Indentation and line breaks stay.
+    """
+    text = _ROLE.sub(_role_text, text)
+    text = re.sub(r"``(.+?)``", r"\1", text, flags=re.S)
+    text = re.sub(r"\*\*(.+?)\*\*", r"\1", text, flags=re.S)
+    text = re.sub(r"\s*::$", ":", text, flags=re.M)
+    return text
+
+
+def _refill(text: str, width: int) -> str:
+    """``text``'s paragraphs and bullets re-wrapped to ``width``; examples as they are.
+
+    The markup :func:`plain_text` drops leaves the docstring's lines ragged.
+    """
+    blocks = []
+    for block in text.split("\n\n"):
+        lines = block.splitlines()
+        indented = any(line[:1].isspace() for line in lines)
+        if not lines or (indented and not lines[0].startswith("* ")):  # an example: as written
+            blocks.append(block)
+            continue
+        items: list[list[str]] = []  # a paragraph, or one list item each
+        for line in lines:
+            if line.startswith("* ") or not items:
+                items.append([line])
+            elif line[:1].isspace() or not items[-1][0].startswith("* "):
+                items[-1].append(line.strip())
+            else:
+                items.append([line])
+        blocks.append(
+            "\n".join(
+                textwrap.fill(
+                    " ".join(item),
+                    width,
+                    subsequent_indent="  " if item[0][:2] == "* " else "",
+                    break_long_words=False,
+                    break_on_hyphens=False,  # a flag stays whole
+                )
+                for item in items
+            )
+        )
+    return "\n\n".join(blocks)
+
+
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-    """``--help`` with every flag's default and the description as written."""
+    """``--help`` with every flag's default, the description's lines as written, in plain text.
+
+    The recipes' descriptions are their module docstrings (reStructuredText): the markup is
+    for the API pages, so the terminal gets :func:`plain_text`.
+    """
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return super()._fill_text(_refill(plain_text(text), width), width, indent)
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = super()._get_help_string(action)
+        return None if text is None else plain_text(text)
 
 
 def _number(kind: type, text: str) -> Any:
@@ -237,7 +315,11 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "k_obstacles": (positive_int, "nearest obstacles observed (observation.k_obstacles)"),
     "episode_duration": (positive_float, "seconds per episode"),
     "config": (config_overrides, "more env overrides, space-separated KEY=VALUE"),
-    "total_timesteps": (positive_int, "agent-steps (the wall budget usually ends a run first)"),
+    "total_timesteps": (
+        positive_int,
+        "agent-steps to train, rounded up to whole rollouts of --n-envs x UAVs x --n-steps "
+        "(the wall budget usually ends a run first)",
+    ),
     "max_minutes": (positive_float, "wall-clock budget in minutes"),
     "n_envs": (positive_int, "batched environments"),
     "n_steps": (positive_int, "rollout length per sub-environment"),
@@ -277,6 +359,44 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "value_norm": (None, "the critic learns returns normalised by their running statistics"),
 }
 
+
+def trial_run(prog: str, more: str = "") -> str:
+    """``--help``'s last words: the command of a short trial run of ``prog`` (``more`` flags)."""
+    return (
+        "A short trial run (a minute or two: checks the install and the flags, learns little):\n"
+        f"  {prog} --total-timesteps 20000 --max-minutes 2 --eval-episodes 5{more} \\\n"
+        "      --out-dir runs/trial --overwrite"
+    )
+
+
+def rollout_steps(args: Args, n_uavs: int) -> int:
+    """Agent-steps of one rollout: every UAV of ``--n-envs`` environments, ``--n-steps`` each."""
+    return args.n_envs * n_uavs * args.n_steps
+
+
+def rounded_budget(args: Args, n_uavs: int, start: int = 0) -> int:
+    """The agent-steps a run trains to: from ``start``, whole rollouts past ``--total-timesteps``.
+
+    Every trainer (SB3's, skrl's, the lean loop) checks the budget between rollouts only;
+    ``--max-minutes`` may end the run before.
+    """
+    per = rollout_steps(args, n_uavs)
+    left = args.total_timesteps - start
+    return start + -(-left // per) * per if left > 0 else start
+
+
+def budget_notice(args: Args, n_uavs: int, start: int = 0) -> str | None:
+    """The line a run prints at its start when its step budget is rounded up, or None."""
+    end = rounded_budget(args, n_uavs, start)
+    if start >= args.total_timesteps or end == args.total_timesteps:
+        return None  # nothing left to train, or nothing rounded
+    return (
+        f"--total-timesteps {args.total_timesteps} rounded up to {end}: whole rollouts of "
+        f"{rollout_steps(args, n_uavs)} agent-steps (--n-envs {args.n_envs} x {n_uavs} UAVs "
+        f"x --n-steps {args.n_steps})"
+    )
+
+
 #: Fields of the env config: an invalid environment is reported against these flags.
 _ENV_FLAGS = ("n_uavs", "n_obstacles", "k_uavs", "k_obstacles", "episode_duration",
               "residual_scale", "scenario")  # fmt: skip
@@ -301,7 +421,16 @@ def build_parser(
         The parser (its ``parse_args`` gives a namespace of the fields).
     """
     base = defaults or Args()
-    parser = OneLineParser(prog=prog, description=description, formatter_class=HelpFormatter)
+    parser = OneLineParser(
+        prog=prog,
+        description=description,
+        # A Lagrangian recipe measures the APF's budget on 1,000 encounters first.
+        epilog=trial_run(
+            prog or "uasep-train RECIPE",
+            " --budget-episodes 5" if hasattr(base, "budget_episodes") else "",
+        ),
+        formatter_class=HelpFormatter,
+    )
     for f in dataclasses.fields(base):
         flag = "--" + f.name.replace("_", "-")
         default = getattr(base, f.name)

@@ -239,7 +239,7 @@ class CostTracker:
         self._batch = []
         return {
             "agent_steps": int(agent_steps),
-            "episodes": self.episodes,
+            "agent_episodes": self.episodes,
             "episode_cost_mean": batch,
             "episode_cost_window": self.window_mean(),
             "cost_limit": self.lagrangian.cost_limit,

@@ -5,6 +5,11 @@ flushed and ``fsync``-ed, so a kill tears at most the last line, which :func:`re
 drops), the figures of the last finished episodes (:func:`window_summary`,
 :func:`bar_postfix`) and the figure drawn at the end (:func:`plot_curves`). A run's folder
 (:class:`~uasep_env.training.rundir.RunFolder`) opens and rewinds these files.
+
+The training log on stdout is for people: one line a checkpoint (:func:`checkpoint_line`)
+and one for the validation at the end (:func:`validation_line`), the summary figures only;
+the episode windows a checkpoint keeps stay in its ``state.json`` and the whole summary in
+``validation.json``.
 """
 
 from __future__ import annotations
@@ -22,12 +27,16 @@ from uasep_env.runtime.atomic import atomic_output, atomic_write
 
 __all__ = [
     "CSV_FIELDS",
+    "FORMER_NAMES",
     "MIN_PLOTTED_EPISODES",
     "WINDOW_EPISODES",
     "ProgressLog",
     "bar_postfix",
+    "checkpoint_line",
+    "log_line",
     "plot_curves",
     "read_progress",
+    "validation_line",
     "window_summary",
     "write_rows",
 ]
@@ -79,13 +88,23 @@ def read_progress(path: Path, root: Path | None = None) -> list[dict[str, str]]:
     return rows
 
 
+#: Columns renamed since a run's CSVs were first written: new name -> former name.
+#: ``cost_progress.csv``'s ``episodes`` counted agent-episodes, ``progress.csv``'s count
+#: environment episodes; one word, one meaning.
+FORMER_NAMES = {"agent_episodes": "episodes"}
+
+
 def write_rows(path: Path, fields: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
-    """Write ``rows`` as a whole CSV file, atomically."""
+    """Write ``rows`` as a whole CSV file, atomically.
+
+    A row read from an older file gives a renamed column its value under the former name
+    (:data:`FORMER_NAMES`), so rewinding an older run's CSV renames the column.
+    """
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: r.get(k, "") for k in fields})
+        w.writerow({k: r.get(k, r.get(FORMER_NAMES.get(k, k), "")) for k in fields})
     atomic_write(path, buf.getvalue(), replace_links=True)  # a run folder's own file
 
 
@@ -222,3 +241,61 @@ def bar_postfix(summary: dict) -> dict:
         "los": f"{summary['loss_of_separation_rate']:.1%}",
         "dev": f"{summary['max_deviation_mean']:.1f}m",
     }
+
+
+def log_line(text: str) -> None:
+    """Print one line of the training log on stdout (above a progress bar, if one is drawn)."""
+    tqdm = sys.modules.get("tqdm")
+    if tqdm is not None and getattr(tqdm, "tqdm", None) is not None:
+        tqdm.tqdm.write(text, file=sys.stdout)  # clears and redraws the bar around the line
+    else:
+        print(text, flush=True)
+
+
+def _lagrangian_part(lag: dict) -> str:
+    """``cost C (limit L), lambda M`` of a checkpoint's ``lagrangian`` facts."""
+    # PPO-Lagrangian keeps the tracker's figures under "state", MAPPO-Lagrangian at the top.
+    cost = lag.get("episode_cost_window", lag.get("state", {}).get("episode_cost_window"))
+    parts = []
+    if cost is not None:
+        parts.append(f"episode cost {float(cost):.3g} (limit {float(lag['cost_limit']):.3g})")
+    parts.append(f"λ {float(lag['multiplier']):.3g}")
+    return ", ".join(parts)
+
+
+def checkpoint_line(name: str, info: dict, window: Any = ()) -> str:
+    """The log's line for the checkpoint ``name``: its counters and summary figures.
+
+    ``info`` is what the checkpoint's ``state.json`` holds (agent-steps, wall time,
+    episodes, :func:`window_summary`'s figures, a Lagrangian recipe's ``lagrangian``);
+    ``window`` the finished episodes the figures are taken over (only its length is said).
+    """
+    text = (
+        f"{name}: {int(info['agent_steps']):,} agent-steps, "
+        f"{float(info.get('wall_s', 0.0)) / 60:.1f} min, {int(info.get('episodes', 0)):,} episodes"
+    )
+    if info.get("return_mean") is not None:
+        text += (
+            f"; the last {len(window)}: return {info['return_mean']:.1f}, "
+            f"collisions {info['collision_rate']:.1%}, "
+            f"loss of separation {info['loss_of_separation_rate']:.1%}, "
+            f"deviation {info['max_deviation_mean']:.1f} m"
+        )
+    if isinstance(info.get("lagrangian"), dict):
+        text += "; " + _lagrangian_part(info["lagrangian"])
+    return text
+
+
+def validation_line(summary: dict, path: Path, episodes: int) -> str:
+    """The log's line for the validation at a run's end (``summary``: ``validation.json``'s)."""
+    results = summary.get("validation", {})
+    if not results:
+        return f"no validation (--eval-episodes 0); the run's summary: {path}"
+    figures = []
+    for label, res in results.items():
+        figures.append(
+            f"{label}: collisions {res.get('collision', float('nan')):.1%}, "
+            f"loss of separation {res.get('loss_of_separation', float('nan')):.1%}, "
+            f"deviation {res.get('max_deviation', float('nan')):.1f} m"
+        )
+    return f"validation on {episodes} encounters ({path}): " + "; ".join(figures)

@@ -246,7 +246,7 @@ def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
     import torch
 
     from uasep_env.training import ppo_lean
-    from uasep_env.training.args import make_env_config
+    from uasep_env.training.args import budget_notice, make_env_config
     from uasep_env.training.rundir import RunFolder
 
     torch.set_num_threads(args.torch_threads)
@@ -259,6 +259,9 @@ def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
         if run.resume is not None:
             restore(state, run.resume, run.resumed)
             run.rewind(state.agent_steps)
+        notice = budget_notice(args, config.n_uavs, state.agent_steps)
+        if notice:
+            print(notice)
 
     nets, norm, facts = ppo_lean.train(args, config, hooks, prepare, central=central)
     if run.resume is None or facts["updates"] > int(run.resumed.get("updates", 0)):

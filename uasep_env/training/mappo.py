@@ -56,6 +56,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from uasep_env.training import ppo_shared
+from uasep_env.training.args import budget_notice
 from uasep_env.training.args import parse_args as _parse_args
 
 if TYPE_CHECKING:
@@ -439,6 +440,9 @@ def train(
         load_checkpoint(agent, venv, run.resume)
         run.rewind(int(run.resumed["agent_steps"]))
     resumed = run.resumed
+    notice = budget_notice(args, config.n_uavs, int(resumed.get("agent_steps", 0)))
+    if notice:
+        print(notice)
     hooks.start(agent, env, run.out, resumed)
     steps, wall_offset = int(resumed.get("agent_steps", 0)), float(resumed.get("wall_s", 0.0))
     per_step = args.n_envs * env.n

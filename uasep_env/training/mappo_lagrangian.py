@@ -1,4 +1,4 @@
-"""Train MAPPO under a safety constraint: a cost critic and a PID Lagrange multiplier (issue 29).
+"""Train MAPPO under a safety constraint: a cost critic and a PID Lagrange multiplier.
 
 The recipe of ``uasep-train mappo`` (:mod:`uasep_env.training.mappo`: every flag applies)
 with the task reward (``--config reward=task``: deviation, control, smoothness and the

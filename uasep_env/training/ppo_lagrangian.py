@@ -1,4 +1,4 @@
-"""Train the shared PPO policy under a safety constraint (PID Lagrangian, issue 29).
+"""Train the shared PPO policy under a safety constraint (PID Lagrangian).
 
 The recipe of :mod:`~uasep_env.training.ppo_shared` (every flag applies), with the task
 reward (``--config reward=task``: deviation, control, smoothness and the alive bonus, no
@@ -26,10 +26,11 @@ at the start with the project's evaluation code and written to ``budget.json`` (
 run keeps its checkpoint's limit).
 
 Beside ``ppo_shared``'s outputs a run writes ``cost_progress.csv`` (one row per PPO
-iteration: the mean episode cost of the rollout and of the last 200 episodes, the limit
-and the multiplier), ``cost_curves.png`` drawn from it, and the multiplier's state in every
-checkpoint's ``state.json`` and in ``validation.json`` (``training.lagrangian``), so that
-``--resume`` continues the multiplier, its cost window and ``cost_progress.csv``.
+iteration: the agent-episodes ended so far, the mean episode cost of the rollout and of the
+last 200 agent-episodes, the limit and the multiplier), ``cost_curves.png`` drawn from it,
+and the multiplier's state in every checkpoint's ``state.json`` and in ``validation.json``
+(``training.lagrangian``), so that ``--resume`` continues the multiplier, its cost window
+and ``cost_progress.csv``.
 """
 
 from __future__ import annotations
@@ -74,7 +75,12 @@ RESIDUAL_LAGRANGIAN_DEFAULTS = Args(
 def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:
     """:class:`Args` from the command line, or exit (status 2) with one line naming the value."""
     return _parse_args(
-        argv, defaults or Args(), prog=ppo_shared._prog(), description=__doc__, check=check
+        argv,
+        defaults or Args(),
+        prog=ppo_shared._prog(),
+        # The residual recipe's own text under ``uasep-train ppo_lagrangian_residual``.
+        description=ppo_shared._PROG.get("doc") or __doc__,
+        check=check,
     )
 
 

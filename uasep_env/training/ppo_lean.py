@@ -1,6 +1,6 @@
 """PPO in one loop on the batched core: the SB3 recipes' algorithm without SB3's per-step layers.
 
-Issue 30's lever "a leaner PPO loop on the native vector env": CleanRL's layout (the whole
+A leaner PPO loop on the native vector env: CleanRL's layout (the whole
 loop in plain sight, arrays batch-first) over :class:`~uasep_env.envs.core.EnvCore`, with
 the settings of :mod:`~uasep_env.training.ppo_shared` (its :class:`~.args.Args`, so the
 residual recipe's defaults apply as they are). What SB3 pays for every step and this loop

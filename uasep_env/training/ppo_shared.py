@@ -58,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.training.args import Args, hidden, make_env_config
+from uasep_env.training.args import Args, budget_notice, hidden, make_env_config
 from uasep_env.training.args import parse_args as _parse_args
 
 # What every trainer writes the same way (rundir); mappo and the scripts read it from here too.
@@ -114,6 +114,12 @@ def _prog() -> str | None:
 
 #: Set by :mod:`uasep_env.training.cli` to name the program in messages.
 _PROG: dict[str, str] = {}
+
+
+def _say(line: str | None) -> None:
+    """Print ``line``, if any (a notice at a run's start)."""
+    if line:
+        print(line)
 
 
 def _hidden(args: Args) -> list[int]:
@@ -377,6 +383,7 @@ def train(args: Args, plugin: Any = None) -> dict:
     if run.resume is not None:
         load_checkpoint(model, venv, run.resume)
         run.rewind(model.num_timesteps)
+    _say(budget_notice(args, config.n_uavs, model.num_timesteps))
     before = plugin.start(run.out, config, run.resumed) if plugin is not None else []
     remaining = max(0, args.total_timesteps - model.num_timesteps)
     if remaining or run.resume is None:

@@ -57,8 +57,11 @@ from uasep_env.training.curves import (  # noqa: F401
     WINDOW_EPISODES,
     ProgressLog,
     bar_postfix,
+    checkpoint_line,
+    log_line,
     plot_curves,
     read_progress,
+    validation_line,
     window_summary,
     write_rows,
 )
@@ -249,6 +252,7 @@ class RunFolder:
         save(folder, {**info, "window": [[float(x) for x in e] for e in window]})
         self.saved_at = agent_steps
         atomic_symlink(folder.name, self.out / "checkpoints" / "latest")  # once it is complete
+        log_line(checkpoint_line(folder.name, info, window))
         return folder
 
     def resumed_info(self) -> dict:
@@ -845,5 +849,5 @@ def write_validation(out: Path, config: Any, policy_path: Path, info: dict, epis
             }
     text = dumps(summary, indent=2, default=str)
     atomic_write(out / "validation.json", text + "\n", replace_links=True)
-    print(text)
+    log_line(validation_line(summary, out / "validation.json", len(seeds)))
     return summary

@@ -45,12 +45,12 @@ from uasep_env.training.lagrangian import PIDLagrangian
 __all__ = ["COST_FIELDS", "LagrangianCallback", "cost_reader", "plot_cost_curves"]
 
 #: Columns of the callback's CSV, one row per rollout: agent-steps, agent-episodes ended so
-#: far (one per UAV), the mean episode cost per agent of the rollout's episodes (what the
-#: multiplier was updated with; empty: none ended) and of the last 200, the limit, and the
-#: multiplier after the update.
+#: far (one per UAV; ``progress.csv``'s ``episodes`` count environment episodes), the mean
+#: episode cost per agent of the rollout's episodes (what the multiplier was updated with;
+#: empty: none ended) and of the last 200, the limit, and the multiplier after the update.
 COST_FIELDS = (
     "agent_steps",
-    "episodes",
+    "agent_episodes",
     "episode_cost_mean",
     "episode_cost_window",
     "cost_limit",
