@@ -128,6 +128,83 @@ def test_a_malformed_cell_is_named(tmp_path: Path) -> None:
         load_table(path)
 
 
+def _table_with(tmp_path: Path, edit: str) -> Path:
+    """The shipped table with one value replaced by ``edit`` (raw JSON text, e.g. 1e308)."""
+    data = json.loads(DEFAULT_TABLE.read_text())
+    data["cells"]["swept"]["glider"]["10"]["lateral"] = ["@EDIT@", 3.0]
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps(data).replace('"@EDIT@"', edit))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        ("1e308", r"lateral is 1e\+308, expected a number in \[0, 100000\]"),
+        (str(calibrated.MAX_COEFFICIENT * 1.5), r"expected a number in \[0, 100000\]"),
+        ("1" + "0" * 399, r"lateral is an integer of 400 digits, too large for a float"),
+        ("-1" + "0" * 399, r"lateral is an integer of 400 digits, too large for a float"),
+    ],
+)
+def test_coefficients_are_bounded_and_huge_integers_named(
+    tmp_path: Path, edit: str, match: str
+) -> None:
+    """A coefficient over the bound (1e308 gave infinite semi-axes) or an integer too large
+    for a float (OverflowError) is a one-line CalibrationTableError (a ValueError)."""
+    path = _table_with(tmp_path, edit)
+    with pytest.raises(CalibrationTableError, match=match) as info:
+        load_table(path)
+    assert isinstance(info.value, ValueError)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_coefficient_bound_admits_the_shipped_table(tmp_path: Path) -> None:
+    bound = calibrated.MAX_COEFFICIENT
+    assert load_table(_table_with(tmp_path, repr(bound))).meta["version"] == 1
+    for coef in load_table(DEFAULT_TABLE).coef.values():
+        assert np.isfinite(coef).all() and coef.max() <= bound
+
+
+def test_a_huge_integer_horizon_is_one_line(tmp_path: Path) -> None:
+    text = DEFAULT_TABLE.read_text()
+    data = json.loads(text)
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps({**data, "horizons": ["@H@"]}).replace('"@H@"', "9" * 400))
+    with pytest.raises(CalibrationTableError, match="OverflowError") as info:
+        load_table(path)
+    assert "\n" not in str(info.value) and len(str(info.value)) < 400
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="no FIFOs here")
+def test_special_files_are_refused_before_opening(tmp_path: Path) -> None:
+    """A FIFO is refused, not opened (opening one for read blocks until a writer comes)."""
+    import os
+    import threading
+
+    fifo = tmp_path / "table.json"
+    os.mkfifo(fifo)
+    caught: list[BaseException] = []
+
+    def read() -> None:
+        try:
+            load_table(fifo)
+        except BaseException as exc:
+            caught.append(exc)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    reader.join(10.0)
+    if reader.is_alive():  # blocked in open(): a writer's open releases it, then fail
+        with open(fifo, "wb"):
+            pass
+        reader.join(10.0)
+        pytest.fail(f"load_table opened the FIFO {fifo} for read and blocked")
+    assert len(caught) == 1 and isinstance(caught[0], CalibrationTableError)
+    assert "is not a regular file" in str(caught[0]) and str(fifo) in str(caught[0])
+    with pytest.raises(CalibrationTableError, match="is not a regular file"):
+        load_table(tmp_path)  # a folder
+
+
 def test_obstacles_carry_their_aircraft_class() -> None:
     world = World(make_config(_calibrated_bank(), episode_duration=1.0), n_envs=3)
     world.reset(seed=6_000_000)
@@ -189,10 +266,6 @@ def test_the_class_feature_is_optional_and_one_hot() -> None:
 
     size = next(f.size for f in FEATURES if f.key == "obstacle_class")
     assert size == len(AIRCRAFT_CLASSES)
-    if importlib.util.find_spec("numba") is not None:  # the compiled twin's own count
-        from uasep_env._kernels.observations import _N_CLASSES
-
-        assert size == _N_CLASSES
 
     conf = make_config(_calibrated_bank(), episode_duration=1.0)
     default = ObservationLayout.from_config(conf)
@@ -253,3 +326,73 @@ def test_real_traffic_eval_plays_every_registered_controller(monkeypatch) -> Non
     with pytest.raises(SystemExit):
         rte.main(["--prediction", "conformal"])
     sys.modules.pop("real_traffic_eval", None)
+
+
+def test_every_class_list_derives_from_the_aircraft_class_table() -> None:
+    """One table: the codes, the one-hot's width (numpy and the kernel's count), the
+    coefficient rows, the builder's classes and the dataset's classes."""
+    from uasep_env.interface.observation_layout import FEATURES
+    from uasep_env.real_traffic import build as rt_build
+    from uasep_env.sim import obstacles
+
+    table = obstacles.AIRCRAFT_TABLE
+    assert tuple(c.name for c in table) == AIRCRAFT_CLASSES
+    assert len(set(AIRCRAFT_CLASSES)) == len(table)
+    assert table[UNKNOWN_CLASS].name == "unknown" and table[UNKNOWN_CLASS].source is None
+    assert table[DUBINS_CLASS].source == "synthetic"
+    assert {c.source for c in table} <= {None, "synthetic", "real_traffic"}
+    width = next(f.size for f in FEATURES if f.key == "obstacle_class")
+    assert width == len(table)
+    conf = make_config(_calibrated_bank(), observation={"optional_features": ["obstacle_class"]})
+    assert ObservationLayout.from_config(conf).columns.n_classes == len(table)
+    for coef in load_table().coef.values():
+        assert coef.shape[0] == len(table)
+    tool = runpy.run_path(str(ROOT / "tools" / "build_prediction_calibration.py"))
+    assert tool["CLASSES"] == tuple(c.name for c in table if c.source is not None)
+    real = tuple(c.name for c in table if c.source == "real_traffic")
+    assert tool["REAL_CLASSES"] == rt_build.CLASSES == real_traffic.CLASSES == real
+
+
+def test_the_kernel_one_hot_is_as_wide_as_the_table_says() -> None:
+    """The kernel reads the one-hot's width from the layout's columns, not a constant: a
+    layout told of fewer classes writes fewer entries (and the rest stay untouched)."""
+    if importlib.util.find_spec("numba") is None:
+        pytest.skip("numba not installed")
+    from uasep_env._kernels import observations as kernel
+
+    assert not hasattr(kernel, "_N_CLASSES")
+    assert "cols.n_classes" in __import__("inspect").getsource(kernel)
+
+
+@pytest.mark.parametrize("out", [None, "shipped"])
+def test_the_builder_never_writes_some_classes_over_the_shipped_table(
+    out: str | None, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--classes`` of a subset is refused before any build unless ``--out`` names another
+    file (a partial table over the shipped one dropped the other classes' cells)."""
+    tool = runpy.run_path(str(ROOT / "tools" / "build_prediction_calibration.py"))
+
+    def build(classes: tuple[str, ...]) -> dict:
+        raise AssertionError(f"built {classes}: the subset was not refused")
+
+    monkeypatch.setitem(tool["main"].__globals__, "build", build)  # never writes a table
+    before = DEFAULT_TABLE.read_bytes(), DEFAULT_TABLE.stat().st_mtime_ns
+    argv = ["--classes", "glider"] + ([] if out is None else ["--out", str(DEFAULT_TABLE)])
+    with pytest.raises(SystemExit) as info:
+        tool["main"](argv)  # refused before building
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "some classes only" in err and "--out" in err and str(DEFAULT_TABLE) in err
+    assert (DEFAULT_TABLE.read_bytes(), DEFAULT_TABLE.stat().st_mtime_ns) == before
+
+
+def test_the_builder_writes_a_subset_to_another_file(tmp_path: Path, monkeypatch) -> None:
+    """With ``--out`` elsewhere the subset is built there (build stubbed: the shipped
+    cells' rebuild is test_the_builder_rebuilds_the_shipped_cells)."""
+    tool = runpy.run_path(str(ROOT / "tools" / "build_prediction_calibration.py"))
+    seen = []
+    main = tool["main"]
+    monkeypatch.setitem(main.__globals__, "build", lambda classes: seen.append(classes) or {})
+    target = tmp_path / "glider.json"
+    assert main(["--classes", "glider", "--out", str(target)]) == 0
+    assert seen == [("glider",)] and json.loads(target.read_text()) == {}

@@ -262,3 +262,78 @@ def test_sb3_agent_infos_are_the_plain_construction_in_order_and_distinct():
     assert len({id(i) for i in infos}) == n and len({id(i["cost_terms"]) for i in infos}) == n
     with pytest.raises(ValueError, match="zip"):
         sb3._agent_infos(clipped, cost[:-1], *columns)  # columns of unequal length
+
+
+# ------------------------------------------------------- the cost table drives the flags
+def _outcome_case(weights: CostWeights):
+    """A stepped world's outcome inputs, with distances straddling every flag's threshold."""
+    from uasep_env.interface import outcome, rewards
+
+    core = EnvCore({"n_uavs": 4, "n_obstacles": 3, "scenario": "random"}, 12)
+    core.reset(seed=3)
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        core.step(rng.uniform(-1, 1, size=(12, 4, 3)))
+    w, cfg = core.world, core.config
+    x = rewards._gather_inputs(w, w.region_distances())
+    x = type(x)(*(np.array(a, copy=True) for a in x))
+    u = cfg.uav
+    x.min_uav_dist[::2] = rng.uniform(0.0, 2 * u.separation_distance, x.min_uav_dist[::2].shape)
+    x.min_obstacle_dist[1::2] = rng.uniform(
+        0.0, 2 * u.obstacle_separation, x.min_obstacle_dist[1::2].shape
+    )
+    x.region[::3, :, 0] = rng.uniform(-5.0, 5.0, x.region[::3, :, 0].shape)
+    rw, c = rewards._vectors(cfg.reward, u, cfg.max_steps)
+    return x, c, rw, outcome.outcome_constants(u.lost_distance, weights)
+
+
+@pytest.mark.parametrize("term", TERMS, ids=COST_TERMS)
+def test_each_table_term_is_computed_alike_by_numpy_and_the_kernel(term):
+    """Every row of the cost table: its flag and its cost are the same bits from the numpy
+    reference and the compiled kernel, take both values, and the cost is the flag."""
+    from uasep_env import _numba
+    from uasep_env.interface import outcome
+
+    if _numba.kernels() is None:
+        pytest.skip("numba not in use")
+    weights = CostWeights(**{t.name: 1.0 if t is term else 0.0 for t in TERMS})
+    args = _outcome_case(weights)
+    fast, slow = outcome.step_outcome(*args), outcome.step_outcome.reference(*args)
+    for name, f, s in zip(outcome.Outcome._fields, fast, slow, strict=True):
+        assert f.dtype == s.dtype and f.shape == s.shape, name
+        assert np.array_equal(f, s, equal_nan=True), name
+        assert f.tobytes() == s.tobytes(), name
+    flag = fast.flags[outcome._FLAG_INDEX._fields.index(term.safety)]
+    assert flag.any() and not flag.all()  # the case takes both sides of the threshold
+    k = COST_TERMS.index(term.name)
+    np.testing.assert_array_equal(fast.cost_terms[k], flag.astype(np.float64))
+    np.testing.assert_array_equal(fast.cost, flag.astype(np.float64))
+
+
+def test_safety_flags_agree_between_cost_table_numpy_kernel_weights_and_infos():
+    """A cost term cannot be half-added: the table's flags, the numpy flags, the kernel's
+    writes (by name, no literal row, no hand-sized array), the weights, the docstrings and
+    the safety keys of the infos name the same things."""
+    import dataclasses
+    import inspect
+    import re
+
+    from uasep_env._kernels import rewards as kernel
+    from uasep_env.envs.core import SAFETY_KEYS
+    from uasep_env.interface import costs, outcome
+
+    flags = tuple(dict.fromkeys(t.safety for t in TERMS))
+    assert costs.SAFETY_FLAGS == outcome.SAFETY_FLAGS == flags
+    assert outcome._FLAG_INDEX._fields == kernel._FlagIndex._fields == flags
+    assert tuple(outcome._FLAG_INDEX) == tuple(range(len(flags)))
+    x, c, _, _ = _outcome_case(CostWeights())
+    assert tuple(outcome._flag_values(x, c, x.region.min(axis=-1))) == flags
+    source = inspect.getsource(kernel)
+    written = re.findall(r"flags\[fx\.(\w+), e, i\]", inspect.getsource(kernel._outcome_agent))
+    assert sorted(written) == sorted(flags)  # each row once, by name
+    assert not re.search(r"flags\[\d", source)  # no literal rows
+    assert not re.search(r"np\.empty\(\(\d+, e, n\)", source)  # no hand-sized arrays
+    assert tuple(f.name for f in dataclasses.fields(CostWeights)) == COST_TERMS
+    for name in (*COST_TERMS, *flags):
+        assert f"``{name}``" in costs.__doc__ or f'"{name}"' in costs.__doc__
+    assert tuple(k for k in SAFETY_KEYS if k in flags) == flags

@@ -35,7 +35,12 @@ the most conservative region. The test flights are never read here.
 
 ``--classes`` rebuilds only some classes' cells (the test of this script rebuilds the
 helicopter and fixed-wing cells and compares them with the shipped table's; the full rebuild,
-about 80 s on 2 shared cores, reproduces the shipped file byte for byte).
+about 80 s on 2 shared cores, reproduces the shipped file byte for byte). A table of some
+classes only is never written over the shipped one: with a subset, ``--out`` must name
+another file (the run stops before building otherwise). It is not merged into the shipped
+table either: the table's header (the dataset's provenance, the config, ``alpha``,
+``delta``, the seeds) vouches for every cell, and cells of two builds under one header would
+make it vouch for what it did not build; a class is added by the full rebuild.
 """
 
 from __future__ import annotations
@@ -64,6 +69,7 @@ from uasep_env.reachable.calibrated import (
 from uasep_env.runtime.jsonio import dumps, write_json  # noqa: F401 -- dumps: for the test
 from uasep_env.sim.dynamics import measure
 from uasep_env.sim.estimation import KalmanModel
+from uasep_env.sim.obstacles import AIRCRAFT_TABLE, CALIBRATED_CLASSES, REAL_TRAFFIC_CLASSES
 from uasep_env.sim.replay import track_velocities
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,8 +92,12 @@ DUBINS_EPISODES = 400
 #: own and gets the most conservative region.
 MIN_CALIBRATION_TRACKS = 5
 DUBINS_SEEDS = {"train": 900_000, "validation": 4_000_000, "test": 5_000_000}
-REAL_CLASSES = ("glider", "helicopter", "fixed_wing")
-CLASSES = ("dubins", *REAL_CLASSES)
+#: The classes calibrated, from the aircraft class table (uasep_env.sim.obstacles): each
+#: row's ``source`` says where its paths come from (synthetic Dubins episodes or the
+#: real-traffic dataset's tracks of that class).
+CLASSES = CALIBRATED_CLASSES
+REAL_CLASSES = REAL_TRAFFIC_CLASSES
+_SOURCE = {c.name: c.source for c in AIRCRAFT_TABLE}
 
 
 @dataclass
@@ -381,7 +391,7 @@ def build(
     cells: dict[str, dict[str, dict[str, Any]]] = {m: {} for m in CENTRE_FRACTION}
     flights: dict[str, dict[str, list[str]]] = {}
     for cls in classes:
-        if cls == "dubins":
+        if _SOURCE[cls] == "synthetic":
             tr_p, val_p = dubins_paths("train", cfg), dubins_paths("validation", cfg)
         else:
             tr_t, val_t = ds.select("train", cls), ds.select("validation", cls)
@@ -433,6 +443,12 @@ def main(argv: list[str] | None = None) -> int:
     bad = [c for c in classes if c not in CLASSES]
     if bad or not classes:
         p.error(f"--classes: unknown class(es) {bad}; choose from {list(CLASSES)}")
+    if set(classes) != set(CLASSES) and args.out.resolve() == DEFAULT_TABLE.resolve():
+        p.error(
+            f"--classes {','.join(classes)} builds a table of some classes only; it would "
+            f"replace the shipped table {DEFAULT_TABLE} (every class): name another file "
+            "with --out, or rebuild every class"
+        )
     write_json(build(classes), args.out)
     print(f"wrote {args.out}")
     return 0

@@ -18,11 +18,6 @@ from uasep_env._kernels.ellipsoids import (
     _sweep,
 )
 
-#: Entries of the optional ``obstacle_class`` feature: one per code of
-#: ``uasep_env.sim.obstacles.AIRCRAFT_CLASSES`` (kernels import nothing outside ``_kernels``;
-#: ``tests/test_calibrated_prediction.py`` checks the count).
-_N_CLASSES = 5
-
 
 # The small store helpers are plain calls that LLVM inlines, not numba's IR inlining
 # (``inline="always"``): dozens of IR copies made the observations take ~30 s of an
@@ -238,7 +233,7 @@ def _obstacle_features(row, e, i, c, cols, x, dist, j, ps, vs, clip):  # noqa: A
         _put(row, c + cols.obstacle_mask, 1.0, clip)
     if cols.obstacle_class >= 0:  # one-hot of the aircraft class code
         code = x.aircraft_class[e, j]
-        for a in range(_N_CLASSES):
+        for a in range(cols.n_classes):  # the class table's length, as data
             _put(row, c + cols.obstacle_class + a, 1.0 if code == a else 0.0, clip)
 
 
@@ -257,7 +252,7 @@ _Columns = namedtuple(
     "waypoint_dir waypoint_dist last_accel progress uav_rel_pos uav_rel_vel uav_dist uav_mask "
     "obstacle_center obstacle_axes obstacle_heading_cs obstacle_rel_pos obstacle_rel_vel "
     "obstacle_region_dist obstacle_mask obstacle_class k_uavs k_obstacles self_dim uav_width "
-    "obstacle_width",
+    "obstacle_width n_classes",
 )
 
 

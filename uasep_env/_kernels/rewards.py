@@ -62,7 +62,8 @@ def _reward_agent(k, x, c, ix, weights, own, terms):  # noqa: ANN001, ANN202
 # tuple's type in C and a named one's in Python, about half a microsecond a tuple on every
 # call (observations.py says more). The fields are the reference's, in its order
 # (tests/test_kernels.py checks them): uasep_env.interface.rewards._Inputs, _Constants and
-# _TERM_INDEX (the term table's names), and uasep_env.interface.outcome.OutcomeConstants.
+# _TERM_INDEX (the term table's names), and uasep_env.interface.outcome.OutcomeConstants and
+# _FLAG_INDEX (the safety flags, the cost table's names).
 _Inputs = namedtuple(
     "_Inputs", "uav_pos plan_pos cmd prev_cmd min_uav_dist min_obstacle_dist region"
 )
@@ -77,6 +78,9 @@ _TermIndex = namedtuple(
     "collision progress",
 )
 _OutcomeConstants = namedtuple("_OutcomeConstants", "lost_sq cost_weights cost_flags")
+_FlagIndex = namedtuple(
+    "_FlagIndex", "loss_of_separation_uav loss_of_separation_obstacle in_reachable_region"
+)
 
 
 @numba.njit(**_JIT)
@@ -126,7 +130,7 @@ def reward_terms(
 # runs every kernel's parallel loops against its reference).
 # fmt: off
 @numba.njit(inline="always", **_JIT)
-def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
+def _outcome_agent(k, x, c, ix, fx, weights, o, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
                    cost_terms):  # noqa: ANN001
 # fmt: on
     """Agent ``k`` of :func:`~uasep_env.interface.outcome.step_outcome` (arrays: ``Outcome``)."""
@@ -140,10 +144,10 @@ def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, f
     off = _sq3(x.uav_pos[e, i, 0] - x.plan_pos[e, i, 0], x.uav_pos[e, i, 1] - x.plan_pos[e, i, 1],
                x.uav_pos[e, i, 2] - x.plan_pos[e, i, 2])  # fmt: skip
     lost[e, i] = off > o.lost_sq
-    # The rows of uasep_env.interface.outcome.SAFETY_FLAGS.
-    flags[0, e, i] = d_uav < c.separation_distance
-    flags[1, e, i] = d_obstacle < c.obstacle_separation
-    flags[2, e, i] = d_region < 0.0
+    # The rows of uasep_env.interface.outcome.SAFETY_FLAGS, by name (_flag_values there).
+    flags[fx.loss_of_separation_uav, e, i] = d_uav < c.separation_distance
+    flags[fx.loss_of_separation_obstacle, e, i] = d_obstacle < c.obstacle_separation
+    flags[fx.in_reachable_region, e, i] = d_region < 0.0
     total = 0.0
     for t in range(o.cost_weights.shape[0]):
         term = 1.0 if flags[o.cost_flags[t], e, i] else 0.0
@@ -155,34 +159,43 @@ def _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, f
 
 # fmt: off
 @numba.njit(**_JIT)
-def _outcome_serial(xt, ct, it, weights, ot, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
+def _outcome_serial(xt, ct, it, ft, weights, ot, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
                     cost_terms):  # noqa: ANN001
 # fmt: on
     x = _Inputs(*xt)
     c = _Constants(*ct)
     ix = _TermIndex(*it)
+    fx = _FlagIndex(*ft)
     o = _OutcomeConstants(*ot)
     for k in range(own.size):
-        _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,
+        _outcome_agent(k, x, c, ix, fx, weights, o, own, terms, d_reg, collided, lost, flags, cost,
                        cost_terms)  # fmt: skip
 
 
 # fmt: off
 @numba.njit(parallel=True, **_JIT)
-def _outcome_parallel(xt, ct, it, weights, ot, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
+def _outcome_parallel(xt, ct, it, ft, weights, ot, own, terms, d_reg, collided, lost, flags, cost,  # noqa: ANN001, ANN202
                       cost_terms):  # noqa: ANN001
 # fmt: on
     x = _Inputs(*xt)  # one statement each: the parallel loop looks up the definitions
     c = _Constants(*ct)
     ix = _TermIndex(*it)
+    fx = _FlagIndex(*ft)
     o = _OutcomeConstants(*ot)
     for k in numba.prange(own.size):
-        _outcome_agent(k, x, c, ix, weights, o, own, terms, d_reg, collided, lost, flags, cost,
+        _outcome_agent(k, x, c, ix, fx, weights, o, own, terms, d_reg, collided, lost, flags, cost,
                        cost_terms)  # fmt: skip
 
 
 def step_outcome(
-    inputs: tuple, constants: tuple, weights: np.ndarray, o: tuple, *, index: tuple, result: type
+    inputs: tuple,
+    constants: tuple,
+    weights: np.ndarray,
+    o: tuple,
+    *,
+    index: tuple,
+    flag_index: tuple,
+    result: type,
 ) -> tuple:
     """Compiled :func:`uasep_env.interface.outcome.step_outcome`: same arguments, same bits.
 
@@ -192,6 +205,7 @@ def step_outcome(
         weights: One weight per reward term.
         o: The :class:`uasep_env.interface.outcome.OutcomeConstants`.
         index: :data:`uasep_env.interface.rewards._TERM_INDEX`.
+        flag_index: :data:`uasep_env.interface.outcome._FLAG_INDEX`, each safety flag's row.
         result: :class:`uasep_env.interface.outcome.Outcome`, filled and returned.
     """
     x = tuple(map(frozen, inputs))  # one compiled signature
@@ -199,10 +213,10 @@ def step_outcome(
     n_costs = o.cost_weights.shape[0]
     out = result(
         np.empty((e, n)), np.empty((len(index), e, n)), np.empty((e, n)),
-        np.empty((e, n), np.bool_), np.empty((e, n), np.bool_), np.empty((3, e, n), np.bool_),
-        np.empty((e, n)), np.empty((n_costs, e, n)),
+        np.empty((e, n), np.bool_), np.empty((e, n), np.bool_),
+        np.empty((len(flag_index), e, n), np.bool_), np.empty((e, n)), np.empty((n_costs, e, n)),
     )  # fmt: skip
     o = (float(o.lost_sq), frozen(o.cost_weights), frozen(o.cost_flags))
     fn = _outcome_parallel if _parallel(e * n) else _outcome_serial
-    fn(x, tuple(constants), tuple(index), frozen(weights), o, *out)
+    fn(x, tuple(constants), tuple(index), tuple(flag_index), frozen(weights), o, *out)
     return out

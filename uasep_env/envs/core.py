@@ -21,7 +21,7 @@ from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import is_real
 from uasep_env.envs._infos import row_dicts
 from uasep_env.interface.actions import ResidualAPF
-from uasep_env.interface.costs import COST_TERMS
+from uasep_env.interface.costs import COST_TERMS, SAFETY_FLAGS
 from uasep_env.interface.observation import ObservationLayout, build_observations, global_state
 from uasep_env.interface.outcome import compute_outcome
 from uasep_env.interface.rewards import REWARD_TERMS, share_rewards
@@ -41,11 +41,12 @@ __all__ = [
 ]
 
 #: The per-step safety figures of :attr:`StepResult.safety`, in order: the minimum
-#: distances to another UAV, an obstacle and a region over the step (m), the loss of
-#: separation flags (UAV, obstacle), inside a region, a collision, lost.
+#: distances to another UAV, an obstacle and a region over the step (m), the safety flags
+#: the cost terms read (:data:`uasep_env.interface.costs.SAFETY_FLAGS`: loss of separation
+#: with a UAV, with an obstacle, inside a region), a collision, lost.
 SAFETY_KEYS = (
     "min_uav_distance", "min_obstacle_distance", "min_region_distance",
-    "loss_of_separation_uav", "loss_of_separation_obstacle", "in_reachable_region",
+    *SAFETY_FLAGS,
     "collision", "lost",
 )  # fmt: skip
 #: An agent's info dict from its columns: the reward terms, the safety figures, the cost
@@ -366,12 +367,11 @@ class EnvCore:
         out = compute_outcome(w, cfg, w.region_distances())
         terminated = (out.collided | out.lost).any(axis=1)
         truncated = ((w.steps >= self._max_steps) | w.plan_finished()) & ~terminated
-        los_uav, los_obstacle, in_region = out.flags
         safety = dict(
             zip(
                 SAFETY_KEYS,
-                (w.min_uav_dist.copy(), w.min_obstacle_dist.copy(), out.d_region, los_uav,
-                 los_obstacle, in_region, out.collided, out.lost),
+                (w.min_uav_dist.copy(), w.min_obstacle_dist.copy(), out.d_region, *out.flags,
+                 out.collided, out.lost),
                 strict=True,
             )
         )  # fmt: skip

@@ -50,7 +50,7 @@ import numpy as np
 
 from uasep_env.config import CostWeights
 
-__all__ = ["COST_TERMS", "TERMS", "CostTerm", "compute_costs", "weighted_cost"]
+__all__ = ["COST_TERMS", "SAFETY_FLAGS", "TERMS", "CostTerm", "compute_costs", "weighted_cost"]
 
 
 class CostTerm(NamedTuple):
@@ -58,7 +58,10 @@ class CostTerm(NamedTuple):
 
     Attributes:
         name: The term's name (a field of :class:`~uasep_env.config.CostWeights` too).
-        safety: The step's safety flag it is 1 on (a key of the step's safety figures).
+        safety: The step's safety flag it is 1 on (a key of the step's safety figures and
+            of every agent's infos; :data:`SAFETY_FLAGS` is made of these names, and the
+            flag's value is computed under this name by
+            :func:`uasep_env.interface.outcome.step_outcome` and its compiled twin).
         low: Least value of the unweighted term in one step.
         high: Greatest value of the unweighted term in one step.
     """
@@ -69,7 +72,9 @@ class CostTerm(NamedTuple):
     high: float = 1.0
 
 
-#: The cost terms, in reporting order: the one list the costs, the weights and the tests read.
+#: The cost terms, in reporting order: the one list the costs, the weights, the safety flags
+#: (:data:`SAFETY_FLAGS`, the kernel's flag rows) and the tests read (``docs/extending.md``,
+#: "Adding a cost term").
 TERMS: tuple[CostTerm, ...] = (
     CostTerm("separation_uav", "loss_of_separation_uav"),
     CostTerm("separation_obstacle", "loss_of_separation_obstacle"),
@@ -77,6 +82,9 @@ TERMS: tuple[CostTerm, ...] = (
 )
 #: Names of the cost terms, in reporting order.
 COST_TERMS: tuple[str, ...] = tuple(t.name for t in TERMS)
+#: The step's safety flags, in the order of the outcome's ``flags`` rows and of the infos'
+#: keys: the terms' ``safety`` names, each once, in table order.
+SAFETY_FLAGS: tuple[str, ...] = tuple(dict.fromkeys(t.safety for t in TERMS))
 
 
 def compute_costs(

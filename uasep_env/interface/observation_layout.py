@@ -36,10 +36,11 @@ per nearest obstacle (K_o)  16    reachable-ellipsoid centre relative to the UAV
                                   UAV (3, m), obstacle velocity relative to the UAV (3, m/s),
                                   signed distance from the UAV to the ellipsoid (1, m),
                                   presence mask (1)
-``obstacle_class``          5     optional, per nearest obstacle: its aircraft class,
+``obstacle_class``          C     optional, per nearest obstacle: its aircraft class,
                                   one-hot over :data:`uasep_env.sim.obstacles.AIRCRAFT_CLASSES`
-                                  (unknown, dubins, glider, helicopter, fixed_wing), like
-                                  ADS-B's emitter category
+                                  (``C`` = its length: one entry per row of the aircraft
+                                  class table, ``AIRCRAFT_TABLE``), like ADS-B's emitter
+                                  category
 ==========================  ====  ======================================================
 
 UAVs are sorted by estimated distance, obstacles by distance to their reachable region;
@@ -67,6 +68,7 @@ from typing import NamedTuple
 import numpy as np
 
 from uasep_env.config import EnvConfig
+from uasep_env.sim.obstacles import AIRCRAFT_CLASSES
 
 __all__ = ["FEATURES", "OPTIONAL_FEATURES", "Columns", "Feature", "ObservationLayout"]
 
@@ -124,7 +126,7 @@ FEATURES: tuple[Feature, ...] = (
     Feature("obstacle", "rel_vel", 3, "vel"),
     Feature("obstacle", "region_dist", 1, "pos"),
     Feature("obstacle", "mask", 1, "unit"),
-    Feature("obstacle", "class", 5, "unit", default=False),
+    Feature("obstacle", "class", len(AIRCRAFT_CLASSES), "unit", default=False),
 )
 _BY_KEY = {f.key: f for f in FEATURES}
 _BLOCKS = ("self", "uav", "obstacle")
@@ -134,8 +136,10 @@ OPTIONAL_FEATURES: tuple[str, ...] = tuple(f.key for f in FEATURES if not f.defa
 #: What the compiled kernel is told of a layout: the first column of every feature of
 #: :data:`FEATURES` (own-state ones from the start of the vector, ``uav_*`` and
 #: ``obstacle_*`` ones from the start of one neighbour's block; -1 when the layout lacks
-#: it), the neighbour counts and the blocks' widths. One type for every layout: a new
-#: feature is a new field, never a new kernel argument.
+#: it), the neighbour counts, the blocks' widths and the ``obstacle_class`` one-hot's width
+#: (the aircraft class table's length: the kernel reads it as data, so a new class is no
+#: kernel edit). One type for every layout: a new feature is a new field, never a new
+#: kernel argument.
 Columns = namedtuple(
     "Columns",
     [
@@ -145,6 +149,7 @@ Columns = namedtuple(
         "self_dim",
         "uav_width",
         "obstacle_width",
+        "n_classes",
     ],
 )
 
@@ -398,4 +403,5 @@ def _columns(features: tuple[str, ...], k_uavs: int, k_obstacles: int) -> Column
         widths["self"],
         widths["uav"],
         widths["obstacle"],
+        _BY_KEY["obstacle_class"].size,
     )

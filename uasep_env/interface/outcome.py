@@ -12,14 +12,15 @@ for it.
 from __future__ import annotations
 
 import functools
+from collections import namedtuple
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from uasep_env._numba import compiled_twin
 from uasep_env.config import CostWeights
+from uasep_env.interface.costs import SAFETY_FLAGS, weighted_cost
 from uasep_env.interface.costs import TERMS as COST_TABLE
-from uasep_env.interface.costs import weighted_cost
 from uasep_env.interface.rewards import (
     _TERM_INDEX,
     _collided,
@@ -43,13 +44,11 @@ __all__ = [
     "step_outcome",
 ]
 
-#: The step's safety flags :func:`step_outcome` computes, in the order of its ``flags`` rows
-#: (keys of the step's safety figures, which the cost terms name).
-SAFETY_FLAGS: tuple[str, ...] = (
-    "loss_of_separation_uav",
-    "loss_of_separation_obstacle",
-    "in_reachable_region",
-)
+# SAFETY_FLAGS (re-exported here): the step's safety flags :func:`step_outcome` computes, in
+# the order of its ``flags`` rows, derived from the cost table (uasep_env.interface.costs).
+#: Each flag's row in the ``(F, E, N)`` flags array, by name (the kernel writes
+#: ``flags[fx.<name>, e, i]``, never a literal row, into an array of ``len(_FLAG_INDEX)`` rows).
+_FLAG_INDEX = namedtuple("FlagIndex", SAFETY_FLAGS)(*range(len(SAFETY_FLAGS)))
 
 
 class Outcome(NamedTuple):
@@ -100,7 +99,16 @@ def outcome_constants(lost_distance: float, weights: CostWeights) -> OutcomeCons
     return OutcomeConstants(float(lost_distance) ** 2, cost_weights, cost_flags)
 
 
-@compiled_twin("step_outcome", index=_TERM_INDEX, result=Outcome)
+def _flag_values(x: _Inputs, c: _Constants, d_region: np.ndarray) -> dict[str, np.ndarray]:
+    """Each safety flag of :data:`SAFETY_FLAGS` by name, ``(E, N)`` bool (numpy reference)."""
+    return {
+        "loss_of_separation_uav": x.min_uav_dist < c.separation_distance,
+        "loss_of_separation_obstacle": x.min_obstacle_dist < c.obstacle_separation,
+        "in_reachable_region": d_region < 0.0,
+    }
+
+
+@compiled_twin("step_outcome", index=_TERM_INDEX, flag_index=_FLAG_INDEX, result=Outcome)
 def step_outcome(x: _Inputs, c: _Constants, w: np.ndarray, o: OutcomeConstants) -> Outcome:
     """The reward terms, episode-end tests, safety flags and costs of a step.
 
@@ -119,13 +127,8 @@ def step_outcome(x: _Inputs, c: _Constants, w: np.ndarray, o: OutcomeConstants) 
     collided = _collided(x.min_uav_dist, x.min_obstacle_dist, c.collision_distance)
     off = x.uav_pos - x.plan_pos
     lost = np.einsum("eni,eni->en", off, off) > o.lost_sq
-    flags = np.stack(
-        [
-            x.min_uav_dist < c.separation_distance,
-            x.min_obstacle_dist < c.obstacle_separation,
-            d_region < 0.0,
-        ]
-    )
+    values = _flag_values(x, c, d_region)
+    flags = np.stack([values[name] for name in SAFETY_FLAGS])
     cost_terms = flags[o.cost_flags].astype(np.float64)
     cost = weighted_cost(list(cost_terms), list(o.cost_weights))
     return Outcome(own, terms, d_region, collided, lost, flags, cost, cost_terms)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import stat
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -60,6 +61,10 @@ CENTRE_FRACTION = {"swept": 0.5, "terminal": 1.0}
 #: Largest table file read (bytes) and deepest JSON nesting accepted.
 MAX_TABLE_BYTES = 1 << 20
 MAX_TABLE_DEPTH = 12
+#: Largest coefficient accepted (``a`` in s, ``b`` and ``inflation_m`` in m): the shipped
+#: table's largest are about 73 s and 322 m; a larger one is a corrupt table (1e308 made
+#: infinite semi-axes).
+MAX_COEFFICIENT = 1e5
 _AXES = ("longitudinal", "lateral", "vertical")
 _MISSING = "no such file (rebuild: python tools/build_prediction_calibration.py)"
 
@@ -141,9 +146,15 @@ def _read(path: Path) -> dict[str, Any]:
 def _finite_nonneg(path: Path, where: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise _fail(path, f"{where} is {value!r}, expected a number")
-    if not (math.isfinite(value) and value >= 0.0):
-        raise _fail(path, f"{where} is {value!r}, expected a finite number >= 0")
-    return float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an integer of hundreds of digits: not printed whole
+        raise _fail(
+            path, f"{where} is an integer of {len(str(abs(value)))} digits, too large for a float"
+        ) from None
+    if not (math.isfinite(number) and 0.0 <= number <= MAX_COEFFICIENT):
+        raise _fail(path, f"{where} is {value!r}, expected a number in [0, {MAX_COEFFICIENT:g}]")
+    return number
 
 
 def _parse(path: Path, data: dict[str, Any]) -> CalibrationTable:
@@ -151,10 +162,11 @@ def _parse(path: Path, data: dict[str, Any]) -> CalibrationTable:
         horizons = tuple(float(h) for h in data["horizons"])
         cells = data["cells"]
         inflation = _finite_nonneg(path, "inflation_m", data["inflation_m"])
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
         if isinstance(exc, CalibrationTableError):
             raise
-        raise _fail(path, f"is malformed ({exc!r})") from None
+        detail = " ".join(str(exc).split())[:120]
+        raise _fail(path, f"is malformed ({type(exc).__name__}: {detail})") from None
     if horizons != CALIBRATED_HORIZONS:
         raise _fail(path, f"horizons {list(horizons)}, expected {list(CALIBRATED_HORIZONS)}")
     coef: dict[str, np.ndarray] = {}
@@ -201,8 +213,9 @@ def load_table(path: str | os.PathLike[str] = DEFAULT_TABLE) -> CalibrationTable
     """Read and check a calibration table (cached while the file is unchanged).
 
     Raises:
-        CalibrationTableError: Missing, unreadable, too large, not JSON, another format or
-            version, or malformed (the message names the file and the bad entry).
+        CalibrationTableError: Missing, not a regular file, unreadable, too large, not JSON,
+            another format or version, or malformed (the message names the file and the
+            bad entry).
     """
     p = Path(path)
     try:
@@ -211,6 +224,10 @@ def load_table(path: str | os.PathLike[str] = DEFAULT_TABLE) -> CalibrationTable
         raise _fail(
             p, "no such file (rebuild: python tools/build_prediction_calibration.py)"
         ) from None
+    except OSError as exc:
+        raise _fail(p, f"cannot be read ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):  # before opening: a FIFO's open would block for ever
+        raise _fail(p, "is not a regular file (a FIFO, device, socket or folder)")
     return _load_cached(str(p), st.st_mtime_ns, st.st_size)
 
 

@@ -66,7 +66,8 @@ class Track:
         callsign: The callsign most often broadcast over the track.
         first_timestamp: UNIX time of the first sample (s).
         origin: ``(latitude deg, longitude deg, barometric altitude m)`` of the first sample.
-        aircraft_class: ``"glider"``, ``"helicopter"`` or ``"fixed_wing"``.
+        aircraft_class: One of :data:`CLASSES` (the ``"real_traffic"`` rows of
+            :data:`uasep_env.sim.obstacles.AIRCRAFT_TABLE`).
         class_rule: How the class was decided (sample category, designator or speed rule).
         split: ``"train"``, ``"validation"`` or ``"test"``.
         flight: The recorded flight it belongs to (``"<category>/<sample>:<icao24>"``); the
@@ -295,7 +296,7 @@ def tracks(
 
     Args:
         split: ``"train"``, ``"validation"``, ``"test"`` or ``None``.
-        aircraft_class: ``"glider"``, ``"helicopter"``, ``"fixed_wing"`` or ``None``.
+        aircraft_class: One of :data:`CLASSES` or ``None``.
         path: Another real-traffic file (default: the shipped one).
 
     Returns:

@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from uasep_env.real_traffic.geodesy import FEET, KNOT, ned_about, ned_rotation
+from uasep_env.sim.obstacles import REAL_TRAFFIC_CLASSES
 
 __all__ = [
     "CLASSES",
@@ -62,7 +63,9 @@ __all__ = [
     "build",
 ]
 
-CLASSES = ("glider", "helicopter", "fixed_wing")
+#: The dataset's aircraft classes: the ``"real_traffic"`` rows of the aircraft class table
+#: (:data:`uasep_env.sim.obstacles.AIRCRAFT_TABLE`); :func:`_aircraft_class` assigns them.
+CLASSES = REAL_TRAFFIC_CLASSES
 SPLITS = ("train", "validation", "test")
 #: Target share of each class's samples per split.
 SPLIT_SHARES = {"train": 0.6, "validation": 0.2, "test": 0.2}

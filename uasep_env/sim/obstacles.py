@@ -29,15 +29,21 @@ uniforms (see :mod:`uasep_env.sim.world`), never from global state.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from uasep_env._numba import compiled_twin
 
 __all__ = [
     "AIRCRAFT_CLASSES",
+    "AIRCRAFT_TABLE",
+    "CALIBRATED_CLASSES",
     "DUBINS_CLASS",
     "N_UNIFORMS",
+    "REAL_TRAFFIC_CLASSES",
     "UNKNOWN_CLASS",
+    "AircraftClass",
     "ObstacleState",
     "aircraft_class_code",
     "obstacle_velocity",
@@ -46,12 +52,47 @@ __all__ = [
 
 #: Uniform draws each obstacle consumes per physics step (switch?, straight?, turn, climb).
 N_UNIFORMS = 4
-#: Aircraft classes an obstacle can carry (its code is the index), like ADS-B's emitter
+
+
+class AircraftClass(NamedTuple):
+    """One row of the aircraft class table.
+
+    Attributes:
+        name: The class's name (in the real-traffic dataset's ``aircraft_class`` field and
+            the calibration table's cells).
+        source: Where the calibration builder (``tools/build_prediction_calibration.py``)
+            draws this class's paths: ``"synthetic"`` (episodes of the Dubins obstacle
+            model), ``"real_traffic"`` (the dataset's tracks of this class) or ``None``
+            (never calibrated: it gets the most conservative region).
+    """
+
+    name: str
+    source: str | None
+
+
+#: Aircraft classes an obstacle can carry (its code is the row's index), like ADS-B's emitter
 #: category: ``"dubins"`` for the synthetic model, the real-traffic dataset's classes for
-#: replayed tracks, ``"unknown"`` (code 0) for anything else.
-AIRCRAFT_CLASSES = ("unknown", "dubins", "glider", "helicopter", "fixed_wing")
-UNKNOWN_CLASS = 0
-DUBINS_CLASS = 1
+#: replayed tracks, ``"unknown"`` (code 0) for anything else. The one table the codes, the
+#: ``obstacle_class`` one-hot's width, the calibrated prediction's coefficient rows, the
+#: calibration builder's class list and the real-traffic dataset's classes derive from
+#: (``docs/extending.md``, "Adding an aircraft class"). Append rows: a code is an index.
+AIRCRAFT_TABLE: tuple[AircraftClass, ...] = (
+    AircraftClass("unknown", None),
+    AircraftClass("dubins", "synthetic"),
+    AircraftClass("glider", "real_traffic"),
+    AircraftClass("helicopter", "real_traffic"),
+    AircraftClass("fixed_wing", "real_traffic"),
+)
+#: The class names, by code.
+AIRCRAFT_CLASSES: tuple[str, ...] = tuple(c.name for c in AIRCRAFT_TABLE)
+#: The classes the calibration builder calibrates, in table order.
+CALIBRATED_CLASSES: tuple[str, ...] = tuple(c.name for c in AIRCRAFT_TABLE if c.source)
+#: The classes of the real-traffic dataset's tracks, in table order.
+REAL_TRAFFIC_CLASSES: tuple[str, ...] = tuple(
+    c.name for c in AIRCRAFT_TABLE if c.source == "real_traffic"
+)
+UNKNOWN_CLASS = AIRCRAFT_CLASSES.index("unknown")
+DUBINS_CLASS = AIRCRAFT_CLASSES.index("dubins")
 
 
 def aircraft_class_code(name: str) -> int:
