@@ -1482,8 +1482,8 @@ def test_fit_kernel_builds_the_nodes_of_numpy_bit_for_bit(swept):
 
 @pytest.mark.parametrize("numba_on", [True, False])
 def test_apf_checks_its_observations_with_and_without_the_kernel(monkeypatch, numba_on):
-    """The same errors either way: a wrong width, a NaN or infinite semi-axis (named as the
-    distance solve names it)."""
+    """The same errors either way: a wrong width, a NaN or infinite semi-axis (refused by
+    every policy's input check, naming the entry)."""
     from uasep_env import make_config
     from uasep_env.envs.core import EnvCore
     from uasep_env.policies import APF
@@ -1499,7 +1499,7 @@ def test_apf_checks_its_observations_with_and_without_the_kernel(monkeypatch, nu
     for bad in (np.nan, np.inf):
         edited = obs.copy()
         edited[1, 2, start + 1] = bad
-        with pytest.raises(ValueError, match="semi_axes must be finite and >= 0"):
+        with pytest.raises(ValueError, match=r"entry 'obstacle0\.axes\[1\]' .* not finite"):
             apf(edited)
 
 
