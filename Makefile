@@ -9,6 +9,7 @@
 #                        outside the repo and run uasep-eval on a shipped policy by name
 #                        (and uasep-train / uasep-report --help there, without torch)
 #   make test-benchmarl -- BenchMARL's MAPPO on a custom task, in a venv of its own
+#   make test-omnisafe  -- OmniSafe's PPOLag on the Gymnasium view, in a venv of its own
 #   make docs   -- the documentation site, warnings as errors
 PYTHON ?= python3
 VENV   ?= .venv
@@ -20,8 +21,9 @@ TORCH  := torch==2.13.0
 FLOORS_VENV ?= $(CURDIR)/.venv-floors
 PKG_DIR     ?= /tmp/uasep-env-package-check
 BENCHMARL_VENV ?= $(CURDIR)/.venv-benchmarl
+OMNISAFE_VENV  ?= $(CURDIR)/.venv-omnisafe
 
-.PHONY: eval test lint bench clean ci test-floors test-package test-benchmarl docs
+.PHONY: eval test lint bench clean ci test-floors test-package test-benchmarl test-omnisafe docs
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -53,7 +55,7 @@ test: lint
 	UASEP_REQUIRE_CLIENTS=1 $(BIN)/python -m pytest -n 2 --dist loadgroup -q
 
 # Every CI job, in order (.ci/run).
-ci: test test-floors test-package test-benchmarl docs
+ci: test test-floors test-package test-benchmarl test-omnisafe docs
 
 # The floors, exactly, and the package's requirements resolved against them (pip fails if a
 # declared range excludes a floor; --dry-run: no build/ left in the tree); the tests run on
@@ -116,6 +118,23 @@ test-benchmarl: $(BENCHMARL_VENV)/.benchmarl
 	UASEP_REQUIRE_BENCHMARL=1 UASEP_NUMBA=0 $(BENCHMARL_VENV)/bin/python -m pytest -q \
 		-p no:cacheprovider tests/test_benchmarl.py
 
+# OmniSafe 0.5.0's PPOLag on uasep_env.clients.omnisafe (tests/test_omnisafe.py). OmniSafe
+# requires safety-gymnasium 1.0.0, which pins gymnasium 0.28.1 (the package needs >= 1.1) and
+# pygame 2.1.0 (no build on Python 3.11), and pandas==2.0.3 (numpy 1 only): so OmniSafe goes
+# in last with --no-deps, after what it imports (.ci/omnisafe.txt); the client module stands
+# in for safety_gymnasium.
+$(OMNISAFE_VENV)/.omnisafe: pyproject.toml .ci/omnisafe.txt
+	rm -rf $(OMNISAFE_VENV)
+	$(PYTHON) -m venv $(OMNISAFE_VENV)
+	$(OMNISAFE_VENV)/bin/python -m pip install --quiet $(TORCH)
+	$(OMNISAFE_VENV)/bin/python -m pip install --quiet -e . -r .ci/omnisafe.txt "$(TORCH)"
+	$(OMNISAFE_VENV)/bin/python -m pip install --quiet --no-deps omnisafe==0.5.0
+	touch $@
+
+test-omnisafe: $(OMNISAFE_VENV)/.omnisafe
+	UASEP_REQUIRE_OMNISAFE=1 UASEP_NUMBA=0 $(OMNISAFE_VENV)/bin/python -m pytest -q \
+		-p no:cacheprovider tests/test_omnisafe.py
+
 # The documentation site (Sphinx), warnings as errors; the pages' examples run in make test.
 docs: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[docs]" "$(TORCH)"
@@ -126,4 +145,4 @@ bench: $(VENV)/.all
 	$(BIN)/python benchmarks/bench_peers.py
 
 clean:
-	rm -rf $(VENV) $(FLOORS_VENV) $(BENCHMARL_VENV) .pytest_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) $(FLOORS_VENV) $(BENCHMARL_VENV) $(OMNISAFE_VENV) .pytest_cache .ruff_cache .hypothesis

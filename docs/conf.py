@@ -35,6 +35,9 @@ exclude_patterns = ["_build", "figures"]
 myst_enable_extensions = ["colon_fence", "deflist", "dollarmath"]
 myst_heading_anchors = 3
 
+# The client modules' trainers are not installed for the docs (OmniSafe has a venv of its own).
+autodoc_mock_imports = ["omnisafe"]
+
 # API reference: one page per public module (written by _write_api_pages below), generated
 # from the docstrings (Google style).
 # Each name is documented once, where it is defined (packages re-export names in __all__).
@@ -148,14 +151,25 @@ def _public_modules() -> list[str]:
     return ["uasep_env", *(n for n in names if not any(p.startswith("_") for p in n.split(".")))]
 
 
+def _module_doc(name: str) -> str:
+    """A module's docstring, read from its source.
+
+    A client module (``uasep_env.clients``) need not import here: its trainer is not
+    installed for the docs.
+    """
+    import ast
+    import importlib.util
+
+    source = Path(importlib.util.find_spec(name).origin).read_text()
+    return ast.get_docstring(ast.parse(source)) or ""
+
+
 def _write_api_pages(app) -> None:  # noqa: ANN001 (Sphinx's hook)
     """One ``api/<module>.rst`` per public module (written only when it changes).
 
     Not autosummary's recursive mode: it resolves ``uasep_env.metrics.aggregate`` to the
     function the package re-exports under the module's name, not to the module.
     """
-    import importlib
-
     out = Path(app.srcdir) / "api"
     out.mkdir(exist_ok=True)
     modules = _public_modules()
@@ -166,7 +180,7 @@ def _write_api_pages(app) -> None:  # noqa: ANN001 (Sphinx's hook)
         if children:
             text += "\nModules\n-------\n\n"
             for child in children:
-                doc = (importlib.import_module(child).__doc__ or "").strip().split("\n\n")[0]
+                doc = _module_doc(child).strip().split("\n\n")[0]
                 doc = " ".join(doc.split())  # the first paragraph, on one line
                 text += f"* :doc:`{child}` -- {doc}\n"
             text += "\n.. toctree::\n   :hidden:\n\n"

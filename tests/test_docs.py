@@ -39,7 +39,7 @@ def public_modules() -> list[str]:
 
 
 #: Optional dependencies (extras) some modules import at the top.
-OPTIONAL = {"torch", "stable_baselines3", "matplotlib", "mpl_toolkits", "ray", "numba"}
+OPTIONAL = {"torch", "stable_baselines3", "matplotlib", "mpl_toolkits", "ray", "numba", "omnisafe"}
 
 
 def import_or_skip(name: str):
