@@ -47,27 +47,29 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from uasep_env import make_config
-from uasep_env.config import AS_PUBLISHED, EnvConfig
+
+# The sweep's table and the front's rules live in the package (uasep-bench plays them too);
+# the names stay importable from here.
+from uasep_env.benchmark.front import interpolate_at, knee, knee_distances, pareto  # noqa: F401
+from uasep_env.benchmark.methods import (  # noqa: F401
+    HORIZONS_S,
+    METHODS,
+    SCALES,
+    Method,
+    _scaled,
+    registry_methods,
+)
 from uasep_env.config.checks import check_positive_int
 from uasep_env.evaluation import PolicyResult, evaluate
 from uasep_env.metrics import t_interval
-from uasep_env.metrics.statistics import NOT_MET, rate_verdict
-from uasep_env.policies import (
-    APF,
-    REGISTRY,
-    APFGains,
-    MotionStateAPF,
-    TraditionalAPF,
-    load_policy,
-)
+from uasep_env.policies import APF  # noqa: F401
 from uasep_env.runtime.atomic import atomic_output, atomic_write
 from uasep_env.runtime.tables import render_table
 
@@ -82,136 +84,6 @@ CHECKPOINTS = ROOT / "checkpoints"
 #: The paper experiment's encounters (``baselines/paper_experiment.py``).
 PAPER_SEEDS = range(0, 20)
 BANK_FIRST_SEED = 100_000
-#: Margin scales: 9 settings from a quarter to three times the default margin.
-SCALES = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0)
-#: Prediction horizons (s) for the pure learned policy (trained at 10 s).
-HORIZONS_S = (4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0)
-
-
-def _scaled(names: Sequence[str], scale: float) -> APFGains:
-    """The reference gains (:class:`APFGains`'s field defaults) with ``names`` scaled."""
-    return APFGains().scaled(names, scale)
-
-
-@dataclass(frozen=True, kw_only=True)
-class Method:
-    """A controller and the knob swept over its safety margin.
-
-    Attributes:
-        name: Key in the CSV and figures.
-        label: Legend label.
-        knob: What the values set.
-        values: The grid.
-        default: The value that is the controller's default (its ``default_gains``).
-        policy: ``(config, value) -> policy`` for one setting.
-        config: Overrides of the environment config for one setting (default: none).
-    """
-
-    name: str
-    label: str
-    knob: str
-    values: tuple[float, ...]
-    default: float
-    policy: Callable[[EnvConfig, float], Any]
-    config: Callable[[float], dict[str, Any]] = lambda _v: {}
-
-
-def _residual(cfg: EnvConfig, s: float) -> Any:
-    return load_policy(
-        CHECKPOINTS / "ppo_residual_apf.zip",
-        cfg,
-        "ppo-residual",
-        base_gains=_scaled(APF.margin_gains, s),
-    )
-
-
-METHODS: tuple[Method, ...] = (
-    Method(
-        name="apf",
-        label="APF (proposed)",
-        knob="margin scale",
-        values=SCALES,
-        default=1.0,
-        policy=lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
-    ),
-    Method(
-        name="apf-published",
-        label="APF, paper's prediction",
-        knob="margin scale",
-        values=SCALES,
-        default=1.0,
-        policy=lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
-        config=lambda _s: AS_PUBLISHED,
-    ),
-    Method(
-        name="motion-state-apf",
-        label="motion-state APF",
-        knob="margin scale",
-        values=SCALES,
-        default=1.5,
-        policy=lambda c, s: MotionStateAPF(c, _scaled(MotionStateAPF.margin_gains, s)),
-    ),
-    Method(
-        name="traditional-apf",
-        label="traditional APF",
-        knob="range scale",
-        values=SCALES,
-        default=0.75,
-        policy=lambda c, s: TraditionalAPF(c, _scaled(TraditionalAPF.margin_gains, s)),
-    ),
-    Method(
-        name="ppo-residual",
-        label="PPO residual on APF",
-        knob="base margin scale",
-        values=SCALES,
-        default=1.0,
-        policy=_residual,
-    ),
-    Method(
-        name="ppo-shared",
-        label="PPO (pure)",
-        knob="prediction horizon (s)",
-        values=HORIZONS_S,
-        default=10.0,
-        policy=lambda c, _h: load_policy(CHECKPOINTS / "ppo_shared.zip", c, "ppo-shared"),
-        config=lambda h: {"prediction": {"horizon": h}},
-    ),
-    Method(
-        name="mappo",
-        label="MAPPO",
-        knob="prediction horizon (s)",
-        values=HORIZONS_S,
-        default=10.0,
-        policy=lambda c, _h: load_policy(CHECKPOINTS / "mappo.zip", c, "mappo"),
-        config=lambda h: {"prediction": {"horizon": h}},
-    ),
-)
-
-
-
-def registry_methods(taken: Sequence[str]) -> tuple[Method, ...]:
-    """A :class:`Method` for every registered reference controller with a margin to sweep.
-
-    Its knob is its registry entry's ``margin`` (``(config, scale) -> policy``) over
-    :data:`SCALES`; controllers already in ``taken`` (the APFs, swept above) are left out.
-    """
-    return tuple(
-        Method(
-            name=e.name,
-            label=e.label,
-            knob=e.knob,
-            values=SCALES,
-            default=e.default_margin,
-            policy=e.margin,
-        )
-        for e in REGISTRY.values()
-        if e.reference and e.margin is not None and e.name not in taken
-    )
-
-
-#: The hand-written methods above, then every other registered reference controller.
-METHODS = METHODS + registry_methods([m.name for m in METHODS])
-
 #: (column, dotted episode metric or derived name, statistic, axis label, higher is safer)
 SAFETY = (
     (
@@ -311,61 +183,6 @@ def run(
     return rows
 
 
-def pareto(safety: np.ndarray, cost: np.ndarray, higher_is_safer: bool) -> np.ndarray:
-    """Mask of the settings no other setting beats on both safety and cost."""
-    s = safety if higher_is_safer else -safety
-    keep = np.ones(len(s), bool)
-    for i in range(len(s)):
-        better = (s >= s[i]) & (cost <= cost[i]) & ((s > s[i]) | (cost < cost[i]))
-        keep[i] = not better.any()
-    return keep
-
-
-def knee_distances(rows: list[dict[str, Any]]) -> list[tuple[dict[str, Any], float]]:
-    """The front of :func:`knee`, each setting with its distance from the chord.
-
-    Both axes scaled to [0, 1]; settings off the front or shown to collide more often
-    than the safest one are left out. With fewer than 3 settings on the front, the safest has 1.
-    """
-    rows = sorted(rows, key=lambda r: r["value"])
-    safest = min(r["collision"] for r in rows)
-    safest_hi = min(r["collision_hi"] for r in rows if r["collision"] == safest)
-    ref = {"rate": safest, "ci_low": safest, "ci_high": safest_hi}
-    # Eligible unless shown worse (rate_verdict's "not met"): the knee is a choice among
-    # settings, not a claim that a target is met, so "not shown" settings stay candidates.
-    ok = [r for r in rows if rate_verdict(_collision(r), ref) != NOT_MET]
-    s = np.array([r["min_obstacle_distance"] for r in ok])
-    c = np.array([r["max_deviation"] for r in ok])
-    front = [r for r, k in zip(ok, pareto(s, c, True), strict=True) if k]
-    if len(front) < 3:
-        best = max(front, key=lambda r: r["min_obstacle_distance"])
-        return [(r, 1.0 if r is best else 0.0) for r in front]
-    x = np.array([r["min_obstacle_distance"] for r in front])
-    y = np.array([r["max_deviation"] for r in front])
-    x = (x - x.min()) / max(np.ptp(x), 1e-12)
-    y = (y - y.min()) / max(np.ptp(y), 1e-12)
-    i0, i1 = np.argmin(x), np.argmax(x)
-    d = np.abs((x[i1] - x[i0]) * (y[i0] - y) - (x[i0] - x) * (y[i1] - y[i0]))
-    return [(r, float(di)) for r, di in zip(front, d, strict=True)]
-
-
-def _collision(row: dict[str, Any]) -> dict[str, float]:
-    """A CSV row's collision rate as the interval :func:`rate_verdict` reads."""
-    return {"rate": row["collision"], "ci_low": row["collision_lo"], "ci_high": row["collision_hi"]}
-
-
-def knee(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """The knee of a method's front of max deviation against min obstacle distance.
-
-    Among the settings not shown to collide more often than the method's safest setting
-    (:func:`~uasep_env.metrics.statistics.rate_verdict` is not ``not met``: the Wilson
-    intervals overlap, or the setting's lies below) and on the Pareto front, the point
-    farthest from the chord between the front's ends, both axes scaled to [0, 1] (the
-    "kneedle" rule): past it, more distance costs more deviation per metre than before it.
-    """
-    return max(knee_distances(rows), key=lambda rd: rd[1])[0]
-
-
 def plot(rows: list[dict[str, Any]], dataset: str, path: Path, title: str) -> None:
     """A 3 x 3 grid: efficiency (rows) against safety (columns), one curve per method."""
     import matplotlib
@@ -439,14 +256,7 @@ def _method_rows(rows: list[dict[str, Any]], name: str, dataset: str) -> list[di
 
 def at_distance(rs: list[dict[str, Any]], level: float, col: str) -> float | None:
     """``col`` interpolated along a front at a min obstacle distance (None: out of reach)."""
-    x = np.array([r["min_obstacle_distance"] for r in rs])
-    y = np.array([r[col] for r in rs])
-    ok = np.isfinite(y)
-    x, y = x[ok], y[ok]
-    if x.size == 0 or not x.min() <= level <= x.max():
-        return None
-    order = np.argsort(x, kind="stable")
-    return float(np.interp(level, x[order], y[order]))
+    return interpolate_at(rs, level, "min_obstacle_distance", col)
 
 
 def _num(x: float) -> str:

@@ -1,0 +1,211 @@
+"""Tests of ``uasep-bench`` (uasep_env.benchmark): rows, equal safety, bad input, resume, workers.
+
+Tiny suites: 2-4 episodes per bank, 20 s episodes (``--config episode_duration=20``).
+"""
+
+import json
+import math
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import uasep_env.evaluation
+from uasep_env import make_config
+from uasep_env.benchmark import main
+from uasep_env.benchmark.front import deviation_at_budget
+from uasep_env.benchmark.methods import METHODS
+from uasep_env.policies import POLICIES, make_policy, shipped_policy_path
+
+SHORT = ["--config", "episode_duration=20", "--no-figure", "--quiet"]
+
+
+def _board(out):
+    board = json.loads((out / "bench.json").read_text())
+    board.pop("command")  # names the output folder
+    return board
+
+
+def test_row_equals_uasep_eval(tmp_path):
+    """A row's numbers are uasep-eval's on the same seeds and config."""
+    ev = tmp_path / "eval.json"
+    args = ["--policy", "apf,zero", "--scenario", "random", "--seed", "5000000"]
+    rc = uasep_env.evaluation.main([*args, "--episodes", "3", "--config", "episode_duration=20",
+                                    "--json", str(ev), "--quiet"])  # fmt: skip
+    assert rc == 0
+    out = tmp_path / "bench"
+    rc = main(["--policy", "apf,zero", "--banks", "held_out", "--episodes", "3", "--no-front",
+               "--out", str(out), *SHORT])  # fmt: skip
+    assert rc == 0
+    evaluated = json.loads(ev.read_text())
+    board = _board(out)
+    assert board["banks"]["held_out"]["seeds"] == {"first": 5_000_000, "count": 3}
+    assert board["banks"]["held_out"]["config"] == evaluated["config"]
+    for label in ("apf", "zero"):
+        agg = evaluated["results"][label]["aggregate"]
+        row = board["results"]["held_out"][label]["default"]
+        for col, key in (("collision", "collision"), ("loss_of_separation", "loss_of_separation")):
+            for f in ("rate", "ci_low", "ci_high", "successes", "n"):
+                assert row[col][f] == agg[f"episode.{key}"][f], (label, col, f)
+        for col, key in (("max_deviation", "max_deviation"),
+                         ("conflict_time", "max_conflict_duration"), ("cost", "cost")):  # fmt: skip
+            for f in ("mean", "ci_low", "ci_high", "n_valid"):
+                assert row[col][f] == agg[f"episode.{key}"][f], (label, col, f)
+
+
+def _pt(value, los, dev, collision=0.0):
+    return {"value": value, "loss_of_separation": los, "max_deviation": dev, "collision": collision}
+
+
+FRONT = [
+    _pt(0.5, 0.4, 2.0),
+    _pt(1.0, 0.2, 4.0),
+    _pt(1.5, 0.2, 5.0),  # dominated by 1.0: same rate, more deviation
+    _pt(2.0, 0.1, 6.0),
+    _pt(3.0, 0.0, 9.0, collision=0.05),  # the only setting within 0 collides: not eligible
+]
+
+
+@pytest.mark.parametrize(
+    ("budget", "deviation", "setting"),
+    [
+        (0.15, 5.0, [1.0, 2.0]),  # half way from 4 m (rate 0.2) to 6 m (rate 0.1)
+        (0.1, 6.0, 2.0),
+        (0.3, 3.0, [0.5, 1.0]),
+        (0.5, 2.0, 0.5),  # every setting within: the cheapest
+    ],
+)
+def test_equal_safety_interpolates_along_the_front(budget, deviation, setting):
+    eq = deviation_at_budget(FRONT, budget)
+    assert eq["deviation"] == pytest.approx(deviation)
+    assert eq["setting"] == setting
+
+
+def test_equal_safety_needs_a_collision_free_setting_within_the_budget():
+    eq = deviation_at_budget(FRONT, 0.0)
+    assert eq["deviation"] is None and "0.1 is over the budget" in eq["reason"]
+    eq = deviation_at_budget([_pt(1.0, 0.0, 3.0, collision=0.1)], 0.5)
+    assert eq["deviation"] is None and "collision" in eq["reason"]
+    assert deviation_at_budget([_pt(None, 0.2, 3.0)], 0.2) == {"deviation": 3.0, "setting": None}
+
+
+def _nan_module(tmp_path, monkeypatch):
+    (tmp_path / "nan_ctrl.py").write_text(
+        textwrap.dedent("""
+        import numpy as np
+
+        class NaNPolicy:
+            def __call__(self, obs):
+                return np.full((*np.shape(obs)[:-1], 3), np.nan)
+
+            def reset(self):
+                pass
+
+        def make(config):
+            return NaNPolicy()
+    """)
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "nan_ctrl", raising=False)
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["--policy", "apff"], "'apff'"),
+        (["--policy", "nosuchmodule:make"], "'nosuchmodule:make'"),
+        (["--policy", "apf+nosuchshield"], "'apf+nosuchshield'"),
+        (["--banks", "held_out,moon"], "'moon'"),
+        (["--budget", "1.5"], "'1.5'"),
+        (["--budget", "-0.1"], "'-0.1'"),
+        (["--budget", "nan"], "'nan'"),
+        (["--config", "episode_duration=-1"], "episode_duration"),
+        (["--policy", "nan_ctrl:make"], "'nan_ctrl:make'"),
+    ],
+)
+def test_bad_input_is_one_line_naming_it(tmp_path, monkeypatch, capsys, args, named):
+    _nan_module(tmp_path, monkeypatch)
+    argv = ["--banks", "held_out", "--episodes", "2", "--no-front", "--out", str(tmp_path / "o")]
+    rc = main([*argv, *SHORT, *args])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and named in err, err
+    if "nan_ctrl" in named:
+        assert "non-finite" in err
+
+
+def test_interrupted_suite_resumes_to_the_same_json(tmp_path, monkeypatch):
+    argv = ["--policy", "apf,zero", "--banks", "held_out", "--episodes", "2", *SHORT]
+    whole = tmp_path / "whole"
+    assert main([*argv, "--out", str(whole)]) == 0
+
+    real, calls = uasep_env.evaluation.evaluate, []
+
+    def interrupted(*a, **k):
+        calls.append(a[0])
+        if len(calls) == 2:  # apf's cells (its default and its sweep) are written
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    cut = tmp_path / "cut"
+    monkeypatch.setattr(uasep_env.evaluation, "evaluate", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        main([*argv, "--out", str(cut)])
+    assert len(list((cut / "cells").rglob("*.json"))) == 9 and not (cut / "bench.json").exists()
+    calls.clear()
+
+    def counted(*a, **k):
+        calls.append(a[0])
+        return real(*a, **k)
+
+    monkeypatch.setattr(uasep_env.evaluation, "evaluate", counted)
+    assert main([*argv, "--out", str(cut), "--resume"]) == 0
+    assert [list(c) for c in calls] == [["default"]]  # only zero's cell was left
+    assert _board(cut) == _board(whole)
+    calls.clear()
+    assert main([*argv, "--out", str(cut)]) == 0 and calls == []  # all finished: nothing runs
+    # Another suite's settings in the same folder are refused, not mixed in.
+    rc = main([*argv[:-4], "--config", "episode_duration=30", "--no-figure", "--quiet",
+               "--out", str(cut)])  # fmt: skip
+    assert rc == 2
+
+
+def test_workers_and_ray_give_the_same_numbers(tmp_path):
+    argv = ["--policy", "apf,zero", "--banks", "held_out", "--episodes", "4", "--no-front", *SHORT]
+    boards = {}
+    for name, extra in (("one", ["--workers", "1"]), ("two", ["--workers", "2"])):
+        assert main([*argv, *extra, "--out", str(tmp_path / name)]) == 0
+        boards[name] = _board(tmp_path / name)
+    assert boards["one"] == boards["two"]
+    pytest.importorskip("ray")
+    assert main([*argv, "--ray", "--out", str(tmp_path / "ray")]) == 0
+    assert _board(tmp_path / "ray") == boards["one"]
+
+
+def _observations():
+    """Observations along collision courses, obstacles near and far (the margins matter)."""
+    from uasep_env.envs.core import EnvCore
+
+    cfg = make_config(scenario="collision_head_on", episode_duration=60.0)
+    core = EnvCore(cfg, n_envs=4)
+    obs, policy, seen = core.reset(seed=[1, 2, 3, 4]), make_policy("apf", cfg), []
+    for _ in range(cfg.max_steps):
+        seen.append(obs)
+        obs = core.step(policy(obs)).obs
+    return cfg, np.concatenate(seen[::5])
+
+
+@pytest.mark.parametrize("method", [m for m in METHODS if m.policy_name], ids=lambda m: m.name)
+def test_a_sweep_passes_through_its_policy_default(method):
+    """A front's default point is the row's policy (the row stands for it on the front)."""
+    name = method.policy_name
+    if name not in POLICIES and shipped_policy_path(name) is None:
+        pytest.skip(f"{name} is not shipped")
+    cfg, obs = _observations()
+    assert make_config(cfg, **method.config(method.default)) == cfg
+    swept, named = method.policy(cfg, method.default), make_policy(name, cfg)
+    swept.reset()
+    named.reset()
+    np.testing.assert_array_equal(swept(obs), named(obs))
+    assert math.isfinite(method.default) and method.default in method.values
