@@ -201,13 +201,15 @@ class CBFFilter:
         coming until it is lost (measured: one seed of six on ``collision_head_on`` flew
         over 300 m off its plan). Each binding barrier of ``valid`` (the filter passes the
         obstacles' only: a formation's neighbours fly alongside, and turning from them
-        pushed UAVs into each other) adds its shortfall along ``down x n``: horizontal, to
-        the right of the line of sight, as the rules of the air turn aircraft right
-        head-on. It vanishes with the shortfall, so a command that keeps every barrier is
-        not changed.
+        pushed UAVs into each other) adds its shortfall along ``n x down``: horizontal, to
+        the right of the line of sight to the obstacle (``-n``; in NED, flying north at an
+        obstacle ahead, east), as the rules of the air turn aircraft right head-on. It
+        vanishes with the shortfall, so a command that keeps every barrier is not changed.
         """
         short = np.where(valid, np.maximum(b - np.einsum("...kj,...j->...k", n, u0), 0.0), 0.0)
-        right = np.cross(np.array([0.0, 0.0, 1.0]), n)  # NED: down x n, horizontal
+        # n points from the obstacle to the UAV: right of the line of sight -n is
+        # down x (-n) = n x down (NED, z down).
+        right = np.cross(n, np.array([0.0, 0.0, 1.0]))
         right, _ = _unit(right)
         return np.einsum("...k,...kj->...j", short, right)
 

@@ -132,26 +132,36 @@ def mvp_velocity_change(
     w2 = np.einsum("...i,...i->...", rel_vel, rel_vel)
     closing = -np.einsum("...i,...i->...", rel_pos, rel_vel)
     t_cpa = np.where(w2 > 1e-12, closing / np.maximum(w2, 1e-12), 0.0)
-    t_ahead = np.maximum(t_cpa, 0.0)  # diverging: the CPA is now
-    d_cpa = rel_pos + rel_vel * t_ahead[..., None]
+    # As BlueSky: the CPA at t_cpa even when it is past (a diverging intrusion), and the
+    # change spread over |t_cpa| ("abs(tcpa) because it becomes negative during intrusion").
+    d_cpa = rel_pos + rel_vel * t_cpa[..., None]
     miss = norm(d_cpa)
     conflict = mask & (((t_cpa > 0.0) & (t_cpa < look_ahead) & (miss < radius)) | (dist < radius))
-    # Head-on: resolve sideways, perpendicular to d in the horizontal plane (odd in d).
+    # Head-on: resolve sideways, perpendicular to d in the horizontal plane (odd in d), so
+    # each UAV turns right of its line of sight (the rules of the air: both turn right).
     side = np.stack([rel_pos[..., 1], -rel_pos[..., 0], np.zeros_like(dist)], axis=-1)
     side_n = norm(side)
     head_on = miss < head_on_distance
-    side_dir = side / np.maximum(side_n, 1e-12)[..., None]
+    # Straight above or below there is no horizontal perpendicular: resolve vertically,
+    # as BlueSky's vertical resolution, the whole zone over the time to the CPA along the
+    # relative velocity w (the ownship moves the way the intruder comes, away from it).
+    vertical = head_on & (side_n <= 1e-9 * dist)
+    w_dir = rel_vel / np.sqrt(np.maximum(w2, 1e-300))[..., None]
+    side_dir = np.where(
+        vertical[..., None], -w_dir, side / np.maximum(side_n, 1e-300)[..., None]
+    )
     cpa_dir = np.where(head_on[..., None], side_dir, d_cpa / np.maximum(miss, 1e-12)[..., None])
     miss = np.where(head_on, head_on_distance, miss)
     # BlueSky's correction for an intruder outside the zone: reach the tangent, not the chord.
-    outside = (radius < dist) & (miss < dist)
+    outside = (radius < dist) & (miss < dist) & ~vertical
     safe_dist = np.maximum(dist, 1e-12)
     erratum = np.cos(
         np.arcsin(np.clip(radius / safe_dist, 0.0, 1.0))
         - np.arcsin(np.clip(miss / safe_dist, 0.0, 1.0))
     )
     push = np.where(outside, radius / np.maximum(erratum, 1e-6) - miss, radius - miss)
-    dv = -(push / np.maximum(t_ahead, min_time))[..., None] * cpa_dir
+    push = np.where(vertical, radius, push)
+    dv = -(push / np.maximum(np.abs(t_cpa), min_time))[..., None] * cpa_dir
     return np.where(conflict[..., None], dv, 0.0)
 
 

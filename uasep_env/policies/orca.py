@@ -132,18 +132,31 @@ def orca_planes(
     w_len = np.sqrt(np.maximum(w_sq, 1e-24))
     n_sphere = w / w_len[..., None]
     u_sphere = (radius * inv_tau - w_len)[..., None] * n_sphere
-    # Cone side: the leg the relative velocity is nearest to (RVO2's closed form).
-    b = np.einsum("...i,...i->...", rel_pos, rel_vel)
-    cross = np.cross(rel_pos, rel_vel)
-    c = np.einsum("...i,...i->...", rel_vel, rel_vel) - np.einsum(
-        "...i,...i->...", cross, cross
-    ) / np.maximum(dist_sq - r_sq, 1e-12)
-    a = np.maximum(dist_sq, 1e-12)
-    t = (b + np.sqrt(np.maximum(b * b - a * c, 0.0))) / a
-    w_cone = rel_vel - t[..., None] * rel_pos
-    wc_len = np.maximum(norm(w_cone), 1e-12)
-    n_cone = w_cone / wc_len[..., None]
-    u_cone = (radius * t - wc_len)[..., None] * n_cone
+    # Cone side: the leg the relative velocity is nearest to, in the plane of the axis and
+    # ``v_rel`` (the cone is circular): leg ``l = cos a p^ + sin a e``, outward normal
+    # ``n = cos a e - sin a p^`` (``sin a = R / |p|``, ``e`` the unit part of ``v_rel``
+    # across the axis) and ``u = -(v_rel . n) n``. RVO2's closed form is the same point but
+    # loses ``n`` to cancellation near the axis (exactly head-on it gave ``n = 0``, no
+    # constraint); on the axis (within 1e-9 rad) there is no nearest leg and the right one
+    # is taken (``e = down x p^``, right of the line of sight: the rules of the air; both
+    # agents of a pair turn right, as ``e`` is odd in ``p``; straight above or below, east
+    # or west by the sign of ``p_z``).
+    dist = np.sqrt(np.maximum(dist_sq, 1e-24))
+    axis = rel_pos / dist[..., None]
+    across = rel_vel - np.einsum("...i,...i->...", rel_vel, axis)[..., None] * axis
+    across_len = norm(across)
+    right = np.cross(np.array([0.0, 0.0, 1.0]), axis)
+    right_len = norm(right)
+    east = np.stack([np.zeros_like(dist), np.where(rel_pos[..., 2] < 0.0, -1.0, 1.0),
+                     np.zeros_like(dist)], axis=-1)  # fmt: skip
+    right = np.where((right_len > 1e-9)[..., None], right / np.maximum(right_len, 1e-300)[
+        ..., None], east)  # fmt: skip
+    on_axis = across_len <= 1e-9 * norm(rel_vel)
+    e = np.where(on_axis[..., None], right, across / np.maximum(across_len, 1e-300)[..., None])
+    sin_a = np.minimum(radius / dist, 1.0)
+    cos_a = np.sqrt(np.maximum(1.0 - sin_a * sin_a, 0.0))
+    n_cone = cos_a[..., None] * e - sin_a[..., None] * axis
+    u_cone = -np.einsum("...i,...i->...", rel_vel, n_cone)[..., None] * n_cone
     # Inside R: leave the sphere of one step (centre p / dt, radius R / dt).
     inv_dt = 1.0 / time_step
     w_in = rel_vel - inv_dt * rel_pos
