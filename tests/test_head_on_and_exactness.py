@@ -148,8 +148,8 @@ def _scipy_filter_qp(u0, a, b, valid, lo, hi, rho):
             res = minimize(
                 lambda z, i=i: 0.5 * ((z[:3] - u0[i]) @ (z[:3] - u0[i]) + z[3] ** 2),
                 np.r_[start, x3], jac=lambda z, i=i: np.r_[z[:3] - u0[i], z[3]],
-                constraints=cons, bounds=[*zip(lo[i], hi[i]), (0.0, None)], method="SLSQP",
-                options={"ftol": 1e-14, "maxiter": 1000},
+                constraints=cons, bounds=[*zip(lo[i], hi[i], strict=True), (0.0, None)],
+                method="SLSQP", options={"ftol": 1e-14, "maxiter": 1000},
             )  # fmt: skip
             if best is None or res.fun < best.fun:
                 best = res
@@ -176,5 +176,5 @@ def test_filter_qp_is_exact_up_to_the_largest_slack_penalty(seed, spread):
     np.testing.assert_allclose(u, ref[:, :3], atol=1e-5)
     short = np.einsum("bkj,bj->bk", a, u) + s[:, None] - b
     assert np.all(np.where(valid, short, 0.0) >= -1e-8)  # the slack is sqrt(rho) x: 1e3 x
-    with pytest.raises(ValueError, match="cbf.slack_penalty"):
+    with pytest.raises(ValueError, match=r"cbf\.slack_penalty"):
         CBFParams(slack_penalty=1e7)

@@ -72,7 +72,8 @@ class CBFParams:
             acceleration (dimensionless). A quadratic penalty leaves a constraint short by
             ``1 / (1 + rho)`` of the change it asks for (1e-4 with the default: a 3 m/s^2
             change is 0.3 mm/s^2 short); the slack is large only where the constraints
-            cannot all hold within the acceleration bounds.
+            cannot all hold within the acceleration bounds. At most 1e6, where the exact
+            solver's range ends (:mod:`uasep_env.policies.qp`).
         deadlock_gain: Weight of the sidestep added to the command where a barrier binds
             (:meth:`CBFFilter.sidestep`; dimensionless, 0: pure minimal change).
     """

@@ -13,9 +13,10 @@ the ORCA half-space is
 
 with ``r`` the agent's responsibility: 1/2 between UAVs (both avoid: reciprocal), 1 against
 an obstacle (it does not avoid). The new velocity is the one closest to the preferred
-velocity inside every half-space and the max-speed sphere: the small linear program
-(quadratic objective, RVO2's incremental algorithm) of :func:`solve_orca_lp`, exact in
-O(n) expected constraints; if the half-spaces leave no velocity (dense traffic),
+velocity inside every half-space and the max-speed sphere: the small program (quadratic
+objective) of :func:`solve_orca_lp`, solved exactly over every active set (RVO2's
+incremental algorithm lost nearly parallel planes); if the half-spaces leave no velocity
+(dense traffic),
 RVO2's fallback picks the velocity that violates them least (the 4-D program of
 ``linearProgram4``: minimise the largest violation).
 
@@ -381,9 +382,10 @@ def _exact_program(
         basis.append(e * inv[:, None])
         beta.append(rhs * inv)
     q = preferred[None, :] + sum(
-        (bj - _dot3(ej, preferred[None, :]))[:, None] * ej for ej, bj in zip(basis, beta)
+        (bj - _dot3(ej, preferred[None, :]))[:, None] * ej
+        for ej, bj in zip(basis, beta, strict=True)
     )
-    centre = sum(bj[:, None] * ej for ej, bj in zip(basis, beta))
+    centre = sum(bj[:, None] * ej for ej, bj in zip(basis, beta, strict=True))
     radius_sq = max_speed * max_speed - _dot3(centre, centre)
     off = q - centre
     off_sq = _dot3(off, off)
@@ -392,9 +394,7 @@ def _exact_program(
     v = np.where(outside[:, None], centre + shrink[:, None] * off, q)  # (C, 3)
     tol = _FEAS_TOL * scale
     slack = np.einsum("ki,ci->ck", normals, v) - offsets[None, :]  # (C, K)
-    ok = (slack.min(axis=-1, initial=np.inf) >= -tol) & (
-        np.sqrt(_dot3(v, v)) <= max_speed + tol
-    )
+    ok = (slack.min(axis=-1, initial=np.inf) >= -tol) & (np.sqrt(_dot3(v, v)) <= max_speed + tol)
     if not ok.any():
         return None
     dist = _dot3(v - preferred[None, :], v - preferred[None, :])
@@ -429,8 +429,7 @@ def solve_orca_lp(
     if exact is not None:
         return np.array(exact, dtype=float)
     planes = [
-        (tuple(map(float, n)), tuple(map(float, p)))
-        for n, p in zip(normals, points, strict=True)
+        (tuple(map(float, n)), tuple(map(float, p))) for n, p in zip(normals, points, strict=True)
     ]
     opt = tuple(map(float, pref))
     fail, result = _lp3(planes, float(max_speed), opt, False)  # type: ignore[arg-type]
