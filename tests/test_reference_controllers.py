@@ -245,3 +245,74 @@ def test_learned_vs_apf_add_merges_without_touching_other_rows(tmp_path):
             "ppo_shared"
         )
     assert " mvp " in text and (tmp_path / "learned_vs_apf.md").read_text() == text
+
+
+def _rotated(n, angle, rng):
+    """``n`` turned by ``angle`` (rad) about a random axis perpendicular to it."""
+    axis = np.cross(n, rng.normal(size=3))
+    axis /= np.linalg.norm(axis)
+    return np.cos(angle) * n + np.sin(angle) * np.cross(axis, n)
+
+
+def _near_degenerate(rng, kind):
+    """A feasible program whose binding planes are nearly parallel or duplicated."""
+    n1 = rng.normal(size=3)
+    n1 /= np.linalg.norm(n1)
+    point = rng.normal(scale=3.0, size=3)
+    if kind == "parallel":  # two planes through one line, 1e-9 rad to 0.5 deg apart
+        angle = 10.0 ** rng.uniform(-9.0, np.log10(np.radians(0.5)))
+        normals = [n1, _rotated(n1, angle, rng)]
+        points = [point, point]
+    else:  # the same plane two or three times, through different points of it
+        copies = int(rng.integers(2, 4))
+        normals = [n1] * copies
+        points = [point + rng.uniform(0.0, 5.0) * np.cross(n1, rng.normal(size=3))
+                  for _ in range(copies)]  # fmt: skip
+    for _ in range(int(rng.integers(0, 3))):  # a few others, slack at the binding point
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        normals.append(n)
+        points.append(point - rng.uniform(0.5, 5.0) * n)
+    # Preferred: behind the binding planes, near their common line (1 mm to 2 m off), so
+    # that both bind at the optimum.
+    off = rng.normal(scale=10.0 ** rng.uniform(-3.0, 0.3), size=3)
+    pref = point - rng.uniform(0.5, 8.0) * n1 + off
+    order = rng.permutation(len(normals))
+    return np.array(normals)[order], np.array(points)[order], pref
+
+
+def test_orca_lp_reproducer_nearly_parallel_binding_planes():
+    """Two planes 0.1 deg apart through (2, 0, 0): the optimum is (2, 0, 0), not 10 m/s off."""
+    a = np.radians(0.1)
+    normals = np.array([[1.0, 0.0, 0.0], [np.cos(a), np.sin(a), 0.0]])
+    v = solve_orca_lp(normals, np.array([[2.0, 0, 0]] * 2), np.array([-1.0, -0.0026, 0]), 10.0)
+    np.testing.assert_allclose(v, [2.0, 0.0, 0.0], atol=1e-9)
+    dup = solve_orca_lp(np.array([[1.0, 0, 0]] * 3), np.array([[2.0, 0, 0]] * 3),
+                        np.array([-1.0, 0.5, 0.0]), 10.0)  # fmt: skip
+    np.testing.assert_allclose(dup, [2.0, 0.5, 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["parallel", "duplicate"])
+def test_orca_lp_is_exact_on_near_degenerate_programs(kind):
+    """Nearly parallel or duplicated binding planes: scipy's optimum, every plane kept.
+
+    Where RVO2-3D's incremental program sees planes within 0.18 deg of each other as
+    parallel, it declares the program infeasible and its fallback flies up to 14 m/s off
+    the optimum; the program is feasible and its optimum is unique (strictly convex).
+    """
+    rng = np.random.default_rng(7 if kind == "parallel" else 8)
+    vmax, checked = 10.0, 0
+    for _ in range(150):
+        normals, points, pref = _near_degenerate(rng, kind)
+        t_star, v_star = _least_violation(normals, points, vmax)
+        if t_star > -1e-9:  # the sphere leaves nothing strictly inside: not this family
+            continue
+        checked += 1
+        v = solve_orca_lp(normals, points, pref, vmax)
+        worst = np.max(np.einsum("ki,ki->k", normals, points - v))
+        assert worst <= 1e-8 and np.linalg.norm(v) <= vmax + 1e-8, (worst, v)
+        ref = _reference_qp(normals, points, pref, vmax, v_star)
+        # Strict convexity: |v - v*|^2 <= f(v) - f(v*), so the objective pins the point.
+        assert (v - pref) @ (v - pref) <= ref.fun + 1e-7, (v, ref.x)
+        np.testing.assert_allclose(v, ref.x, atol=1e-3)
+    assert checked > 60

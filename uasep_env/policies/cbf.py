@@ -72,7 +72,8 @@ class CBFParams:
             acceleration (dimensionless). A quadratic penalty leaves a constraint short by
             ``1 / (1 + rho)`` of the change it asks for (1e-4 with the default: a 3 m/s^2
             change is 0.3 mm/s^2 short); the slack is large only where the constraints
-            cannot all hold within the acceleration bounds.
+            cannot all hold within the acceleration bounds. At most 1e6, where the exact
+            solver's range ends (:mod:`uasep_env.policies.qp`).
         deadlock_gain: Weight of the sidestep added to the command where a barrier binds
             (:meth:`CBFFilter.sidestep`; dimensionless, 0: pure minimal change).
     """
@@ -201,13 +202,15 @@ class CBFFilter:
         coming until it is lost (measured: one seed of six on ``collision_head_on`` flew
         over 300 m off its plan). Each binding barrier of ``valid`` (the filter passes the
         obstacles' only: a formation's neighbours fly alongside, and turning from them
-        pushed UAVs into each other) adds its shortfall along ``down x n``: horizontal, to
-        the right of the line of sight, as the rules of the air turn aircraft right
-        head-on. It vanishes with the shortfall, so a command that keeps every barrier is
-        not changed.
+        pushed UAVs into each other) adds its shortfall along ``n x down``: horizontal, to
+        the right of the line of sight to the obstacle (``-n``; in NED, flying north at an
+        obstacle ahead, east), as the rules of the air turn aircraft right head-on. It
+        vanishes with the shortfall, so a command that keeps every barrier is not changed.
         """
         short = np.where(valid, np.maximum(b - np.einsum("...kj,...j->...k", n, u0), 0.0), 0.0)
-        right = np.cross(np.array([0.0, 0.0, 1.0]), n)  # NED: down x n, horizontal
+        # n points from the obstacle to the UAV: right of the line of sight -n is
+        # down x (-n) = n x down (NED, z down).
+        right = np.cross(n, np.array([0.0, 0.0, 1.0]))
         right, _ = _unit(right)
         return np.einsum("...k,...kj->...j", short, right)
 

@@ -6,19 +6,23 @@ obstacle) with relative position ``d = p_j - p_i`` and relative velocity ``w = v
 
 * time to the closest point of approach ``t_cpa = -d.w / |w|^2`` and the intruder's relative
   position there, ``d_cpa = d + w t_cpa``;
+  (as BlueSky, also for a past CPA, ``t_cpa < 0``: a diverging intrusion);
 * a conflict when ``0 < t_cpa < T_la`` (the look-ahead) and ``|d_cpa| < R`` (the protected
   zone's radius times the margin factor), or when already inside (``|d| < R``);
 * the displacement that moves the CPA to the protected zone's boundary,
   ``R / cos(asin(R/|d|) - asin(|d_cpa|/|d|)) - |d_cpa|`` (BlueSky's correction, so the new
   path does not graze the zone; ``R - |d_cpa|`` inside it), along ``d_cpa`` away from the
   intruder, turned into a velocity change over the time to the CPA:
-  ``dv_j = -(displacement / max(t_cpa, t_min)) d_cpa / |d_cpa|``;
+  ``dv_j = -(displacement / max(|t_cpa|, t_min)) d_cpa / |d_cpa|``;
 * a head-on conflict (``|d_cpa|`` below ``head_on_distance``) resolved sideways: ``d_cpa``
-  is replaced by the horizontal perpendicular of ``d``, odd in ``d`` so that both UAVs of a
-  pair turn apart;
+  is replaced by the horizontal perpendicular of ``d``, right of the line of sight and odd
+  in ``d`` so that both UAVs of a pair turn right (the rules of the air); straight above or
+  below, BlueSky's vertical resolution (the whole zone over the time to the CPA, along
+  ``w``);
 * the changes summed over conflicts; a UAV-UAV conflict is shared (each UAV takes
-  ``uav_share`` = 1/2 of it, both seeing it), an obstacle is not cooperative (the UAV takes
-  all of it).
+  ``uav_share`` = 1/2 of the whole change, both seeing it: this package's reciprocal split;
+  BlueSky halves only the vertical part), an obstacle is not cooperative (the UAV takes all
+  of it).
 
 Obstacles are resolved on their estimated state (``mvp``) or, in the ``mvp-region``
 variant, on their predicted reachable region: the UAV's straight path is checked against
@@ -64,13 +68,15 @@ class MVPParams:
         margin_factor: Resolution margin on the protected zone (BlueSky's ``asas_marh``,
             1.05 in its shipped settings).
         margin_scale: Multiplies the protected-zone radii (the trade-off sweep's knob).
-        uav_share: Part of a UAV-UAV conflict each UAV resolves (1/2: both resolve it,
-            BlueSky's cooperative rule; 1: each as if alone).
+        uav_share: Part of a UAV-UAV conflict's whole change each UAV takes (1/2: both
+            resolve it, reciprocally; 1: each as if alone). BlueSky's cooperative rule
+            halves only the vertical part.
         response_time: Time over which the velocity change is commanded (s): the
             acceleration is ``dv / response_time``. 1 s: the change is flown within about a
             second at the 2 m/s^2 bound for the few-m/s changes of an encounter.
         min_time: Floor on the time to the CPA the change is spread over (s), so an
-            intrusion (``t_cpa`` near 0) asks for a finite change. BlueSky takes ``|t_cpa|``;
+            intrusion (``t_cpa`` near 0) asks for a finite change: ``max(|t_cpa|, t_min)``.
+            BlueSky takes ``|t_cpa|`` alone;
             one 0.1 s step would demand 10 times the acceleration bound.
         head_on_distance: Below this miss distance at the CPA the conflict is head-on and is
             resolved sideways (m). BlueSky's 10 m is 0.1 % of its 5 NM zone; 0.1 % of 10 m.
@@ -132,26 +138,34 @@ def mvp_velocity_change(
     w2 = np.einsum("...i,...i->...", rel_vel, rel_vel)
     closing = -np.einsum("...i,...i->...", rel_pos, rel_vel)
     t_cpa = np.where(w2 > 1e-12, closing / np.maximum(w2, 1e-12), 0.0)
-    t_ahead = np.maximum(t_cpa, 0.0)  # diverging: the CPA is now
-    d_cpa = rel_pos + rel_vel * t_ahead[..., None]
+    # As BlueSky: the CPA at t_cpa even when it is past (a diverging intrusion), and the
+    # change spread over |t_cpa| ("abs(tcpa) because it becomes negative during intrusion").
+    d_cpa = rel_pos + rel_vel * t_cpa[..., None]
     miss = norm(d_cpa)
     conflict = mask & (((t_cpa > 0.0) & (t_cpa < look_ahead) & (miss < radius)) | (dist < radius))
-    # Head-on: resolve sideways, perpendicular to d in the horizontal plane (odd in d).
+    # Head-on: resolve sideways, perpendicular to d in the horizontal plane (odd in d), so
+    # each UAV turns right of its line of sight (the rules of the air: both turn right).
     side = np.stack([rel_pos[..., 1], -rel_pos[..., 0], np.zeros_like(dist)], axis=-1)
     side_n = norm(side)
     head_on = miss < head_on_distance
-    side_dir = side / np.maximum(side_n, 1e-12)[..., None]
+    # Straight above or below there is no horizontal perpendicular: resolve vertically,
+    # as BlueSky's vertical resolution, the whole zone over the time to the CPA along the
+    # relative velocity w (the ownship moves the way the intruder comes, away from it).
+    vertical = head_on & (side_n <= 1e-9 * dist)
+    w_dir = rel_vel / np.sqrt(np.maximum(w2, 1e-300))[..., None]
+    side_dir = np.where(vertical[..., None], -w_dir, side / np.maximum(side_n, 1e-300)[..., None])
     cpa_dir = np.where(head_on[..., None], side_dir, d_cpa / np.maximum(miss, 1e-12)[..., None])
     miss = np.where(head_on, head_on_distance, miss)
     # BlueSky's correction for an intruder outside the zone: reach the tangent, not the chord.
-    outside = (radius < dist) & (miss < dist)
+    outside = (radius < dist) & (miss < dist) & ~vertical
     safe_dist = np.maximum(dist, 1e-12)
     erratum = np.cos(
         np.arcsin(np.clip(radius / safe_dist, 0.0, 1.0))
         - np.arcsin(np.clip(miss / safe_dist, 0.0, 1.0))
     )
     push = np.where(outside, radius / np.maximum(erratum, 1e-6) - miss, radius - miss)
-    dv = -(push / np.maximum(t_ahead, min_time))[..., None] * cpa_dir
+    push = np.where(vertical, radius, push)
+    dv = -(push / np.maximum(np.abs(t_cpa), min_time))[..., None] * cpa_dir
     return np.where(conflict[..., None], dv, 0.0)
 
 

@@ -13,9 +13,10 @@ the ORCA half-space is
 
 with ``r`` the agent's responsibility: 1/2 between UAVs (both avoid: reciprocal), 1 against
 an obstacle (it does not avoid). The new velocity is the one closest to the preferred
-velocity inside every half-space and the max-speed sphere: the small linear program
-(quadratic objective, RVO2's incremental algorithm) of :func:`solve_orca_lp`, exact in
-O(n) expected constraints; if the half-spaces leave no velocity (dense traffic),
+velocity inside every half-space and the max-speed sphere: the small program (quadratic
+objective) of :func:`solve_orca_lp`, solved exactly over every active set (RVO2's
+incremental algorithm lost nearly parallel planes); if the half-spaces leave no velocity
+(dense traffic),
 RVO2's fallback picks the velocity that violates them least (the 4-D program of
 ``linearProgram4``: minimise the largest violation).
 
@@ -34,6 +35,8 @@ sequential; each agent's result depends on its own row only, so batched equals p
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
@@ -130,18 +133,31 @@ def orca_planes(
     w_len = np.sqrt(np.maximum(w_sq, 1e-24))
     n_sphere = w / w_len[..., None]
     u_sphere = (radius * inv_tau - w_len)[..., None] * n_sphere
-    # Cone side: the leg the relative velocity is nearest to (RVO2's closed form).
-    b = np.einsum("...i,...i->...", rel_pos, rel_vel)
-    cross = np.cross(rel_pos, rel_vel)
-    c = np.einsum("...i,...i->...", rel_vel, rel_vel) - np.einsum(
-        "...i,...i->...", cross, cross
-    ) / np.maximum(dist_sq - r_sq, 1e-12)
-    a = np.maximum(dist_sq, 1e-12)
-    t = (b + np.sqrt(np.maximum(b * b - a * c, 0.0))) / a
-    w_cone = rel_vel - t[..., None] * rel_pos
-    wc_len = np.maximum(norm(w_cone), 1e-12)
-    n_cone = w_cone / wc_len[..., None]
-    u_cone = (radius * t - wc_len)[..., None] * n_cone
+    # Cone side: the leg the relative velocity is nearest to, in the plane of the axis and
+    # ``v_rel`` (the cone is circular): leg ``l = cos a p^ + sin a e``, outward normal
+    # ``n = cos a e - sin a p^`` (``sin a = R / |p|``, ``e`` the unit part of ``v_rel``
+    # across the axis) and ``u = -(v_rel . n) n``. RVO2's closed form is the same point but
+    # loses ``n`` to cancellation near the axis (exactly head-on it gave ``n = 0``, no
+    # constraint); on the axis (within 1e-9 rad) there is no nearest leg and the right one
+    # is taken (``e = down x p^``, right of the line of sight: the rules of the air; both
+    # agents of a pair turn right, as ``e`` is odd in ``p``; straight above or below, east
+    # or west by the sign of ``p_z``).
+    dist = np.sqrt(np.maximum(dist_sq, 1e-24))
+    axis = rel_pos / dist[..., None]
+    across = rel_vel - np.einsum("...i,...i->...", rel_vel, axis)[..., None] * axis
+    across_len = norm(across)
+    right = np.cross(np.array([0.0, 0.0, 1.0]), axis)
+    right_len = norm(right)
+    east = np.stack([np.zeros_like(dist), np.where(rel_pos[..., 2] < 0.0, -1.0, 1.0),
+                     np.zeros_like(dist)], axis=-1)  # fmt: skip
+    right = np.where((right_len > 1e-9)[..., None], right / np.maximum(right_len, 1e-300)[
+        ..., None], east)  # fmt: skip
+    on_axis = across_len <= 1e-9 * norm(rel_vel)
+    e = np.where(on_axis[..., None], right, across / np.maximum(across_len, 1e-300)[..., None])
+    sin_a = np.minimum(radius / dist, 1.0)
+    cos_a = np.sqrt(np.maximum(1.0 - sin_a * sin_a, 0.0))
+    n_cone = cos_a[..., None] * e - sin_a[..., None] * axis
+    u_cone = -np.einsum("...i,...i->...", rel_vel, n_cone)[..., None] * n_cone
     # Inside R: leave the sphere of one step (centre p / dt, radius R / dt).
     inv_dt = 1.0 / time_step
     w_in = rel_vel - inv_dt * rel_pos
@@ -299,14 +315,102 @@ def _lp4(planes: Sequence[Plane], begin: int, radius: float, result: Vec) -> Vec
     return result
 
 
+# -- the exact program: every active set, solved in closed form --------------------------
+#: A normal whose part orthogonal to the earlier ones of its set is shorter than this is
+#: their combination (a duplicate or parallel plane, to within 1e-12 rad): dropped from the
+#: set. The set without it is a candidate too, and within that angle its point violates the
+#: dropped plane by under 1e-12 of the speeds involved, well inside the tolerance below.
+_DEPENDENT = 1e-12
+#: Feasibility tolerance of a candidate, relative to the largest speed of the program
+#: (round-off level: the orthogonalised systems below are backward stable).
+_FEAS_TOL = 1e-9
+
+
+@functools.lru_cache(maxsize=32)
+def _plane_sets(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every set of at most three of ``k`` planes: indices ``(C, 3)`` (padded) and sizes."""
+    sets = [c for m in range(4) for c in itertools.combinations(range(k), m)]
+    idx = np.array([c + (0,) * (3 - len(c)) for c in sets], dtype=np.intp).reshape(-1, 3)
+    return idx, np.array([len(c) for c in sets], dtype=np.intp)
+
+
+def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a . b`` over the last axis (3), added left to right (no BLAS: the same everywhere)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def _exact_program(
+    normals: np.ndarray, offsets: np.ndarray, preferred: np.ndarray, max_speed: float
+) -> np.ndarray | None:
+    """The optimum of the program, or None where it has no feasible velocity.
+
+    ``argmin |v - v_pref|`` s.t. ``n_k . v >= c_k`` and ``|v| <= V``: strictly convex, so
+    its minimiser is unique and, on its active set ``S`` (at most three planes with
+    independent normals, and perhaps the sphere), is the point of the ball's section by the
+    planes' common affine subspace ``A_S`` nearest ``v_pref``. Every set of at most three
+    planes is tried: its normals are orthonormalised in order (modified Gram-Schmidt,
+    twice; a dependent normal, a duplicate or (nearly) parallel plane, is dropped), which
+    gives ``A_S`` as ``E v = beta`` with ``E`` orthonormal, then the projection ``q`` of
+    ``v_pref`` on ``A_S``, the centre ``c`` of the section and its radius, and the
+    candidate: ``q`` if inside the section, else its radial projection onto the section's
+    boundary. Every candidate that satisfies all constraints (to round-off) is a feasible
+    velocity and the optimum is one of them: the nearest to ``v_pref`` is the optimum.
+    Backward stable, so nearly parallel or duplicated binding planes (where RVO2-3D's
+    incremental program declares the program infeasible) are solved like any other.
+    """
+    k = normals.shape[0]
+    if k == 0:
+        speed = norm(preferred)
+        return preferred * min(1.0, max_speed / speed) if speed > 0.0 else preferred
+    idx, size = _plane_sets(k)
+    n_s = normals[idx]  # (C, 3, 3): the rows of each set
+    c_s = offsets[idx]  # (C, 3)
+    scale = 1.0 + max(max_speed, float(np.abs(offsets).max(initial=0.0)), norm(preferred))
+    basis: list[np.ndarray] = []
+    beta: list[np.ndarray] = []
+    for j in range(3):
+        e = n_s[:, j, :]
+        rhs = c_s[:, j]
+        for _ in range(2):  # twice is enough (Giraud et al. 2005)
+            for ei, bi in zip(basis, beta, strict=True):
+                r = _dot3(e, ei)
+                e = e - r[:, None] * ei
+                rhs = rhs - r * bi
+        length = np.sqrt(_dot3(e, e))
+        keep = (j < size) & (length > _DEPENDENT)
+        inv = np.where(keep, 1.0 / np.where(keep, length, 1.0), 0.0)
+        basis.append(e * inv[:, None])
+        beta.append(rhs * inv)
+    q = preferred[None, :] + sum(
+        (bj - _dot3(ej, preferred[None, :]))[:, None] * ej
+        for ej, bj in zip(basis, beta, strict=True)
+    )
+    centre = sum(bj[:, None] * ej for ej, bj in zip(basis, beta, strict=True))
+    radius_sq = max_speed * max_speed - _dot3(centre, centre)
+    off = q - centre
+    off_sq = _dot3(off, off)
+    outside = off_sq > np.maximum(radius_sq, 0.0)
+    shrink = np.sqrt(np.maximum(radius_sq, 0.0) / np.where(outside, off_sq, 1.0))
+    v = np.where(outside[:, None], centre + shrink[:, None] * off, q)  # (C, 3)
+    tol = _FEAS_TOL * scale
+    slack = np.einsum("ki,ci->ck", normals, v) - offsets[None, :]  # (C, K)
+    ok = (slack.min(axis=-1, initial=np.inf) >= -tol) & (np.sqrt(_dot3(v, v)) <= max_speed + tol)
+    if not ok.any():
+        return None
+    dist = _dot3(v - preferred[None, :], v - preferred[None, :])
+    return v[np.argmin(np.where(ok, dist, np.inf))]
+
+
 def solve_orca_lp(
     normals: np.ndarray, points: np.ndarray, preferred: np.ndarray, max_speed: float
 ) -> np.ndarray:
     """The velocity nearest ``preferred`` in every half-space and the speed sphere.
 
     ``argmin |v - v_pref|`` s.t. ``(v - point_k) . normal_k >= 0`` and ``|v| <= max_speed``:
-    RVO2-3D's incremental program (``linearProgram3``), and its fallback
-    (``linearProgram4``, the least largest violation) when the half-spaces leave nothing.
+    exact where the half-spaces and the sphere leave a velocity (every active set in closed
+    form, :func:`_exact_program`; nearly parallel and duplicated planes included), and
+    RVO2-3D's fallback (``linearProgram4``, the least largest violation) where they leave
+    none.
 
     Args:
         normals: ``(K, 3)`` unit normals.
@@ -317,11 +421,17 @@ def solve_orca_lp(
     Returns:
         ``(3,)`` the new velocity.
     """
+    normals = np.asarray(normals, dtype=float).reshape(-1, 3)
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    pref = np.asarray(preferred, dtype=float).reshape(3)
+    offsets = _dot3(normals, points)
+    exact = _exact_program(normals, offsets, pref, float(max_speed))
+    if exact is not None:
+        return np.array(exact, dtype=float)
     planes = [
-        (tuple(map(float, n)), tuple(map(float, p)))
-        for n, p in zip(np.asarray(normals), np.asarray(points), strict=True)
+        (tuple(map(float, n)), tuple(map(float, p))) for n, p in zip(normals, points, strict=True)
     ]
-    opt = tuple(map(float, preferred))
+    opt = tuple(map(float, pref))
     fail, result = _lp3(planes, float(max_speed), opt, False)  # type: ignore[arg-type]
     if fail < len(planes):
         result = _lp4(planes, fail, float(max_speed), result)  # type: ignore[arg-type]

@@ -22,6 +22,12 @@ beyond a feasibility tolerance at round-off level, and is deterministic. Agents 
 ``u_0`` already satisfies every constraint (most of them, most of the time) skip the
 enumeration. ``tests/test_cbf.py`` checks it against ``qpsolvers`` (Clarabel) on random
 instances, infeasible ones (slack active) included.
+
+Its range: ``rho`` up to 1e6 (``CBFParams.slack_penalty``'s cap;
+``tests/test_head_on_and_exactness.py`` checks it there against scipy). The slack's column
+is ``1 / sqrt(rho)``, and past about 1e6 the pivots of a set holding it fall under the
+linear-dependence test, so the true active set is rejected and a costlier candidate wins
+(at 1e8, 22 of 83 instances worse than Clarabel).
 """
 
 from __future__ import annotations
@@ -148,7 +154,8 @@ def solve_filter_qp(
         valid: Which of the ``K`` rows are constraints ``(..., K)`` (bool).
         lower: Lower bound of ``u`` per axis ``(..., 3)`` (m/s^2), ``<= upper``.
         upper: Upper bound of ``u`` per axis ``(..., 3)`` (m/s^2).
-        slack_penalty: ``rho > 0``, the weight of the squared slack (dimensionless).
+        slack_penalty: ``rho > 0``, the weight of the squared slack (dimensionless); exact
+            up to 1e6 (module docstring).
 
     Returns:
         ``u`` ``(..., 3)`` and the slack ``s`` ``(...)``, float64.
