@@ -537,26 +537,17 @@ def train(
                         )
                     )
                     episodes += 1
+            if i == args.n_steps - 1:  # the rollout's row: before a checkpoint at its end
+                s = summary()
+                row = {"agent_steps": steps, "wall_s": round(time.perf_counter() - t0, 2)}
+                log.write({**row, "episodes": episodes, **s})
+                if bar is not None:
+                    bar.update(steps - bar.n)
+                    if s:
+                        bar.set_postfix(**ppo_shared.bar_postfix(s))
             if steps >= next_ckpt:
                 checkpoint()
                 next_ckpt += args.checkpoint_every
-        s = summary()
-        log.write(
-            {
-                "agent_steps": steps,
-                "wall_s": round(time.perf_counter() - t0, 2),
-                "episodes": episodes,
-                **s,
-            }
-        )
-        if bar is not None:
-            bar.update(steps - bar.n)
-            if s:
-                bar.set_postfix(
-                    ret=f"{s['return_mean']:.0f}",
-                    coll=f"{s['collision_rate']:.1%}",
-                    dev=f"{s['max_deviation_mean']:.1f}m",
-                )
     checkpoint()
     run.close()
     hooks.close()
