@@ -56,7 +56,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from uasep_env.training import ppo_shared
-from uasep_env.training.args import budget_notice
+from uasep_env.training.args import budget_notice, rounded_budget
 from uasep_env.training.args import parse_args as _parse_args
 
 if TYPE_CHECKING:
@@ -456,7 +456,7 @@ def train(
         from tqdm import tqdm
 
         bar = tqdm(
-            total=args.total_timesteps,
+            total=rounded_budget(args, config.n_uavs, steps),  # where the run ends
             initial=steps,
             unit="step",
             unit_scale=True,

@@ -59,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.training.args import Args, budget_notice, hidden, make_env_config
+from uasep_env.training.args import Args, budget_notice, hidden, make_env_config, rounded_budget
 from uasep_env.training.args import parse_args as _parse_args
 
 # What every trainer writes the same way (rundir); mappo and the scripts read it from here too.
@@ -397,7 +397,8 @@ def train(args: Args, plugin: Any = None) -> dict:
     remaining = max(0, args.total_timesteps - model.num_timesteps)
     if remaining or run.resume is None:
         callback = make_callback(
-            args, config, venv, float(run.resumed.get("wall_s", 0.0)), args.total_timesteps,
+            args, config, venv, float(run.resumed.get("wall_s", 0.0)),
+            rounded_budget(args, config.n_uavs, model.num_timesteps),  # where the run ends
             run.resumed, extra=plugin.facts if plugin is not None else None, run=run,
         )  # fmt: skip
         model.learn(
