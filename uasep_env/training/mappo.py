@@ -436,14 +436,15 @@ def train(
     run = out if isinstance(out, RunFolder) else RunFolder.attach(args, out=out)
     hooks = hooks or Hooks()
     venv, env, agent = build(args, config, hooks.agent_class)
+    resumed = run.resumed
     if run.resume is not None:
         load_checkpoint(agent, venv, run.resume)
-        run.rewind(int(run.resumed["agent_steps"]))
-    resumed = run.resumed
+    hooks.start(agent, env, run.out, resumed)  # checked before the folder is rewound
+    if run.resume is not None:
+        run.rewind(int(resumed["agent_steps"]))
     notice = budget_notice(args, config.n_uavs, int(resumed.get("agent_steps", 0)))
     if notice:
         print(notice)
-    hooks.start(agent, env, run.out, resumed)
     steps, wall_offset = int(resumed.get("agent_steps", 0)), float(resumed.get("wall_s", 0.0))
     per_step = args.n_envs * env.n
     t0 = time.perf_counter() - wall_offset

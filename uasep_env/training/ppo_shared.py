@@ -391,9 +391,12 @@ def train(args: Args, plugin: Any = None) -> dict:
     venv, model = build(args, config)
     if run.resume is not None:
         load_checkpoint(model, venv, run.resume)
+    # The plugin's state restored (and checked) before the folder is rewound: a refused
+    # checkpoint leaves the folder as it was.
+    before = plugin.start(run.out, config, run.resumed) if plugin is not None else []
+    if run.resume is not None:
         run.rewind(model.num_timesteps)
     _say(budget_notice(args, config.n_uavs, model.num_timesteps))
-    before = plugin.start(run.out, config, run.resumed) if plugin is not None else []
     remaining = max(0, args.total_timesteps - model.num_timesteps)
     if remaining or run.resume is None:
         callback = make_callback(
