@@ -18,6 +18,8 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
+from conftest import HANG_GUARD_S
+
 from uasep_env.runtime.atomic import atomic_write
 from uasep_env.training import ppo_shared, rundir
 from uasep_env.training.lagrangian import PIDLagrangian
@@ -336,7 +338,7 @@ def test_a_deflate_bomb_in_state_pt_is_refused_in_bounded_memory(run, tmp_path):
     assert (ck / "state.pt").stat().st_size < 8 << 20
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     p = subprocess.run([sys.executable, "-c", BOMB, str(ck)], capture_output=True, text=True,
-                       env=env, timeout=300)  # fmt: skip
+                       env=env, timeout=HANG_GUARD_S)  # fmt: skip
     assert "refused 2" in p.stdout, p.stdout + p.stderr
     assert "state.pt" in p.stderr and p.stderr.count("\n") == 1, p.stderr
     grew = float(p.stdout.split("grew_mb")[1])

@@ -54,7 +54,7 @@ class RunFolderError(RunError):
         print(self.args[0], file=sys.stderr)
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class RunFolderLimits:
     """Hard bounds on a run folder's files (a file beyond them is refused, not read).
 
