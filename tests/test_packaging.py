@@ -224,6 +224,18 @@ def test_readme_for_the_package_index_has_absolute_links():
     )
 
 
+def test_the_package_index_page_opens_with_pip_not_make():
+    # The README keeps its clone set-up block on top; the index's page (the wheel's long
+    # description) drops it and opens with installing the package.
+    page = _setup_py()["index_readme"]((ROOT / "README.md").read_text())
+    first_block = page[page.index("```") :].split("\n```\n", 1)[0]
+    assert first_block.startswith("```bash\npip install") and "make " not in first_block
+    assert page.index("pip install") < page.index("Commands marked *(repository)*")
+    assert PYPROJECT["project"]["description"].split()[0] != "make"
+    with pytest.raises(ValueError, match="make eval"):
+        _setup_py()["index_readme"]("# t\n\ntext\n")
+
+
 def test_readme_links_stay_inside_the_repository():
     readme = (ROOT / "README.md").read_text()
     for target in re.findall(r"\]\(([^)\s#]+)[^)]*\)", readme):
