@@ -7,6 +7,7 @@ test-package`` (CI); the declared floors are installed and tested by ``make test
 
 from __future__ import annotations
 
+import os
 import re
 import runpy
 import subprocess
@@ -276,3 +277,19 @@ def test_sdist_carries_what_the_tests_need(tmp_path):
     ):
         assert needed in names, needed
     assert not any("__pycache__" in n for n in names)  # (make test-package checks the wheel)
+
+
+# ------------------------------------------------------------ the console commands
+@pytest.mark.parametrize("name", sorted(PYPROJECT["project"]["scripts"]))
+def test_every_console_command_imports_and_prints_its_help(name):
+    module, _, func = PYPROJECT["project"]["scripts"][name].partition(":")
+    code = (
+        f"import sys; from {module} import {func} as entry; sys.argv = [{name!r}, '--help']; "
+        "sys.exit(entry())"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "UASEP_NUMBA": "0"}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert done.returncode == 0, f"{name} --help: exit {done.returncode}\n{done.stderr[-2000:]}"
+    assert "usage" in done.stdout.lower(), done.stdout[:500]
