@@ -3,13 +3,13 @@
     uasep-seeds --recipe residual_apf --seeds 3 --parallel 2 --out-dir runs/seeds_residual
     uasep-seeds --recipe shared --seeds 3 --parallel 2 --out-dir runs/seeds_shared
     uasep-seeds --recipe mappo --seeds 3 --parallel 2 --out-dir runs/seeds_mappo
-    # the same command again resumes: finished seeds are kept, interrupted ones continue
-    # from their checkpoints/latest; flags after "--" go to the recipe unchanged:
     uasep-seeds --recipe shared --seeds 2 --out-dir /tmp/s -- --max-minutes 1
-    # the report again from its stored figures (no training, no episode; the verdicts are
-    # judged again): rewrites runs/seeds_mappo/seeds.md and the JSON's targets
     uasep-seeds --from-json runs/seeds_mappo/seeds.json
 
+The same command again resumes: finished seeds are kept, interrupted ones continue from
+their ``checkpoints/latest``; flags after ``--`` go to the recipe unchanged. ``--from-json``
+writes a report again from its stored figures (no training, no episode; the verdicts are
+judged again): its ``.md`` and the JSON's targets.
 (In a clone, ``python train/seeds.py`` is the same driver, recorded as such in its reports.)
 The recipes need the ``train`` extra (install ``torch==2.13.0`` first), ``mappo*`` also skrl.
 
