@@ -147,6 +147,7 @@ test-omnisafe: $(OMNISAFE_VENV)/.omnisafe
 docs: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[docs]" "$(TORCH)"
 	$(BIN)/python -m sphinx -b html -W --keep-going -q docs docs/_build/html
+	$(BIN)/python tools/check_built_docs.py docs/_build/html  # links resolve, tables scroll
 
 bench: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[bench]"
