@@ -289,7 +289,7 @@ def test_every_console_command_imports_and_prints_its_help(name):
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT), "UASEP_NUMBA": "0"}
     done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=HANG_GUARD_S
     )
     assert done.returncode == 0, f"{name} --help: exit {done.returncode}\n{done.stderr[-2000:]}"
     assert "usage" in done.stdout.lower(), done.stdout[:500]

@@ -215,12 +215,25 @@ def read_policy(directory: Path) -> Any:
         RunFolderError: Not a regular file inside the folder, or refused by the policy
             checkpoint reader (its limits): one line.
     """
+    return read_policy_inside(directory, directory / "policy.zip")[0]
+
+
+def read_policy_inside(directory: Path, path: Path) -> Any:
+    """The policy checkpoint ``path`` of the folder ``directory``, read within limits.
+
+    Returns:
+        The policy checkpoint reader's ``(meta, arrays)``.
+
+    Raises:
+        RunFolderError: Not a regular file inside the folder, or refused by the policy
+            checkpoint reader (its limits): one line.
+    """
     from uasep_env.policies.checkpoint import CheckpointError
     from uasep_env.policies.learned import read_checkpoint
 
     try:
-        check_inside(directory, directory / "policy.zip", LIMITS.policy)
-        return read_checkpoint(directory / "policy.zip")[0]
+        check_inside(directory, path, LIMITS.policy)
+        return read_checkpoint(path)
     except (RunFileRefused, CheckpointError) as err:
         raise RunFolderError(directory, str(err)) from None
 

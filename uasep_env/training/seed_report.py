@@ -8,8 +8,6 @@ their verdicts (:mod:`uasep_env.metrics.statistics`) and the learning curves.
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 import sys
 from pathlib import Path
@@ -28,6 +26,8 @@ from uasep_env.metrics.statistics import (
     weakest_verdict,
 )
 from uasep_env.runtime.atomic import atomic_output, atomic_write
+from uasep_env.runtime.runfiles import read_json_inside
+from uasep_env.training.curves import read_rows
 
 #: Recipes whose targets are the APF's safety (and, for the constrained ones, its formation).
 AS_SAFE_AS_APF = ("residual_apf", "lagrangian", "lagrangian_residual", "mappo_lagrangian")
@@ -184,8 +184,8 @@ def _fmt(stats: dict[str, Any], kind: str) -> str:
 
 def _training_facts(run: Path) -> dict[str, Any]:
     try:
-        return json.loads((run / "validation.json").read_text())["training"]
-    except (OSError, ValueError, KeyError):
+        return read_json_inside(run, run / "validation.json")["training"]
+    except (OSError, ValueError, KeyError, TypeError):
         return {}
 
 
@@ -197,13 +197,13 @@ def recipe_args(out: Path) -> dict[str, Any]:
     report is retrained as it was even after the recipe's defaults moved. Empty when the
     checkpoint does not record them, or there is none.
     """
-    from uasep_env.policies.checkpoint_reader import read_checkpoint
     from uasep_env.training.args import PER_RUN
+    from uasep_env.training.checkpoint_readers import read_policy_inside
 
     path = seed_dir(out, 0) / "selected.zip"
     if not path.exists():
         return {}
-    meta = read_checkpoint(path)[0]
+    meta = read_policy_inside(seed_dir(out, 0), path)[0]
     args = meta.info.get("args") if isinstance(meta.info, dict) else None
     return {k: v for k, v in args.items() if k not in PER_RUN} if isinstance(args, dict) else {}
 
@@ -320,7 +320,7 @@ def rerender(path: Path) -> str:
     from uasep_env.runtime.jsonio import write_json
 
     try:
-        data = json.loads(path.read_text())
+        data = read_json_inside(path.parent, path)
     except (OSError, ValueError) as err:
         raise SystemExit(f"--from-json {path}: not a train/seeds.py report ({err})") from None
     if not isinstance(data, dict) or not {"per_seed", "across_seeds"} <= data.keys():
@@ -334,8 +334,7 @@ def rerender(path: Path) -> str:
 
 def read_curve(path: Path) -> dict[str, np.ndarray]:
     """A run's ``progress.csv`` as float columns (empty cells NaN)."""
-    with path.open(newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    rows = read_rows(path, root=path.parent)
     cols = ("agent_steps", *CURVE_COLUMNS)
     return {c: np.array([float(r.get(c) or "nan") for r in rows]) for c in cols}
 

@@ -44,7 +44,6 @@ Stages (each skipped when its output exists, so an interrupted run picks up wher
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -52,7 +51,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from uasep_env.runtime.atomic import atomic_write
+from uasep_env.runtime.atomic import atomic_copy, atomic_write
+from uasep_env.runtime.runfiles import read_json_inside
 from uasep_env.runtime.runlock import RunFolderBusy, claim_run_folder
 from uasep_env.training import selection as select_checkpoint
 from uasep_env.training.args import HelpFormatter, OneLineParser, non_negative_int, positive_int
@@ -332,7 +332,7 @@ def main(argv: list[str] | None = None, script: str | None = None) -> dict[str, 
     if args.from_json is not None:
         text = rerender(args.from_json)
         print(text)
-        return json.loads(args.from_json.read_text())
+        return read_json_inside(args.from_json.parent, args.from_json)
     missing = [f for f in ("recipe", "out_dir") if getattr(args, f) is None]
     if missing:
         p.error(f"the following arguments are required: --{missing[0].replace('_', '-')}")
@@ -365,7 +365,7 @@ def main(argv: list[str] | None = None, script: str | None = None) -> dict[str, 
     shipped = ship(out, args.seeds)
     print(f"shipped (chosen on validation): seed {shipped['seed']}", flush=True)
     if args.ship_to is not None:
-        atomic_write(args.ship_to, chosen[shipped["seed"]].read_bytes())
+        atomic_copy(chosen[shipped["seed"]], args.ship_to)
         print(f"copied {chosen[shipped['seed']]} -> {args.ship_to}", flush=True)
     result = held_out(chosen, args.episodes, args.workers)
     curves = "curves.png" if args.publish is None else published(args.publish, False)[2].name
@@ -399,7 +399,7 @@ def main(argv: list[str] | None = None, script: str | None = None) -> dict[str, 
             raise SystemExit(f"--publish: {missing[0]} was not written; nothing published")
         dests = published(args.publish, args.scaling_episodes > 0)
         for src, dst in zip(sources, dests, strict=True):
-            atomic_write(dst, src.read_bytes())
+            atomic_copy(src, dst)
         print(f"published {', '.join(map(str, dests))}", flush=True)
     print(text)
     return data
@@ -414,7 +414,7 @@ def scaling_done(out: Path, episodes: int) -> bool:
     if not all((out / f"scaling{ext}").exists() for ext in SCALING_FILES):
         return False
     try:
-        data = json.loads((out / "scaling.json").read_text())
+        data = read_json_inside(out, out / "scaling.json")
         return int(data["seeds"]["count"]) == episodes
     except (OSError, ValueError, KeyError, TypeError):
         return False

@@ -23,8 +23,9 @@ from typing import Any
 from uasep_env import make_config
 from uasep_env.evaluation import EvaluationResult, evaluate
 from uasep_env.policies import load_policy
-from uasep_env.runtime.atomic import atomic_output, atomic_write
+from uasep_env.runtime.atomic import atomic_copy, atomic_output
 from uasep_env.scenarios import VALIDATION_SEEDS
+from uasep_env.training.curves import read_rows
 
 KEYS = ("terminated", "collision", "loss_of_separation", "max_deviation")
 
@@ -62,8 +63,7 @@ def read_selection(run: Path) -> tuple[list[dict[str, Any]], dict[str, float]]:
         FileNotFoundError: The run has not been through selection.
         ValueError: The table has no APF row or a figure is not a number (named).
     """
-    with (run / "selection.csv").open(newline="") as fh:
-        table = list(csv.DictReader(fh))
+    table = read_rows(run / "selection.csv", root=run)
     rows, apf = [], None
     where = run / "selection.csv"
     for line, r in enumerate(table, start=2):
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> Path:
               f"{', '.join(f'{k} {r[k]:.3f}' for k in KEYS)}, safe={r['safe']}")  # fmt: skip
     chosen = Path(best["policy"])
     if args.copy_to is not None:
-        atomic_write(args.copy_to, chosen.read_bytes())
+        atomic_copy(chosen, args.copy_to)
         print(f"copied {chosen} -> {args.copy_to}")
     return chosen
 
