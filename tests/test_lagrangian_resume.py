@@ -18,6 +18,7 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 torch = pytest.importorskip("torch")
+from conftest import same_bits  # noqa: E402
 
 #: SB3 recipes: 2 environments x 2 UAVs x 32 steps = 128 agent-steps a rollout.
 SB3_TINY = [
@@ -69,17 +70,6 @@ def _key(rows):
     return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
 
 
-def _same(a, b):
-    """``a`` and ``b`` equal bit for bit (nested dicts, lists, tensors, numbers)."""
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    if isinstance(a, (list, tuple)):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    if isinstance(a, torch.Tensor):
-        return isinstance(b, torch.Tensor) and torch.equal(a, b)
-    return a == b
-
-
 def _checkpoint(folder):
     """A checkpoint's tensors and its ``state.json`` less the wall time and the options."""
     tensors = torch.load(folder / "state.pt", map_location="cpu", weights_only=True)
@@ -116,7 +106,7 @@ def test_a_resumed_lagrangian_run_is_the_run_it_continues(name, tmp_path, monkey
     # The checkpoint holds the state after the rollout's updates: the short run's end.
     tensors, state = _checkpoint(ckpt)
     end_tensors, end_state = _checkpoint(short / "checkpoints" / f"step_{mid}")
-    assert _same(tensors, end_tensors), "the weights, optimiser or RNG are not the run's at M"
+    assert same_bits(tensors, end_tensors), "the weights, optimiser or RNG are not the run's at M"
     assert state == end_state
     # ...and the multiplier the kept row of cost_progress.csv records.
     cost_rows = _rows(full / "cost_progress.csv")
