@@ -7,7 +7,8 @@
 #                        every test file collects there (no import error without the extras)
 #   make test-package -- build wheel + sdist, twine check, install the wheel in a clean venv
 #                        outside the repo and run uasep-eval on a shipped policy by name
-#                        (and uasep-train / uasep-report --help there, without torch)
+#                        (and uasep-train / uasep-report / uasep-seeds --help there, without
+#                        torch; uasep-bench and uasep-tradeoff on 2 episodes, into the cwd)
 #   make test-benchmarl -- BenchMARL's MAPPO on a custom task, in a venv of its own
 #   make test-omnisafe  -- OmniSafe's PPOLag on the Gymnasium view, in a venv of its own
 #   make docs   -- the documentation site, warnings as errors
@@ -99,6 +100,13 @@ test-package: $(VENV)/.all
 		venv/bin/uasep-train $$r --help > train_help.txt || exit 1; done
 	cd $(PKG_DIR) && grep -q -- "--checkpoint-every CHECKPOINT_EVERY" train_help.txt
 	cd $(PKG_DIR) && venv/bin/uasep-report --help | grep -q -- "--held-out-episodes"
+	cd $(PKG_DIR) && venv/bin/uasep-bench --help > /dev/null && venv/bin/uasep-tradeoff --help \
+		> /dev/null && venv/bin/uasep-seeds --help | grep -q -- "--from-json"
+	cd $(PKG_DIR) && venv/bin/uasep-bench --policy apf --banks held_out --episodes 2 --no-front \
+		--no-figure --quiet --out bench && test -s bench/bench.json
+	cd $(PKG_DIR) && venv/bin/uasep-tradeoff --methods apf --paper-episodes 2 --bank-episodes 2 \
+		--workers 1 --no-figures > tradeoff.log && test -s tradeoff/tradeoff.csv \
+		&& test -s tradeoff/tradeoff.md
 	cd $(PKG_DIR) && mkdir sdist && tar xzf dist/*.tar.gz -C sdist --strip-components 1
 	cd $(PKG_DIR)/sdist && $(abspath $(BIN))/python -m pytest -q -p no:cacheprovider \
 		--collect-only tests > collect.log || (tail -30 collect.log && false)
@@ -139,6 +147,7 @@ test-omnisafe: $(OMNISAFE_VENV)/.omnisafe
 docs: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[docs]" "$(TORCH)"
 	$(BIN)/python -m sphinx -b html -W --keep-going -q docs docs/_build/html
+	$(BIN)/python tools/check_built_docs.py docs/_build/html  # links resolve, tables scroll
 
 bench: $(VENV)/.all
 	$(BIN)/python -m pip install --quiet -e ".[bench]"

@@ -5,7 +5,9 @@
   so the installed package resolves them by name and the copy cannot drift from the repo.
   A source checkout (and an editable install) reads them from ``baselines/checkpoints/``.
 * The long description: the README with its relative links and images made absolute, so
-  that they work on the package index's page (on GitHub and in the docs they stay relative).
+  that they work on the package index's page (on GitHub and in the docs they stay relative),
+  and without its opening block of a clone's ``make`` commands: the index's page opens with
+  installing the package (``pip install``), the README's next section.
 """
 
 from __future__ import annotations
@@ -36,6 +38,23 @@ def absolute_links(markdown: str) -> str:
     return _LINK.sub(repl, markdown)
 
 
+# The README's opening: its title, then the clone's set-up block (make eval / make test).
+_CLONE_SETUP = re.compile(r"\A(# [^\n]+\n\n)```bash\n(?:make [^\n]*\n)+```\n\n")
+
+
+def index_readme(markdown: str) -> str:
+    """The README as the package index shows it: no clone set-up block, absolute links.
+
+    Raises:
+        ValueError: The README does not open with its title and the clone's ``make`` block
+            (the page would open with something unchecked).
+    """
+    page, n = _CLONE_SETUP.subn(r"\1", markdown)
+    if n != 1:
+        raise ValueError("README.md does not open with its title and the make eval/test block")
+    return absolute_links(page)
+
+
 class BuildPyWithCheckpoints(build_py):
     """``build_py`` that also puts the shipped policy checkpoints into the package."""
 
@@ -55,6 +74,6 @@ class BuildPyWithCheckpoints(build_py):
 if __name__ == "__main__":
     setup(
         cmdclass={"build_py": BuildPyWithCheckpoints},
-        long_description=absolute_links((HERE / "README.md").read_text(encoding="utf-8")),
+        long_description=index_readme((HERE / "README.md").read_text(encoding="utf-8")),
         long_description_content_type="text/markdown",
     )

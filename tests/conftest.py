@@ -99,6 +99,21 @@ def fill_disk(monkeypatch: pytest.MonkeyPatch, room: int = 0) -> None:
     )
 
 
+def same_bits(a: Any, b: Any) -> bool:
+    """``a`` and ``b`` equal bit for bit (nested dicts, lists, torch tensors, numbers)."""
+    if isinstance(a, dict):
+        return (
+            isinstance(b, dict) and a.keys() == b.keys() and all(same_bits(a[k], b[k]) for k in a)
+        )
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(same_bits(x, y) for x, y in zip(a, b, strict=True))
+    if type(a).__module__.startswith("torch"):  # torch imported only where a tensor is
+        import torch
+
+        return isinstance(b, torch.Tensor) and torch.equal(a, b)
+    return a == b
+
+
 def run_in_repo(*args: str, timeout: float = HANG_GUARD_S) -> subprocess.CompletedProcess:
     """``python *args`` in the repository, headless (Agg), importing this checkout."""
     env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))

@@ -405,3 +405,55 @@ def test_the_lab_notes_check_sees_them():
         "on machine B (the boundary round, `e80e694`, issue 30) in /tmp/s8/x; a machine"
     )
     assert found == ["machine B", "the boundary round", "`e80e694`", "issue 30", "/tmp/"]
+
+
+# ------------------------------------------------ commands that need the repository
+#: A fenced block of any language (```` ```bash ````, ```` ```{code-block} ````, ...).
+_ANY_FENCE = re.compile(r"^(`{3,}|~{3,})([^\n]*)\n(.*?)^\1[ \t]*$", re.DOTALL | re.MULTILINE)
+#: A call of a script that is not in the wheel (benchmarks/, train/, baselines/, tools/), or
+#: of one of the repository's make targets.
+_REPO_COMMAND = re.compile(
+    r"(?<![\w/.-])(?:\./)?(?:benchmarks|train|baselines|tools)/[\w/.-]+\.(?:py|sh)\b"
+    r"|^\s*(?:\$\s*)?make\b",
+    re.MULTILINE,
+)
+#: The quick start's convention: a block that needs a clone has this mark on the line above.
+REPO_MARK = "*(repository)*"
+DOC_PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+
+
+def unmarked_repository_blocks(text: str, skip_first: bool = False) -> list[str]:
+    """The code blocks that call a repository script or ``make`` without the mark above.
+
+    ``skip_first``: the README's opening block (``make eval`` / ``make test``), which the
+    project keeps exactly as it is, is exempt (the section after it states the convention).
+    """
+    bad = []
+    for k, m in enumerate(_ANY_FENCE.finditer(text)):
+        if (skip_first and k == 0) or not _REPO_COMMAND.search(m[3]):
+            continue
+        above = [ln for ln in text[: m.start()].splitlines() if ln.strip()]
+        if not above or REPO_MARK not in above[-1]:
+            line = text[: m.start()].count("\n") + 1
+            bad.append(f"line {line}: {_REPO_COMMAND.search(m[3])[0].strip()}")
+    return bad
+
+
+def test_repository_blocks_are_found():
+    marked = f"a {REPO_MARK}:\n\n```bash\npython train/seeds.py --x\n```\n"
+    assert unmarked_repository_blocks(marked) == []
+    for body in ("python train/seeds.py", "make docs", "bash benchmarks/a.sh", "tools/x.py"):
+        assert unmarked_repository_blocks(f"text\n\n```bash\n{body}\n```\n"), body
+    wheel = "```bash\nuasep-eval --json baselines/results/x.json\nuasep-train ppo_shared\n```\n"
+    assert unmarked_repository_blocks(wheel) == []
+
+
+@pytest.mark.parametrize("page", DOC_PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_commands_that_need_the_repository_are_marked(page):
+    bad = unmarked_repository_blocks(page.read_text(), skip_first=page.name == "README.md")
+    assert bad == [], (
+        f"{page.relative_to(ROOT)}: blocks that need a clone, without {REPO_MARK} on the line "
+        f"above (the quick start's convention): {bad}"
+    )
+    quickstart = (ROOT / "docs" / "quickstart.md").read_text()
+    assert f"Commands marked {REPO_MARK} need a clone" in quickstart

@@ -130,3 +130,43 @@ def test_the_heartbeat_redraws_between_chunks_and_stops_on_close():
     time.sleep(0.05)
     assert seen >= 2 and bar.refreshed == seen  # no redraw after close
     assert (bar.updated, bar.closed) == (3, 1)
+
+
+#: A tiny run whose --total-timesteps (700) is not whole rollouts: it trains to 768
+#: (SB3's and the lean loop's: 2 envs x 2 UAVs x 32 steps = 128 a rollout; skrl's MAPPO:
+#: 2 envs x 3 UAVs x 16 steps = 96 a rollout).
+_BAR_RUNS = {
+    "sb3": ("ppo_shared", ["--n-uavs", "2", "--n-steps", "32", "--batch-size", "64"], 768),
+    "lean": ("ppo_shared", ["--n-uavs", "2", "--n-steps", "32", "--batch-size", "64",
+                            "--trainer", "lean"], 768),
+    "mappo": ("mappo", ["--n-steps", "16", "--batch-size", "16"], 768),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("trainer", list(_BAR_RUNS))
+def test_the_progress_bar_ends_where_the_run_ends(trainer, tmp_path, monkeypatch):
+    """The bar's total is the rounded budget: it reaches 100 % at the run's end, not before."""
+    import importlib
+
+    tqdm = pytest.importorskip("tqdm")
+    pytest.importorskip("torch")
+    if trainer == "mappo":
+        pytest.importorskip("skrl")
+    else:
+        pytest.importorskip("stable_baselines3")
+    bars = []
+
+    class Recorded(tqdm.tqdm):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **{**kwargs, "disable": False, "file": sys.stderr})
+            bars.append(self)
+
+    monkeypatch.setattr(tqdm, "tqdm", Recorded)
+    module, argv, end = _BAR_RUNS[trainer]
+    recipe = importlib.import_module(f"uasep_env.training.{module}")
+    out = str(tmp_path / "run")
+    recipe.main([*argv, "--n-envs", "2", "--episode-duration", "4", "--hidden", "16",
+                 "--n-epochs", "1", "--total-timesteps", "700", "--checkpoint-every", "100000",
+                 "--eval-episodes", "0", "--progress", "--out-dir", out])  # fmt: skip
+    (bar,) = bars
+    assert (bar.total, bar.n) == (end, end)

@@ -19,7 +19,6 @@ from uasep_env.envs.core import EnvCore
 from uasep_env.envs.gym_env import FormationEnv
 from uasep_env.envs.parallel import env as aec_env
 from uasep_env.envs.parallel import parallel_env
-from uasep_env.envs.sb3 import UAVSharedVecEnv
 from uasep_env.envs.vector import FormationVectorEnv
 
 SEED = 0
@@ -121,6 +120,9 @@ def test_the_vector_env_ends_at_the_first_collision(path, first_collision):
 
 
 def test_the_sb3_adapter_ends_at_the_first_collision(path, first_collision):
+    pytest.importorskip("stable_baselines3")  # the floors' job has no SB3
+    from uasep_env.envs.sb3 import UAVSharedVecEnv
+
     env, policy = UAVSharedVecEnv(1, CONFIG, seed=SEED), no_avoidance(CONFIG)
     obs = env.reset()
     for step in range(1, first_collision + 1):

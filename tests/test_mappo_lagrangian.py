@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import same_bits
 
 from uasep_env.training import mappo, mappo_lagrangian
 from uasep_env.training.cli import main as uasep_train
@@ -127,19 +128,6 @@ def test_lambda_zero_is_plain_mappo_and_a_multiplier_changes_the_actor(tmp_path)
 # --------------------------------------------------------------------- a run and its files
 
 
-def _same(a, b):
-    """``a`` and ``b`` equal bit for bit (nested dicts, lists, tensors, numbers)."""
-    import torch
-
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    if isinstance(a, (list, tuple)):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    if isinstance(a, torch.Tensor):
-        return isinstance(b, torch.Tensor) and torch.equal(a, b)
-    return a == b
-
-
 def _rows(path):
     with path.open(newline="") as fh:
         return list(csv.DictReader(fh))
@@ -194,7 +182,7 @@ def test_resume_restores_cost_critic_and_multiplier(tmp_path):
         for name in ("cost_optimizers", "_cost_value_preprocessor"):
             a = getattr(agent, name)[uid].state_dict()
             b = getattr(fresh, name)[uid].state_dict()
-            assert _same(a, b), (uid, name)  # tensors and Adam's moments alike
+            assert same_bits(a, b), (uid, name)  # tensors and Adam's moments alike
     assert torch.equal(
         agent._cost_sampler.generator.get_state(), fresh._cost_sampler.generator.get_state()
     )

@@ -7,6 +7,7 @@ test-package`` (CI); the declared floors are installed and tested by ``make test
 
 from __future__ import annotations
 
+import os
 import re
 import runpy
 import subprocess
@@ -224,6 +225,18 @@ def test_readme_for_the_package_index_has_absolute_links():
     )
 
 
+def test_the_package_index_page_opens_with_pip_not_make():
+    # The README keeps its clone set-up block on top; the index's page (the wheel's long
+    # description) drops it and opens with installing the package.
+    page = _setup_py()["index_readme"]((ROOT / "README.md").read_text())
+    first_block = page[page.index("```") :].split("\n```\n", 1)[0]
+    assert first_block.startswith("```bash\npip install") and "make " not in first_block
+    assert page.index("pip install") < page.index("Commands marked *(repository)*")
+    assert PYPROJECT["project"]["description"].split()[0] != "make"
+    with pytest.raises(ValueError, match="make eval"):
+        _setup_py()["index_readme"]("# t\n\ntext\n")
+
+
 def test_readme_links_stay_inside_the_repository():
     readme = (ROOT / "README.md").read_text()
     for target in re.findall(r"\]\(([^)\s#]+)[^)]*\)", readme):
@@ -264,3 +277,19 @@ def test_sdist_carries_what_the_tests_need(tmp_path):
     ):
         assert needed in names, needed
     assert not any("__pycache__" in n for n in names)  # (make test-package checks the wheel)
+
+
+# ------------------------------------------------------------ the console commands
+@pytest.mark.parametrize("name", sorted(PYPROJECT["project"]["scripts"]))
+def test_every_console_command_imports_and_prints_its_help(name):
+    module, _, func = PYPROJECT["project"]["scripts"][name].partition(":")
+    code = (
+        f"import sys; from {module} import {func} as entry; sys.argv = [{name!r}, '--help']; "
+        "sys.exit(entry())"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "UASEP_NUMBA": "0"}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=HANG_GUARD_S
+    )
+    assert done.returncode == 0, f"{name} --help: exit {done.returncode}\n{done.stderr[-2000:]}"
+    assert "usage" in done.stdout.lower(), done.stdout[:500]

@@ -217,14 +217,16 @@ def test_every_mutation_kind_yields_files_the_reader_sees(mutate):
 
 def test_metadata_is_refused_by_its_shape_before_it_is_parsed(tmp_path, monkeypatch):
     import json
+    import types
 
     from uasep_env.real_traffic import fileformat
+    from uasep_env.runtime import jsonio
     from uasep_env.runtime.jsonio import json_shape
 
     def parsed(*args, **kwargs):
         raise AssertionError("the JSON was parsed")
 
-    monkeypatch.setattr(fileformat, "loads_unique", parsed)
+    monkeypatch.setattr(jsonio, "json", types.SimpleNamespace(loads=parsed))
     rng = np.random.default_rng(2)
     lists = b"".join(b"[]," + b" \n\t\r"[k : k + 1] for k in rng.integers(0, 4, 60_000))
     for text, match in (

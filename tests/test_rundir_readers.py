@@ -1,6 +1,6 @@
-"""A run folder's files are read in one place: the readers of ``training/rundir.py`` and
-``training/curves.py`` (``check_checkpoint``, ``read_state``, ``read_tensors``,
-``load_normalization``, ``read_policy``, ``read_progress``).
+"""A run folder's files are read in one place: the readers of ``training/checkpoint_readers.py``
+(re-exported by ``training/rundir.py``) and ``training/curves.py`` (``check_checkpoint``,
+``read_state``, ``read_tensors``, ``load_normalization``, ``read_policy``, ``read_progress``).
 
 Hardening the reading of a hostile run folder (symlinks, oversized files) hardens them
 only; a recipe that read a checkpoint's or a CSV's file itself would escape it. Also: each
@@ -15,7 +15,7 @@ import pytest
 
 TRAINING = Path(__file__).resolve().parents[1] / "uasep_env" / "training"
 #: Where a run folder's files may be read.
-READERS = {"rundir.py", "curves.py"}
+READERS = {"checkpoint_readers.py", "rundir.py", "curves.py"}
 #: Calls that read a file (or load one).
 READS = {"loads", "load", "read_text", "read_bytes", "read_checkpoint", "DictReader"}
 #: The recipes' loops, each holding one RunFolder.

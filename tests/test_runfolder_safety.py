@@ -18,6 +18,8 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
+from conftest import HANG_GUARD_S
+
 from uasep_env.runtime.atomic import atomic_write
 from uasep_env.training import ppo_shared, rundir
 from uasep_env.training.lagrangian import PIDLagrangian
@@ -336,8 +338,154 @@ def test_a_deflate_bomb_in_state_pt_is_refused_in_bounded_memory(run, tmp_path):
     assert (ck / "state.pt").stat().st_size < 8 << 20
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     p = subprocess.run([sys.executable, "-c", BOMB, str(ck)], capture_output=True, text=True,
-                       env=env, timeout=300)  # fmt: skip
+                       env=env, timeout=HANG_GUARD_S)  # fmt: skip
     assert "refused 2" in p.stdout, p.stdout + p.stderr
     assert "state.pt" in p.stderr and p.stderr.count("\n") == 1, p.stderr
     grew = float(p.stdout.split("grew_mb")[1])
     assert grew < 300, f"{grew:.0f} MB"
+
+
+# ----------------------------------------------------- the other recipes' resume paths
+
+#: recipe -> (module, extra flags): each resumes through its own loader (the lean loop's,
+#: skrl MAPPO's, MAPPO-Lagrangian's, SB3 PPO-Lagrangian's); a rollout is 128 agent-steps.
+RECIPES = {
+    "lean": ("ppo_shared", ["--trainer", "lean"]),
+    "mappo": ("mappo", []),
+    "mappo_lagrangian": ("mappo_lagrangian", ["--cost-limit", "0.5"]),
+    "ppo_lagrangian": ("ppo_lagrangian", ["--cost-limit", "0.5"]),
+}
+
+
+def _recipe_main(recipe):
+    import importlib
+
+    module, extra = RECIPES[recipe]
+    main = importlib.import_module(f"uasep_env.training.{module}").main
+    return lambda argv: main([*TINY, "--eval-episodes", "0", *extra, *argv])
+
+
+@pytest.fixture(scope="module")
+def recipe_runs(tmp_path_factory):
+    """A real tiny run folder of each recipe (made when first asked for)."""
+    made = {}
+
+    def get(recipe):
+        if recipe not in made:
+            if "mappo" in recipe:
+                pytest.importorskip("skrl")
+            out = tmp_path_factory.mktemp(recipe) / "run"
+            _recipe_main(recipe)(["--out-dir", str(out)])
+            made[recipe] = out
+        return made[recipe]
+
+    return get
+
+
+def _nan_first_float(ck):
+    """NaN in the first floating-point tensor of ``state.pt``, wherever it is nested."""
+    import torch
+
+    def walk(value):
+        if isinstance(value, dict):
+            return any(walk(v) for v in value.values())
+        if isinstance(value, (list, tuple)):
+            return any(walk(v) for v in value)
+        if isinstance(value, torch.Tensor) and value.is_floating_point() and value.numel():
+            value.view(-1)[0] = float("nan")
+            return True
+        return False
+
+    state = _tensors(ck)
+    assert walk(state)
+    _save_tensors(ck, state)
+
+
+def _multiplier(value):
+    """Every ``multiplier`` under ``state.json``'s ``lagrangian`` set to ``value`` (JSON text)."""
+
+    def change(text):
+        info = json.loads(text)
+
+        def walk(d):
+            for k, v in d.items():
+                if k == "multiplier":
+                    d[k] = "@@"
+                elif isinstance(v, dict):
+                    walk(v)
+
+        walk(info["lagrangian"])
+        return json.dumps(info).replace('"@@"', value)
+
+    return _state_json(change)
+
+
+#: name -> (craft, the words the refusal must name); for every recipe.
+RECIPE_CASES = {
+    "state.pt truncated": (
+        lambda ck: (ck / "state.pt").write_bytes((ck / "state.pt").read_bytes()[:999]),
+        ("state.pt",),
+    ),
+    "state.pt pickled": (_pickled, ("state.pt",)),
+    "state.pt NaN tensor": (_nan_first_float, ("state.pt", "non-finite")),
+    "state.json NaN": (CHECKPOINT_CASES["state.json NaN"][0], ("state.json",)),
+    "state.json bad steps": (CHECKPOINT_CASES["state.json bad steps"][0], ("state.json",)),
+    "normalization NaN": (CHECKPOINT_CASES["normalization NaN"][0], ("normalization.npz",)),
+}
+#: The Lagrangian recipes' multiplier, crafted in a real checkpoint's state.json.
+LAGRANGIAN_CASES = {
+    "multiplier NaN": (_multiplier("NaN"), ("state.json",)),
+    "multiplier 1e308": (_multiplier("1e308"), ("state.json", "multiplier")),
+    "multiplier -1": (_multiplier("-1.0"), ("state.json", "multiplier")),
+}
+
+
+def _resume_recipe(recipe, out, capsys):
+    ck = out / "checkpoints" / "step_128"
+    with pytest.raises(SystemExit) as exc:
+        _recipe_main(recipe)(["--out-dir", str(out), "--resume", str(ck)])
+    return exc.value, capsys.readouterr().err
+
+
+def _tree(path):
+    """Every file's bytes under ``path``, by its name within it."""
+    files = (p for p in sorted(path.rglob("*")) if p.is_file() and not p.is_symlink())
+    return {str(p.relative_to(path)): p.read_bytes() for p in files}
+
+
+@pytest.mark.parametrize(
+    "recipe, case",
+    [(r, c) for r in RECIPES for c in RECIPE_CASES]
+    + [(r, c) for r in RECIPES if "lagrangian" in r for c in LAGRANGIAN_CASES],
+)
+def test_each_recipe_refuses_a_crafted_checkpoint_in_one_line(
+    recipe, case, recipe_runs, tmp_path, outside, capsys
+):
+    out = _copy(recipe_runs(recipe), tmp_path)
+    capsys.readouterr()  # the reference run's own lines
+    craft, named = {**RECIPE_CASES, **LAGRANGIAN_CASES}[case]
+    craft(out / "checkpoints" / "step_128")
+    before, precious = _tree(out), outside.read_bytes()
+    exc, err = _resume_recipe(recipe, out, capsys)
+    _refused(exc, err, *named, "step_128")
+    assert outside.read_bytes() == precious
+    after = {p: b for p, b in _tree(out).items() if p != ".uasep-run.lock"}
+    changed = sorted(p for p in {*before, *after} if before.get(p) != after.get(p))
+    assert not changed, changed  # the refused run changed nothing, not even its own folder
+
+
+@pytest.mark.parametrize("recipe", list(RECIPES))
+@pytest.mark.parametrize("name", ["state.pt", "state.json", "normalization.npz", "policy.zip"])
+def test_each_recipe_refuses_a_checkpoint_file_linked_out(
+    recipe, name, recipe_runs, tmp_path, outside, capsys
+):
+    out = _copy(recipe_runs(recipe), tmp_path)
+    capsys.readouterr()  # the reference run's own lines
+    target = out / "checkpoints" / "step_128" / name
+    shutil.copy(target, outside)  # a valid file, but outside the folder
+    before = outside.read_bytes()
+    target.unlink()
+    target.symlink_to(outside)
+    exc, err = _resume_recipe(recipe, out, capsys)
+    _refused(exc, err, name)
+    assert outside.read_bytes() == before

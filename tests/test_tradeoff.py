@@ -13,6 +13,8 @@ sys.path.insert(0, str(BASELINES))
 
 import tradeoff  # noqa: E402
 
+import uasep_env.benchmark.tradeoff as tradeoff_impl  # noqa: E402  (the sweep's code)
+
 
 def test_pareto_keeps_only_undominated_settings():
     dist = np.array([10.0, 12.0, 11.0, 20.0, 20.0])
@@ -82,7 +84,7 @@ def test_small_sweep_writes_csv_and_figures_and_resumes(tmp_path, monkeypatch):
         raise AssertionError("a finished setting was evaluated again")
 
     before = (tmp_path / "tradeoff.csv").read_text()
-    monkeypatch.setattr(tradeoff, "evaluate", no_eval)
+    monkeypatch.setattr(tradeoff_impl, "evaluate", no_eval)  # where the sweep runs
     tradeoff.main(args)
     assert (tmp_path / "tradeoff.csv").read_text() == before
     with pytest.raises(SystemExit):

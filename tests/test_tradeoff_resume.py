@@ -24,7 +24,8 @@ import sys
 sys.path.insert(0, {baselines!r})
 import tradeoff
 from tradeoff import APF, Method, _scaled
-tradeoff.METHODS = (Method(name="apf", label="APF", knob="margin scale",
+# The package module holds the table the sweep reads (baselines/tradeoff.py wraps it).
+tradeoff._impl.METHODS = (Method(name="apf", label="APF", knob="margin scale",
     values=tradeoff.SCALES, default=1.0,
     policy=lambda c, s: APF(c, _scaled(APF.margin_gains, s)),
     config=lambda v: {{"episode_duration": 10.0 + 4 * v}}),)

@@ -10,11 +10,11 @@ deviation, conflict time and episode cost (Student-t intervals), and the max dev
 equal safety along the policy's swept front (:mod:`.front`, :mod:`.summary`).
 
 The modules: :mod:`.methods` (each method's knob and swept values, shared with
-``baselines/tradeoff.py``), :mod:`.front` (Pareto fronts, the knee, interpolation at equal
-safety), :mod:`.banks` (the suite's table of banks), :mod:`.entries` (the policies),
-:mod:`.runner` (the cells, written as they finish; resume), :mod:`.summary` (the JSON
-layout), :mod:`.output` (JSON, Markdown, figure) and :mod:`.cli`. Heavy parts are imported
-where used.
+``uasep-tradeoff``), :mod:`.tradeoff` and :mod:`.sweep_rows` (that sweep, ``uasep-tradeoff``,
+and its CSV), :mod:`.front` (Pareto fronts, the knee, interpolation at equal safety),
+:mod:`.banks` (the suite's table of banks), :mod:`.entries` (the policies), :mod:`.runner`
+(the cells, written as they finish; resume), :mod:`.summary` (the JSON layout), :mod:`.output`
+(JSON, Markdown, figure) and :mod:`.cli`. Heavy parts are imported where used.
 """
 
 from __future__ import annotations

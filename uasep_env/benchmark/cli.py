@@ -218,18 +218,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         bank, a budget outside [0, 1], a policy that fails or returns non-finite actions),
         1 for an output that cannot be written.
     """
-    from uasep_env.evaluation.cli import _one_line
+    from uasep_env.evaluation.cli import exit_status
 
-    try:
-        return _run(argv)
-    except SystemExit as exc:
-        code = exc.code
-        if code is None:
-            return 0
-        if isinstance(code, int):
-            return code
-        print(code, file=sys.stderr)
-        return 1
-    except OSError as err:
-        print(f"{PROG}: error: {_one_line(err)}", file=sys.stderr)
-        return 1
+    return exit_status(PROG, _run, argv)

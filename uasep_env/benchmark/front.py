@@ -1,6 +1,6 @@
 """Fronts of safety against cost: Pareto masks, the knee, and the cost at equal safety.
 
-``baselines/tradeoff.py`` (the knee that sets each controller's default, the cost at equal
+``uasep-tradeoff`` (the knee that sets each controller's default, the cost at equal
 min distance) and ``uasep-bench`` (the deviation at equal loss-of-separation rate) share
 these. A front is a list of settings (dicts), each with its safety and cost statistics.
 """

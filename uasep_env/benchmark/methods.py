@@ -1,7 +1,7 @@
 """Each method's safety knob and the values it is swept over (the trade-off sweep's table).
 
-``baselines/tradeoff.py`` plots these sweeps; ``uasep-bench`` plays the same sweeps on its
-banks to find each method's deviation at equal safety. The knobs (``scale`` multiplies the
+``uasep-tradeoff`` (:mod:`.tradeoff`) plots these sweeps; ``uasep-bench`` plays the same sweeps on
+its banks to find each method's deviation at equal safety. The knobs (``scale`` multiplies the
 gains that set the margin in the reference gains, :class:`~uasep_env.policies.apf.APFGains`'s
 field defaults; each method's own default is the knee of its front on the trade-off bank):
 

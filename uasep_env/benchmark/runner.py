@@ -53,7 +53,7 @@ class BenchError(ValueError):
     """A bad input found while the suite runs (a policy that fails or returns NaN actions)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Cell:
     """One setting of one policy on one bank (``value`` None: the policy's default)."""
 
@@ -113,12 +113,16 @@ def plan_cells(
     cells: list[Cell] = []
     for bank in banks:
         for e in entries:
-            cells.append(Cell(bank, e, None))
+            cells.append(Cell(bank=bank, entry=e, value=None))
         if reference is not None:
-            cells.append(Cell(bank, reference, None))
+            cells.append(Cell(bank=bank, entry=reference, value=None))
         for e in entries if front else ():
             if e.sweep is not None:
-                cells += [Cell(bank, e, float(v)) for v in e.sweep.values if v != e.sweep.default]
+                cells += [
+                    Cell(bank=bank, entry=e, value=float(v))
+                    for v in e.sweep.values
+                    if v != e.sweep.default
+                ]
     return cells
 
 

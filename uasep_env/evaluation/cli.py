@@ -450,8 +450,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         the bad value; output paths are checked before the evaluation runs), 1 for an output
         file that still cannot be written.
     """
+    return exit_status("uasep-eval", _run, argv)
+
+
+def exit_status(
+    prog: str, run: Callable[[Sequence[str] | None], int], argv: Sequence[str] | None
+) -> int:
+    """``run(argv)``'s exit status, as every command of the package gives it.
+
+    argparse's exits keep their status (``--help`` 0, a usage error 2); a message raised as
+    ``SystemExit`` is printed and gives 1; an output that cannot be written (``OSError``) is
+    one line naming it, status 1.
+    """
     try:
-        return _run(argv)
+        return run(argv)
     except SystemExit as exc:  # argparse: --help / --version (0) and usage errors (2)
         code = exc.code
         if code is None:
@@ -461,5 +473,5 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(code, file=sys.stderr)
         return 1
     except OSError as err:
-        print(f"uasep-eval: error: {_one_line(err)}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(err)}", file=sys.stderr)
         return 1

@@ -29,10 +29,11 @@ import json
 import math
 import os
 import stat
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -111,16 +112,27 @@ def _fail(path: Path, why: str) -> CalibrationTableError:
     return CalibrationTableError(f"calibration table {path}: {why}")
 
 
-def _read(path: Path) -> dict[str, Any]:
+_T = TypeVar("_T")
+
+
+def _named(path: Path, action: Callable[[], _T]) -> _T:
+    """``action()``, a missing or unreadable file named in one line."""
     try:
-        with open(path, "rb") as fh:
-            raw = fh.read(MAX_TABLE_BYTES + 1)
+        return action()
     except FileNotFoundError:
         raise _fail(
             path, "no such file (rebuild: python tools/build_prediction_calibration.py)"
         ) from None
     except OSError as exc:
         raise _fail(path, f"cannot be read ({exc.strerror})") from None
+
+
+def _read(path: Path) -> dict[str, Any]:
+    def head() -> bytes:
+        with open(path, "rb") as fh:
+            return fh.read(MAX_TABLE_BYTES + 1)
+
+    raw = _named(path, head)
     if len(raw) > MAX_TABLE_BYTES:
         raise _fail(path, f"larger than the limit of {MAX_TABLE_BYTES:,} bytes")
     try:
@@ -218,14 +230,7 @@ def load_table(path: str | os.PathLike[str] = DEFAULT_TABLE) -> CalibrationTable
             bad entry).
     """
     p = Path(path)
-    try:
-        st = p.stat()
-    except FileNotFoundError:
-        raise _fail(
-            p, "no such file (rebuild: python tools/build_prediction_calibration.py)"
-        ) from None
-    except OSError as exc:
-        raise _fail(p, f"cannot be read ({exc.strerror})") from None
+    st = _named(p, p.stat)
     if not stat.S_ISREG(st.st_mode):  # before opening: a FIFO's open would block for ever
         raise _fail(p, "is not a regular file (a FIFO, device, socket or folder)")
     return _load_cached(str(p), st.st_mtime_ns, st.st_size)

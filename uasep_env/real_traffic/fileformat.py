@@ -39,7 +39,7 @@ from uasep_env.runtime.boundedzip import (
     check_members,
     read_member,
 )
-from uasep_env.runtime.jsonio import DuplicateKeyError, json_shape, loads_unique
+from uasep_env.runtime.jsonio import loads_bounded
 
 __all__ = ["FORMAT_VERSION", "MAX_FILE_BYTES", "RealTrafficFileError", "read_npz", "write_npz"]
 
@@ -145,23 +145,9 @@ def _member_array(
 def _meta(raw: bytes, path: Path) -> Any:
     """The JSON metadata, its nesting, size and keys checked before it is parsed."""
     try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise RealTrafficFileError(f"{path}: metadata is not UTF-8 ({exc})") from None
-    depth, containers = json_shape(text)
-    if depth > MAX_META_DEPTH:
-        raise RealTrafficFileError(f"{path}: metadata nests {depth} levels, limit {MAX_META_DEPTH}")
-    if containers > MAX_META_CONTAINERS:
-        raise RealTrafficFileError(
-            f"{path}: metadata holds {containers:,} arrays and objects, limit "
-            f"{MAX_META_CONTAINERS:,}"
-        )
-    try:
-        return loads_unique(text)
-    except DuplicateKeyError as exc:
-        raise RealTrafficFileError(f"{path}: metadata: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise RealTrafficFileError(f"{path}: metadata is not JSON ({exc})") from None
+        return loads_bounded(raw, max_depth=MAX_META_DEPTH, max_containers=MAX_META_CONTAINERS)
+    except ValueError as exc:  # not UTF-8 or JSON, too deep or wide, a repeated key
+        raise RealTrafficFileError(f"{path}: metadata {exc}") from None
 
 
 def _limits() -> dict[str, int]:

@@ -37,12 +37,20 @@ import errno
 import os
 import re
 import secrets
+import shutil
 import stat
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_output", "atomic_symlink", "atomic_write", "fsync_dir", "output_kind"]
+__all__ = [
+    "atomic_copy",
+    "atomic_output",
+    "atomic_symlink",
+    "atomic_write",
+    "fsync_dir",
+    "output_kind",
+]
 
 # Indirection so that tests can simulate a full disk (``monkeypatch.setattr(atomic, "_open",
 # ...)``) for every writer at once.
@@ -258,6 +266,17 @@ def atomic_write(path: str | Path, data: bytes | str, *, replace_links: bool = F
     raw = data.encode("utf-8") if isinstance(data, str) else data
     with atomic_output(path, "wb", replace_links=replace_links) as fh:
         fh.write(raw)
+    return Path(path)
+
+
+def atomic_copy(source: str | Path, path: str | Path) -> Path:
+    """Copy the file ``source`` to ``path`` atomically (streamed: no size is held in memory).
+
+    Raises:
+        OSError: ``source`` cannot be read or ``path`` written: one line; ``path`` unchanged.
+    """
+    with open(source, "rb") as src, atomic_output(path, "wb") as dst:
+        shutil.copyfileobj(src, dst, 1 << 20)
     return Path(path)
 
 

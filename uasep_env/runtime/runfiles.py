@@ -17,8 +17,16 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
+from typing import Any
 
-__all__ = ["RunFileRefused", "check_inside", "open_lock", "read_inside"]
+__all__ = [
+    "MAX_JSON_BYTES",
+    "RunFileRefused",
+    "check_inside",
+    "open_lock",
+    "read_inside",
+    "read_json_inside",
+]
 
 _NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
 _NONBLOCK = getattr(os, "O_NONBLOCK", 0)  # a FIFO opens at once (then is refused)
@@ -102,6 +110,29 @@ def read_inside(root: str | Path, path: str | Path, limit: int) -> bytes:
     if size > limit:
         raise RunFileRefused(f"{path}: more than {limit:,} bytes")
     return b"".join(chunks)
+
+
+#: The largest JSON a driver reads from a run folder (a report, a validation, a sweep).
+MAX_JSON_BYTES = 64 * 2**20
+
+
+def read_json_inside(root: str | Path, path: str | Path, limit: int = MAX_JSON_BYTES) -> Any:
+    """The JSON entry ``path`` of the folder ``root``, read and parsed within limits.
+
+    :func:`read_inside`, then the bounded JSON reader
+    (:func:`~uasep_env.runtime.jsonio.loads_bounded`).
+
+    Raises:
+        ValueError: Refused (:class:`RunFileRefused`) or not strict JSON within the limits;
+            one line naming ``path``.
+    """
+    from uasep_env.runtime.jsonio import loads_bounded
+
+    raw = read_inside(root, path, limit)
+    try:
+        return loads_bounded(raw)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
 
 
 def open_lock(path: str | Path) -> int:

@@ -47,16 +47,24 @@ MAX_CSV_BYTES = 128 * 1024 * 1024
 
 
 def read_progress(path: Path, root: Path | None = None) -> list[dict[str, str]]:
-    """The rows of ``progress.csv``; a torn last line (a kill mid-write) is dropped.
+    """The rows of ``progress.csv`` (:func:`read_rows`, ``agent_steps`` whole numbers)."""
+    return read_rows(path, root, whole="agent_steps")
+
+
+def read_rows(
+    path: Path, root: Path | None = None, whole: str | None = None
+) -> list[dict[str, str]]:
+    """The rows of a run's CSV; a torn last line (a kill mid-write) is dropped.
 
     With ``root`` (the run folder, when ``--resume`` reads it) the file is untrusted input:
     read through :func:`~uasep_env.runtime.runfiles.read_inside` (inside ``root``, a
     regular file, at most :data:`MAX_CSV_BYTES`), as UTF-8, and every kept row's
-    ``agent_steps`` must be a whole number.
+    column ``whole`` (``agent_steps`` for the learning curves), if named, must be a whole
+    number.
 
     Raises:
         ValueError: A NUL byte or another CSV error, or (with ``root``) a refused entry,
-            bytes that are not UTF-8, a bad ``agent_steps``: one line naming the file.
+            bytes that are not UTF-8, a bad ``whole`` column: one line naming the file.
     """
     if root is None:
         if not path.exists():
@@ -78,13 +86,11 @@ def read_progress(path: Path, root: Path | None = None) -> list[dict[str, str]]:
     except csv.Error as err:  # a NUL byte
         raise ValueError(f"{path}: not a CSV file ({err})") from None
     rows = [r for r in rows if None not in r.values() and None not in r]
-    if root is not None:
+    if root is not None and whole is not None:
         for k, r in enumerate(rows, start=2):
-            steps = r.get("agent_steps")
+            steps = r.get(whole)
             if steps is None or not (steps.isascii() and steps.isdigit()):
-                raise ValueError(
-                    f"{path}: line {k}: agent_steps {steps!r:.40} is not a whole number"
-                )
+                raise ValueError(f"{path}: line {k}: {whole} {steps!r:.40} is not a whole number")
     return rows
 
 

@@ -295,8 +295,11 @@ class _RunHooks(Hooks):
         if args.progress:
             from tqdm import tqdm
 
+            from uasep_env.training.args import rounded_budget
+
+            end = rounded_budget(args, self.config.n_uavs, steps)  # whole rollouts
             self.bar = tqdm(
-                total=args.total_timesteps, initial=steps, unit="step", unit_scale=True,
+                total=end, initial=steps, unit="step", unit_scale=True,
                 desc=f"{args.action_mode} (lean)", dynamic_ncols=True,
             )  # fmt: skip
 

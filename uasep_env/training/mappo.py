@@ -56,7 +56,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from uasep_env.training import ppo_shared
-from uasep_env.training.args import budget_notice
+from uasep_env.training.args import budget_notice, rounded_budget
 from uasep_env.training.args import parse_args as _parse_args
 
 if TYPE_CHECKING:
@@ -436,14 +436,15 @@ def train(
     run = out if isinstance(out, RunFolder) else RunFolder.attach(args, out=out)
     hooks = hooks or Hooks()
     venv, env, agent = build(args, config, hooks.agent_class)
+    resumed = run.resumed
     if run.resume is not None:
         load_checkpoint(agent, venv, run.resume)
-        run.rewind(int(run.resumed["agent_steps"]))
-    resumed = run.resumed
+    hooks.start(agent, env, run.out, resumed)  # checked before the folder is rewound
+    if run.resume is not None:
+        run.rewind(int(resumed["agent_steps"]))
     notice = budget_notice(args, config.n_uavs, int(resumed.get("agent_steps", 0)))
     if notice:
         print(notice)
-    hooks.start(agent, env, run.out, resumed)
     steps, wall_offset = int(resumed.get("agent_steps", 0)), float(resumed.get("wall_s", 0.0))
     per_step = args.n_envs * env.n
     t0 = time.perf_counter() - wall_offset
@@ -456,7 +457,7 @@ def train(
         from tqdm import tqdm
 
         bar = tqdm(
-            total=args.total_timesteps,
+            total=rounded_budget(args, config.n_uavs, steps),  # where the run ends
             initial=steps,
             unit="step",
             unit_scale=True,
@@ -537,26 +538,17 @@ def train(
                         )
                     )
                     episodes += 1
+            if i == args.n_steps - 1:  # the rollout's row: before a checkpoint at its end
+                s = summary()
+                row = {"agent_steps": steps, "wall_s": round(time.perf_counter() - t0, 2)}
+                log.write({**row, "episodes": episodes, **s})
+                if bar is not None:
+                    bar.update(steps - bar.n)
+                    if s:
+                        bar.set_postfix(**ppo_shared.bar_postfix(s))
             if steps >= next_ckpt:
                 checkpoint()
                 next_ckpt += args.checkpoint_every
-        s = summary()
-        log.write(
-            {
-                "agent_steps": steps,
-                "wall_s": round(time.perf_counter() - t0, 2),
-                "episodes": episodes,
-                **s,
-            }
-        )
-        if bar is not None:
-            bar.update(steps - bar.n)
-            if s:
-                bar.set_postfix(
-                    ret=f"{s['return_mean']:.0f}",
-                    coll=f"{s['collision_rate']:.1%}",
-                    dev=f"{s['max_deviation_mean']:.1f}m",
-                )
     checkpoint()
     run.close()
     hooks.close()

@@ -33,9 +33,10 @@ rewinds ``progress.csv`` and the checkpoints to the one it resumes from
 (:mod:`uasep_env.training.rundir`).
 A resumed run restores the weights, the optimiser, the normalisation statistics, the
 counters (agent-steps, episodes, the 200-episode window, wall time) and torch's random
-state; it is not bit-exact with an uninterrupted run: the episodes and the rollout in
-progress at the checkpoint are dropped, and the environments restart their episodes from
-their seeds (see ``docs/robustness.md``).
+state, all as they were after the updates of the checkpoint's last rollout (a checkpoint is
+saved when the next rollout starts); it is not bit-exact with an uninterrupted run: the
+episodes in progress at the checkpoint are dropped, and the environments restart their
+episodes from their seeds (see ``docs/robustness.md``).
 
 ``--trainer lean`` trains the same recipe with :mod:`~uasep_env.training.ppo_lean` in place
 of SB3 (:mod:`~uasep_env.training.lean_recipe`: the same files and ``--resume``).
@@ -58,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.training.args import Args, budget_notice, hidden, make_env_config
+from uasep_env.training.args import Args, budget_notice, hidden, make_env_config, rounded_budget
 from uasep_env.training.args import parse_args as _parse_args
 
 # What every trainer writes the same way (rundir); mappo and the scripts read it from here too.
@@ -284,6 +285,7 @@ def make_callback(
             self.window: collections.deque = run.episode_window()
             self.episodes = int(resumed.get("episodes", 0))
             self.next_ckpt = run.next_checkpoint(self.num_timesteps)
+            self.due = False  # a checkpoint to save at the next rollout's start
             self.csv = run.progress_log()
             self.bar = None
             if args.progress:
@@ -310,11 +312,18 @@ def make_callback(
                     self.episodes += 1
             if self.bar is not None:
                 self.bar.update(self.num_timesteps - self.bar.n)
+            # Due now, saved when the next rollout starts: after this rollout's updates (the
+            # multiplier's at its end, PPO's weights), the state its kept CSV rows record.
             # The last one is saved at the end (after the final update), not twice.
             if self.next_ckpt <= self.num_timesteps < total:
-                self.checkpoint()
-                self.next_ckpt += args.checkpoint_every
+                self.due = True
+                self.next_ckpt = run.next_checkpoint(self.num_timesteps)
             return self.wall() < args.max_minutes * 60.0
+
+        def _on_rollout_start(self) -> None:
+            if self.due:
+                self.checkpoint()
+                self.due = False
 
         def _on_rollout_end(self) -> None:
             self.iterations += 1
@@ -382,13 +391,17 @@ def train(args: Args, plugin: Any = None) -> dict:
     venv, model = build(args, config)
     if run.resume is not None:
         load_checkpoint(model, venv, run.resume)
+    # The plugin's state restored (and checked) before the folder is rewound: a refused
+    # checkpoint leaves the folder as it was.
+    before = plugin.start(run.out, config, run.resumed) if plugin is not None else []
+    if run.resume is not None:
         run.rewind(model.num_timesteps)
     _say(budget_notice(args, config.n_uavs, model.num_timesteps))
-    before = plugin.start(run.out, config, run.resumed) if plugin is not None else []
     remaining = max(0, args.total_timesteps - model.num_timesteps)
     if remaining or run.resume is None:
         callback = make_callback(
-            args, config, venv, float(run.resumed.get("wall_s", 0.0)), args.total_timesteps,
+            args, config, venv, float(run.resumed.get("wall_s", 0.0)),
+            rounded_budget(args, config.n_uavs, model.num_timesteps),  # where the run ends
             run.resumed, extra=plugin.facts if plugin is not None else None, run=run,
         )  # fmt: skip
         model.learn(

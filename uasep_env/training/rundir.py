@@ -33,10 +33,8 @@ from __future__ import annotations
 import collections
 import dataclasses
 import io
-import math
 import os
 import shutil
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -44,11 +42,27 @@ from typing import Any
 import numpy as np
 
 from uasep_env.runtime.atomic import atomic_symlink, atomic_write, fsync_dir
-from uasep_env.runtime.boundedzip import HOSTILE_FILE_ERRORS, check_member, check_members
-from uasep_env.runtime.jsonio import loads_bounded
-from uasep_env.runtime.runfiles import RunFileRefused, check_inside, read_inside
+from uasep_env.runtime.runfiles import RunFileRefused
 from uasep_env.runtime.runlock import LOCK_NAME, RunFolderBusy, claim_run_folder, is_own_lock
 from uasep_env.training.args import Args, hidden, make_env_config
+
+# The checkpoint's readers (checkpoint_readers) and checked restoring (restore): imported by
+# the recipes and tests from here, as they always were.
+from uasep_env.training.checkpoint_readers import (  # noqa: F401
+    CHECKPOINT_FILES,
+    LIMITS,
+    RunError,
+    RunFolderError,
+    RunFolderLimits,
+    _count,
+    _finite,
+    _read,
+    check_checkpoint,
+    load_normalization,
+    read_policy,
+    read_state,
+    read_tensors,
+)
 
 # The learning curve's files (curves); imported by the recipes from here, as they always were.
 from uasep_env.training.curves import (  # noqa: F401
@@ -65,62 +79,19 @@ from uasep_env.training.curves import (  # noqa: F401
     window_summary,
     write_rows,
 )
+from uasep_env.training.restore import (  # noqa: F401
+    _check_tensor,
+    _walk,
+    restore_json,
+    restore_module,
+    restore_optimizer,
+    restore_rng,
+    tensor_part,
+)
 
 #: What a run writes in its folder (``--overwrite`` deletes these, and only these).
 RUN_FILES = ("progress.csv", "curves.png", "policy.zip", "validation.json")
 RUN_DIRS = ("checkpoints", "tb")
-#: The files of a complete checkpoint folder (``state.json`` last).
-CHECKPOINT_FILES = ("state.pt", "normalization.npz", "policy.zip", "state.json")
-
-
-class RunError(SystemExit):
-    """A run that cannot start: one line for the user (exit status 1)."""
-
-    def __init__(self, message: str) -> None:
-        super().__init__(f"{Path(sys.argv[0]).name}: error: {message}")
-
-
-class RunFolderError(RunError):
-    """A run folder's file refused (untrusted input): one line, exit status 2.
-
-    The line names the folder, the file and what is wrong. As :mod:`argparse`'s errors
-    (also status 2) it is printed when raised: a :class:`SystemExit` of status 2 prints
-    nothing itself.
-    """
-
-    def __init__(self, folder: Path | str, message: str) -> None:
-        prefix = f"{folder}{os.sep}"
-        message = message.replace(prefix, "")  # the file by its name within the folder
-        super().__init__(f"--resume {folder}: {message}" if message else f"{folder}")
-        self.code = 2
-        print(self.args[0], file=sys.stderr)
-
-
-@dataclasses.dataclass(frozen=True)
-class RunFolderLimits:
-    """Hard bounds on a run folder's files (a file beyond them is refused, not read).
-
-    Attributes:
-        state_json: Largest ``state.json`` (counters, a window of 200 episodes, options).
-        json_depth: Deepest nesting of ``state.json``.
-        state_pt: Largest ``state.pt`` (networks, Adam's moments, torch's RNG).
-        record: Largest record (one tensor's storage) of ``state.pt``.
-        ratio: Largest compression ratio of a zip member over 64 KiB.
-        normalization: Largest ``normalization.npz``.
-        policy: Largest ``policy.zip`` (its reader has its own, finer limits).
-    """
-
-    state_json: int = 4 * 1024 * 1024
-    json_depth: int = 16
-    state_pt: int = 512 * 1024 * 1024
-    record: int = 128 * 1024 * 1024
-    ratio: float = 50.0
-    normalization: int = 16 * 1024 * 1024
-    policy: int = 64 * 1024 * 1024
-
-
-#: The limits the run folder's readers apply.
-LIMITS = RunFolderLimits()
 
 
 class RunFolder:
@@ -137,7 +108,8 @@ class RunFolder:
         run.close()
         return run.publish(export, config, info, title)
 
-    The folder's files are read through few functions only, the ones to harden:
+    The folder's files are read through few functions only, the ones to harden
+    (:mod:`~uasep_env.training.checkpoint_readers`, re-exported here):
     :func:`check_checkpoint` (what a checkpoint folder holds), :func:`read_state`
     (``state.json``), :func:`read_tensors` (``state.pt``), :func:`load_normalization`
     (``normalization.npz``), :func:`read_policy` (``policy.zip``'s metadata) and
@@ -359,289 +331,6 @@ def prepare_out_dir(out: Path, resume: str, overwrite: bool) -> None:
     out.mkdir(parents=True, exist_ok=True)
 
 
-def check_checkpoint(directory: Path) -> Path:
-    """The resolved checkpoint folder, or a one-line error naming what is missing.
-
-    Raises:
-        RunError: The folder does not exist or lacks one of :data:`CHECKPOINT_FILES`.
-    """
-    if not directory.is_dir():
-        raise RunError(f"--resume {directory}: no such checkpoint folder")
-    missing = [f for f in CHECKPOINT_FILES if not os.path.lexists(directory / f)]
-    if missing:
-        raise RunError(
-            f"--resume {directory}: incomplete checkpoint (missing {', '.join(missing)}; "
-            "a kill while it was saved?); resume from an earlier checkpoints/step_N"
-        )
-    resolved = directory.resolve()
-    limits = {"state.pt": LIMITS.state_pt, "normalization.npz": LIMITS.normalization,
-              "policy.zip": LIMITS.policy, "state.json": LIMITS.state_json}  # fmt: skip
-    for name in CHECKPOINT_FILES:  # links out, FIFOs, devices, huge files: before any read
-        try:
-            check_inside(resolved, resolved / name, limits[name])
-        except RunFileRefused as err:
-            raise RunFolderError(resolved, str(err)) from None
-    return resolved
-
-
-def _read(directory: Path, name: str, limit: int) -> bytes:
-    """A checkpoint file's bytes, through the run folder's one file reader (runfiles)."""
-    try:
-        return read_inside(directory, directory / name, limit)
-    except RunFileRefused as err:
-        raise RunFolderError(directory, str(err)) from None
-
-
-def _count(value: Any, low: int = 0) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= low
-
-
-def _finite(value: Any, low: float = -math.inf) -> bool:
-    number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    return number and math.isfinite(value) and value >= low
-
-
-def read_state(directory: Path) -> dict:
-    """A checkpoint folder's ``state.json`` (the counters, the episode window, the options).
-
-    Read within :data:`LIMITS` by the project's bounded JSON reader (no NaN or Infinity, no
-    repeated key); the counters, the wall time and the episode window are checked.
-
-    Raises:
-        RunFolderError: One line naming the folder, ``state.json`` and what is wrong.
-    """
-    raw = _read(directory, "state.json", LIMITS.state_json)
-    try:
-        info = loads_bounded(raw, max_depth=LIMITS.json_depth)
-    except ValueError as err:
-        raise RunFolderError(directory, f"state.json: {err}") from None
-
-    def bad(message: str) -> RunFolderError:
-        return RunFolderError(directory, f"state.json: {message}")
-
-    if not isinstance(info, dict):
-        raise bad(f"holds {type(info).__name__}, not an object")
-    if not _count(info.get("agent_steps")):
-        raise bad(f"agent_steps must be a whole number >= 0, got {info.get('agent_steps')!r:.40}")
-    for key in ("episodes", "updates"):
-        if key in info and not _count(info[key]):
-            raise bad(f"{key} must be a whole number >= 0, got {info[key]!r:.40}")
-    if "wall_s" in info and not _finite(info["wall_s"], 0.0):
-        raise bad(f"wall_s must be a finite number >= 0, got {info['wall_s']!r:.40}")
-    window = info.get("window", [])
-    if not isinstance(window, list) or len(window) > WINDOW_EPISODES:
-        raise bad(f"window must be a list of at most {WINDOW_EPISODES} episodes")
-    for k, episode in enumerate(window):  # null: an episode without a return (NaN, saved)
-        if not isinstance(episode, list) or not all(e is None or _finite(e) for e in episode):
-            raise bad(f"window[{k}] must be a list of finite numbers, got {episode!r:.60}")
-    for key in ("args", "lagrangian"):
-        if key in info and not isinstance(info[key], dict):
-            raise bad(f"{key} must be an object")
-    return info
-
-
-def read_tensors(directory: Path) -> dict:
-    """A checkpoint folder's ``state.pt``, loaded weights-only (no unpickling).
-
-    Its zip directory is checked first, as the policy reader checks ``policy.zip``
-    (:mod:`uasep_env.runtime.boundedzip`): every record's declared size, its compression
-    ratio (torch stores its records uncompressed: a compressed one is refused) and their
-    total, so that ``torch.load`` (which inflates before it checks) never meets a deflate
-    bomb. The tensors themselves are checked where they are restored
-    (:func:`restore_module`, :func:`restore_optimizer`, :func:`restore_rng`).
-
-    Raises:
-        RunFolderError: One line naming the folder, ``state.pt`` and what is wrong.
-    """
-    import pickle
-    import zipfile
-
-    import torch
-
-    raw = _read(directory, "state.pt", LIMITS.state_pt)
-
-    def bad(message: str) -> RunFolderError:
-        return RunFolderError(directory, f"state.pt: {message}")
-
-    try:
-        with zipfile.ZipFile(io.BytesIO(raw)) as z:
-            total = 0
-            for info in z.infolist():
-                check_member(info, LIMITS.record, LIMITS.ratio)
-                if info.compress_type != zipfile.ZIP_STORED:
-                    raise ValueError(f"{info.filename}: compressed (torch stores its records)")
-                total += info.file_size
-            if total > LIMITS.state_pt:
-                raise ValueError(f"records of {total:,} bytes in all, limit {LIMITS.state_pt:,}")
-    except (*HOSTILE_FILE_ERRORS, pickle.UnpicklingError) as err:
-        detail = " ".join(str(err).split())[:200] or type(err).__name__
-        raise bad(f"not a torch checkpoint ({detail})") from None
-    try:
-        state = torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
-    except Exception as err:  # whatever a hostile file makes torch raise
-        detail = " ".join(str(err).split())[:200] or type(err).__name__
-        raise bad(f"not a weights-only torch checkpoint ({type(err).__name__}: {detail})") from None
-    if not isinstance(state, dict):
-        raise bad(f"holds {type(state).__name__}, not a dict of the run's tensors")
-    return state
-
-
-def tensor_part(directory: Path, state: Any, *keys: str) -> Any:
-    """``state[keys[0]][keys[1]]...`` of a ``state.pt``, or one line naming the missing key.
-
-    Raises:
-        RunFolderError: A key missing (or a part that is not a dict).
-    """
-    where = []
-    for key in keys:
-        where.append(key)
-        if not isinstance(state, dict) or key not in state:
-            raise RunFolderError(directory, f"state.pt: no {'.'.join(where)!r}")
-        state = state[key]
-    return state
-
-
-def _check_tensor(directory: Path, where: str, value: Any, like: Any) -> None:
-    """``value`` a tensor of ``like``'s shape and dtype, finite; else one line."""
-    import torch
-
-    def bad(message: str) -> RunFolderError:
-        return RunFolderError(directory, f"state.pt: {where}: {message}")
-
-    if not isinstance(value, torch.Tensor):
-        raise bad(f"{type(value).__name__}, not a tensor")
-    if value.shape != like.shape:
-        raise bad(f"shape {tuple(value.shape)}, expected {tuple(like.shape)}")
-    if value.dtype != like.dtype:
-        raise bad(f"dtype {value.dtype}, expected {like.dtype}")
-    if (value.is_floating_point() or value.is_complex()) and not torch.isfinite(value).all():
-        raise bad("non-finite values")
-
-
-def restore_module(directory: Path, where: str, module: Any, saved: Any) -> None:
-    """Load ``saved`` into ``module`` once every tensor matches the module's own.
-
-    The same keys; each tensor of the same shape and dtype (an int64 weight is refused, not
-    cast) and finite.
-
-    Raises:
-        RunFolderError: One line naming ``state.pt``, ``where`` and the tensor.
-    """
-    own = module.state_dict()
-    if not isinstance(saved, dict):
-        raise RunFolderError(directory, f"state.pt: {where}: {type(saved).__name__}, not a dict")
-    missing, extra = sorted(set(own) - set(saved)), sorted(set(saved) - set(own), key=str)
-    if missing or extra:
-        detail = ", ".join([*(f"{k} missing" for k in missing[:3]),
-                            *(f"{k!r:.40} unexpected" for k in extra[:3])])  # fmt: skip
-        raise RunFolderError(directory, f"state.pt: {where}: {detail}")
-    for key, value in saved.items():
-        _check_tensor(directory, f"{where}.{key}", value, own[key])
-    module.load_state_dict(saved)
-
-
-def _walk(directory: Path, where: str, value: Any, depth: int = 0) -> None:
-    """Every tensor and number in ``value`` finite (an optimizer's state)."""
-    import torch
-
-    if depth > 16:
-        raise RunFolderError(directory, f"state.pt: {where}: nested too deep")
-    if isinstance(value, dict):
-        for k, v in value.items():
-            _walk(directory, f"{where}.{k}", v, depth + 1)
-    elif isinstance(value, (list, tuple)):
-        for k, v in enumerate(value):
-            _walk(directory, f"{where}[{k}]", v, depth + 1)
-    elif isinstance(value, torch.Tensor):
-        if value.is_floating_point() and not torch.isfinite(value).all():
-            raise RunFolderError(directory, f"state.pt: {where}: non-finite values")
-    elif isinstance(value, float) and not math.isfinite(value):
-        raise RunFolderError(directory, f"state.pt: {where}: {value}, not finite")
-
-
-def restore_optimizer(directory: Path, where: str, optimizer: Any, saved: Any) -> None:
-    """Load ``saved`` into ``optimizer`` once it matches the optimizer's parameters.
-
-    The same groups of the same sizes; every per-parameter tensor (Adam's moments) of its
-    parameter's shape and dtype; everything finite.
-
-    Raises:
-        RunFolderError: One line naming ``state.pt``, ``where`` and what is wrong.
-    """
-    import torch
-
-    def bad(message: str) -> RunFolderError:
-        return RunFolderError(directory, f"state.pt: {where}: {message}")
-
-    if not isinstance(saved, dict) or set(saved) != {"state", "param_groups"}:
-        raise bad("not an optimizer's state (keys 'state' and 'param_groups')")
-    _walk(directory, where, saved)
-    groups = saved["param_groups"]
-    ours = optimizer.param_groups
-    sizes = [len(g.get("params", ())) if isinstance(g, dict) else -1 for g in groups]
-    if not isinstance(groups, list) or sizes != [len(g["params"]) for g in ours]:
-        raise bad(f"parameter groups of sizes {sizes}, expected {[len(g['params']) for g in ours]}")
-    params = [p for g in ours for p in g["params"]]
-    if not isinstance(saved["state"], dict):
-        raise bad("state is not a dict")
-    for index, entry in saved["state"].items():
-        if not (_count(index) and index < len(params)) or not isinstance(entry, dict):
-            raise bad(f"state of parameter {index!r:.40}, which it does not have")
-        for key, value in entry.items():
-            if isinstance(value, torch.Tensor) and value.dim() > 0:  # a moment, not 'step'
-                _check_tensor(directory, f"{where}.state[{index}].{key}", value, params[index])
-    try:
-        optimizer.load_state_dict(saved)
-    except Exception as err:  # anything else torch refuses, in one line
-        raise bad(f"refused by the optimizer ({' '.join(str(err).split())[:200]})") from None
-
-
-def restore_rng(directory: Path, where: str, saved: Any) -> None:
-    """Set torch's CPU random state from ``saved`` (checked: a byte tensor of its size)."""
-    import torch
-
-    _check_tensor(directory, where, saved, torch.get_rng_state())
-    torch.set_rng_state(saved)
-
-
-def restore_json(
-    directory: Path,
-    where: str,
-    load: Callable[[Any], None],
-    saved: Any,
-    file: str = "state.json",
-) -> None:
-    """``load(saved)`` of a part of a checkpoint (a multiplier's state), in one line.
-
-    Raises:
-        RunFolderError: ``load`` refused it (ValueError, KeyError, TypeError,
-            RuntimeError): one line naming ``file`` and ``where``.
-    """
-    try:
-        load(saved)
-    except (ValueError, KeyError, TypeError, RuntimeError) as err:
-        detail = f"missing {err}" if isinstance(err, KeyError) else " ".join(str(err).split())
-        detail = detail.removeprefix("invalid config value ")
-        raise RunFolderError(directory, f"{file}: {where}: {detail[:200]}") from None
-
-
-def read_policy(directory: Path) -> Any:
-    """The metadata of a checkpoint folder's ``policy.zip`` (its algorithm, its options).
-
-    Raises:
-        RunFolderError: Not a regular file inside the folder, or refused by the policy
-            checkpoint reader (its limits): one line.
-    """
-    from uasep_env.policies.checkpoint import CheckpointError
-    from uasep_env.policies.learned import read_checkpoint
-
-    try:
-        check_inside(directory, directory / "policy.zip", LIMITS.policy)
-        return read_checkpoint(directory / "policy.zip")[0]
-    except (RunFileRefused, CheckpointError) as err:
-        raise RunFolderError(directory, str(err)) from None
-
-
 def rewind(out: Path, fields: tuple[str, ...], agent_steps: int) -> None:
     """Make ``out`` what it was when the checkpoint at ``agent_steps`` was saved.
 
@@ -717,55 +406,6 @@ def normalization_bytes(norm: Any) -> bytes:
         ret_mean=r.mean, ret_var=r.var, ret_count=r.count,
     )  # fmt: skip
     return buf.getvalue()
-
-
-def load_normalization(norm: Any, path: Path) -> None:
-    """Restore :func:`normalization_bytes`' statistics into ``norm`` (no unpickling).
-
-    The return statistics only where the file has them (skrl's MAPPO saves the
-    observations' alone). Read within :data:`LIMITS` (its zip directory checked first);
-    each array must have ``norm``'s shape and be finite, variances >= 0, counts > 0.
-
-    Raises:
-        RunFolderError: One line naming the folder, the file and the array.
-    """
-    import zipfile
-
-    directory, name = path.parent, path.name
-    raw = _read(directory, name, LIMITS.normalization)
-    own = {"obs_": norm.obs_rms, "ret_": getattr(norm, "ret_rms", None)}
-    names = [f"{p}{k}" for p in own for k in ("mean", "var", "count")]
-    try:
-        with zipfile.ZipFile(io.BytesIO(raw)) as z:
-            infos = z.infolist()
-            present = {i.filename.removesuffix(".npy") for i in infos}
-            expected = names if present - set(names[:3]) else names[:3]
-            check_members(z, {f"{n}.npy": LIMITS.normalization for n in expected}, LIMITS.ratio)
-        with np.load(io.BytesIO(raw), allow_pickle=False) as z:
-            arrays = {n: np.asarray(z[n]) for n in expected}
-    except HOSTILE_FILE_ERRORS as err:
-        detail = " ".join(str(err).split())[:200] or type(err).__name__
-        raise RunFolderError(directory, f"{name}: not the run's statistics ({detail})") from None
-    for prefix, rms in own.items():
-        if f"{prefix}mean" not in arrays or rms is None:
-            continue
-        shape = np.shape(rms.mean)
-        for key in ("mean", "var", "count"):
-            a = arrays[prefix + key]
-            want = () if key == "count" else shape
-            problem = (
-                f"shape {a.shape}, expected {want}" if a.shape != want
-                else f"{a.dtype} data, expected floats" if a.dtype.kind not in "fiu"
-                else "non-finite values" if not np.isfinite(a).all()
-                else "negative values" if key == "var" and (a < 0).any()
-                else "not > 0" if key == "count" and not a > 0
-                else ""
-            )  # fmt: skip
-            if problem:
-                raise RunFolderError(directory, f"{name}: {prefix}{key}: {problem}")
-        rms.mean = arrays[prefix + "mean"].astype(np.float64)
-        rms.var = arrays[prefix + "var"].astype(np.float64)
-        rms.count = float(arrays[prefix + "count"])
 
 
 def check_trainer(directory: Path, args: Args, info: dict | None = None) -> dict:

@@ -1,0 +1,126 @@
+"""A resumed Lagrangian run is the run it continues (issue 55).
+
+Each Lagrangian recipe runs three ways with the same seeds: uninterrupted to N (``full``),
+to its own end at the mid checkpoint M (``short``: its state there is the one after the
+rollout's multiplier update and weight update), and to N killed right after the checkpoint
+at M, then resumed to N (``killed``). The checkpoint a killed run resumes from must hold the
+state after both updates of its last rollout (the ``short`` run's, bit for bit: weights,
+optimiser, random state, the multiplier's state, the counters), the multiplier the kept
+``cost_progress.csv`` row records, and the rows up to it must be the uninterrupted run's.
+After the resume the environments restart their episodes from their seeds (not bit-exact by
+design: ``docs/robustness.md``), so the later rows are compared by their steps only.
+"""
+
+import csv
+import json
+
+import pytest
+
+pytest.importorskip("stable_baselines3")
+torch = pytest.importorskip("torch")
+from conftest import same_bits  # noqa: E402
+
+#: SB3 recipes: 2 environments x 2 UAVs x 32 steps = 128 agent-steps a rollout.
+SB3_TINY = [
+    "--scenario", "collision_head_on", "--n-uavs", "2", "--episode-duration", "4",
+    "--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "2", "--hidden", "16",
+    "--eval-episodes", "0", "--no-progress", "--cost-limit", "0.5", "--pid-ki", "0.5",
+    "--multiplier-init", "0.25", "--torch-threads", "1",
+    "--config", "reward=task uav.separation_distance=100",
+]  # fmt: skip
+#: skrl's MAPPO-Lagrangian: 2 environments x 3 UAVs x 20 steps = 120 agent-steps a rollout,
+#: an episode a rollout (4 s at 5 Hz).
+MAPPO_TINY = [
+    "--n-envs", "2", "--n-steps", "20", "--batch-size", "20", "--episode-duration", "4",
+    "--hidden", "16,16", "--no-progress", "--eval-episodes", "0", "--cost-limit", "1",
+    "--multiplier-init", "0.7", "--pid-ki", "0.2", "--pid-kp", "0.5", "--torch-threads", "1",
+    "--config", "reward=task uav.separation_distance=100",
+]  # fmt: skip
+
+#: recipe: (module, its main, its defaults or None, argv, rollout size in agent-steps).
+RECIPES = {
+    "ppo_lagrangian": ("ppo_lagrangian", "main", None, SB3_TINY, 128),
+    "ppo_lagrangian_residual": (
+        "ppo_lagrangian", "main", "RESIDUAL_LAGRANGIAN_DEFAULTS", SB3_TINY, 128,
+    ),
+    "mappo_lagrangian": ("mappo_lagrangian", "main", None, MAPPO_TINY, 120),
+}  # fmt: skip
+
+
+class _Killed(BaseException):
+    """The process dies right after a checkpoint (a SIGKILL there, in-process)."""
+
+
+def _main(name):
+    import importlib
+
+    module_name, func, defaults, argv, rollout = RECIPES[name]
+    module = importlib.import_module(f"uasep_env.training.{module_name}")
+    main = getattr(module, func)
+    default = getattr(module, defaults) if defaults else None
+    return (lambda extra: main([*argv, *extra], default)), rollout
+
+
+def _rows(path):
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _key(rows):
+    return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+
+
+def _checkpoint(folder):
+    """A checkpoint's tensors and its ``state.json`` less the wall time and the options."""
+    tensors = torch.load(folder / "state.pt", map_location="cpu", weights_only=True)
+    state = json.loads((folder / "state.json").read_text())
+    return tensors, {k: v for k, v in state.items() if k not in ("wall_s", "args")}
+
+
+@pytest.mark.parametrize("name", list(RECIPES))
+def test_a_resumed_lagrangian_run_is_the_run_it_continues(name, tmp_path, monkeypatch):
+    from uasep_env.training.rundir import RunFolder
+
+    train, rollout = _main(name)
+    mid, total = 2 * rollout, 3 * rollout
+    every = ["--checkpoint-every", str(mid)]
+    full, short, killed = tmp_path / "full", tmp_path / "short", tmp_path / "killed"
+    train([*every, "--total-timesteps", str(total), "--out-dir", str(full)])
+    train([*every, "--total-timesteps", str(mid), "--out-dir", str(short)])
+
+    real = RunFolder.save_checkpoint
+
+    def save_then_die(self, agent_steps, *args, **kwargs):
+        folder = real(self, agent_steps, *args, **kwargs)
+        if agent_steps == mid:
+            raise _Killed
+        return folder
+
+    monkeypatch.setattr(RunFolder, "save_checkpoint", save_then_die)
+    with pytest.raises(_Killed):
+        train([*every, "--total-timesteps", str(total), "--out-dir", str(killed)])
+    monkeypatch.setattr(RunFolder, "save_checkpoint", real)
+    ckpt = killed / "checkpoints" / f"step_{mid}"
+    assert ckpt.is_dir()
+
+    # The checkpoint holds the state after the rollout's updates: the short run's end.
+    tensors, state = _checkpoint(ckpt)
+    end_tensors, end_state = _checkpoint(short / "checkpoints" / f"step_{mid}")
+    assert same_bits(tensors, end_tensors), "the weights, optimiser or RNG are not the run's at M"
+    assert state == end_state
+    # ...and the multiplier the kept row of cost_progress.csv records.
+    cost_rows = _rows(full / "cost_progress.csv")
+    at_mid = next(r for r in cost_rows if int(r["agent_steps"]) == mid)
+    assert state["lagrangian"]["multiplier"] == float(at_mid["multiplier"])
+
+    train([*every, "--total-timesteps", str(total), "--out-dir", str(killed),
+           "--resume", str(ckpt)])  # fmt: skip
+    for csv_name in ("progress.csv", "cost_progress.csv"):
+        ours, theirs = _rows(killed / csv_name), _rows(full / csv_name)
+        assert [int(r["agent_steps"]) for r in ours] == [int(r["agent_steps"]) for r in theirs]
+        upto = [r for r in theirs if int(r["agent_steps"]) <= mid]
+        assert _key(ours[: len(upto)]) == _key(upto), csv_name
+    # Every episode costs the same here (all its steps in loss of separation, at 100 m)
+    # and the episodes end where the uninterrupted run's do (4 s; at the checkpoint too),
+    # so the multiplier goes on as the uninterrupted run's, to the same value at N.
+    assert _rows(killed / "cost_progress.csv") == cost_rows
