@@ -4,7 +4,11 @@ The digests were recorded on ``main`` at 4bef8b7, before the observation layout 
 and the reward terms a table (issue 19); ``residual``'s moved with the ``-v2`` ground fix.
 A refactor of the observation or reward code must leave them unchanged, with and without
 numba. A change that is meant to move the numbers (new dynamics, a new default feature)
-updates them here, with a CHANGELOG entry and the env version bump.
+adds the new version's numbers here, with a CHANGELOG entry and the env version bump, and
+keeps the earlier versions' (their defaults as overrides, ``VERSION_DEFAULTS``): ``-v2``'s
+are the numbers recorded before ``-v3`` made the calibrated prediction the default. The APF
+that drives the rollouts has the reference gains (``APFGains()``), so that a controller's
+default moving does not move the env's numbers.
 """
 
 from __future__ import annotations
@@ -15,9 +19,10 @@ import numpy as np
 import pytest
 
 from uasep_env import _numba, make_config
+from uasep_env.config import VERSION_DEFAULTS
 from uasep_env.envs.core import EnvCore
 from uasep_env.interface.observation import ObservationLayout
-from uasep_env.policies import APF
+from uasep_env.policies import APF, APFGains
 
 CONFIGS = {
     "paper": {"scenario": "paper"},
@@ -49,8 +54,8 @@ RECORDED_TERMS = (
     "smoothness",
 )
 #: name: (digest of 40 steps of observations, rewards and terms; last obs[0, 0, 0];
-#: last reward[0, 0]; observation width; digest of the feature names).
-PINNED = {
+#: last reward[0, 0]; observation width; digest of the feature names), in ``-v2``.
+PINNED_V2 = {
     "paper": ("11d015cec0fb0280", 0.00385141558945179, 0.9350802311468418, 58, "4ad1804379e3ca79"),
     "random": (
         "c54a2cb3f9d14577",
@@ -85,11 +90,52 @@ PINNED = {
 }
 
 
-def _rollout(name: str) -> tuple[str, float, float, int]:
-    cfg = make_config(**CONFIGS[name])
+#: The same in ``-v3`` (recorded when the calibrated prediction became the default).
+PINNED_V3 = {
+    "paper": ("0b897ea8b0b3d260", 0.00385141558945179, 0.9350802311468418, 58, "4ad1804379e3ca79"),
+    "random": (
+        "044efb79ebcb3b3f",
+        -0.014026936143636703,
+        0.9757481990098025,
+        98,
+        "f77f57f8b8f6a080",
+    ),
+    # Its obstacles stay beyond the 60 m sensing range in these 40 steps: nothing moved.
+    "short_range": (
+        "1cd0c42bfd6c554d",
+        -0.013831560499966145,
+        0.9787620078065938,
+        106,
+        "61c1e65f43d2b817",
+    ),
+    "no_obstacles": (
+        "950a21c53068ff3e",
+        0.0049272882752120495,
+        0.9357570556866531,
+        66,
+        "b7d89c0929ca9f01",
+    ),
+    "residual": (
+        "215526e5c7d40fd5",
+        -0.02903461456298828,
+        0.9683772334816598,
+        77,
+        "ead82f5a5479d5ee",
+    ),
+}
+#: env version -> its pinned numbers.
+PINNED = {2: PINNED_V2, 3: PINNED_V3}
+
+
+def _config(name: str, version: int):
+    return make_config(VERSION_DEFAULTS[version], **CONFIGS[name])
+
+
+def _rollout(name: str, version: int) -> tuple[str, float, float, int]:
+    cfg = _config(name, version)
     core = EnvCore(cfg, n_envs=5)
     obs = core.reset(seed=7)
-    apf = APF(cfg)
+    apf = APF(cfg, APFGains())
     h = hashlib.sha256(obs.tobytes())
     rng = np.random.default_rng(1)
     for _ in range(40):
@@ -106,21 +152,29 @@ def _rollout(name: str) -> tuple[str, float, float, int]:
     return h.hexdigest()[:16], float(obs[0, 0, 0]), float(res.rewards[0, 0]), obs.shape[-1]
 
 
+@pytest.mark.parametrize("version", sorted(PINNED), ids=lambda v: f"v{v}")
 @pytest.mark.parametrize("numba", [True, False], ids=["numba", "numpy"])
 @pytest.mark.parametrize("name", sorted(CONFIGS))
-def test_observations_and_rewards_match_the_recorded_numbers(monkeypatch, name, numba):
+def test_observations_and_rewards_match_the_recorded_numbers(monkeypatch, name, numba, version):
     if numba and not _numba.available():
         pytest.skip("numba not installed or UASEP_NUMBA=0")
     if not numba:
         monkeypatch.setitem(_numba._state, "numba", None)
-    digest, first_obs, first_reward, width = _rollout(name)
-    want = PINNED[name]
+    digest, first_obs, first_reward, width = _rollout(name, version)
+    want = PINNED[version][name]
     assert (first_obs, first_reward, width) == want[1:4]
     assert digest == want[0]
 
 
+@pytest.mark.parametrize("version", sorted(PINNED), ids=lambda v: f"v{v}")
 @pytest.mark.parametrize("name", sorted(CONFIGS))
-def test_feature_names_match_the_recorded_layout(name):
-    names = ObservationLayout.from_config(make_config(**CONFIGS[name])).feature_names()
-    assert len(names) == PINNED[name][3]
-    assert hashlib.sha256("\n".join(names).encode()).hexdigest()[:16] == PINNED[name][4]
+def test_feature_names_match_the_recorded_layout(name, version):
+    names = ObservationLayout.from_config(_config(name, version)).feature_names()
+    assert len(names) == PINNED[version][name][3]
+    assert hashlib.sha256("\n".join(names).encode()).hexdigest()[:16] == PINNED[version][name][4]
+
+
+def test_the_versions_differ_where_they_should():
+    """-v3 moved the rollouts whose obstacles are observed (their predicted region), only."""
+    moved = {name for name in CONFIGS if PINNED_V2[name][0] != PINNED_V3[name][0]}
+    assert moved == {"paper", "random", "residual"}

@@ -1,24 +1,44 @@
 """Gymnasium registration of the ``uasep`` ids (idempotent; runs on ``import uasep_env``).
 
 The ids come from the scenario registry: every family with a ``gym_name`` registers
-``uasep/<gym_name>-v<ENV_VERSION>`` (:data:`ENV_IDS`).
+``uasep/<gym_name>-v<ENV_VERSION>`` (:data:`ENV_IDS`), and, for the earlier versions whose
+episodes today's code reproduces (:data:`uasep_env.config.VERSION_DEFAULTS`), the same id at
+that version with that version's defaults as overrides: ``uasep/Formation-v2`` plays the
+``-v2`` episodes bit for bit.
 """
 
 from __future__ import annotations
 
 import gymnasium
 
+from uasep_env.config.env import VERSION_DEFAULTS
 from uasep_env.scenarios import FAMILIES
 
-__all__ = ["ENV_IDS", "ENV_VERSION", "ENV_VERSIONS", "FIRST_VERSION", "register_envs"]
+__all__ = [
+    "ENV_IDS",
+    "ENV_VERSION",
+    "ENV_VERSIONS",
+    "FIRST_VERSION",
+    "ID_VERSIONS",
+    "register_envs",
+]
 
 #: The env ids' version: bumped whenever episodes or rewards change (see CHANGELOG.md).
-ENV_VERSION = 2
+ENV_VERSION = 3
 
 #: Each env version, newest first: ``(version, package release, what changed)``. Bumping
 #: :data:`ENV_VERSION` needs a row here (tested); the env cards' version history is this
 #: table (``docs/envs/``, ``tools/build_env_cards.py``), CHANGELOG.md has the detail.
 ENV_VERSIONS: tuple[tuple[int, str, str], ...] = (
+    (
+        3,
+        "0.4.0",
+        "The obstacles' predicted region is the calibrated one by default "
+        '(`prediction.fit="calibrated"`: it held recorded aircraft\'s next 10 s in >= 95 % '
+        "of test windows, the enclosing Dubins region of `-v2` in 22 %), and every "
+        "controller's default margin is the knee of its own front on a `-v3` validation "
+        "bank. The `-v2` ids stay registered and reproduce their episodes.",
+    ),
     (
         2,
         "0.3.0",
@@ -40,12 +60,28 @@ ENV_VERSIONS: tuple[tuple[int, str, str], ...] = (
 #: The first env version of ids added after ``-v0``, by the family's ``gym_name``.
 FIRST_VERSION: dict[str, int] = {"RealTraffic": 2}
 
-#: id -> default config overrides.
+
+def _merge(base: dict, over: dict) -> dict:
+    """``base`` with ``over`` on top, nested dicts merged."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+#: id -> default config overrides: the current version's ids, then the earlier versions'
+#: that today's code reproduces (with that version's defaults).
 ENV_IDS: dict[str, dict] = {
-    f"uasep/{f.gym_name}-v{ENV_VERSION}": {"scenario": f.name, **f.defaults}
+    f"uasep/{f.gym_name}-v{version}": _merge(
+        {"scenario": f.name, **f.defaults}, VERSION_DEFAULTS[version]
+    )
+    for version in sorted(VERSION_DEFAULTS, reverse=True)
     for f in FAMILIES.values()
-    if f.gym_name is not None
+    if f.gym_name is not None and FIRST_VERSION.get(f.gym_name, 0) <= version
 }
+
+#: id -> its env version (every id of :data:`ENV_IDS`).
+ID_VERSIONS: dict[str, int] = {i: int(i.rsplit("-v", 1)[1]) for i in ENV_IDS}
 
 
 def register_envs() -> None:

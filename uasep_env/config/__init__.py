@@ -15,7 +15,13 @@ Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 from __future__ import annotations
 
 from uasep_env.config import groups
-from uasep_env.config.env import AS_PUBLISHED, FORMATION_PATTERNS, EnvConfig, make_config
+from uasep_env.config.env import (
+    AS_PUBLISHED,
+    FORMATION_PATTERNS,
+    VERSION_DEFAULTS,
+    EnvConfig,
+    make_config,
+)
 from uasep_env.config.groups import *  # noqa: F403 (the groups' public names, groups.__all__)
 
 
@@ -33,6 +39,7 @@ __all__ = [
     "AS_PUBLISHED",
     "FORMATION_PATTERNS",
     "SCENARIOS",  # noqa: F405 (read by __getattr__ above)
+    "VERSION_DEFAULTS",
     "EnvConfig",
     "make_config",
 ]

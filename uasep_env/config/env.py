@@ -5,7 +5,8 @@ unknown keys raise a :class:`TypeError` (Python's convention for an unexpected k
 invalid or out-of-range values a :class:`ValueError`, each naming the dotted field. Also the
 names the top-level fields accept (:data:`SCENARIOS`, read from the scenario registry, and
 :data:`FORMATION_PATTERNS`) and the
-overrides of the paper's prediction as published (:data:`AS_PUBLISHED`).
+overrides of the paper's prediction as published (:data:`AS_PUBLISHED`) and of each env
+version's defaults (:data:`VERSION_DEFAULTS`).
 
 Units are SI throughout: metres (m), seconds (s), radians (rad), m/s, m/s^2.
 """
@@ -44,7 +45,14 @@ from uasep_env.config.groups import (
 )
 from uasep_env.scenarios.registry import get_family, scenario_names
 
-__all__ = ["AS_PUBLISHED", "FORMATION_PATTERNS", "SCENARIOS", "EnvConfig", "make_config"]  # noqa: F822
+__all__ = [
+    "AS_PUBLISHED",
+    "FORMATION_PATTERNS",
+    "SCENARIOS",
+    "VERSION_DEFAULTS",
+    "EnvConfig",
+    "make_config",
+]
 
 #: Names accepted for ``EnvConfig.formation`` (see :mod:`uasep_env.sim.formation`).
 FORMATION_PATTERNS = ("line_abreast", "paper", "column", "v", "wedge", "grid", "circle")
@@ -63,6 +71,16 @@ def __getattr__(name: str) -> Any:
 #: scenario="paper")``; on the command line ``--config prediction.mode=terminal --config
 #: prediction.fit=paper``.
 AS_PUBLISHED: dict[str, dict[str, str]] = {"prediction": {"mode": "terminal", "fit": "paper"}}
+
+#: Overrides that give each env version's defaults from today's (``make_config(
+#: VERSION_DEFAULTS[2], scenario="random")`` plays the ``-v2`` episodes bit for bit; the
+#: ``uasep/...-v2`` ids are registered with them). Versions 0 and 1 are not reproducible
+#: (their dynamics changed in code, not in a default).
+VERSION_DEFAULTS: dict[int, dict[str, dict[str, str]]] = {
+    3: {},
+    # -v3 made the calibrated prediction the default; -v2 predicted the enclosing region.
+    2: {"prediction": {"fit": "enclosing"}},
+}
 
 T = TypeVar("T")
 
