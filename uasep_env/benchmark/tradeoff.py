@@ -7,8 +7,9 @@ A single setting per controller says little: the README's tables compare the APF
 17 m from the obstacle with a motion-state APF keeping 11 m. Here each controller's safety
 margin is swept over a grid (:data:`METHODS`), every setting plays the same encounters as
 the paper experiment (the ``paper`` scenario, seeds 0-19, and the 200-encounter ``random``
-bank, seeds 4000500-4000699 of the validation range), and efficiency (max deviation, longest conflict resolution,
-acceleration fluctuation) is plotted against safety (min UAV-obstacle distance,
+bank, seeds 4000500-4000699 of the validation range), and efficiency (max deviation,
+longest conflict resolution, acceleration fluctuation) is plotted against safety (min
+UAV-obstacle distance,
 loss-of-separation rate, collision rate), with 95 % intervals (Student-t for means, Wilson
 for rates) and each method's Pareto front.
 

@@ -48,7 +48,7 @@ from uasep_env.scenarios.registry import get_family, scenario_names
 __all__ = [
     "AS_PUBLISHED",
     "FORMATION_PATTERNS",
-    "SCENARIOS",
+    "SCENARIOS",  # noqa: F822 (read by __getattr__ below)
     "VERSION_DEFAULTS",
     "EnvConfig",
     "make_config",
