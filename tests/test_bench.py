@@ -209,3 +209,54 @@ def test_a_sweep_passes_through_its_policy_default(method):
     named.reset()
     np.testing.assert_array_equal(swept(obs), named(obs))
     assert math.isfinite(method.default) and method.default in method.values
+
+
+def _stats(coll, coll_hi, los, los_hi, dev, dev_lo, dev_hi):
+    return {
+        "collision": {"rate": coll, "ci_low": 0.0, "ci_high": coll_hi},
+        "loss_of_separation": {"rate": los, "ci_low": max(0.0, los - 0.02), "ci_high": los_hi},
+        "max_deviation": {"mean": dev, "ci_low": dev_lo, "ci_high": dev_hi},
+    }
+
+
+def _board(rows_by_bank):
+    return {
+        "banks": {
+            b: {"title": f"bank {b}", "budget": {"loss_of_separation": 0.02}}
+            for b in rows_by_bank
+        },
+        "results": {
+            b: {
+                label: {"default": st, "equal_safety": {"deviation": eq}}
+                for label, (st, eq) in rows.items()
+            }
+            for b, rows in rows_by_bank.items()
+        },
+    }
+
+
+def test_verdict_names_the_safest_the_cheapest_and_who_beats_the_apf():
+    from uasep_env.benchmark import verdict
+
+    held = {
+        "apf": (_stats(0.0, 0.01, 0.02, 0.04, 36.0, 34.0, 38.0), 36.0),
+        "orca": (_stats(0.0, 0.01, 0.01, 0.03, 17.0, 16.0, 18.0), 17.0),
+        "mvp": (_stats(0.05, 0.08, 0.60, 0.65, 9.0, 8.5, 9.5), None),
+    }
+    real = {
+        "apf": (_stats(0.01, 0.03, 0.09, 0.13, 26.0, 25.0, 27.0), 26.0),
+        "orca": (_stats(0.06, 0.10, 0.80, 0.85, 10.0, 9.0, 11.0), None),
+        "mvp": (_stats(0.08, 0.12, 0.90, 0.93, 9.0, 8.5, 9.5), None),
+    }
+    board = _board({"held_out": held, "real_traffic": real})
+    assert verdict.safest(board["results"]["held_out"]) == ("orca", ["apf"])
+    assert verdict.cheapest(board["results"]["held_out"]) == "orca"
+    text = verdict.sentences(board)
+    assert text[0].startswith("On bank held_out the safest at its default is **orca**")
+    assert "cheapest is **orca**, 17.0 m" in text[1] and "the APF 36.0 m" in text[1]
+    # The order changes on real traffic: the APF is safest and cheapest there.
+    assert any("bank real_traffic the safest at its default is **apf**" in t for t in text)
+    assert text[-1].endswith("on bank held_out: orca.")
+    # A row as safe but whose deviation interval touches the APF's does not beat it.
+    held["orca"] = (_stats(0.0, 0.01, 0.01, 0.03, 33.0, 31.0, 34.5), 33.0)
+    assert "not beaten" in verdict.sentences(_board({"held_out": held}))[-1]

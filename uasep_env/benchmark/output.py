@@ -72,6 +72,12 @@ def markdown(board: dict[str, Any]) -> str:
         "equal safety: the least max deviation along the policy's front (its knob swept) with "
         "a loss-of-separation (LoS) rate within the bank's budget and no collision.",
     ]
+    from uasep_env.benchmark.verdict import sentences
+
+    verdict = sentences(board)
+    if verdict:
+        # Read from the numbers below (uasep_env.benchmark.verdict), never written by hand.
+        out += ["", "## Verdict", "", *(f"* {line}" for line in verdict)]
     for bank, info in board["banks"].items():
         seeds, budget = info["seeds"], info["budget"]
         last = seeds["first"] + seeds["count"] - 1
