@@ -37,16 +37,19 @@ class ResidualAPF:
     Args:
         config: The environment config (its ``action.residual_scale`` bounds the correction;
             its mode may be either: the APF always reads the world part of the observation).
-        gains: The base APF's gains (default: :class:`~uasep_env.policies.apf.APFGains`, what
-            the environments use); other gains only to study a trained policy on another
+        gains: The base APF's gains (default: the reference gains,
+            :class:`~uasep_env.policies.apf.APFGains`'s field defaults, what the environments
+            use, not the APF controller's tuned ``default_gains``: re-tuning a controller
+            does not move an episode); other gains only to study a trained policy on another
             base (``baselines/tradeoff.py``).
     """
 
     def __init__(self, config: EnvConfig, gains: APFGains | None = None) -> None:
-        from uasep_env.policies.apf import APF  # here: the policies package imports this module
+        from uasep_env.policies.apf import APF, APFGains  # here: policies imports this module
 
         self.scale = config.action.residual_scale
-        self.apf = APF(config.replace(action={"mode": "direct"}), gains)
+        base_gains = gains if gains is not None else APFGains()
+        self.apf = APF(config.replace(action={"mode": "direct"}), base_gains)
         self.world_dim = self.apf.layout.dim
 
     def base(self, world_obs: np.ndarray) -> np.ndarray:
