@@ -15,6 +15,7 @@ from uasep_env.config.env import VERSION_DEFAULTS
 from uasep_env.scenarios import FAMILIES
 
 __all__ = [
+    "EARLIER_IDS",
     "ENV_IDS",
     "ENV_VERSION",
     "ENV_VERSIONS",
@@ -69,23 +70,34 @@ def _merge(base: dict, over: dict) -> dict:
     return out
 
 
-#: id -> default config overrides: the current version's ids, then the earlier versions'
-#: that today's code reproduces (with that version's defaults).
-ENV_IDS: dict[str, dict] = {
-    f"uasep/{f.gym_name}-v{version}": _merge(
-        {"scenario": f.name, **f.defaults}, VERSION_DEFAULTS[version]
-    )
-    for version in sorted(VERSION_DEFAULTS, reverse=True)
-    for f in FAMILIES.values()
-    if f.gym_name is not None and FIRST_VERSION.get(f.gym_name, 0) <= version
+def _ids(version: int) -> dict[str, dict]:
+    """Every family's id at ``version``, with that version's defaults as overrides."""
+    return {
+        f"uasep/{f.gym_name}-v{version}": _merge(
+            {"scenario": f.name, **f.defaults}, VERSION_DEFAULTS[version]
+        )
+        for f in FAMILIES.values()
+        if f.gym_name is not None and FIRST_VERSION.get(f.gym_name, 0) <= version
+    }
+
+
+#: id -> default config overrides, the current version's ids.
+ENV_IDS: dict[str, dict] = _ids(ENV_VERSION)
+#: The same for the earlier versions whose episodes today's code reproduces (registered
+#: too; gymnasium warns that a newer version exists).
+EARLIER_IDS: dict[str, dict] = {
+    i: d
+    for v in sorted(VERSION_DEFAULTS, reverse=True)
+    if v < ENV_VERSION
+    for i, d in _ids(v).items()
 }
 
 #: id -> its env version (every id of :data:`ENV_IDS`).
-ID_VERSIONS: dict[str, int] = {i: int(i.rsplit("-v", 1)[1]) for i in ENV_IDS}
+ID_VERSIONS: dict[str, int] = {i: int(i.rsplit("-v", 1)[1]) for i in (*ENV_IDS, *EARLIER_IDS)}
 
 
 def register_envs() -> None:
-    """Register every id in :data:`ENV_IDS` that is not registered yet.
+    """Register every id of :data:`ENV_IDS` and :data:`EARLIER_IDS` not registered yet.
 
     Each id's ``max_episode_steps`` is its default episode length in steps (the env
     truncates there itself; ``gymnasium.make`` adds a ``TimeLimit`` at the same step and
@@ -95,7 +107,7 @@ def register_envs() -> None:
     """
     from uasep_env.config import make_config
 
-    for env_id, defaults in ENV_IDS.items():
+    for env_id, defaults in {**ENV_IDS, **EARLIER_IDS}.items():
         if env_id in gymnasium.registry:
             continue
         gymnasium.register(
