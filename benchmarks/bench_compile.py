@@ -11,7 +11,7 @@ start to exit:
 * ``eval``: ``uasep-eval --policy apf --scenario paper --episodes 1 --seed 0``, what
   ``make eval`` runs (import, compile, one APF episode, the metrics printed);
 * ``precompile``: ``python -m uasep_env.precompile``, what ``make`` runs at install time;
-* ``vector``: ``gymnasium.make_vec("uasep/Formation-v2", num_envs=4096)``, reset, one
+* ``vector``: ``gymnasium.make_vec("uasep/Formation-v3", num_envs=4096)``, reset, one
   step with random actions (a training's first step).
 
 With ``--against`` each case runs under both checkouts in turn, side by side in one run,
@@ -42,7 +42,7 @@ CASES = {
     "vector": [
         "-c",
         "import gymnasium, numpy as np, uasep_env\n"
-        "vec = gymnasium.make_vec('uasep/Formation-v2', num_envs=4096)\n"
+        "vec = gymnasium.make_vec('uasep/Formation-v3', num_envs=4096)\n"
         "vec.reset(seed=0)\n"
         "rng = np.random.default_rng(0)\n"
         "vec.step(rng.uniform(-1, 1, vec.action_space.shape).astype(np.float32))\n",

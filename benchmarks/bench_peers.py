@@ -95,7 +95,7 @@ def bench_vector(n: int, seconds: float) -> float:
 
     import uasep_env  # noqa: F401
 
-    vec = gymnasium.make_vec("uasep/Formation-v2", num_envs=n, n_uavs=3, n_obstacles=1)
+    vec = gymnasium.make_vec("uasep/Formation-v3", num_envs=n, n_uavs=3, n_obstacles=1)
     vec.reset(seed=0)
     rng = np.random.default_rng(0)
     pool = rng.uniform(-1, 1, size=(8, *vec.action_space.shape)).astype(np.float32)

@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/bench_resets.py [--envs 4096] [--warmup 300] [--chunk 50] [--rounds 4]
 
-Two native vector envs (``gymnasium.make_vec("uasep/Formation-v2")``, 3 UAVs, one obstacle,
+Two native vector envs (``gymnasium.make_vec("uasep/Formation-v3")``, 3 UAVs, one obstacle,
 ``random`` scenario) in one process: one stepped with zero actions (almost no episode
 ends), one with uniform random actions in ``[-1, 1]`` (UAVs get lost: a few of 4096
 environments end and are reset every step). Both are first stepped ``--warmup`` steps, so that
@@ -53,7 +53,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     envs, actions = {}, {}
     for mode in ("zero", "random"):
-        vec = gymnasium.make_vec("uasep/Formation-v2", num_envs=args.envs)
+        vec = gymnasium.make_vec("uasep/Formation-v3", num_envs=args.envs)
         vec.reset(seed=0)
         envs[mode] = vec
         shape = vec.action_space.shape

@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/bench_threads.py [--envs 4096] [--seconds 10] [--actions zero]
 
-Steps the native vector env (``gymnasium.make_vec("uasep/Formation-v2")``, 3 UAVs, one
+Steps the native vector env (``gymnasium.make_vec("uasep/Formation-v3")``, 3 UAVs, one
 obstacle) in fresh processes and prints agent-steps/s for
 
 * one process, threads decided by the package (``UASEP_THREADS``/``UASEP_WORKERS`` unset);
@@ -41,7 +41,7 @@ def _worker(envs: int, seconds: float, actions: str) -> None:
     import uasep_env  # noqa: F401  (registers the ids)
     from uasep_env import _numba
 
-    vec = gymnasium.make_vec("uasep/Formation-v2", num_envs=envs)
+    vec = gymnasium.make_vec("uasep/Formation-v3", num_envs=envs)
     vec.reset(seed=0)
     rng = np.random.default_rng(0)
     shape = vec.action_space.shape

@@ -82,7 +82,7 @@ def test_every_view_offers_the_mode():
         _apf_returns_pettingzoo(cfg, 3, 50), _apf_returns_pettingzoo(res, 3, 50)
     )
     # gymnasium.make
-    g = gymnasium.make("uasep/Formation-v2", **RESIDUAL)
+    g = gymnasium.make("uasep/Formation-v3", **RESIDUAL)
     obs, _ = g.reset(seed=0)
     n = g.unwrapped.config.n_uavs
     assert obs.shape == (n * ObservationLayout.from_config(g.unwrapped.config).dim,)
@@ -90,7 +90,7 @@ def test_every_view_offers_the_mode():
     obs, *_ = g.step(np.zeros(n * 3, np.float32))
     assert g.observation_space.contains(obs)
     # make_vec
-    v = gymnasium.make_vec("uasep/Formation-v2", num_envs=3, **RESIDUAL)
+    v = gymnasium.make_vec("uasep/Formation-v3", num_envs=3, **RESIDUAL)
     obs, _ = v.reset(seed=0)
     obs, *_ = v.step(np.zeros(v.action_space.shape, np.float32))
     assert v.observation_space.contains(obs)

@@ -64,7 +64,7 @@ def test_torchrl_gym_env():
     from torchrl.envs import GymEnv
     from torchrl.envs.utils import check_env_specs
 
-    env = GymEnv("uasep/Formation-v2", **SHORT)  # TorchRL passes frameskip: a TypeError
+    env = GymEnv("uasep/Formation-v3", **SHORT)  # TorchRL passes frameskip: a TypeError
     check_env_specs(env)
     td = env.rollout(300, break_when_any_done=False)
     assert td.batch_size == (300,)
@@ -78,7 +78,7 @@ def test_torchrl_gym_vector_env():
 
     # TorchRL steps num_envs copies in subprocesses: the "module:id" form imports
     # uasep_env there (which registers the ids) before gymnasium.make looks the id up.
-    env = GymEnv("uasep_env:uasep/Formation-v2", num_envs=2, **SHORT)
+    env = GymEnv("uasep_env:uasep/Formation-v3", num_envs=2, **SHORT)
     check_env_specs(env)
     td = env.rollout(120, break_when_any_done=False)
     assert td.batch_size == (2, 120)
@@ -92,7 +92,7 @@ def test_torchrl_wraps_the_native_vector_env():
     from torchrl.envs import GymWrapper
     from torchrl.envs.utils import check_env_specs
 
-    vec = gymnasium.make_vec("uasep/Formation-v2", num_envs=2, autoreset_mode="SameStep", **SHORT)
+    vec = gymnasium.make_vec("uasep/Formation-v3", num_envs=2, autoreset_mode="SameStep", **SHORT)
     env = GymWrapper(vec)
     check_env_specs(env)
     td = env.rollout(120, break_when_any_done=False)
@@ -220,7 +220,7 @@ def test_cleanrl_style_ppo_on_make_vec():
     from torch import nn
 
     n_envs, n_steps, gamma, lam, clip = 2, 64, 0.99, 0.95, 0.2
-    envs = gymnasium.make_vec("uasep/Formation-v2", num_envs=n_envs, **SHORT)
+    envs = gymnasium.make_vec("uasep/Formation-v3", num_envs=n_envs, **SHORT)
     envs = vw.RecordEpisodeStatistics(envs)
     envs = vw.ClipAction(envs)
     envs = vw.NormalizeObservation(envs)
@@ -313,7 +313,7 @@ def test_sb3_subproc_vec_env_spawn():
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
     venv = make_vec_env(
-        "uasep_env:uasep/PaperEncounter-v2",
+        "uasep_env:uasep/PaperEncounter-v3",
         n_envs=2,
         seed=0,
         env_kwargs=SHORT,

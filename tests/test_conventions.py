@@ -21,7 +21,7 @@ from uasep_env.registration import ENV_IDS
 def test_torchrl_frameskip_keyword_is_a_type_error():
     """TorchRL's GymEnv passes ``frameskip`` and drops it only on a TypeError."""
     with pytest.raises(TypeError, match="frameskip"):
-        gymnasium.make("uasep/Formation-v2", frameskip=1)
+        gymnasium.make("uasep/Formation-v3", frameskip=1)
     with pytest.raises(TypeError, match="frameskip"):
         uasep_env.parallel_env(frameskip=1)
 
@@ -97,7 +97,7 @@ def test_spec_declares_max_episode_steps(env_id):
 
 
 def test_vector_max_episode_steps_the_earlier_limit_wins():
-    vec = gymnasium.make_vec("uasep/Formation-v2", num_envs=2, max_episode_steps=5)
+    vec = gymnasium.make_vec("uasep/Formation-v3", num_envs=2, max_episode_steps=5)
     assert vec.unwrapped.config.max_steps == 5
     assert FormationVectorEnv(2, episode_duration=1.0, max_episode_steps=50).config.max_steps == 5
     with pytest.raises(ValueError, match="max_episode_steps must be a positive integer, got 0"):
@@ -175,6 +175,6 @@ def test_same_step_infos_no_stray_keys():
 def test_unknown_keyword_uses_pythons_wording():
     """TorchRL drops ``frameskip`` only on "unexpected keyword argument 'frameskip'"."""
     with pytest.raises(TypeError, match="unexpected keyword argument 'frameskip'"):
-        gymnasium.make("uasep/Formation-v2", frameskip=1)
+        gymnasium.make("uasep/Formation-v3", frameskip=1)
     with pytest.raises(TypeError, match=r"unexpected keyword argument 'noise\.acel_std'"):
         uasep_env.parallel_env(noise={"acel_std": 1.0})

@@ -40,20 +40,20 @@ def test_gymnasium_check_env_every_id(env_id):
 
 @pytest.mark.parametrize("cfg", GRID[:5])
 def test_gymnasium_check_env_grid(cfg):
-    env = gymnasium.make("uasep/Formation-v2", **cfg)
+    env = gymnasium.make("uasep/Formation-v3", **cfg)
     check_env(env.unwrapped, skip_render_check=True)
 
 
 def test_gymnasium_make_validates_config():
     with pytest.raises(TypeError, match="n_uavz"):
-        gymnasium.make("uasep/Formation-v2", n_uavz=3)
+        gymnasium.make("uasep/Formation-v3", n_uavz=3)
     with pytest.raises(ValueError, match="n_uavs=99"):
-        gymnasium.make("uasep/PaperEncounter-v2", n_uavs=99)
+        gymnasium.make("uasep/PaperEncounter-v3", n_uavs=99)
 
 
 def test_registration_survives_spawned_subprocesses():
     vec = gymnasium.make_vec(
-        "uasep/Formation-v2",
+        "uasep/Formation-v3",
         num_envs=2,
         vectorization_mode="async",
         vector_kwargs={"context": "spawn"},
@@ -69,7 +69,7 @@ def test_registration_survives_spawned_subprocesses():
 
 def test_import_registers_ids_in_a_fresh_interpreter():
     code = (
-        "import gymnasium, uasep_env; e = gymnasium.make('uasep/PaperEncounter-v2'); "
+        "import gymnasium, uasep_env; e = gymnasium.make('uasep/PaperEncounter-v3'); "
         "print(e.reset(seed=0)[0].shape)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -214,7 +214,7 @@ def test_bad_agent_and_spaces(env):
 
 
 def test_gym_bad_action():
-    env = gymnasium.make("uasep/Formation-v2").unwrapped
+    env = gymnasium.make("uasep/Formation-v3").unwrapped
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"shape \(9,\)"):
         env.step(np.zeros(3))
@@ -223,7 +223,7 @@ def test_gym_bad_action():
 
 
 def test_gym_clips_and_counts_and_strict_raises():
-    env = gymnasium.make("uasep/PaperEncounter-v2")
+    env = gymnasium.make("uasep/PaperEncounter-v3")
     env.reset(seed=0)
     act = np.zeros(9)
     act[[0, 1, 8]] = [2.0, -3.0, 1.5]
@@ -231,7 +231,7 @@ def test_gym_clips_and_counts_and_strict_raises():
     assert info["clipped_actions"].tolist() == [2, 0, 1]
     *_, info = env.step(np.zeros(9))
     assert info["clipped_actions"].tolist() == [0, 0, 0]
-    strict = gymnasium.make("uasep/PaperEncounter-v2", action={"strict": True})
+    strict = gymnasium.make("uasep/PaperEncounter-v3", action={"strict": True})
     strict.reset(seed=0)
     with pytest.raises(ValueError, match=r"value 2.0 at index \(0,\) is outside"):
         strict.step(act)
@@ -239,7 +239,7 @@ def test_gym_clips_and_counts_and_strict_raises():
 
 def test_gym_reward_and_info_means_are_each_rows_numpy_mean():
     """The single-agent view's means over the UAVs: the same bits as ``row.mean()``."""
-    env = gymnasium.make("uasep/Formation-v2", scenario="random", n_uavs=5).unwrapped
+    env = gymnasium.make("uasep/Formation-v3", scenario="random", n_uavs=5).unwrapped
     env.reset(seed=2)
     rng = np.random.default_rng(0)
     for _ in range(30):
@@ -257,13 +257,13 @@ def test_gym_reward_and_info_means_are_each_rows_numpy_mean():
 
 def test_gym_stepping_a_finished_episode_raises():
     """Issue 13 item 1: the Gymnasium view kept stepping after its episode ended."""
-    g = gymnasium.make("uasep/Formation-v2", formation_spacing=0.5)
+    g = gymnasium.make("uasep/Formation-v3", formation_spacing=0.5)
     g.reset(seed=4)
     _, _, terminated, _, _ = g.step(np.zeros(9))
     assert terminated  # a collision
     with pytest.raises(RuntimeError, match="reset"):
         g.step(np.full(9, 0.3))
-    g = gymnasium.make("uasep/Formation-v2", episode_duration=1.0).unwrapped
+    g = gymnasium.make("uasep/Formation-v3", episode_duration=1.0).unwrapped
     g.reset(seed=0)
     truncated = [g.step(np.zeros(9))[3] for _ in range(5)]
     assert truncated == [False] * 4 + [True]
@@ -276,7 +276,7 @@ def test_gym_stepping_a_finished_episode_raises():
 @pytest.mark.parametrize("seed", ["5", b"7", [1.9], 1.5, [-5], True, np.float64(2.0), [1, 2]])
 def test_bad_seeds_are_named(seed):
     """Issue 13 item 3: seeds were coerced ("5" == 5) or failed inside numpy."""
-    for env in (uasep_env.parallel_env(), gymnasium.make("uasep/Formation-v2")):
+    for env in (uasep_env.parallel_env(), gymnasium.make("uasep/Formation-v3")):
         with pytest.raises(TypeError, match=re.escape(f"got {seed!r}")):
             env.reset(seed=seed)
     with pytest.raises(ValueError, match="seed must be >= 0, got -1"):
@@ -284,14 +284,14 @@ def test_bad_seeds_are_named(seed):
 
 
 def test_numpy_integer_seed_equals_int_seed():
-    a, b = gymnasium.make("uasep/Formation-v2"), gymnasium.make("uasep/Formation-v2")
+    a, b = gymnasium.make("uasep/Formation-v3"), gymnasium.make("uasep/Formation-v3")
     np.testing.assert_array_equal(a.reset(seed=np.int64(3))[0], b.reset(seed=3)[0])
 
 
 @pytest.mark.parametrize("options", [5, "config", [("config", {})]])
 def test_reset_options_must_be_a_dict(options):
     """Issue 13 item 7: reset(options=5) raised AttributeError or TypeError from inside."""
-    for env in (uasep_env.parallel_env(), gymnasium.make("uasep/Formation-v2")):
+    for env in (uasep_env.parallel_env(), gymnasium.make("uasep/Formation-v3")):
         with pytest.raises(TypeError, match="options must be a dict or None, got"):
             env.reset(seed=0, options=options)
 
@@ -304,7 +304,7 @@ def test_reset_options_config_must_be_a_dict(changes):
 
 
 def test_gym_unknown_reset_option_is_named():
-    env = gymnasium.make("uasep/Formation-v2")
+    env = gymnasium.make("uasep/Formation-v3")
     with pytest.raises(ValueError, match=r"unknown reset option.*'bogus'"):
         env.reset(seed=0, options={"bogus": 1})
 

@@ -376,7 +376,7 @@ def test_scenario_brings_its_defaults_large_formation_flies_eight(tmp_path):
     """Issue 23 item 8: --scenario large_formation flew 3 UAVs; its gym id flies 8."""
     import gymnasium
 
-    gym_cfg = gymnasium.make("uasep/LargeFormation-v2").unwrapped.config
+    gym_cfg = gymnasium.make("uasep/LargeFormation-v3").unwrapped.config
     cfg = build_config("large_formation")
     assert (cfg.n_uavs, cfg.formation, cfg.n_obstacles) == (8, "wedge", 2)
     assert (gym_cfg.n_uavs, gym_cfg.formation, gym_cfg.n_obstacles) == (8, "wedge", 2)

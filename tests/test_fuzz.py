@@ -124,7 +124,7 @@ class VectorView(View):
         # SameStep: every row steps with its action each step (NextStep ignores the action
         # of a row being reset, and that row's infos are the reset's, as in SyncVectorEnv).
         self.env = gymnasium.make_vec(
-            "uasep/Formation-v2", num_envs=2, autoreset_mode="SameStep", **self.cfg
+            "uasep/Formation-v3", num_envs=2, autoreset_mode="SameStep", **self.cfg
         )
 
     def _reset(self, seed, options):
@@ -171,8 +171,8 @@ class SB3View(View):
 def _views():
     views = [
         PettingZooView(),
-        GymView("uasep/Formation-v2"),
-        GymView("uasep/PaperEncounter-v2"),
+        GymView("uasep/Formation-v3"),
+        GymView("uasep/PaperEncounter-v3"),
         VectorView(),
     ]
     try:
@@ -547,9 +547,9 @@ def test_hostile_configs(flat, unknown):
     [
         lambda kw: uasep_env.parallel_env(**kw),
         lambda kw: make_config(**kw),
-        lambda kw: gymnasium.make("uasep/Formation-v2", **kw),
-        lambda kw: gymnasium.make("uasep/PaperEncounter-v2", **kw),
-        lambda kw: gymnasium.make_vec("uasep/Formation-v2", num_envs=2, **kw),
+        lambda kw: gymnasium.make("uasep/Formation-v3", **kw),
+        lambda kw: gymnasium.make("uasep/PaperEncounter-v3", **kw),
+        lambda kw: gymnasium.make_vec("uasep/Formation-v3", num_envs=2, **kw),
         lambda kw: pytest.importorskip("uasep_env.envs.sb3").UAVSharedVecEnv(n_envs=1, **kw),
     ],
     ids=["pettingzoo", "make_config", "gym-formation", "gym-paper", "make_vec", "sb3"],

@@ -228,7 +228,7 @@ def _views():
 
     views = {
         "num_envs": lambda n: FormationVectorEnv(num_envs=n),
-        "make_vec num_envs": lambda n: gymnasium.make_vec("uasep/Formation-v2", num_envs=n),
+        "make_vec num_envs": lambda n: gymnasium.make_vec("uasep/Formation-v3", num_envs=n),
         "n_envs": lambda n: EnvCore(None, n_envs=n),
     }
     try:

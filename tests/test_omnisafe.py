@@ -27,7 +27,7 @@ from conftest import run_python
 import uasep_env
 from uasep_env.envs.safe import SafeEnv, safe_make
 
-ID = "uasep/Formation-v2"
+ID = "uasep/Formation-v3"
 #: 10 steps an episode, and every UAV within 100 m of another: a cost of 1 every step.
 SHORT = {"episode_duration": 2.0}
 ALWAYS_COSTLY = {"uav": {"separation_distance": 100.0}}

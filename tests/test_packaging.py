@@ -88,11 +88,11 @@ for env_id in ENV_IDS:
     env.close()
 # Asking for rendering is one clear error, at once, naming the extra.
 try:
-    gymnasium.make("uasep/PaperEncounter-v2", render_mode="rgb_array")
+    gymnasium.make("uasep/PaperEncounter-v3", render_mode="rgb_array")
 except ModuleNotFoundError as err:
     print("ERR", err)
 try:
-    gymnasium.make_vec("uasep/PaperEncounter-v2", 2, vectorization_mode="vector_entry_point",
+    gymnasium.make_vec("uasep/PaperEncounter-v3", 2, vectorization_mode="vector_entry_point",
                        render_mode="rgb_array")
 except ModuleNotFoundError as err:
     print("VEC", err)

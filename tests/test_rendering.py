@@ -326,7 +326,7 @@ def test_pettingzoo_render_test_parallel_equivalent():
 
 def test_gymnasium_env_frames_for_video():
     """The frames a video recorder would get: constant shape, even sizes, uint8."""
-    env = gymnasium.make("uasep/PaperEncounter-v2", render_mode="rgb_array", episode_duration=4.0)
+    env = gymnasium.make("uasep/PaperEncounter-v3", render_mode="rgb_array", episode_duration=4.0)
     env.reset(seed=0)
     frames = [env.render()]
     done = False
@@ -348,7 +348,7 @@ def test_gymnasium_record_video(tmp_path):
     pytest.importorskip("moviepy", reason="gymnasium's RecordVideo needs moviepy")
     from gymnasium.wrappers import RecordVideo
 
-    env = gymnasium.make("uasep/PaperEncounter-v2", render_mode="rgb_array", episode_duration=4.0)
+    env = gymnasium.make("uasep/PaperEncounter-v3", render_mode="rgb_array", episode_duration=4.0)
     videos = tmp_path / "videos"
     env = RecordVideo(env, video_folder=str(videos), episode_trigger=lambda ep: True)
     env.reset(seed=0)
@@ -363,7 +363,7 @@ def test_gymnasium_record_video(tmp_path):
 
 def test_vector_env_render():
     env = gymnasium.make_vec(
-        "uasep/PaperEncounter-v2",
+        "uasep/PaperEncounter-v3",
         num_envs=2,
         vectorization_mode="vector_entry_point",
         render_mode="rgb_array",
@@ -378,7 +378,7 @@ def test_vector_env_render():
     assert not np.array_equal(frames[0], frames[1])
     # Sub-env i is the single env seeded seed + i: the same frame, pixel for pixel, below
     # the title (which names the env index).
-    single = gymnasium.make("uasep/PaperEncounter-v2", render_mode="rgb_array")
+    single = gymnasium.make("uasep/PaperEncounter-v3", render_mode="rgb_array")
     single.reset(seed=1)
     single.step(np.zeros(single.action_space.shape, dtype=np.float32))
     np.testing.assert_array_equal(frames[1][40:], single.render()[40:])
@@ -395,7 +395,7 @@ def test_vector_env_human_rendering_wrapper(monkeypatch):
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")  # no display needed
     env = HumanRendering(
         gymnasium.make_vec(
-            "uasep/PaperEncounter-v2",
+            "uasep/PaperEncounter-v3",
             num_envs=2,
             vectorization_mode="vector_entry_point",
             render_mode="rgb_array",

@@ -15,7 +15,7 @@ SHORT = {"episode_duration": 3.0, "n_obstacles": 2}
 
 
 def test_make_vec_uses_native_vector_env():
-    vec = gymnasium.make_vec("uasep/Formation-v2", num_envs=8, **SHORT)
+    vec = gymnasium.make_vec("uasep/Formation-v3", num_envs=8, **SHORT)
     assert isinstance(vec.unwrapped, FormationVectorEnv)
     obs, _ = vec.reset(seed=0)
     assert obs.shape == (8, *vec.single_observation_space.shape)
@@ -86,7 +86,7 @@ def test_vector_bad_actions_and_modes():
     with pytest.raises(TypeError, match="n_uavz"):
         FormationVectorEnv(2, n_uavz=3)
     with pytest.raises(TypeError, match="n_uavz"):
-        gymnasium.make_vec("uasep/Formation-v2", num_envs=2, n_uavz=3)
+        gymnasium.make_vec("uasep/Formation-v3", num_envs=2, n_uavz=3)
 
 
 def test_vector_clips_and_counts_actions():

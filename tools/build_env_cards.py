@@ -57,7 +57,7 @@ GIF_FRAME_MS = 100
 
 
 def card_name(env_id: str) -> str:
-    """``uasep/PaperEncounter-v2`` -> ``PaperEncounter`` (the card's file name)."""
+    """``uasep/PaperEncounter-v3`` -> ``PaperEncounter`` (the card's file name)."""
     return env_id.split("/", 1)[1].rsplit("-v", 1)[0]
 
 

@@ -2,7 +2,7 @@
 
 * :func:`parallel_env` -- the PettingZoo parallel environment (primary API); :func:`env`
   its AEC view. The package is a PettingZoo env module (``pettingzoo.test`` takes it).
-* ``gymnasium.make("uasep/Formation-v2")`` / ``"uasep/PaperEncounter-v2"`` -- centralised
+* ``gymnasium.make("uasep/Formation-v3")`` / ``"uasep/PaperEncounter-v3"`` -- centralised
   Gymnasium views, registered on import (``gymnasium.make_vec`` gives the batched vector env).
 * :class:`World` -- the batched numpy core, the one transition function.
 * :mod:`uasep_env.policies` -- the paper's APF and its comparison methods.

@@ -7,7 +7,7 @@ Importing this module imports OmniSafe and registers :class:`UasepCMDP` with Omn
     import omnisafe
     import uasep_env.clients.omnisafe  # registers the uasep/ ids with OmniSafe
 
-    agent = omnisafe.Agent("PPOLag", "uasep/Formation-v2", custom_cfgs={...})
+    agent = omnisafe.Agent("PPOLag", "uasep/Formation-v3", custom_cfgs={...})
     agent.learn()
 
 trains on the formation, the cost being the Gymnasium view's ``info["cost"]``

@@ -39,7 +39,7 @@ class SafeEnv(gymnasium.Wrapper):
         return obs, reward, float(info["cost"]), terminated, truncated, info
 
 
-def safe_make(env_id: str = "uasep/Formation-v2", **kwargs: Any) -> SafeEnv:
+def safe_make(env_id: str = "uasep/Formation-v3", **kwargs: Any) -> SafeEnv:
     """``SafeEnv(gymnasium.make(env_id, **kwargs))``: a ``uasep/`` id in Safety-Gymnasium's form.
 
     Args:

@@ -1,6 +1,6 @@
 """A native Gymnasium vector environment over the batched core.
 
-``gymnasium.make_vec("uasep/Formation-v2", num_envs=4096)`` returns
+``gymnasium.make_vec("uasep/Formation-v3", num_envs=4096)`` returns
 :class:`FormationVectorEnv`: one :class:`~uasep_env.sim.world.World` of ``num_envs``
 environments stepped by array operations, with no Python loop over environments. Each
 environment is the centralised view of :class:`~uasep_env.envs.gym_env.FormationEnv`
