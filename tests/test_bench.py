@@ -219,7 +219,7 @@ def _stats(coll, coll_hi, los, los_hi, dev, dev_lo, dev_hi):
     }
 
 
-def _board(rows_by_bank):
+def _verdict_board(rows_by_bank):
     return {
         "banks": {
             b: {"title": f"bank {b}", "budget": {"loss_of_separation": 0.02}}
@@ -248,7 +248,7 @@ def test_verdict_names_the_safest_the_cheapest_and_who_beats_the_apf():
         "orca": (_stats(0.06, 0.10, 0.80, 0.85, 10.0, 9.0, 11.0), None),
         "mvp": (_stats(0.08, 0.12, 0.90, 0.93, 9.0, 8.5, 9.5), None),
     }
-    board = _board({"held_out": held, "real_traffic": real})
+    board = _verdict_board({"held_out": held, "real_traffic": real})
     assert verdict.safest(board["results"]["held_out"]) == ("orca", ["apf"])
     assert verdict.cheapest(board["results"]["held_out"]) == "orca"
     text = verdict.sentences(board)
@@ -259,4 +259,21 @@ def test_verdict_names_the_safest_the_cheapest_and_who_beats_the_apf():
     assert text[-1].endswith("on bank held_out: orca.")
     # A row as safe but whose deviation interval touches the APF's does not beat it.
     held["orca"] = (_stats(0.0, 0.01, 0.01, 0.03, 33.0, 31.0, 34.5), 33.0)
-    assert "not beaten" in verdict.sentences(_board({"held_out": held}))[-1]
+    assert "not beaten" in verdict.sentences(_verdict_board({"held_out": held}))[-1]
+
+
+def test_front_banks_sweep_only_those_banks(tmp_path, capsys):
+    out = tmp_path / "b"
+    argv = ["--policy", "apf", "--banks", "held_out,collision_head_on", "--episodes", "2",
+            "--front-banks", "held_out", "--out", str(out), *SHORT]  # fmt: skip
+    assert main(argv) == 0
+    board = _board(out)
+    assert board["settings"]["front_banks"] == ["held_out"]
+    swept = board["results"]["held_out"]["apf"]
+    single = board["results"]["collision_head_on"]["apf"]
+    assert len(swept["front"]) == len(METHODS[0].values) and swept["front_kind"] == "swept"
+    assert len(single["front"]) == 1 and single["front_kind"].startswith("single point")
+    assert "swept on held_out" in (out / "bench.md").read_text()
+    # A front bank outside --banks is a one-line error naming it.
+    assert main([*argv[:6], "--front-banks", "uavs_8", "--out", str(tmp_path / "x"), *SHORT]) == 2
+    assert "uavs_8 not in --banks" in capsys.readouterr().err

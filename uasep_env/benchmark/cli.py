@@ -79,6 +79,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-front", action="store_true", help="skip the knob sweeps (the default points only)"
     )
     p.add_argument(
+        "--front-banks",
+        default=None,
+        metavar="NAMES",
+        help="sweep the knobs on these banks only (default: every bank of --banks); the "
+        "others get each policy's default point",
+    )
+    p.add_argument(
         "--config",
         action="append",
         default=[],
@@ -153,7 +160,17 @@ def _run(argv: Sequence[str] | None) -> int:
     reference = None
     if args.budget is None and REFERENCE not in labels:
         reference = parse_entries([REFERENCE])[0]  # the budget's reference, not a row
-    front = not args.no_front
+    front: bool | list[str] = not args.no_front
+    if args.front_banks is not None:
+        if args.no_front:
+            parser.error("arguments --front-banks and --no-front: choose one")
+        try:
+            front = check_banks([b.strip() for b in args.front_banks.split(",") if b.strip()])
+        except ValueError as err:
+            parser.error(f"argument --front-banks: {err}")
+        outside = [b for b in front if b not in banks]
+        if outside:
+            parser.error(f"argument --front-banks: {', '.join(outside)} not in --banks")
     cells = plan_cells(entries, banks, front, reference)
     if args.fresh:
         shutil.rmtree(args.out / "cells", ignore_errors=True)

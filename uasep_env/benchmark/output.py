@@ -56,6 +56,15 @@ def _equal(eq: dict[str, Any], kind: str) -> str:
     return f"{eq['deviation']:.1f} ({where})"
 
 
+def _fronts(settings: dict[str, Any]) -> str:
+    banks = settings.get("front_banks")
+    if not settings["front"]:
+        return "skipped"
+    if banks is None or list(banks) == list(settings["banks"]):
+        return "swept"
+    return "swept on " + ", ".join(banks)
+
+
 def markdown(board: dict[str, Any]) -> str:
     """One table per bank; every rate and mean with its 95 % interval."""
     from uasep_env.runtime.tables import render_table
@@ -66,7 +75,7 @@ def markdown(board: dict[str, Any]) -> str:
         "",
         f"`{' '.join(board['command'])}` (uasep-env {board['versions']['uasep_env']}, "
         f"env v{board['versions']['env']}; episodes per bank: {s['episodes'] or 'all'}; "
-        f"fronts: {'swept' if s['front'] else 'skipped'})",
+        f"fronts: {_fronts(s)})",
         "",
         "Rates with 95 % Wilson intervals, means with 95 % Student-t intervals. Deviation at "
         "equal safety: the least max deviation along the policy's front (its knob swept) with "
@@ -93,7 +102,7 @@ def markdown(board: dict[str, Any]) -> str:
         rows = []
         for label, r in board["results"][bank].items():
             d = r["default"]
-            kind = board["policies"][label]["front"]
+            kind = r.get("front_kind", board["policies"][label]["front"])
             rows.append([
                 label, _rate(d["collision"]), _rate(d["loss_of_separation"]),
                 _mean(d["max_deviation"]), _mean(d["conflict_time"]), _mean(d["cost"], 2),

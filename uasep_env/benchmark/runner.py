@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -103,20 +103,24 @@ def cell_stats(aggregate: dict[str, dict[str, Any]]) -> dict[str, Any]:
 
 
 def plan_cells(
-    entries: Sequence[Entry], banks: Sequence[str], front: bool, reference: Entry | None
+    entries: Sequence[Entry],
+    banks: Sequence[str],
+    front: bool | Collection[str],
+    reference: Entry | None,
 ) -> list[Cell]:
     """Every cell of the suite, bank by bank.
 
-    Each entry's default, the budget's reference default where it is no entry, then (with
-    ``front``) each sweep's other values.
+    Each entry's default, the budget's reference default where it is no entry, then (on the
+    banks of ``front``: all with True, none with False) each sweep's other values.
     """
+    fronts = set(banks) if front is True else set() if front is False else set(front)
     cells: list[Cell] = []
     for bank in banks:
         for e in entries:
             cells.append(Cell(bank=bank, entry=e, value=None))
         if reference is not None:
             cells.append(Cell(bank=bank, entry=reference, value=None))
-        for e in entries if front else ():
+        for e in entries if bank in fronts else ():
             if e.sweep is not None:
                 cells += [
                     Cell(bank=bank, entry=e, value=float(v))

@@ -41,7 +41,7 @@ def _point(value: float | None, stats: dict[str, Any]) -> dict[str, Any]:
 def _front_kind(entry: Entry, front: bool) -> str:
     if entry.sweep is None:
         return "single point: no knob to sweep"
-    return "swept" if front else "single point: --no-front"
+    return "swept" if front else "single point: front not swept on this bank"
 
 
 def leaderboard(
@@ -50,7 +50,7 @@ def leaderboard(
     cells: dict[tuple[str, str, str], dict[str, Any]],
     *,
     budget: float | None,
-    front: bool,
+    front: bool | Sequence[str],
     episodes: int | None,
     overrides: dict[str, Any],
     command: Sequence[str],
@@ -65,6 +65,8 @@ def leaderboard(
     """
     from uasep_env import __version__
     from uasep_env.registration import ENV_VERSION
+
+    fronts = list(banks) if front is True else [] if front is False else list(front)
 
     out_banks: dict[str, Any] = {}
     results: dict[str, Any] = {}
@@ -88,7 +90,7 @@ def leaderboard(
             default = cells[bank, e.label, "default"]
             sweep = e.sweep
             points = [(sweep.default if sweep else None, default)]
-            if front and sweep is not None:
+            if bank in fronts and sweep is not None:
                 points = [
                     (float(v), default if v == sweep.default else cells[bank, e.label, f"{v:g}"])
                     for v in sorted({*sweep.values, sweep.default})
@@ -99,6 +101,7 @@ def leaderboard(
                 else {"deviation": None, "setting": None, "reason": "no budget (reference NaN)"}
             )
             rows[e.label] = {
+                "front_kind": _front_kind(e, bank in fronts),
                 "default": default,
                 "front": [{"value": v, **s} for v, s in points],
                 "equal_safety": {**eq, "budget": limit},
@@ -113,7 +116,8 @@ def leaderboard(
             "episodes": episodes,
             "config": overrides,
             "budget": budget,
-            "front": front,
+            "front": bool(fronts),
+            "front_banks": fronts,
         },
         "banks": out_banks,
         "policies": {
@@ -121,9 +125,9 @@ def leaderboard(
                 "spec": e.spec,
                 "kind": e.kind,
                 "knob": e.sweep.knob if e.sweep else None,
-                "values": list(e.sweep.values) if e.sweep and front else None,
+                "values": list(e.sweep.values) if e.sweep and fronts else None,
                 "default": e.sweep.default if e.sweep else None,
-                "front": _front_kind(e, front),
+                "front": _front_kind(e, bool(fronts)),
             }
             for e in entries
         },
