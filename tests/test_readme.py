@@ -60,3 +60,14 @@ def test_sync_rewrites_a_stale_table_and_names_a_missing_section(tmp_path):
     assert new.startswith("a\n<!-- results") and new.endswith("<!-- /results -->\nb\n")
     with pytest.raises(ValueError, match="Nope"):
         SYNC["render_readme"]('<!-- results r.md "Nope" -->\n<!-- /results -->', tmp_path)
+
+
+def test_sync_writes_a_verdict_list_from_its_results_file(tmp_path):
+    (tmp_path / "b.md").write_text(
+        "# Board\n\n## Verdict\n\n* **orca** is safest.\n  second line.\n* APF beaten.\n\n## X\n"
+    )
+    stale = '<!-- results b.md "Verdict" list -->\n* old\n<!-- /results -->\n'
+    new = SYNC["render_readme"](stale, tmp_path)
+    assert new.splitlines()[1:4] == ["* **orca** is safest.", "  second line.", "* APF beaten."]
+    with pytest.raises(ValueError, match="no list after the heading 'Board'"):
+        SYNC["render_readme"]('<!-- results b.md "Board" list -->\n<!-- /results -->\n', tmp_path)

@@ -172,3 +172,13 @@ def test_every_registered_controllers_default_is_the_knee_of_its_front():
 def test_the_paper_prediction_apf_shares_the_apf_default():
     by_name = {m.name: m for m in tradeoff.METHODS}
     assert by_name["apf-published"].default == by_name["apf"].default
+
+
+def test_the_shields_margin_is_cbf_qps_knee():
+    """The shield is CBF-QP's filter over another policy: its default margin is that knee."""
+    from uasep_env import make_config
+    from uasep_env.policies import REGISTRY, Shielded, make_policy
+
+    shield = Shielded(make_policy("apf", make_config()), make_config())
+    assert shield.params.margin_scale == REGISTRY["cbf-qp"].default_margin
+    assert make_policy("orca+cbf", make_config()).params.margin_scale == shield.params.margin_scale

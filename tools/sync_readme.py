@@ -21,6 +21,10 @@ The table of registered controllers stands between ``<!-- controllers -->`` and
 ``<!-- /controllers -->``; it is written from the policy registry
 (:data:`uasep_env.policies.REGISTRY`).
 
+``list`` takes the bullet list after the heading instead of a table (the leaderboard's
+verdict sentences, ``<!-- results bench/bench.md "Verdict" list -->``): sentences computed
+from the numbers, so a page cannot quote a verdict the results do not give.
+
 ``pretty`` writes the controllers as the README names them (``APF (proposed)``, ...) and
 units with superscripts (``m/s²``). The tables are re-laid out by
 :func:`uasep_env.runtime.tables.render_table`, so the pages say exactly what the results say.
@@ -56,7 +60,8 @@ def pages() -> list[Path]:
 README_LABELS = {name: e.label for name, e in REGISTRY.items() if e.reference}
 _UNITS = {"m/s^2": "m/s²", "m/s^3": "m/s³"}
 _BLOCK = re.compile(
-    r'(?P<open><!-- results (?P<file>\S+) "(?P<heading>[^"]+)"(?P<pretty> pretty)? -->\n)'
+    r'(?P<open><!-- results (?P<file>\S+) "(?P<heading>[^"]+)"'
+    r"(?P<pretty> pretty)?(?P<list> list)? -->\n)"
     r".*?(?P<close><!-- /results -->)",
     re.DOTALL,
 )
@@ -131,6 +136,29 @@ def section_table(text: str, heading: str) -> tuple[list[str], list[list[str]]]:
     return _cells(table[0]), [_cells(ln) for ln in table[2:]]
 
 
+def section_list(text: str, heading: str) -> list[str]:
+    """The bullet list (``* `` lines, with their continuation lines) after the heading.
+
+    Raises:
+        ValueError: If there is no such heading or no list after it.
+    """
+    lines = text.splitlines()
+    start = next((i for i, ln in enumerate(lines) if ln.startswith("#") and heading in ln), None)
+    if start is None:
+        raise ValueError(f"no heading with {heading!r}")
+    items: list[str] = []
+    for ln in lines[start + 1 :]:
+        if ln.startswith("* "):
+            items.append(ln)
+        elif items and ln.startswith("  ") and ln.strip():
+            items[-1] += "\n" + ln
+        elif items or ln.startswith("#"):
+            break
+    if not items:
+        raise ValueError(f"no list after the heading {heading!r}")
+    return items
+
+
 def _prettify(cell: str) -> str:
     cell = README_LABELS.get(cell, cell)
     for raw, nice in _UNITS.items():
@@ -152,6 +180,13 @@ def render_readme(readme: str, results: Path = RESULTS) -> str:
     def block(m: re.Match[str]) -> str:
         # A bare name is a results file; a path (with "/") is relative to the repository.
         path = ROOT / m["file"] if "/" in m["file"] else results / m["file"]
+        if m["list"]:
+            return (
+                m["open"]
+                + "\n".join(section_list(path.read_text(), m["heading"]))
+                + "\n"
+                + m["close"]
+            )
         header, rows = section_table(path.read_text(), m["heading"])
         if m["pretty"]:
             header = [_prettify(c) for c in header]

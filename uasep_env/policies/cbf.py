@@ -65,7 +65,9 @@ class CBFParams:
         alpha2: ``alpha_2`` [1/s], class-K gain of ``psi_1`` in the constraint.
         uav_buffer: Added to ``uav.separation_distance`` for the UAV-UAV radius [m].
         obstacle_buffer: Added to ``uav.obstacle_separation`` for the obstacle radius [m].
-        margin_scale: Scales both radii (dimensionless; the trade-off sweep's knob).
+        margin_scale: Scales both radii (dimensionless; the trade-off sweep's knob; default
+            2, the knee of CBF-QP's front on the ``-v3`` validation bank, and so the
+            shield's: CBF-QP is the shield over plan tracking).
         max_constraints: ``K``, the barriers kept per UAV (the most demanding).
         uav_share: Share of a UAV-UAV constraint each of the two UAVs carries (0-1].
         slack_penalty: ``rho``, weight of the squared slack against the squared change of
@@ -87,7 +89,9 @@ class CBFParams:
     alpha2: float = 0.8  # 1/s
     uav_buffer: float = 2.0  # m
     obstacle_buffer: float = 4.0  # m
-    margin_scale: float = 1.0  # dimensionless
+    # The knee of CBF-QP's front on the -v3 validation bank (docs/figures/tradeoff.md);
+    # the shield is the same filter, so its margin is the same.
+    margin_scale: float = 2.0  # dimensionless
     max_constraints: int = 4  # K: the 1-3 obstacles of a bank encounter and a neighbour
     uav_share: float = 0.5  # Wang, Ames & Egerstedt (2017): reciprocal halves
     slack_penalty: float = 1.0e4  # dimensionless
@@ -269,7 +273,7 @@ class CBFFilter:
         return np.clip((command - base) / self.residual_scale, -1.0, 1.0).astype(np.float32)
 
 
-@register_policy("cbf-qp", label="CBF-QP", reference=True)
+@register_policy("cbf-qp", label="CBF-QP", reference=True, default_margin=2.0)
 class CBFQP(TrackingController):
     """CBF-QP: a nominal plan-tracking command, filtered by :class:`CBFFilter`.
 

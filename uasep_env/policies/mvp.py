@@ -67,7 +67,8 @@ class MVPParams:
             horizon ``K_s`` (10 s), so the methods look equally far.
         margin_factor: Resolution margin on the protected zone (BlueSky's ``asas_marh``,
             1.05 in its shipped settings).
-        margin_scale: Multiplies the protected-zone radii (the trade-off sweep's knob).
+        margin_scale: Multiplies the protected-zone radii (the trade-off sweep's knob;
+            default 1.5, the knee of MVP's front on the ``-v3`` validation bank).
         uav_share: Part of a UAV-UAV conflict's whole change each UAV takes (1/2: both
             resolve it, reciprocally; 1: each as if alone). BlueSky's cooperative rule
             halves only the vertical part.
@@ -90,7 +91,8 @@ class MVPParams:
 
     look_ahead: float = 10.0  # s
     margin_factor: float = 1.05  # -
-    margin_scale: float = 1.0  # -
+    # The knee of MVP's front on the -v3 validation bank (docs/figures/tradeoff.md).
+    margin_scale: float = 1.5  # -
     uav_share: float = 0.5  # -
     response_time: float = 1.0  # s
     min_time: float = 1.0  # s
@@ -197,7 +199,7 @@ def _region_velocity_change(
     return np.where(conflict[..., None], dv, 0.0)
 
 
-@register_policy("mvp", label="MVP", reference=True)
+@register_policy("mvp", label="MVP", reference=True, default_margin=1.5)
 class MVP(TrackingController):
     """Modified Voltage Potential conflict resolution on the shared plan tracking.
 
