@@ -338,6 +338,11 @@ def load_policy(
     Returns:
         The policy.
 
+    Warns:
+        EnvVersionWarning: (a ``UserWarning``) when ``config``'s prediction
+            (``prediction.fit``) is not the one it was trained with: another env version's
+            episodes (:mod:`uasep_env.policies.env_version`).
+
     Raises:
         FileNotFoundError: If ``path`` does not exist.
         CheckpointError: For a file that is not a valid checkpoint, or one that does not fit
@@ -351,6 +356,10 @@ def load_policy(
     if not p.is_file():
         raise FileNotFoundError(f"no policy checkpoint at {p} (and no shipped policy {path!r})")
     meta, weights, mean, var = _read(p)
+    if config is not None:
+        from uasep_env.policies.env_version import warn_if_other_env
+
+        warn_if_other_env(meta, p, config)
     return LearnedPolicy(
         meta, weights, mean, var, config=config, name=name or p.stem, base_gains=base_gains
     )
