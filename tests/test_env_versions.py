@@ -24,7 +24,7 @@ from uasep_env.evaluation import evaluate
 from uasep_env.policies import APF, APFGains, CheckpointError, load_policy, shipped_policy_path
 from uasep_env.policies.checkpoint import save_policy
 from uasep_env.policies.checkpoint_reader import read_checkpoint
-from uasep_env.policies.env_version import EnvVersionWarning, env_defaults_for
+from uasep_env.policies.env_version import EnvVersionWarning, current_version, env_defaults_for
 from uasep_env.registration import ENV_VERSION
 
 SHIPPED = "ppo_residual_apf"
@@ -73,6 +73,7 @@ def test_the_v2_ids_play_the_v2_episodes_bit_for_bit():
 
 
 def test_old_files_say_v2_and_new_ones_record_the_current_version(tmp_path):
+    assert current_version() == ENV_VERSION  # read below the registration's layer
     meta = read_checkpoint(shipped_policy_path(SHIPPED))[0]
     assert "env_version" not in meta.info and meta.env_version == 2
     assert meta.env_config.prediction.fit == "enclosing"

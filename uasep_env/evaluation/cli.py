@@ -411,10 +411,14 @@ def _run(argv: Sequence[str] | None) -> int:
             if name not in POLICIES and _same_file(path, Path(name)):
                 parser.error(f"argument {flag}: {str(path)!r} is the policy being evaluated")
     # Checkpoints play the env version they were trained in (and the others beside them).
-    try:
-        trained = {n: v for n in names if (v := policy_env_version(n)) is not None}
-    except (ValueError, OSError) as err:
-        parser.error(f"argument --policy: {_one_line(err)}")
+    trained: dict[str, int] = {}
+    for name in names:
+        try:
+            version = policy_env_version(name)
+        except (ValueError, OSError) as err:
+            parser.error(f"argument --policy: cannot load {name!r}: {_one_line(err)}")
+        if version is not None:
+            trained[name] = version
     try:
         version, notes = choose_env_version(trained, args.env_version)
     except ValueError as err:

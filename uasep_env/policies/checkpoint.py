@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.config import EnvConfig, make_config
+from uasep_env.config import VERSION_DEFAULTS, EnvConfig, make_config
 from uasep_env.interface.observation import ObservationLayout
 from uasep_env.runtime.atomic import atomic_output
 from uasep_env.runtime.jsonio import dumps
@@ -219,7 +219,7 @@ def save_policy(
 
     The current format (:data:`CHECKPOINT_FORMAT`) is written, with the observation layout
     (``meta.layout``, or the training config's) and the env version it was trained in
-    (``info["env_version"]``: ``meta.info``'s, else this package's
+    (``info["env_version"]``: ``meta.info``'s, else this package's,
     :data:`~uasep_env.registration.ENV_VERSION`, so every recipe records it).
 
     Returns:
@@ -234,11 +234,10 @@ def save_policy(
         arrays["obs_var"] = np.asarray(obs_var, np.float64)
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    from uasep_env.registration import ENV_VERSION  # (the package's init imports this module)
-
     desc = {
         **asdict(meta),
-        "info": {"env_version": ENV_VERSION, **meta.info},
+        # The current env version: the newest VERSION_DEFAULTS has (registration.ENV_VERSION).
+        "info": {"env_version": max(VERSION_DEFAULTS), **meta.info},
         "format": CHECKPOINT_FORMAT,
         "hidden": list(meta.hidden),
         "n_layers": len(weights),

@@ -16,10 +16,14 @@ from typing import Any
 
 from uasep_env.config import VERSION_DEFAULTS, EnvConfig, make_config
 from uasep_env.policies.checkpoint import CheckpointError, PolicyCheckpoint
+from uasep_env.policies.checkpoint_policy import EnvVersionWarning, _read, checkpoint_path
+from uasep_env.policies.registry import POLICIES
+from uasep_env.policies.shield import split_shield
 
 __all__ = [
     "EnvVersionWarning",
     "choose_env_version",
+    "current_version",
     "env_defaults_for",
     "policy_env_version",
     "version_config",
@@ -27,34 +31,13 @@ __all__ = [
 ]
 
 
-class EnvVersionWarning(UserWarning):
-    """A checkpoint acts in an env whose prediction is not the one it was trained with."""
-
-
-def warn_if_other_env(meta: PolicyCheckpoint, path: str | Path, config: EnvConfig) -> None:
-    """Warn (:class:`EnvVersionWarning`) when ``config`` predicts otherwise than training did.
-
-    Not an error: the trade-off sweep and users play checkpoints in other envs on purpose.
-    """
-    import warnings
-
-    fit = meta.env_config.prediction.fit
-    if config.prediction.fit != fit:
-        warnings.warn(
-            f"{path}: trained in env -v{meta.env_version} with prediction.fit={fit!r}, this "
-            f"env has prediction.fit={config.prediction.fit!r}: not the episodes it was "
-            f"trained on (config=make_config(VERSION_DEFAULTS[{meta.env_version}], ...) plays "
-            "its own)",
-            EnvVersionWarning,
-            stacklevel=3,
-        )
-
-
 def current_version() -> int:
-    """This package's env version (:data:`uasep_env.registration.ENV_VERSION`)."""
-    from uasep_env.registration import ENV_VERSION  # (the package's init imports policies)
+    """This package's env version: the newest of :data:`~uasep_env.config.VERSION_DEFAULTS`.
 
-    return ENV_VERSION
+    It is :data:`uasep_env.registration.ENV_VERSION` (``tests/test_env_versions.py``), read
+    from the config layer, below the policies.
+    """
+    return max(VERSION_DEFAULTS)
 
 
 def env_defaults_for(meta: PolicyCheckpoint, path: str | Path | None = None) -> dict[str, Any]:
@@ -92,9 +75,6 @@ def policy_env_version(spec: Any) -> int | None:
         CheckpointError: For a checkpoint of a version that is not reproduced
             (:func:`env_defaults_for`) or a file that is not a valid checkpoint.
     """
-    from uasep_env.policies import POLICIES, checkpoint_path, split_shield
-    from uasep_env.policies.checkpoint_policy import _read
-
     if not isinstance(spec, (str, Path)):
         return None
     base = split_shield(str(spec))[0]
