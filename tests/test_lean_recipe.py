@@ -21,6 +21,7 @@ import pytest
 pytest.importorskip("stable_baselines3")
 torch = pytest.importorskip("torch")
 
+from uasep_env.config import VERSION_DEFAULTS  # noqa: E402
 from uasep_env.envs.episode_safety import EpisodeSafety  # noqa: E402
 from uasep_env.policies import load_policy  # noqa: E402
 from uasep_env.policies.learned import read_checkpoint  # noqa: E402
@@ -150,6 +151,7 @@ def test_a_lean_run_writes_an_sb3_runs_files(runs):
     policy = load_policy(lean / "policy.zip")
     assert policy.meta.info["implementation"] == "uasep_env.training.ppo_lean"
     assert policy.meta.info["agent_steps"] == TOTAL
+    assert policy.meta.info["env_version"] == max(VERSION_DEFAULTS)  # the recipe's env version
     assert _same_weights(lean / "policy.zip", lean / "checkpoints" / "latest" / "policy.zip")
     first = lean / "checkpoints" / f"step_{EVERY}" / "policy.zip"
     assert not _same_weights(lean / "policy.zip", first)  # it trained

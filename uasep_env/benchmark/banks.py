@@ -144,9 +144,18 @@ def check_banks(names: Sequence[str]) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-def bank_config(name: str, overrides: Mapping[str, Any] | None = None) -> EnvConfig:
-    """The environment of bank ``name`` with the suite's ``--config`` overrides applied."""
-    from uasep_env.config import make_config
+def bank_config(
+    name: str, overrides: Mapping[str, Any] | None = None, version: int | None = None
+) -> EnvConfig:
+    """The environment of bank ``name`` with the suite's ``--config`` overrides applied.
+
+    Args:
+        name: The bank.
+        overrides: The suite's ``--config`` overrides (applied last).
+        version: The env version to play (None: the current one); a learned row plays the
+            version it was trained in (:mod:`uasep_env.policies.env_version`).
+    """
+    from uasep_env.policies.env_version import current_version, version_config
 
     cfg = BANKS[name].config()
-    return make_config(cfg, **overrides) if overrides else cfg
+    return version_config(cfg, version or current_version(), overrides or {})

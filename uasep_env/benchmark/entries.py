@@ -31,12 +31,22 @@ class Entry:
         spec: What the user gave (a name, ``name+cbf``, a path or ``module:callable``).
         kind: ``"name"`` (registered, shipped or a checkpoint file) or ``"factory"``.
         sweep: Its knob's sweep, or None (a single point).
+        trained_version: For a policy checkpoint, the env version it was trained in (its
+            row plays that version of every bank); None for anything else.
     """
 
     label: str
     spec: str
     kind: str
     sweep: Method | None
+    trained_version: int | None = None
+
+    @property
+    def env_version(self) -> int:
+        """The env version its row plays: a checkpoint's own, else the current one."""
+        from uasep_env.policies.env_version import current_version
+
+        return self.trained_version if self.trained_version is not None else current_version()
 
     @property
     def base(self) -> str:
@@ -58,9 +68,11 @@ def parse_entries(specs: Sequence[str]) -> list[Entry]:
 
     Raises:
         ValueError: Naming a value that is no policy name, file or importable
-            ``module:callable``.
+            ``module:callable``, or a checkpoint of an env version this package does not
+            play.
     """
     from uasep_env.policies import check_policy_name, split_shield
+    from uasep_env.policies.env_version import policy_env_version
     from uasep_env.reporting.scaling import load_factory
 
     out: list[Entry] = []
@@ -76,7 +88,8 @@ def parse_entries(specs: Sequence[str]) -> list[Entry]:
         check_policy_name(spec)  # ValueError: "unknown policy 'x': use one of ..."
         sweep = sweep_of(base) if not Path(base).exists() else None
         label = spec if not Path(base).exists() else Path(base).stem + spec[len(base) :]
-        out.append(Entry(label=label, spec=spec, kind="name", sweep=sweep))
+        version = policy_env_version(base)  # a checkpoint's; ValueError: one not reproduced
+        out.append(Entry(label=label, spec=spec, kind="name", sweep=sweep, trained_version=version))
     if not out:
         raise ValueError("no policy given")
     labels = [e.label for e in out]

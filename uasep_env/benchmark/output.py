@@ -79,7 +79,8 @@ def markdown(board: dict[str, Any]) -> str:
         "",
         "Rates with 95 % Wilson intervals, means with 95 % Student-t intervals. Deviation at "
         "equal safety: the least max deviation along the policy's front (its knob swept) with "
-        "a loss-of-separation (LoS) rate within the bank's budget and no collision.",
+        "a loss-of-separation (LoS) rate within the bank's budget and no collision. env: "
+        "the env version a row played (a learned policy plays the one it was trained in).",
     ]
     from uasep_env.benchmark.verdict import sentences
 
@@ -104,11 +105,12 @@ def markdown(board: dict[str, Any]) -> str:
             d = r["default"]
             kind = r.get("front_kind", board["policies"][label]["front"])
             rows.append([
-                label, _rate(d["collision"]), _rate(d["loss_of_separation"]),
+                label, f"-v{r.get('env_version', board['versions']['env'])}",
+                _rate(d["collision"]), _rate(d["loss_of_separation"]),
                 _mean(d["max_deviation"]), _mean(d["conflict_time"]), _mean(d["cost"], 2),
                 _equal(r["equal_safety"], kind),
             ])  # fmt: skip
-        out += render_table(["policy", *COLUMNS], rows, markdown=True).splitlines()
+        out += render_table(["policy", "env", *COLUMNS], rows, markdown=True).splitlines()
     return "\n".join(out) + "\n"
 
 

@@ -176,12 +176,19 @@ def run_cells(
     from uasep_env.evaluation import evaluate
     from uasep_env.runtime.jsonio import dumps
 
-    bank_cfgs = {b: bank_config(b, overrides) for b in dict.fromkeys(c.bank for c in cells)}
-    seeds = {b: list(BANKS[b].seeds)[: episodes or len(BANKS[b].seeds)] for b in bank_cfgs}
+    # Each row plays its env version of the bank: a checkpoint's own, else the current one.
+    bank_cfgs = {
+        (c.bank, c.entry.env_version): bank_config(c.bank, overrides, c.entry.env_version)
+        for c in cells
+    }
+    seeds = {
+        b: list(BANKS[b].seeds)[: episodes or len(BANKS[b].seeds)]
+        for b in dict.fromkeys(c.bank for c in cells)
+    }
     done: dict[tuple[str, str, str], dict[str, Any]] = {}
     groups: dict[tuple[str, str, str], list[tuple[Cell, EnvConfig, dict[str, Any]]]] = {}
     for cell in cells:
-        cfg = bank_cfgs[cell.bank]
+        cfg = bank_cfgs[cell.bank, cell.entry.env_version]
         played = (
             cfg
             if cell.value is None and cell.entry.kind == "name"

@@ -60,7 +60,8 @@ def leaderboard(
     Returns:
         ``{"format", "command", "versions", "settings", "banks": {bank: {title, seeds,
         seed_range, config, budget}}, "policies": {label: {spec, kind, knob, values,
-        default, front}}, "results": {bank: {label: {"default": stats, "front": [{"value",
+        default, front, env_version}}, "results": {bank: {label: {"env_version" (the env
+        version the row played: a checkpoint's own), "default": stats, "front": [{"value",
         **stats}], "equal_safety": {deviation, setting, budget[, reason]}}}}}``.
     """
     from uasep_env import __version__
@@ -101,6 +102,7 @@ def leaderboard(
                 else {"deviation": None, "setting": None, "reason": "no budget (reference NaN)"}
             )
             rows[e.label] = {
+                "env_version": e.env_version,
                 "front_kind": _front_kind(e, bank in fronts),
                 "default": default,
                 "front": [{"value": v, **s} for v, s in points],
@@ -128,6 +130,7 @@ def leaderboard(
                 "values": list(e.sweep.values) if e.sweep and fronts else None,
                 "default": e.sweep.default if e.sweep else None,
                 "front": _front_kind(e, bool(fronts)),
+                "env_version": e.env_version,
             }
             for e in entries
         },

@@ -7,11 +7,13 @@ import math
 import os
 import sys
 import textwrap
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 from uasep_env._numba import note_slow_kernels
+from uasep_env.config import VERSION_DEFAULTS
 from uasep_env.evaluation.output import write_csv, write_json
 from uasep_env.evaluation.overrides import build_config
 from uasep_env.evaluation.progress import progress_bar
@@ -25,6 +27,12 @@ from uasep_env.policies import (
     shipped_policies,
 )
 from uasep_env.policies.checkpoint import ALGORITHMS as SB3_ALGORITHMS
+from uasep_env.policies.env_version import (
+    EnvVersionWarning,
+    choose_env_version,
+    current_version,
+    policy_env_version,
+)
 from uasep_env.rollout import DEFAULT_DEVIATION_THRESHOLD_M, DEFAULT_SETTLE_TIME_S
 from uasep_env.runtime.atomic import output_kind
 from uasep_env.scenarios import scenario_names
@@ -154,6 +162,27 @@ def _size_problem(args: argparse.Namespace, cfg: Any, n_policies: int) -> str | 
     return None
 
 
+def _versions() -> list[int]:
+    """The env versions this package plays (:data:`~uasep_env.config.VERSION_DEFAULTS`)."""
+    from uasep_env.config import VERSION_DEFAULTS
+
+    return sorted(VERSION_DEFAULTS)
+
+
+def _env_version(text: str) -> int:
+    """An argparse type: one of :func:`_versions`."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value not in _versions():
+        raise argparse.ArgumentTypeError(
+            f"choose from {', '.join(map(str, _versions()))} (the env versions this uasep-env "
+            f"plays), got {text!r}"
+        )
+    return value
+
+
 _positive_int = _bounded(int, 1)
 _non_negative_int = _bounded(int, 0)
 _non_negative_float = _bounded(float, 0.0)
@@ -209,6 +238,15 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"scenario family: {', '.join(scenario_names())} (default: paper); a family's "
         "own defaults come with it (large_formation: 8 UAVs in a wedge, as its gym id), "
         "--config overrides them",
+    )
+    p.add_argument(
+        "--env-version",
+        type=_env_version,
+        default=None,
+        metavar="N",
+        help=f"play the episodes of env -vN: {', '.join(map(str, _versions()))} (default: the "
+        "version the policy checkpoints were trained in, else the current one, "
+        f"{current_version()}); every policy plays the same episodes",
     )
     p.add_argument(
         "--episodes",
@@ -325,7 +363,6 @@ _EVALUATE_OPTIONS = ("workers", "batch_size", "deviation_threshold", "settle_tim
 
 
 def _run(argv: Sequence[str] | None) -> int:
-    from uasep_env.config.options import pick
     from uasep_env.runtime.cores import check_variables
 
     parser = build_parser()
@@ -373,13 +410,45 @@ def _run(argv: Sequence[str] | None) -> int:
         for name in names if path is not None else ():
             if name not in POLICIES and _same_file(path, Path(name)):
                 parser.error(f"argument {flag}: {str(path)!r} is the policy being evaluated")
+    # Checkpoints play the env version they were trained in (and the others beside them).
+    trained: dict[str, int] = {}
+    for name in names:
+        try:
+            version = policy_env_version(name)
+        except (ValueError, OSError) as err:
+            parser.error(f"argument --policy: cannot load {name!r}: {_one_line(err)}")
+        if version is not None:
+            trained[name] = version
     try:
-        cfg = build_config(args.scenario, args.config)
+        version, notes = choose_env_version(trained, args.env_version)
+    except ValueError as err:
+        parser.error(f"argument --policy: {_one_line(err)}")
+    if not args.quiet:
+        for note in notes:
+            print(f"uasep-eval: {note}", file=sys.stderr)
+    try:
+        cfg = build_config(args.scenario, args.config, base=VERSION_DEFAULTS[version])
     except (TypeError, ValueError, RecursionError) as err:
         parser.error(f"argument --config: {_one_line(err)}")
     problem = _size_problem(args, cfg, len(names))
     if problem is not None:
         parser.error(problem)
+    with warnings.catch_warnings():  # the notes above said it, once
+        warnings.simplefilter("ignore", EnvVersionWarning)
+        return _evaluate(args, parser, names, cfg, version, argv)
+
+
+def _evaluate(
+    args: argparse.Namespace,
+    parser: argparse.ArgumentParser,
+    names: list[str],
+    cfg: Any,
+    version: int,
+    argv: Sequence[str] | None,
+) -> int:
+    """Load the policies (failing early), play them, print and write the results."""
+    from uasep_env.config.options import pick
+
     for name in names:  # fail early on models that do not load
         try:
             observed = policy_config(name, cfg)  # a checkpoint's own layout where it must
@@ -409,6 +478,7 @@ def _run(argv: Sequence[str] | None) -> int:
         if bar is not None:
             bar.close()
     result.command = ["uasep-eval", *(sys.argv[1:] if argv is None else argv)]
+    result.env_version = version
 
     if not args.quiet:
         print(format_summary(result))

@@ -8,6 +8,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from uasep_env.evaluation.results import EvaluationResult
+from uasep_env.policies.env_version import version_label
 from uasep_env.runtime.tables import render_table
 from uasep_env.sim.dynamics import AXES
 
@@ -94,7 +95,8 @@ def summary_rows(result: EvaluationResult) -> list[list[str]]:
     def row(title: str, key: str, digits: int) -> list[str]:
         return [title, *(_cell(aggs[lab].get(key), digits, single, pm) for lab in labels)]
 
-    rows: list[list[str]] = [["metric", *labels]]
+    trained = result.trained_env_versions or {}
+    rows: list[list[str]] = [["metric", *(version_label(lab, trained.get(lab)) for lab in labels)]]
     rows.extend(row(t, k, d) for t, k, d in _EPISODE_ROWS)
     if not single:
         rows.append(row("episodes with a collision", "episode.collision", 0))
@@ -141,8 +143,9 @@ def format_summary(result: EvaluationResult) -> str:
         else f"{n} episodes (seeds {seeds[0]}..{seeds[-1]}), mean "
         f"{_pm_symbol()} {100 * settings.confidence:.0f}% CI half-width"
     )
+    env = f"env -v{result.env_version}, " if result.env_version is not None else ""
     head = (
-        f"uasep-eval {result.version}: scenario {cfg.scenario}, {what}; "
+        f"uasep-eval {result.version}: {env}scenario {cfg.scenario}, {what}; "
         f"{cfg.n_uavs} UAVs, {cfg.n_obstacles} obstacle slot(s), "
         f"{cfg.episode_duration:g} s episodes"
     )

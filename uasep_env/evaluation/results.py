@@ -8,7 +8,8 @@ through :func:`uasep_env.runtime.jsonio.to_plain`, field by field, in declaratio
      "results": {label: {"episodes": [{"seed", "family", "steps", "terminated",
                                        "episode_return", "metrics"}, ...],
                          "aggregate": {dotted metric: stats}}},
-     "elapsed_s", "command" (only when set)}
+     "elapsed_s", "env_version" (only when set), "trained_env_versions" (only when some
+     policy is a checkpoint), "command" (only when set)}
 
 The episodes kept whole for plots (:attr:`EvaluationResult.episodes`) are not written.
 """
@@ -100,6 +101,10 @@ class EvaluationResult:
         settings: How it ran.
         results: Label -> the policy's episodes and aggregate.
         elapsed_s: Wall time of the evaluation (s).
+        env_version: The env version whose episodes were played (set by ``uasep-eval``,
+            which plays the checkpoints' own; not written when None).
+        trained_env_versions: Label -> the env version a checkpoint was trained in, for
+            the policies that are checkpoints (not written when None).
         command: The command line (set by ``uasep-eval``; not written when None).
         observations: Label -> the observation group a policy observed when it is not
             ``config``'s: a checkpoint that does not fit ``config`` as given observes with
@@ -115,6 +120,8 @@ class EvaluationResult:
     settings: EvaluationSettings
     results: dict[str, PolicyResult]
     elapsed_s: float
+    env_version: int | None = field(default=None, metadata={OMIT: None})
+    trained_env_versions: dict[str, int] | None = field(default=None, metadata={OMIT: None})
     command: list[str] | None = field(default=None, metadata={OMIT: None})
     observations: dict[str, dict[str, Any]] | None = field(default=None, metadata={OMIT: None})
     episodes: dict[str, list[Episode]] = field(default_factory=dict, metadata={OMIT: True})

@@ -15,6 +15,7 @@ import math
 import multiprocessing
 import os
 import time
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from pathlib import Path
@@ -40,6 +41,7 @@ from uasep_env.policies import (
     observed_config,
     split_shield,
 )
+from uasep_env.policies.env_version import EnvVersionWarning, policy_env_version
 from uasep_env.rollout import (
     DEFAULT_DEVIATION_THRESHOLD_M,
     DEFAULT_SETTLE_TIME_S,
@@ -181,7 +183,9 @@ def _run_chunk(
     """
     policy = spec
     if isinstance(spec, str):
-        policy = make_policy(spec, config, allow_pickle, algorithm)
+        with warnings.catch_warnings():  # said once, by evaluate's policy_config
+            warnings.simplefilter("ignore", EnvVersionWarning)
+            policy = make_policy(spec, config, allow_pickle, algorithm)
     if isinstance(spec, str) and isinstance(policy, RandomPolicy):
         policy = RandomPolicy(config, seed=seeds[0])  # independent draws per chunk
     episodes = run_episodes(
@@ -301,6 +305,7 @@ def evaluate(
         raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
     chunks = _chunks(seed_list, int(batch_size))
     observed = {label: policy_config(spec, cfg) for label, spec in specs.items()}
+    trained = {label: v for label, s in specs.items() if (v := policy_env_version(s)) is not None}
     tasks = [
         (
             label,
@@ -355,6 +360,7 @@ def evaluate(
         ),
         results=results,
         elapsed_s=time.perf_counter() - t0,
+        trained_env_versions=trained or None,
         observations={
             label: c.to_dict()["observation"] for label, c in observed.items() if c != cfg
         }

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.config import EnvConfig, make_config
+from uasep_env.config import VERSION_DEFAULTS, EnvConfig, make_config
 from uasep_env.interface.observation import ObservationLayout
 from uasep_env.runtime.atomic import atomic_output
 from uasep_env.runtime.jsonio import dumps
@@ -36,6 +36,7 @@ __all__ = [
     "CHECKPOINT_FORMAT",
     "META",
     "READABLE_FORMATS",
+    "UNRECORDED_ENV_VERSION",
     "CheckpointError",
     "PolicyCheckpoint",
     "StoredLayout",
@@ -50,6 +51,9 @@ META = "uasep_policy.json"
 WEIGHTS = "weights.npz"
 ACTIVATIONS = ("tanh", "relu")
 ALGORITHMS = ("PPO", "SAC", "TD3", "A2C", "DDPG")
+#: The env version of a checkpoint whose ``info`` does not record one: files were written
+#: without it before ``-v3``, so in ``-v2`` (or earlier, which no shipped file is).
+UNRECORDED_ENV_VERSION = 2
 #: What a checkpoint's ``algorithm`` may say: the SB3 algorithms, and MAPPO (train/mappo.py).
 CHECKPOINT_ALGORITHMS = (*ALGORITHMS, "MAPPO")
 
@@ -176,6 +180,15 @@ class PolicyCheckpoint:
         return make_config(_tuples(self.config))
 
     @property
+    def env_version(self) -> int:
+        """The env version it was trained in (``info["env_version"]``, or 2 if unrecorded).
+
+        :func:`save_policy` records it; files written before it did (before ``-v3``) say
+        :data:`UNRECORDED_ENV_VERSION`.
+        """
+        return int(self.info.get("env_version", UNRECORDED_ENV_VERSION))
+
+    @property
     def action_mode(self) -> str:
         """``"direct"`` or ``"residual_apf"``."""
         return self.env_config.action.mode
@@ -205,7 +218,9 @@ def save_policy(
     """Write a policy checkpoint (JSON description + ``.npz`` arrays in one zip), atomically.
 
     The current format (:data:`CHECKPOINT_FORMAT`) is written, with the observation layout
-    (``meta.layout``, or the training config's).
+    (``meta.layout``, or the training config's) and the env version it was trained in
+    (``info["env_version"]``: ``meta.info``'s, else this package's,
+    :data:`~uasep_env.registration.ENV_VERSION`, so every recipe records it).
 
     Returns:
         The path written.
@@ -221,6 +236,8 @@ def save_policy(
     np.savez(buf, **arrays)
     desc = {
         **asdict(meta),
+        # The current env version: the newest VERSION_DEFAULTS has (registration.ENV_VERSION).
+        "info": {"env_version": max(VERSION_DEFAULTS), **meta.info},
         "format": CHECKPOINT_FORMAT,
         "hidden": list(meta.hidden),
         "n_layers": len(weights),

@@ -21,6 +21,7 @@ stable-baselines3 models are another concern: :mod:`uasep_env.policies.sb3_polic
 from __future__ import annotations
 
 import functools
+import warnings
 import zipfile
 from collections.abc import Sequence
 from dataclasses import asdict
@@ -40,6 +41,7 @@ if TYPE_CHECKING:
     from uasep_env.policies.apf import APFGains
 
 __all__ = [
+    "EnvVersionWarning",
     "LearnedPolicy",
     "checkpoint_config",
     "checkpoint_path",
@@ -208,6 +210,28 @@ def _check_fits(meta: PolicyCheckpoint, trained: EnvConfig, config: EnvConfig) -
         raise CheckpointError("checkpoint does not fit this environment: " + "; ".join(problems))
 
 
+class EnvVersionWarning(UserWarning):
+    """A checkpoint acts in an env whose prediction is not the one it was trained with."""
+
+
+def _warn_if_other_env(meta: PolicyCheckpoint, path: Path, config: EnvConfig) -> None:
+    """Warn (:class:`EnvVersionWarning`) when ``config`` predicts otherwise than training did.
+
+    Not an error: the trade-off sweep and users play checkpoints in other envs on purpose
+    (:mod:`uasep_env.policies.env_version` says which version a checkpoint plays).
+    """
+    fit = meta.env_config.prediction.fit
+    if config.prediction.fit != fit:
+        warnings.warn(
+            f"{path}: trained in env -v{meta.env_version} with prediction.fit={fit!r}, this "
+            f"env has prediction.fit={config.prediction.fit!r}: not the episodes it was "
+            f"trained on (config=make_config(VERSION_DEFAULTS[{meta.env_version}], ...) plays "
+            "its own)",
+            EnvVersionWarning,
+            stacklevel=3,
+        )
+
+
 def is_policy_checkpoint(path: str | Path) -> bool:
     """Whether ``path`` is a zip in this project's checkpoint format (by its member names)."""
     try:
@@ -338,6 +362,11 @@ def load_policy(
     Returns:
         The policy.
 
+    Warns:
+        EnvVersionWarning: (a ``UserWarning``) when ``config``'s prediction
+            (``prediction.fit``) is not the one it was trained with: another env version's
+            episodes (:mod:`uasep_env.policies.env_version`).
+
     Raises:
         FileNotFoundError: If ``path`` does not exist.
         CheckpointError: For a file that is not a valid checkpoint, or one that does not fit
@@ -351,6 +380,8 @@ def load_policy(
     if not p.is_file():
         raise FileNotFoundError(f"no policy checkpoint at {p} (and no shipped policy {path!r})")
     meta, weights, mean, var = _read(p)
+    if config is not None:
+        _warn_if_other_env(meta, p, config)
     return LearnedPolicy(
         meta, weights, mean, var, config=config, name=name or p.stem, base_gains=base_gains
     )

@@ -180,6 +180,8 @@ def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyC
         raise _fail(p, "info must be an object")
     if len(json.dumps(info)) > limits.info_bytes:
         raise _fail(p, f"info is larger than {limits.info_bytes:,} bytes")
+    if "env_version" in info:  # read as the env version it was trained in: an integer
+        _integer(p, "info.env_version", info["env_version"], 0, 999)
     algorithm = desc.get("algorithm", "PPO")
     if algorithm not in CHECKPOINT_ALGORITHMS:
         raise _fail(p, f"algorithm must be one of {CHECKPOINT_ALGORITHMS}, got {_short(algorithm)}")

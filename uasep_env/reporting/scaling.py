@@ -29,7 +29,8 @@ Policies (``--policy``, comma-separated or repeated; ``LABEL=SPEC`` names one):
   ``ppo_residual_apf``, ``ppo_shared``): it reads the observation layout
   it was trained with (its K nearest UAVs and obstacles:
   :func:`uasep_env.policies.observed_config`), so a checkpoint trained on 3 UAVs flies every
-  size zero-shot;
+  size zero-shot, in the env version it was trained in (a ``-v2`` checkpoint plays the
+  ``-v2`` version of each cell, and its rows' ``env_version`` says so);
 * ``module:callable``: a factory called with each cell's :class:`~uasep_env.EnvConfig`
   and returning a policy (``actions = policy(observations)``);
 * any of these followed by ``+cbf``: that policy under the CBF shield
@@ -72,6 +73,7 @@ from uasep_env.policies import (
     shipped_policy_path,
     split_shield,
 )
+from uasep_env.policies.env_version import current_version, policy_env_version, version_config
 from uasep_env.reporting.scaling_views import APFS, METRICS, figure, markdown
 from uasep_env.runtime.atomic import atomic_write
 from uasep_env.runtime.jsonio import write_json
@@ -107,6 +109,8 @@ class PolicyEntry:
         spec: The name, path or ``module:callable``.
         layout: For a checkpoint, its ``(k_uavs, k_obstacles)``; trained sizes in ``trained``.
         trained: For a checkpoint, ``(n_uavs, n_obstacles)`` it was trained with.
+        env_version: For a checkpoint, the env version it was trained in: it plays that
+            version of every cell (:mod:`uasep_env.policies.env_version`); None: the current.
     """
 
     label: str
@@ -114,6 +118,7 @@ class PolicyEntry:
     spec: str
     layout: tuple[int, int] | None = None
     trained: tuple[int, int] | None = None
+    env_version: int | None = None
 
 
 def checkpoint_layout(path: str | Path) -> tuple[EnvConfig, tuple[int, int]]:
@@ -151,6 +156,8 @@ def cell_config(
         scenario="random", n_uavs=n_uavs, n_obstacles=n_obstacles, formation=pattern, **extra
     )
     if entry is not None and entry.kind == "checkpoint":
+        if entry.env_version is not None:  # the env version it was trained in
+            config = version_config(config, entry.env_version)
         config = observed_config(split_shield(entry.spec)[0], config)
     return config
 
@@ -194,6 +201,7 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
                 spec=str(shipped),
                 layout=layout,
                 trained=(trained.n_uavs, trained.n_obstacles),
+                env_version=policy_env_version(shipped),
             )
         elif Path(spec).is_file():
             if not is_policy_checkpoint(spec):
@@ -205,6 +213,7 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
                 spec=spec,
                 layout=layout,
                 trained=(trained.n_uavs, trained.n_obstacles),
+                env_version=policy_env_version(spec),
             )
         elif ":" in spec:
             load_factory(spec)
@@ -283,6 +292,7 @@ def evaluate_cell(
                 "policy": e.label,
                 "zero_shot": e.trained is not None and e.trained != (n, m),
                 "formation": cfg.formation if isinstance(cfg.formation, str) else "slots",
+                "env_version": e.env_version or current_version(),
                 "metrics": {k: agg[k] for k, _, _ in METRICS if k in agg},
             }
     return [rows[e.label] for e in entries]
