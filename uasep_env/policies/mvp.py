@@ -248,6 +248,7 @@ register_policy(
     "mvp-region",
     label="MVP (region)",
     reference=True,
+    default_margin=1.5,  # its knee on the -v3 validation bank, as MVP's (MVPParams' default)
     margin=lambda c, s: MVP(c, MVPParams(obstacle_model="region", margin_scale=s)),
     factory=lambda c: MVP(c, MVPParams(obstacle_model="region")),
     summary="MVP with obstacles resolved on their predicted reachable region "
