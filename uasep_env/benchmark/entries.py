@@ -49,6 +49,13 @@ class Entry:
         return self.trained_version if self.trained_version is not None else current_version()
 
     @property
+    def earlier_version(self) -> bool:
+        """Whether its row plays an env version older than the current one."""
+        from uasep_env.policies.env_version import current_version
+
+        return self.env_version < current_version()
+
+    @property
     def base(self) -> str:
         """The spec without its shield."""
         from uasep_env.policies import split_shield

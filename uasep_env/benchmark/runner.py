@@ -121,7 +121,9 @@ def plan_cells(
         if reference is not None:
             cells.append(Cell(bank=bank, entry=reference, value=None))
         for e in entries if bank in fronts else ():
-            if e.sweep is not None:
+            # A row played in an earlier env version has no front: the bank's budget is
+            # the current version's APF's, so its equal-safety figure would compare nothing.
+            if e.sweep is not None and not e.earlier_version:
                 cells += [
                     Cell(bank=bank, entry=e, value=float(v))
                     for v in e.sweep.values

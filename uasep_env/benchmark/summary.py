@@ -39,6 +39,8 @@ def _point(value: float | None, stats: dict[str, Any]) -> dict[str, Any]:
 
 
 def _front_kind(entry: Entry, front: bool) -> str:
+    if entry.earlier_version:
+        return f"single point: played in -v{entry.env_version}"
     if entry.sweep is None:
         return "single point: no knob to sweep"
     return "swept" if front else "single point: front not swept on this bank"
@@ -91,16 +93,21 @@ def leaderboard(
             default = cells[bank, e.label, "default"]
             sweep = e.sweep
             points = [(sweep.default if sweep else None, default)]
-            if bank in fronts and sweep is not None:
+            if bank in fronts and sweep is not None and not e.earlier_version:
                 points = [
                     (float(v), default if v == sweep.default else cells[bank, e.label, f"{v:g}"])
                     for v in sorted({*sweep.values, sweep.default})
                 ]
-            eq = (
-                deviation_at_budget([_point(v, s) for v, s in points], limit)
-                if math.isfinite(limit)
-                else {"deviation": None, "setting": None, "reason": "no budget (reference NaN)"}
-            )
+            if e.earlier_version:
+                eq = {
+                    "deviation": None,
+                    "setting": None,
+                    "reason": f"played in -v{e.env_version}, the budget is -v{ENV_VERSION}'s",
+                }
+            elif math.isfinite(limit):
+                eq = deviation_at_budget([_point(v, s) for v, s in points], limit)
+            else:
+                eq = {"deviation": None, "setting": None, "reason": "no budget (reference NaN)"}
             rows[e.label] = {
                 "env_version": e.env_version,
                 "front_kind": _front_kind(e, bank in fronts),

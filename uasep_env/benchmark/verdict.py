@@ -130,8 +130,21 @@ def _apf_sentence(board: Mapping[str, Any]) -> str:
     )
 
 
+def _current(board: Mapping[str, Any]) -> dict[str, Any]:
+    """The board's results without the rows played in another env version (not comparable)."""
+    env = board.get("versions", {}).get("env")
+    return {
+        bank: {k: r for k, r in rows.items() if r.get("env_version", env) == env}
+        for bank, rows in board["results"].items()
+    }
+
+
 def sentences(board: Mapping[str, Any]) -> list[str]:
-    """The verdict: the held-out bank first, then the banks where the order changes."""
+    """The verdict: the held-out bank first, then the banks where the order changes.
+
+    Rows played in an earlier env version (checkpoints not yet retrained) are left out.
+    """
+    board = {**board, "results": _current(board)}
     banks = list(board["results"])
     if not banks:
         return []

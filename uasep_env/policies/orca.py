@@ -68,7 +68,8 @@ class ORCAParams:
             beyond ``R / tau`` = 1.6 m/s of relative speed).
         obstacle_time_horizon: ``tau`` against obstacles (s): the APF's prediction horizon
             ``K_s`` (10 s), so the methods look equally far at the intruder.
-        margin_scale: Multiplies the combined radii (the trade-off sweep's knob).
+        margin_scale: Multiplies the combined radii (the trade-off sweep's knob; default
+            1.5, the knee of ORCA's front on the ``-v3`` validation bank).
         uav_responsibility: Share of a UAV-UAV half-space each UAV takes (ORCA: 1/2).
         obstacle_responsibility: Share against an obstacle (1: it does not avoid).
         response_time: ``T`` (s): ``v_pref = v + a_nom T`` and the command
@@ -81,7 +82,8 @@ class ORCAParams:
 
     time_horizon: float = 5.0  # s
     obstacle_time_horizon: float = 10.0  # s
-    margin_scale: float = 1.0  # -
+    # The knee of ORCA's front on the -v3 validation bank (docs/figures/tradeoff.md).
+    margin_scale: float = 1.5  # -
     uav_responsibility: float = 0.5  # -
     obstacle_responsibility: float = 1.0  # -
     response_time: float = 1.0  # s
@@ -438,7 +440,7 @@ def solve_orca_lp(
     return np.array(result, dtype=float)
 
 
-@register_policy("orca", label="ORCA", reference=True)
+@register_policy("orca", label="ORCA", reference=True, default_margin=1.5)
 class ORCA(TrackingController):
     """ORCA velocity selection on the shared plan tracking (batched numpy + small LPs).
 
