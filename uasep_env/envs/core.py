@@ -316,7 +316,12 @@ class EnvCore:
         live = self._state_arrays()
         check_arrays({f"core.{k}": v for k, v in ours.items()},
                      {f"core.{k}": v for k, v in live.items()})  # fmt: skip
-        self.world.load_state_dict({k[6:]: v for k, v in state.items() if k.startswith("world.")})
+        try:
+            self.world.load_state_dict(
+                {k[6:]: v for k, v in state.items() if k.startswith("world.")}
+            )
+        except ValueError as err:  # named as in this state
+            raise ValueError(f"world.{err}") from None
         copy_arrays(ours, live)
 
     def _state_arrays(self) -> dict[str, np.ndarray]:

@@ -132,7 +132,10 @@ def load_rollout_state(model: Any, venv: Any, state: dict[str, np.ndarray]) -> N
             check_range(name, ours[name], 0, 2**62)
     check_range("numpy.pos", ours["numpy.pos"], 0, _MT_WORDS)
     check_range("numpy.has_gauss", ours["numpy.has_gauss"], 0, 1)
-    env.load_state_dict({k[4:]: v for k, v in state.items() if k.startswith("env.")})
+    try:
+        env.load_state_dict({k[4:]: v for k, v in state.items() if k.startswith("env.")})
+    except ValueError as err:  # named as in this state
+        raise ValueError(f"env.{err}") from None
     inplace = [k for k in ("monitor.episode_returns", "monitor.episode_lengths",
                            "normalize.returns") if k in live]  # fmt: skip
     copy_arrays({k: ours[k] for k in inplace}, {k: live[k] for k in inplace})
