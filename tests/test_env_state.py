@@ -63,6 +63,7 @@ def test_a_loaded_sb3_view_steps_on_as_the_original(name):
         assert len(set(saved["world.steps"].tolist())) == 3
     b = UAVSharedVecEnv(n_envs=3, config=config, seed=999)  # its seed is not used
     b.load_state_dict(saved)
+    assert _same(b.state_dict(), saved)  # every part restored, the running episodes' too
     ends = 0
     for _ in range(160):
         act = rng.uniform(-1.5, 1.5, (a.num_envs, 3)).astype(np.float32)
@@ -108,10 +109,12 @@ BAD_STATES = {
     "negative steps": (_set("steps", lambda a: a - 5), r"^steps: values outside \[0, "),
     "noise position": (_set("noise.buf_pos", lambda a: a + 100), r"^noise.buf_pos: values outs"),
     "generators": (
-        _set("noise.generators", lambda a: a.astype(np.int64)), r"^noise.generators: int64"
+        _set("noise.generators", lambda a: a.astype(np.int64)),
+        r"^noise.generators: int64",
     ),
     "cached half": (
-        _set("noise.generators", lambda a: a + np.uint64(7)), r"^noise.generators: a cached"
+        _set("noise.generators", lambda a: a + np.uint64(7)),
+        r"^noise.generators: a cached",
     ),
     "families": (_set("families", lambda a: a[:1]), r"^families: .* expected 2 names"),
     "missing": (lambda s: s.pop("slots"), r"^slots: missing$"),
@@ -122,7 +125,7 @@ BAD_STATES = {
 
 @pytest.mark.parametrize("case", sorted(BAD_STATES))
 def test_a_bad_world_state_is_refused_naming_the_array_and_changes_nothing(case):
-    w, state = _world_and_state()
+    _, state = _world_and_state()
     change, message = BAD_STATES[case]
     change(state)
     target, _ = _world_and_state()

@@ -139,11 +139,20 @@ SB3_EXACT = [
     "--config", "reward=task uav.separation_distance=19",
 ]  # fmt: skip
 SB3_RECIPES = {"ppo_lagrangian": None, "ppo_lagrangian_residual": "RESIDUAL_LAGRANGIAN_DEFAULTS"}
+#: The constraint's flags of SB3_EXACT (not ppo_shared's).
+_CONSTRAINT_FLAGS = ("--cost-limit", "--pid-ki", "--multiplier-init")
 
 
 def _sb3_train(name):
-    from uasep_env.training import ppo_lagrangian
+    from uasep_env.training import ppo_lagrangian, ppo_shared
 
+    if name == "ppo_shared":  # the same loop without the constraint, returns normalised
+        argv = [
+            a
+            for k, a in enumerate(SB3_EXACT)
+            if a not in _CONSTRAINT_FLAGS and SB3_EXACT[k - 1] not in _CONSTRAINT_FLAGS
+        ]
+        return lambda extra: ppo_shared.main([*argv, "--norm-reward", *extra])  # fmt: skip
     default = getattr(ppo_lagrangian, SB3_RECIPES[name]) if SB3_RECIPES[name] else None
     return lambda extra: ppo_lagrangian.main([*SB3_EXACT, *extra], default)
 
@@ -171,8 +180,8 @@ def _without_wall(path):
     return [",".join(c for k, c in enumerate(line.split(",")) if k != col) for line in lines]
 
 
-@pytest.mark.parametrize("name", list(SB3_RECIPES))
-def test_a_resumed_sb3_lagrangian_run_is_bit_identical(name, tmp_path, monkeypatch):
+@pytest.mark.parametrize("name", [*SB3_RECIPES, "ppo_shared"])
+def test_a_resumed_sb3_run_is_bit_identical(name, tmp_path, monkeypatch):
     """Killed mid-episode at a checkpoint and resumed: the uninterrupted run, bit for bit."""
     train = _sb3_train(name)
     rollout = 2 * 2 * 32
@@ -191,6 +200,11 @@ def test_a_resumed_sb3_lagrangian_run_is_bit_identical(name, tmp_path, monkeypat
     # steps into its episode are not 0), and the multiplier moves with costs that vary.
     env = np.load(killed / "checkpoints" / f"step_{mid}" / "env_state.npz")
     assert (env["env.world.steps"] > 0).all()
+    if name == "ppo_shared":
+        assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
+        end = f"checkpoints/step_{total}"
+        assert same_bits(_checkpoint(killed / end), _checkpoint(full / end))
+        return
     rows = _rows(full / "cost_progress.csv")
     assert len({r["episode_cost_mean"] for r in rows}) > 1
     assert len({r["multiplier"] for r in rows}) > 2
@@ -201,6 +215,7 @@ def test_a_resumed_sb3_lagrangian_run_is_bit_identical(name, tmp_path, monkeypat
     assert ours[1] == theirs[1]  # the multiplier's state, the counters, the window
     assert (killed / "cost_progress.csv").read_bytes() == (full / "cost_progress.csv").read_bytes()
     assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
-    assert json.loads((killed / "validation.json").read_text())["training"]["lagrangian"] == (
-        json.loads((full / "validation.json").read_text())["training"]["lagrangian"]
+    assert (
+        json.loads((killed / "validation.json").read_text())["training"]["lagrangian"]
+        == (json.loads((full / "validation.json").read_text())["training"]["lagrangian"])
     )

@@ -230,18 +230,15 @@ ENV_STATE_CASES = {
     "negative counter": (_put("env.world.steps", lambda a: a - 10**6), "env.world.steps"),
     "noise position": (_put("env.world.noise.buf_pos", lambda a: a + 10**6), "noise.buf_pos"),
     "generators": (
-        _put("env.world.noise.generators", lambda a: a[:, :3]), "env.world.noise.generators"
+        _put("env.world.noise.generators", lambda a: a[:, :3]),
+        "env.world.noise.generators",
     ),
     "last obs NaN": (_put("model.last_obs", _nan_at_first), "model.last_obs"),
     "monitor shape": (_put("monitor.episode_returns", lambda a: a[:1]), "monitor.episode_returns"),
     "numpy rng": (_put("numpy.pos", lambda a: a + 10**6), "numpy.pos"),
     "missing": (lambda arrays: arrays.pop("env.core.obs"), "env.core.obs"),
     "unexpected": (lambda arrays: arrays.update(extra=arrays["numpy.pos"]), "extra"),
-    "pickled": (
-        lambda arrays: arrays.update({"env.world.families": arrays["env.world.families"]
-                                      .astype(object)}),  # fmt: skip
-        "allow_pickle",
-    ),
+    "pickled": (_put("env.world.families", lambda a: a.astype(object)), "allow_pickle"),
 }
 
 
