@@ -123,8 +123,11 @@ class Constraint:
             # The environments continue their episodes where the checkpoint has their state
             # (loaded already): so do the episodes' running costs.
             running = (folder / ENV_STATE_FILE).exists()
-            restore_json(folder, "lagrangian.state",
-                         lambda s: self.callback.load_state_dict(s, running), state)  # fmt: skip
+
+            def load(saved: Any) -> None:
+                self.callback.load_state_dict(saved, running=running)
+
+            restore_json(folder, "lagrangian.state", load, state)
             # Rows of the abandoned continuation go, as progress.csv's.
             rewind_csv(path, COST_FIELDS, int(resumed["agent_steps"]))
         return [self.callback]
