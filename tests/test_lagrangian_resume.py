@@ -219,3 +219,21 @@ def test_a_resumed_sb3_run_is_bit_identical(name, tmp_path, monkeypatch):
         json.loads((killed / "validation.json").read_text())["training"]["lagrangian"]
         == (json.loads((full / "validation.json").read_text())["training"]["lagrangian"])
     )
+
+
+@pytest.mark.parametrize("change", ["--n-envs 3", "no env_state.npz"])
+def test_a_resume_that_cannot_continue_the_episodes_restarts_them(change, tmp_path, capsys):
+    """Other environments (or an older checkpoint without their state): not refused; said."""
+    train = _sb3_train("ppo_lagrangian")
+    out = tmp_path / "run"
+    train(["--total-timesteps", "256", "--checkpoint-every", "128", "--out-dir", str(out)])
+    ckpt = out / "checkpoints" / "step_128"
+    extra = change.split() if change.startswith("--") else []
+    if not extra:
+        (ckpt / "env_state.npz").unlink()
+    capsys.readouterr()
+    summary = train([*extra, "--total-timesteps", "512", "--out-dir", str(out),
+                     "--resume", str(ckpt)])  # fmt: skip
+    said = capsys.readouterr().out
+    assert "the environments restart their episodes from their seeds" in said, said
+    assert summary["training"]["agent_steps"] >= 512

@@ -99,8 +99,9 @@ class Constraint:
 
     def start(self, out: Path, config: Any, resumed: dict) -> list:
         """The multiplier's callback, its state restored from ``resumed`` if any."""
-        from uasep_env.training.rundir import ENV_STATE_FILE, restore_json, rewind_csv
+        from uasep_env.training.rundir import restore_json, rewind_csv
         from uasep_env.training.sb3_lagrangian import COST_FIELDS, LagrangianCallback
+        from uasep_env.training.sb3_state import continues_episodes
 
         task = config.reward == config.reward.task()
         print(f"reward: {'the task reward' if task else config.reward} "
@@ -122,7 +123,7 @@ class Constraint:
             state = kept.get("state")
             # The environments continue their episodes where the checkpoint has their state
             # (loaded already): so do the episodes' running costs.
-            running = (folder / ENV_STATE_FILE).exists()
+            running = continues_episodes(self.args, resumed, folder)
 
             def load(saved: Any) -> None:
                 self.callback.load_state_dict(saved, running=running)

@@ -219,13 +219,14 @@ def _write_checkpoint(
     export_policy(model, venv, config, args, tmp / "policy.zip", info)
 
 
-def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
+def load_checkpoint(model: Any, venv: Any, directory: Path, episodes: bool = True) -> dict:
     """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling).
 
-    With its ``env_state.npz`` (:mod:`~uasep_env.training.sb3_state`) the environments'
-    episodes and SB3's rollout state continue where the checkpoint's run was: the resumed
-    run is the uninterrupted one, bit for bit. A checkpoint without it (an older version's)
-    resumes with the environments' episodes restarted from their seeds (said in a line).
+    With ``episodes`` and its ``env_state.npz`` (:mod:`~uasep_env.training.sb3_state`) the
+    environments' episodes and SB3's rollout state continue where the checkpoint's run was:
+    the resumed run is the uninterrupted one, bit for bit. Otherwise (a checkpoint of an
+    older version, or ``episodes`` False: :func:`~uasep_env.training.sb3_state.continues_episodes`
+    said no) the environments restart their episodes from their seeds (said in a line).
     """
     import torch
 
@@ -255,11 +256,12 @@ def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
         torch.cuda.set_rng_state(state["cuda_rng"], model.device)
     load_normalization(venv, directory / "normalization.npz")
     info = read_state(directory)
-    env_state = read_env_state(directory)
+    env_state = read_env_state(directory) if episodes else None
     if env_state is None:
-        print(f"{directory} has no {ENV_STATE_FILE} (an older checkpoint): the environments "
-              "restart their episodes from their seeds; not bit-identical with a run "
-              "uninterrupted")  # fmt: skip
+        why = (f"{directory.name} has no {ENV_STATE_FILE}" if episodes
+               else "the environment's options are not the checkpoint's")  # fmt: skip
+        print(f"{why}: the environments restart their episodes from their seeds (a valid "
+              "continuation, not bit-identical with an uninterrupted run)")  # fmt: skip
     else:
         restore_arrays(
             directory, ENV_STATE_FILE, lambda s: load_rollout_state(model, venv, s), env_state
@@ -418,7 +420,10 @@ def train(args: Args, plugin: Any = None) -> dict:
     run = RunFolder.start(args)
     venv, model = build(args, config)
     if run.resume is not None:
-        load_checkpoint(model, venv, run.resume)
+        from uasep_env.training.sb3_state import continues_episodes
+
+        episodes = continues_episodes(args, run.resumed, run.resume)
+        load_checkpoint(model, venv, run.resume, episodes)
     # The plugin's state restored (and checked) before the folder is rewound: a refused
     # checkpoint leaves the folder as it was.
     before = plugin.start(run.out, config, run.resumed) if plugin is not None else []

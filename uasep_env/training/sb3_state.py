@@ -28,6 +28,8 @@ This module imports stable-baselines3; the rest of the package does not.
 from __future__ import annotations
 
 import io
+import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,12 +38,37 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from uasep_env.envs.sb3 import UAVSharedVecEnv
 from uasep_env.sim.snapshot import check_arrays, check_range, copy_arrays
 
-__all__ = ["ENV_STATE_FILE", "env_state_bytes", "load_rollout_state", "rollout_state"]
+__all__ = [
+    "ENV_OPTIONS",
+    "ENV_STATE_FILE",
+    "continues_episodes",
+    "env_state_bytes",
+    "load_rollout_state",
+    "rollout_state",
+]
 
 #: The checkpoint file of :func:`env_state_bytes`.
 ENV_STATE_FILE = "env_state.npz"
+#: The options that make the environments and what they observe: a checkpoint's episodes
+#: continue only under the same ones (:func:`continues_episodes`).
+ENV_OPTIONS = ("n_envs", "seed", "n_uavs", "n_obstacles", "k_uavs", "k_obstacles",
+               "episode_duration", "residual_scale", "scenario", "config", "action_mode",
+               "norm_obs")  # fmt: skip
 #: numpy's global generator (MT19937): its key's length.
 _MT_WORDS = 624
+
+
+def continues_episodes(args: Any, resumed: dict, folder: Path) -> bool:
+    """Whether a run resumed from ``folder`` continues its environments' episodes.
+
+    It does where the checkpoint has their state (:data:`ENV_STATE_FILE`) and the run has
+    the checkpoint's :data:`ENV_OPTIONS` (``resumed``: its ``state.json``); otherwise (a
+    checkpoint of an older version, ``--n-envs`` or the environment changed) the
+    environments restart their episodes from their seeds.
+    """
+    theirs = resumed.get("args", {})
+    same = all(theirs.get(k) == getattr(args, k) for k in ENV_OPTIONS)
+    return same and os.path.lexists(Path(folder) / ENV_STATE_FILE)
 
 
 def _layers(venv: Any) -> tuple[UAVSharedVecEnv, VecMonitor | None, VecNormalize | None]:
