@@ -6,9 +6,16 @@ rollout's multiplier update and weight update), and to N killed right after the 
 at M, then resumed to N (``killed``). The checkpoint a killed run resumes from must hold the
 state after both updates of its last rollout (the ``short`` run's, bit for bit: weights,
 optimiser, random state, the multiplier's state, the counters), the multiplier the kept
-``cost_progress.csv`` row records, and the rows up to it must be the uninterrupted run's.
-After the resume the environments restart their episodes from their seeds (not bit-exact by
-design: ``docs/robustness.md``), so the later rows are compared by their steps only.
+``cost_progress.csv`` row records, and the rows up to it must be the uninterrupted run's
+(there, episodes end with the rollouts, so the rows after it match too).
+
+The SB3 recipes (``ppo_lagrangian``, ``ppo_lagrangian_residual``, and ``ppo_shared``) go
+further: their checkpoints keep the environments' episodes in progress and SB3's rollout
+state (``env_state.npz``), so a run killed at a checkpoint that falls inside episodes and
+resumed ends with the uninterrupted run's weights, optimiser, random state, multiplier,
+``cost_progress.csv`` and ``progress.csv`` (but its wall times), bit for bit. (skrl's
+MAPPO-Lagrangian does not keep them: its environments restart their episodes from their
+seeds, ``docs/robustness.md``.)
 """
 
 import csv
