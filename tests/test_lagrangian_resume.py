@@ -6,14 +6,22 @@ rollout's multiplier update and weight update), and to N killed right after the 
 at M, then resumed to N (``killed``). The checkpoint a killed run resumes from must hold the
 state after both updates of its last rollout (the ``short`` run's, bit for bit: weights,
 optimiser, random state, the multiplier's state, the counters), the multiplier the kept
-``cost_progress.csv`` row records, and the rows up to it must be the uninterrupted run's.
-After the resume the environments restart their episodes from their seeds (not bit-exact by
-design: ``docs/robustness.md``), so the later rows are compared by their steps only.
+``cost_progress.csv`` row records, and the rows up to it must be the uninterrupted run's
+(there, episodes end with the rollouts, so the rows after it match too).
+
+The SB3 recipes (``ppo_lagrangian``, ``ppo_lagrangian_residual``, and ``ppo_shared``) go
+further: their checkpoints keep the environments' episodes in progress and SB3's rollout
+state (``env_state.npz``), so a run killed at a checkpoint that falls inside episodes and
+resumed ends with the uninterrupted run's weights, optimiser, random state, multiplier,
+``cost_progress.csv`` and ``progress.csv`` (but its wall times), bit for bit. (skrl's
+MAPPO-Lagrangian does not keep them: its environments restart their episodes from their
+seeds, ``docs/robustness.md``.)
 """
 
 import csv
 import json
 
+import numpy as np
 import pytest
 
 pytest.importorskip("stable_baselines3")
@@ -124,3 +132,115 @@ def test_a_resumed_lagrangian_run_is_the_run_it_continues(name, tmp_path, monkey
     # and the episodes end where the uninterrupted run's do (4 s; at the checkpoint too),
     # so the multiplier goes on as the uninterrupted run's, to the same value at N.
     assert _rows(killed / "cost_progress.csv") == cost_rows
+
+
+#: SB3 recipes on random encounters (obstacles, noise) whose episodes (25 steps: 5 s at 5 Hz,
+#: or fewer) end neither with the rollouts (32 steps) nor at the checkpoint, with costs that
+#: differ from episode to episode (19 m of separation, the formation's spacing 20 m): 2
+#: environments x 2 UAVs.
+SB3_EXACT = [
+    "--n-uavs", "2", "--episode-duration", "5",
+    "--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "2", "--hidden", "16",
+    "--eval-episodes", "0", "--no-progress", "--cost-limit", "0.5", "--pid-ki", "0.5",
+    "--multiplier-init", "0.25", "--torch-threads", "1", "--seed", "3",
+    "--config", "reward=task uav.separation_distance=19",
+]  # fmt: skip
+SB3_RECIPES = {"ppo_lagrangian": None, "ppo_lagrangian_residual": "RESIDUAL_LAGRANGIAN_DEFAULTS"}
+#: The constraint's flags of SB3_EXACT (not ppo_shared's).
+_CONSTRAINT_FLAGS = ("--cost-limit", "--pid-ki", "--multiplier-init")
+
+
+def _sb3_train(name):
+    from uasep_env.training import ppo_lagrangian, ppo_shared
+
+    if name == "ppo_shared":  # the same loop without the constraint, returns normalised
+        argv = [
+            a
+            for k, a in enumerate(SB3_EXACT)
+            if a not in _CONSTRAINT_FLAGS and SB3_EXACT[k - 1] not in _CONSTRAINT_FLAGS
+        ]
+        return lambda extra: ppo_shared.main([*argv, "--norm-reward", *extra])  # fmt: skip
+    default = getattr(ppo_lagrangian, SB3_RECIPES[name]) if SB3_RECIPES[name] else None
+    return lambda extra: ppo_lagrangian.main([*SB3_EXACT, *extra], default)
+
+
+def _kill_at(monkeypatch, step):
+    """Make the run die right after saving its checkpoint at ``step`` (a SIGKILL there)."""
+    from uasep_env.training.rundir import RunFolder
+
+    real = RunFolder.save_checkpoint
+
+    def save_then_die(self, agent_steps, *args, **kwargs):
+        folder = real(self, agent_steps, *args, **kwargs)
+        if agent_steps == step:
+            raise _Killed
+        return folder
+
+    monkeypatch.setattr(RunFolder, "save_checkpoint", save_then_die)
+    return lambda: monkeypatch.setattr(RunFolder, "save_checkpoint", real)
+
+
+def _without_wall(path):
+    """``progress.csv``'s bytes less its wall-time column (the one figure that may differ)."""
+    lines = path.read_text().splitlines()
+    col = lines[0].split(",").index("wall_s")
+    return [",".join(c for k, c in enumerate(line.split(",")) if k != col) for line in lines]
+
+
+@pytest.mark.parametrize("name", [*SB3_RECIPES, "ppo_shared"])
+def test_a_resumed_sb3_run_is_bit_identical(name, tmp_path, monkeypatch):
+    """Killed mid-episode at a checkpoint and resumed: the uninterrupted run, bit for bit."""
+    train = _sb3_train(name)
+    rollout = 2 * 2 * 32
+    mid, total = 2 * rollout, 4 * rollout
+    every = ["--checkpoint-every", str(mid), "--total-timesteps", str(total)]
+    full, killed = tmp_path / "full", tmp_path / "killed"
+    train([*every, "--out-dir", str(full)])
+    put_back = _kill_at(monkeypatch, mid)
+    with pytest.raises(_Killed):
+        train([*every, "--out-dir", str(killed)])
+    put_back()
+    train([*every, "--out-dir", str(killed),
+           "--resume", str(killed / "checkpoints" / f"step_{mid}")])  # fmt: skip
+
+    # What makes this test able to fail: the checkpoint falls inside episodes (each env's
+    # steps into its episode are not 0), and the multiplier moves with costs that vary.
+    env = np.load(killed / "checkpoints" / f"step_{mid}" / "env_state.npz")
+    assert (env["env.world.steps"] > 0).all()
+    if name == "ppo_shared":
+        assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
+        end = f"checkpoints/step_{total}"
+        assert same_bits(_checkpoint(killed / end), _checkpoint(full / end))
+        return
+    rows = _rows(full / "cost_progress.csv")
+    assert len({r["episode_cost_mean"] for r in rows}) > 1
+    assert len({r["multiplier"] for r in rows}) > 2
+
+    end = f"checkpoints/step_{total}"
+    ours, theirs = _checkpoint(killed / end), _checkpoint(full / end)
+    assert same_bits(ours[0], theirs[0]), "the final weights, optimiser or RNG differ"
+    assert ours[1] == theirs[1]  # the multiplier's state, the counters, the window
+    assert (killed / "cost_progress.csv").read_bytes() == (full / "cost_progress.csv").read_bytes()
+    assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
+    assert (
+        json.loads((killed / "validation.json").read_text())["training"]["lagrangian"]
+        == (json.loads((full / "validation.json").read_text())["training"]["lagrangian"])
+    )
+
+
+@pytest.mark.parametrize("change", ["--n-envs 3", "no env_state.npz"])
+def test_a_resume_that_cannot_continue_the_episodes_restarts_them(change, tmp_path, capsys):
+    """Other environments (or an older checkpoint without their state): not refused; said."""
+    train = _sb3_train("ppo_lagrangian")
+    out = tmp_path / "run"
+    train(["--total-timesteps", "256", "--checkpoint-every", "128", "--out-dir", str(out)])
+    ckpt = out / "checkpoints" / "step_128"
+    extra = change.split() if change.startswith("--") else []
+    if not extra:
+        (ckpt / "env_state.npz").unlink()
+    capsys.readouterr()
+    summary = train([*extra, "--total-timesteps", "512", "--out-dir", str(out),
+                     "--resume", str(ckpt)])  # fmt: skip
+    said = capsys.readouterr().out
+    assert "the environments restart their episodes from their seeds" in said, said
+    assert summary["training"]["agent_steps"] >= 512

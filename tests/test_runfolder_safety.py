@@ -188,6 +188,81 @@ CHECKPOINT_CASES = {
 }
 
 
+def _env_state(change):
+    """Rewrite ``env_state.npz`` with ``change(arrays)`` applied (arrays by name)."""
+
+    def craft(ck):
+        import numpy as np
+
+        path = ck / "env_state.npz"
+        with np.load(path) as z:
+            arrays = dict(z)
+        change(arrays)
+        with path.open("wb") as fh:
+            np.savez(fh, **arrays)
+
+    return craft
+
+
+def _put(name, value):
+    """A change of :func:`_env_state`: ``arrays[name] = value(arrays[name])``."""
+
+    def change(arrays):
+        arrays[name] = value(arrays[name])
+
+    return change
+
+
+def _nan_at_first(a):
+    a = a.copy()
+    a.flat[0] = float("nan")
+    return a
+
+
+#: Crafted ``env_state.npz`` files (the environments' state of an SB3 checkpoint): each is
+#: refused in one line naming the file and the array.
+ENV_STATE_CASES = {
+    "wrong shape": (_put("env.world.uav_pos", lambda a: a[:, :1]), "env.world.uav_pos"),
+    "NaN": (_put("env.world.uav_vel", _nan_at_first), "env.world.uav_vel"),
+    "huge": (_put("env.world.time", lambda a: a + 1e300), "env.world.time"),
+    "inf": (_put("env.world.est_pos", lambda a: a - float("inf")), "env.world.est_pos"),
+    "wrong dtype": (_put("env.world.steps", lambda a: a.astype("float64")), "env.world.steps"),
+    "negative counter": (_put("env.world.steps", lambda a: a - 10**6), "env.world.steps"),
+    "noise position": (_put("env.world.noise.buf_pos", lambda a: a + 10**6), "noise.buf_pos"),
+    "generators": (
+        _put("env.world.noise.generators", lambda a: a[:, :3]),
+        "env.world.noise.generators",
+    ),
+    "last obs NaN": (_put("model.last_obs", _nan_at_first), "model.last_obs"),
+    "monitor shape": (_put("monitor.episode_returns", lambda a: a[:1]), "monitor.episode_returns"),
+    "numpy rng": (_put("numpy.pos", lambda a: a + 10**6), "numpy.pos"),
+    "missing": (lambda arrays: arrays.pop("env.core.obs"), "env.core.obs"),
+    "unexpected": (lambda arrays: arrays.update(extra=arrays["numpy.pos"]), "extra"),
+    "pickled": (_put("env.world.families", lambda a: a.astype(object)), "allow_pickle"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(ENV_STATE_CASES))
+def test_a_crafted_env_state_is_refused_in_one_line(case, run, tmp_path, capsys):
+    out = _copy(run, tmp_path)
+    change, named = ENV_STATE_CASES[case]
+    _env_state(change)(out / "checkpoints" / "step_128")
+    exc, err = _resume(out, capsys)
+    _refused(exc, err, "env_state.npz", named, "step_128")
+
+
+def test_an_env_state_over_its_limit_is_refused_before_a_read(run, tmp_path, capsys, monkeypatch):
+    import dataclasses
+
+    from uasep_env.training import checkpoint_readers
+
+    out = _copy(run, tmp_path)
+    small = dataclasses.replace(checkpoint_readers.LIMITS, env_state=1000)
+    monkeypatch.setattr(checkpoint_readers, "LIMITS", small)
+    exc, err = _resume(out, capsys)
+    _refused(exc, err, "env_state.npz", "limit 1,000")
+
+
 def _npy(values):
     import io
 
@@ -207,7 +282,9 @@ def test_a_crafted_checkpoint_is_refused_in_one_line(case, run, tmp_path, capsys
     _refused(exc, err, named, "step_128")
 
 
-@pytest.mark.parametrize("name", ["state.pt", "state.json", "normalization.npz", "policy.zip"])
+@pytest.mark.parametrize(
+    "name", ["state.pt", "state.json", "normalization.npz", "policy.zip", "env_state.npz"]
+)
 @pytest.mark.parametrize("kind", ["link out", "fifo", "device"])
 def test_links_out_and_special_files_are_refused_before_a_read(
     name, kind, run, tmp_path, outside, capsys

@@ -19,15 +19,26 @@ Exits 1 with one line per problem.
 
 from __future__ import annotations
 
+import ast
 import sys
 from html.parser import HTMLParser
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
-#: Links into the repository's files (docs/conf.py's REPOSITORY_FILES), checked against
-#: this checkout.
-REPOSITORY_FILES = "https://github.com/uasep/uasep-env/blob/main/"
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _conf_value(name: str) -> str:
+    """A string constant of docs/conf.py, read without running it (it imports Sphinx)."""
+    for node in ast.parse((ROOT / "docs" / "conf.py").read_text()).body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == name for t in node.targets):
+            return ast.literal_eval(node.value)
+    raise LookupError(f"docs/conf.py defines no {name}")
+
+
+#: Links into the repository's files (docs/conf.py's REPOSITORY_FILES, read from there),
+#: checked against this checkout.
+REPOSITORY_FILES = _conf_value("REPOSITORY_FILES")
 #: What the stylesheet's rule selects (docs/_static/tables.css).
 TABLE_CLASSES = ("docutils",)
 WRAPPER_CLASS = "table-wrapper"

@@ -287,6 +287,46 @@ class EnvCore:
         self.residual = ResidualAPF(self.config) if self.layout.base_action else None
         self._base = np.zeros((n_envs, self.n_uavs, 3), dtype=np.float32)
 
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """The batch's state as arrays (copies), for :meth:`load_state_dict`.
+
+        The world's (``world.*``, :meth:`World.state_dict
+        <uasep_env.sim.world.World.state_dict>`) and the last observations and APF commands
+        (``core.*``), which the next step's actions correct.
+        """
+        state = {f"world.{k}": v for k, v in self.world.state_dict().items()}
+        state |= {f"core.{k}": v.copy() for k, v in self._state_arrays().items()}
+        return state
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Continue from a :meth:`state_dict` of a core of the same config and size.
+
+        Everything checked before anything is written (:meth:`World.load_state_dict
+        <uasep_env.sim.world.World.load_state_dict>`).
+
+        Raises:
+            ValueError: One line naming the array.
+        """
+        from uasep_env.sim.snapshot import check_arrays, copy_arrays
+
+        other = sorted(k for k in state if not k.startswith(("world.", "core.")))
+        if other:
+            raise ValueError(f"{other[0]!r:.60}: not part of the state")
+        ours = {k[5:]: v for k, v in state.items() if k.startswith("core.")}
+        live = self._state_arrays()
+        check_arrays({f"core.{k}": v for k, v in ours.items()},
+                     {f"core.{k}": v for k, v in live.items()})  # fmt: skip
+        try:
+            self.world.load_state_dict(
+                {k[6:]: v for k, v in state.items() if k.startswith("world.")}
+            )
+        except ValueError as err:  # named as in this state
+            raise ValueError(f"world.{err}") from None
+        copy_arrays(ours, live)
+
+    def _state_arrays(self) -> dict[str, np.ndarray]:
+        return {"obs": self._obs, "base": self._base}
+
     @property
     def obs_dim(self) -> int:
         """Width of one agent's observation."""

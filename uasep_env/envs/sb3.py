@@ -149,6 +149,45 @@ class UAVSharedVecEnv(VecEnv):
             self._episodes.clear(done_env)
         return obs, rewards, dones, infos
 
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Where every environment's episode stands, as arrays (copies).
+
+        The core's state (``world.*``, ``core.*``: :meth:`EnvCore.state_dict
+        <uasep_env.envs.core.EnvCore.state_dict>`), the running episodes' safety
+        (``episodes.*``) and whether the first reset was done (``started``). A view that
+        loads it (:meth:`load_state_dict`) steps on exactly as this one would: what an SB3
+        run's checkpoint keeps so that a resumed run is the uninterrupted one, bit for bit.
+        """
+        state = self.core.state_dict()
+        state |= {f"episodes.{k}": v.copy() for k, v in vars(self._episodes).items()}
+        state["started"] = np.array(self._started)
+        return state
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Continue from a :meth:`state_dict` of a view of the same config and size.
+
+        Everything is checked before anything is written; the seed given to the constructor
+        is then spent (the restored episodes continue their generators).
+
+        Raises:
+            ValueError: One line naming the array (wrong shape or dtype, NaN, out of range).
+        """
+        from uasep_env.sim.snapshot import check_arrays, copy_arrays
+
+        live = {f"episodes.{k}": v for k, v in vars(self._episodes).items()}
+        ours = {k: v for k, v in state.items() if k.startswith("episodes.")}
+        check_arrays(ours, live)
+        started = state.get("started")
+        if not isinstance(started, np.ndarray) or started.shape != () or started.dtype != bool:
+            raise ValueError(f"started: {started!r:.40}, not a bool")
+        self.core.load_state_dict(
+            {k: v for k, v in state.items() if not k.startswith("episodes.") and k != "started"}
+        )
+        copy_arrays(ours, live)
+        self._started = bool(started)
+        self._seed = None
+        self._actions = None
+
     def close(self) -> None:
         """Mark the env closed: later ``reset``/``step`` calls raise (Gymnasium's rule)."""
         self._closed = True

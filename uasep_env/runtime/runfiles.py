@@ -19,6 +19,8 @@ import stat
 from pathlib import Path
 from typing import Any
 
+from uasep_env.runtime.jsonio import loads_bounded
+
 __all__ = [
     "MAX_JSON_BYTES",
     "RunFileRefused",
@@ -126,8 +128,6 @@ def read_json_inside(root: str | Path, path: str | Path, limit: int = MAX_JSON_B
         ValueError: Refused (:class:`RunFileRefused`) or not strict JSON within the limits;
             one line naming ``path``.
     """
-    from uasep_env.runtime.jsonio import loads_bounded
-
     raw = read_inside(root, path, limit)
     try:
         return loads_bounded(raw)

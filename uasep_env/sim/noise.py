@@ -88,6 +88,22 @@ class NoiseStreams:
         self.buf_pos[env] = self.noise_block  # drop noise drawn from the old stream
         self._lockstep = False  # until the next masked draw checks again
 
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The live arrays of the streams' state: the buffered noise and each position in it.
+
+        With the generators' states (:func:`uasep_env.sim.snapshot.generator_states`), what a
+        world's :meth:`~uasep_env.sim.world.World.state_dict` keeps of its noise.
+        """
+        return {"normal_buf": self._normal_buf, "unif_buf": self._unif_buf,
+                "buf_pos": self.buf_pos}  # fmt: skip
+
+    def set_generators(self, rngs: list[np.random.Generator]) -> None:
+        """Replace every environment's generator (a restored state; buffers restored apart)."""
+        if len(rngs) != self.n_envs:
+            raise ValueError(f"{len(rngs)} generators for {self.n_envs} environments")
+        self.rngs = list(rngs)
+        self._sync_lockstep()
+
     def draw(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """This physics step's Gaussian noise (scaled by ``normal_std``) and uniforms.
 

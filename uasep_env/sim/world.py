@@ -64,6 +64,15 @@ from uasep_env.sim.obstacles import N_UNIFORMS, ObstacleState, obstacle_velocity
 from uasep_env.sim.physics_step import PhysicsArrays, PhysicsParams, physics_step
 from uasep_env.sim.planned_now import PlannedNow
 from uasep_env.sim.replay import ReplayTracks
+from uasep_env.sim.snapshot import (
+    MAX_MAGNITUDE,
+    check_arrays,
+    check_range,
+    copy_arrays,
+    generator_states,
+    generators_from,
+    ndarray_attributes,
+)
 
 __all__ = ["World"]
 
@@ -217,6 +226,75 @@ class World(PlannedNow, RenamedAttributes):
                 views[name] = view
             self._frozen = views
         return self._frozen
+
+    # ------------------------------------------------------------------ state
+    #: Arrays of the state that may hold ``inf`` (a minimum distance with nothing to meet).
+    _MAY_BE_INF = ("min_uav_dist", "min_obstacle_dist")
+    #: Entries of :meth:`state_dict` that are not arrays of the world's own.
+    _STATE_META = ("noise.generators", "families", "has_reset")
+
+    def _state_arrays(self) -> dict[str, np.ndarray]:
+        """The live arrays of the world's state, by name.
+
+        Every array attribute of the world, its obstacles, plans and replayed tracks, and the
+        buffered noise.
+        """
+        arrays = ndarray_attributes(self, "")
+        arrays |= ndarray_attributes(self.obstacles, "obstacles.")
+        arrays |= ndarray_attributes(self.plan, "plan.")
+        if self.replay is not None:
+            arrays |= ndarray_attributes(self.replay, "replay.")
+        arrays |= {f"noise.{k}": v for k, v in self._noise.state_arrays().items()}
+        return arrays
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """The whole state of the batch, as arrays (copies): what :meth:`load_state_dict` needs.
+
+        Every state array (positions, estimates, obstacles, plans, counters, the noise
+        buffered), each environment's generator state (``noise.generators``, ``(E, 6)``
+        uint64), the scenario families and whether the world was reset. Plain arrays, so
+        ``np.savez`` writes it and ``np.load(allow_pickle=False)`` reads it back: a world that
+        loads it steps on exactly as this one would (the same numbers, bit for bit).
+        """
+        state = {k: v.copy() for k, v in self._state_arrays().items()}
+        state["noise.generators"] = generator_states(self._noise.rngs)
+        state["families"] = np.array(self.families, dtype=str)
+        state["has_reset"] = np.array(self._has_reset)
+        return state
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Continue from a :meth:`state_dict` of a world of the same config and size.
+
+        Everything is checked before anything is written (a refused state leaves the world
+        as it was): the same arrays, of the same shapes and dtypes, no NaN, finite (but the
+        minimum distances) and within :data:`~uasep_env.sim.snapshot.MAX_MAGNITUDE`; the
+        step counters within the episode, the noise positions within their blocks.
+
+        Raises:
+            ValueError: One line naming the array.
+        """
+        live = self._state_arrays()
+        check_arrays(state, live, self._MAY_BE_INF, self._STATE_META)
+        check_range("steps", state["steps"], 0, MAX_MAGNITUDE)
+        check_range("_kf_count", state["_kf_count"], 0, MAX_MAGNITUDE)
+        check_range("noise.buf_pos", state["noise.buf_pos"], 0, self.noise_block)
+        check_range("obstacles.aircraft_class", state["obstacles.aircraft_class"], 0, 255)
+        missing = [k for k in self._STATE_META if k not in state]
+        if missing:
+            raise ValueError(f"{missing[0]}: missing")
+        rngs = generators_from("noise.generators", state["noise.generators"], self.n_envs)
+        families, has_reset = state["families"], state["has_reset"]
+        names = families.dtype.kind == "U" and families.itemsize <= 256  # 64 characters
+        if not names or families.shape != (self.n_envs,):
+            raise ValueError(f"families: {families.dtype} of shape {families.shape}, expected "
+                             f"{self.n_envs} names")  # fmt: skip
+        if has_reset.shape != () or has_reset.dtype != bool:
+            raise ValueError(f"has_reset: {has_reset.dtype} of shape {has_reset.shape}, not a bool")
+        copy_arrays(state, live)
+        self._noise.set_generators(rngs)
+        self.families = families.tolist()
+        self._has_reset = bool(has_reset)
+        self._refresh_plan()  # the plan now: recomputed from the restored arrays on first read
 
     # ------------------------------------------------------------------ reset
     def reset(

@@ -29,6 +29,9 @@ from uasep_env.training.curves import WINDOW_EPISODES
 
 #: The files of a complete checkpoint folder (``state.json`` last).
 CHECKPOINT_FILES = ("state.pt", "normalization.npz", "policy.zip", "state.json")
+#: The SB3 recipes' environments' state (:mod:`uasep_env.training.sb3_state`), read by
+#: :func:`read_env_state`: in their checkpoints, absent from older ones and other trainers'.
+ENV_STATE_FILE = "env_state.npz"
 
 
 class RunError(SystemExit):
@@ -66,6 +69,9 @@ class RunFolderLimits:
         ratio: Largest compression ratio of a zip member over 64 KiB.
         normalization: Largest ``normalization.npz``.
         policy: Largest ``policy.zip`` (its reader has its own, finer limits).
+        env_state: Largest ``env_state.npz``, and the most its arrays inflate to in all
+            (the worlds' arrays and buffered noise).
+        env_state_arrays: Most arrays in ``env_state.npz``.
     """
 
     state_json: int = 4 * 1024 * 1024
@@ -75,6 +81,8 @@ class RunFolderLimits:
     ratio: float = 50.0
     normalization: int = 16 * 1024 * 1024
     policy: int = 64 * 1024 * 1024
+    env_state: int = 256 * 1024 * 1024
+    env_state_arrays: int = 4096
 
 
 #: The limits the run folder's readers apply.
@@ -98,7 +106,9 @@ def check_checkpoint(directory: Path) -> Path:
     resolved = directory.resolve()
     limits = {"state.pt": LIMITS.state_pt, "normalization.npz": LIMITS.normalization,
               "policy.zip": LIMITS.policy, "state.json": LIMITS.state_json}  # fmt: skip
-    for name in CHECKPOINT_FILES:  # links out, FIFOs, devices, huge files: before any read
+    if os.path.lexists(resolved / ENV_STATE_FILE):  # optional: checked alike where present
+        limits[ENV_STATE_FILE] = LIMITS.env_state
+    for name in limits:  # links out, FIFOs, devices, huge files: before any read
         try:
             check_inside(resolved, resolved / name, limits[name])
         except RunFileRefused as err:
@@ -206,6 +216,41 @@ def read_tensors(directory: Path) -> dict:
     if not isinstance(state, dict):
         raise bad(f"holds {type(state).__name__}, not a dict of the run's tensors")
     return state
+
+
+def read_env_state(directory: Path) -> dict[str, np.ndarray] | None:
+    """A checkpoint folder's ``env_state.npz`` (plain arrays; ``None`` where there is none).
+
+    Read within :data:`LIMITS` (its zip directory checked first: at most
+    ``env_state_arrays`` members, their declared sizes and compression ratios, their
+    total) and loaded with ``allow_pickle=False``. The arrays are checked where they are
+    restored (:func:`uasep_env.training.sb3_state.load_rollout_state`).
+
+    Raises:
+        RunFolderError: One line naming the folder, ``env_state.npz`` and what is wrong.
+    """
+    import zipfile
+
+    if not os.path.lexists(directory / ENV_STATE_FILE):
+        return None
+    raw = _read(directory, ENV_STATE_FILE, LIMITS.env_state)
+    try:
+        with zipfile.ZipFile(io.BytesIO(raw)) as z:
+            infos = z.infolist()
+            if len(infos) > LIMITS.env_state_arrays:
+                raise ValueError(f"{len(infos):,} members, limit {LIMITS.env_state_arrays:,}")
+            members = {i.filename: LIMITS.env_state for i in infos}
+            check_members(z, members, LIMITS.ratio)  # duplicates, encryption, bombs
+            total = sum(i.file_size for i in infos)
+            if total > LIMITS.env_state:
+                raise ValueError(f"arrays of {total:,} bytes in all, limit {LIMITS.env_state:,}")
+        with np.load(io.BytesIO(raw), allow_pickle=False) as z:
+            return {name: np.asarray(z[name]) for name in z.files}
+    except HOSTILE_FILE_ERRORS as err:
+        detail = " ".join(str(err).split())[:200] or type(err).__name__
+        raise RunFolderError(
+            directory, f"{ENV_STATE_FILE}: not an environment state ({detail})"
+        ) from None
 
 
 def read_policy(directory: Path) -> Any:

@@ -212,10 +212,17 @@ class CostTracker:
         self.episodes = 0
         self._batch: list[float] = []
         self._running = np.zeros(int(n))
+        self._resumed: np.ndarray | None = None  # running costs to continue (load_state_dict)
 
     def start(self, n: int) -> None:
-        """Begin ``n`` running episodes at zero cost (a run's start, or its resumption)."""
-        self._running = np.zeros(int(n))
+        """Begin ``n`` running episodes: at zero cost, or where a resumed state left them.
+
+        The running costs :meth:`load_state_dict` restored (``running=True``) continue when
+        there are ``n`` of them; otherwise (a run's start, a resumption whose environments
+        restart their episodes) every episode starts at zero.
+        """
+        resumed, self._resumed = self._resumed, None
+        self._running = resumed if resumed is not None and len(resumed) == n else np.zeros(int(n))
         self._batch = []
 
     def step(self, costs: np.ndarray, dones: np.ndarray) -> None:
@@ -261,12 +268,34 @@ class CostTracker:
         }
 
     def state_dict(self) -> dict[str, Any]:
-        """:meth:`info` and the episode window: what a checkpoint keeps (JSON-friendly)."""
-        return {**self.info(), "window": list(self.window)}
+        """What a checkpoint keeps (JSON-friendly): :meth:`info`, the window, running costs.
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`state_dict` (running episodes start anew, as the environments do)."""
+        The episode window and the running episodes' costs so far; saved between rollouts,
+        so there is no rollout's batch to keep.
+        """
+        return {**self.info(), "window": list(self.window), "running": self._running.tolist()}
+
+    def load_state_dict(self, state: dict[str, Any], running: bool = False) -> None:
+        """Restore :meth:`state_dict`.
+
+        Args:
+            state: A :meth:`state_dict` (from a file: checked).
+            running: The environments continue their episodes (an SB3 checkpoint with its
+                environments' state): their running costs continue too, from the next
+                :meth:`start`. Otherwise they start anew, as the environments do.
+
+        Raises:
+            ValueError: A value out of range, named. KeyError: a missing field.
+        """
         from uasep_env.config.checks import check, check_int_in, check_positive
+
+        resumed = None
+        if running:
+            costs = state["running"]
+            check(isinstance(costs, list), "running", costs, "must be a list of episode costs")
+            for c in costs:
+                check_positive("running[]", c, allow_zero=True, hi=1e300)
+            resumed = np.array(costs, dtype=np.float64)
 
         self.lagrangian.load_state_dict(state)  # checked there (the multiplier's range)
         check_int_in("episodes", state["episodes"], 0, 2**62)
@@ -279,3 +308,4 @@ class CostTracker:
         self.window.extend(float(c) for c in window)
         self._batch = []
         self._running[:] = 0.0
+        self._resumed = resumed

@@ -29,8 +29,12 @@ Beside ``ppo_shared``'s outputs a run writes ``cost_progress.csv`` (one row per 
 iteration: the agent-episodes ended so far, the mean episode cost of the rollout and of the
 last 200 agent-episodes, the limit and the multiplier), ``cost_curves.png`` drawn from it,
 and the multiplier's state in every checkpoint's ``state.json`` and in ``validation.json``
-(``training.lagrangian``), so that ``--resume`` continues the multiplier, its cost window
-and ``cost_progress.csv``.
+(``training.lagrangian``), so that ``--resume`` continues the multiplier, its cost window,
+the running episodes' costs and ``cost_progress.csv``. With the environments' and SB3's state
+the checkpoint keeps (``env_state.npz``, :mod:`uasep_env.training.sb3_state`), a run killed
+at any point and resumed from its last checkpoint ends with the same weights, multiplier,
+``progress.csv`` (but its wall times) and ``cost_progress.csv`` as an uninterrupted run of the
+same length and seed, bit for bit.
 """
 
 from __future__ import annotations
@@ -97,6 +101,7 @@ class Constraint:
         """The multiplier's callback, its state restored from ``resumed`` if any."""
         from uasep_env.training.rundir import restore_json, rewind_csv
         from uasep_env.training.sb3_lagrangian import COST_FIELDS, LagrangianCallback
+        from uasep_env.training.sb3_state import continues_episodes
 
         task = config.reward == config.reward.task()
         print(f"reward: {'the task reward' if task else config.reward} "
@@ -116,7 +121,14 @@ class Constraint:
         self.callback = LagrangianCallback(lagrangian, self.args.cost, path)
         if resumed:
             state = kept.get("state")
-            restore_json(folder, "lagrangian.state", self.callback.load_state_dict, state)
+            # The environments continue their episodes where the checkpoint has their state
+            # (loaded already): so do the episodes' running costs.
+            running = continues_episodes(self.args, resumed, folder)
+
+            def load(saved: Any) -> None:
+                self.callback.load_state_dict(saved, running=running)
+
+            restore_json(folder, "lagrangian.state", load, state)
             # Rows of the abandoned continuation go, as progress.csv's.
             rewind_csv(path, COST_FIELDS, int(resumed["agent_steps"]))
         return [self.callback]

@@ -32,11 +32,14 @@ files above) or ``--resume`` is given; every file is written atomically, and ``-
 rewinds ``progress.csv`` and the checkpoints to the one it resumes from
 (:mod:`uasep_env.training.rundir`).
 A resumed run restores the weights, the optimiser, the normalisation statistics, the
-counters (agent-steps, episodes, the 200-episode window, wall time) and torch's random
-state, all as they were after the updates of the checkpoint's last rollout (a checkpoint is
-saved when the next rollout starts); it is not bit-exact with an uninterrupted run: the
-episodes in progress at the checkpoint are dropped, and the environments restart their
-episodes from their seeds (see ``docs/robustness.md``).
+counters (agent-steps, episodes, the 200-episode window, wall time), torch's and numpy's
+random states, the environments' episodes in progress and SB3's rollout state
+(``env_state.npz``, :mod:`~uasep_env.training.sb3_state`), all as they were after the
+updates of the checkpoint's last rollout (a checkpoint is saved when the next rollout
+starts, so no rollout is in progress): it is bit-identical with an uninterrupted run (the
+same weights and ``progress.csv`` but its wall times). A checkpoint of an older version,
+without ``env_state.npz``, resumes with the environments' episodes restarted from their
+seeds.
 
 ``--trainer lean`` trains the same recipe with :mod:`~uasep_env.training.ppo_lean` in place
 of SB3 (:mod:`~uasep_env.training.lean_recipe`: the same files and ``--resume``).
@@ -209,22 +212,37 @@ def _write_checkpoint(
     torch.save(state, buf)
     atomic_write(tmp / "state.pt", buf.getvalue())
     atomic_write(tmp / "normalization.npz", normalization_bytes(venv))
+    # The episodes in progress and the rollouts' state: a resumed run continues them exactly.
+    from uasep_env.training.sb3_state import ENV_STATE_FILE, env_state_bytes
+
+    atomic_write(tmp / ENV_STATE_FILE, env_state_bytes(model, venv))
     export_policy(model, venv, config, args, tmp / "policy.zip", info)
 
 
-def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
-    """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling)."""
+def load_checkpoint(model: Any, venv: Any, directory: Path, episodes: bool = True) -> dict:
+    """Restore a :func:`save_checkpoint` directory (weights-only loads; no unpickling).
+
+    With ``episodes`` and its ``env_state.npz`` (:mod:`~uasep_env.training.sb3_state`) the
+    environments' episodes and SB3's rollout state continue where the checkpoint's run was:
+    the resumed run is the uninterrupted one, bit for bit. Otherwise (a checkpoint of an
+    older version, or ``episodes`` False: :func:`~uasep_env.training.sb3_state.continues_episodes`
+    said no) the environments restart their episodes from their seeds (said in a line).
+    """
     import torch
 
     from uasep_env.training.rundir import (
+        ENV_STATE_FILE,
         check_checkpoint,
+        read_env_state,
         read_state,
         read_tensors,
+        restore_arrays,
         restore_module,
         restore_optimizer,
         restore_rng,
         tensor_part,
     )
+    from uasep_env.training.sb3_state import load_rollout_state
 
     directory = check_checkpoint(directory)
     state = read_tensors(directory)  # every tensor checked as it is restored
@@ -238,6 +256,16 @@ def load_checkpoint(model: Any, venv: Any, directory: Path) -> dict:
         torch.cuda.set_rng_state(state["cuda_rng"], model.device)
     load_normalization(venv, directory / "normalization.npz")
     info = read_state(directory)
+    env_state = read_env_state(directory) if episodes else None
+    if env_state is None:
+        why = (f"{directory.name} has no {ENV_STATE_FILE}" if episodes
+               else "the environment's options are not the checkpoint's")  # fmt: skip
+        print(f"{why}: the environments restart their episodes from their seeds (a valid "
+              "continuation, not bit-identical with an uninterrupted run)")  # fmt: skip
+    else:
+        restore_arrays(
+            directory, ENV_STATE_FILE, lambda s: load_rollout_state(model, venv, s), env_state
+        )
     model.num_timesteps = int(info["agent_steps"])
     return info
 
@@ -307,7 +335,9 @@ def make_callback(
                 if k % n_uavs == 0 and "episode_safety" in info:
                     s = info["episode_safety"]
                     ep = info.get("episode", {"r": np.nan, "l": np.nan})
-                    row = (ep["r"], s["collision"], s["loss_of_separation"])
+                    # A Python float, as a resumed window's (from state.json) holds: the
+                    # mean of float32 returns would round otherwise.
+                    row = (float(ep["r"]), s["collision"], s["loss_of_separation"])
                     self.window.append((*row, s["max_deviation"], ep["l"]))
                     self.episodes += 1
             if self.bar is not None:
@@ -390,7 +420,10 @@ def train(args: Args, plugin: Any = None) -> dict:
     run = RunFolder.start(args)
     venv, model = build(args, config)
     if run.resume is not None:
-        load_checkpoint(model, venv, run.resume)
+        from uasep_env.training.sb3_state import continues_episodes
+
+        episodes = continues_episodes(args, run.resumed, run.resume)
+        load_checkpoint(model, venv, run.resume, episodes)
     # The plugin's state restored (and checked) before the folder is rewound: a refused
     # checkpoint leaves the folder as it was.
     before = plugin.start(run.out, config, run.resumed) if plugin is not None else []

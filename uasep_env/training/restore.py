@@ -154,3 +154,17 @@ def restore_json(
         detail = f"missing {err}" if isinstance(err, KeyError) else " ".join(str(err).split())
         detail = detail.removeprefix("invalid config value ")
         raise RunFolderError(directory, f"{file}: {where}: {detail[:200]}") from None
+
+
+def restore_arrays(directory: Path, file: str, loader: Callable[[Any], None], saved: Any) -> None:
+    """``loader(saved)`` of a checkpoint's arrays (an environments' state), in one line.
+
+    Raises:
+        RunFolderError: ``loader`` refused them (ValueError, KeyError, TypeError): one
+            line naming ``file`` and the array.
+    """
+    try:
+        loader(saved)
+    except (ValueError, KeyError, TypeError) as err:
+        detail = f"{err}: missing" if isinstance(err, KeyError) else " ".join(str(err).split())
+        raise RunFolderError(directory, f"{file}: {detail[:200]}") from None

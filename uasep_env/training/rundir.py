@@ -50,6 +50,7 @@ from uasep_env.training.args import Args, hidden, make_env_config
 # the recipes and tests from here, as they always were.
 from uasep_env.training.checkpoint_readers import (  # noqa: F401
     CHECKPOINT_FILES,
+    ENV_STATE_FILE,
     LIMITS,
     RunError,
     RunFolderError,
@@ -59,6 +60,7 @@ from uasep_env.training.checkpoint_readers import (  # noqa: F401
     _read,
     check_checkpoint,
     load_normalization,
+    read_env_state,
     read_policy,
     read_state,
     read_tensors,
@@ -82,6 +84,7 @@ from uasep_env.training.curves import (  # noqa: F401
 from uasep_env.training.restore import (  # noqa: F401
     _check_tensor,
     _walk,
+    restore_arrays,
     restore_json,
     restore_module,
     restore_optimizer,

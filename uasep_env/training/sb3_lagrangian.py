@@ -130,15 +130,20 @@ class LagrangianCallback(BaseCallback):
     def state_dict(self) -> dict[str, Any]:
         """What a resumed run needs (JSON-friendly): the tracker's state.
 
-        The multiplier's state, the episodes counted and the cost window
-        (:meth:`uasep_env.training.constraint.CostTracker.state_dict`). The rollout in
-        progress is not kept (a resumed run drops it, as the recipes do).
+        The multiplier's state, the episodes counted, the cost window and the running
+        episodes' costs (:meth:`uasep_env.training.constraint.CostTracker.state_dict`).
+        Saved between rollouts (the recipes checkpoint when a rollout starts), so there is
+        no rollout in progress to keep.
         """
         return self.tracker.state_dict()
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`state_dict` (the limit and gains are the constructor's)."""
-        self.tracker.load_state_dict(state)
+    def load_state_dict(self, state: dict[str, Any], running: bool = False) -> None:
+        """Restore :meth:`state_dict` (the limit and gains are the constructor's).
+
+        ``running``: the environments continue their episodes (their state restored from
+        the checkpoint), so the running episodes' costs continue too.
+        """
+        self.tracker.load_state_dict(state, running)
 
     def _on_training_start(self) -> None:
         env = self.training_env
