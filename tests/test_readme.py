@@ -15,7 +15,10 @@ SYNC = runpy.run_path(str(ROOT / "tools" / "sync_readme.py"))
 
 def test_readme_tables_match_the_results_files():
     readme = (ROOT / "README.md").read_text()
-    assert readme.count("<!-- results ") == 4  # every marked table is checked below
+    assert readme.count("<!-- results ") == 5  # every marked table is checked below
+    # The headline results lead with the leaderboard's verdict.
+    first = readme.index("<!-- results ")
+    assert readme[first:].startswith('<!-- results baselines/results/bench/bench.md "Verdict" list')
     assert SYNC["render_readme"](readme) == readme, "run: python tools/sync_readme.py"
 
 
@@ -25,9 +28,12 @@ def test_docs_pages_tables_match_the_results_files():
     marked = {p.name: p.read_text().count("<!-- results ") for p in pages}
     # The results page holds every method's held-out tables, the paper experiment's and the
     # trade-off tables.
-    assert marked["results.md"] == 11 and marked["training.md"] == 3, marked
+    assert marked["results.md"] == 15 and marked["training.md"] == 3, marked
     results = (ROOT / "docs" / "results.md").read_text()
     assert '<!-- results learned_vs_apf.md "Held-out bank" -->' in results
+    # The Results page opens with the leaderboard's verdict, then its tables.
+    first = results.index("<!-- results ")
+    assert results[first:].startswith('<!-- results baselines/results/bench/bench.md "Verdict"')
     assert marked["real_traffic.md"] == 2, marked  # every controller on real traffic
     # The families' table, written from the scenario registry.
     assert (ROOT / "docs" / "environment.md").read_text().count("<!-- scenarios -->") == 1
