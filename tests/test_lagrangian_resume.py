@@ -13,9 +13,9 @@ The SB3 recipes (``ppo_lagrangian``, ``ppo_lagrangian_residual``, and ``ppo_shar
 further: their checkpoints keep the environments' episodes in progress and SB3's rollout
 state (``env_state.npz``), so a run killed at a checkpoint that falls inside episodes and
 resumed ends with the uninterrupted run's weights, optimiser, random state, multiplier,
-``cost_progress.csv`` and ``progress.csv`` (but its wall times), bit for bit. (skrl's
-MAPPO-Lagrangian does not keep them: its environments restart their episodes from their
-seeds, ``docs/robustness.md``.)
+``cost_progress.csv`` and ``progress.csv`` (but its wall times), bit for bit. So does skrl's
+MAPPO-Lagrangian, whose checkpoints between two rollouts keep the same ``env_state.npz``
+(with the agents' last observations and the loop's timestep).
 """
 
 import csv
@@ -244,3 +244,70 @@ def test_a_resume_that_cannot_continue_the_episodes_restarts_them(change, tmp_pa
     said = capsys.readouterr().out
     assert "the environments restart their episodes from their seeds" in said, said
     assert summary["training"]["agent_steps"] >= 512
+
+
+#: skrl's MAPPO-Lagrangian on random encounters whose episodes (25 steps: 5 s at 5 Hz) end
+#: neither with the rollouts (20 steps) nor at the checkpoint, with costs that differ from
+#: episode to episode: 2 environments x 3 UAVs x 20 steps = 120 agent-steps a rollout.
+MAPPO_EXACT = [
+    "--n-envs", "2", "--n-steps", "20", "--batch-size", "20", "--episode-duration", "5",
+    "--hidden", "16,16", "--no-progress", "--eval-episodes", "0", "--cost-limit", "1",
+    "--multiplier-init", "0.7", "--pid-ki", "0.2", "--pid-kp", "0.5", "--torch-threads", "1",
+    "--seed", "3", "--config", "reward=task uav.separation_distance=19",
+]  # fmt: skip
+
+
+def test_a_resumed_mappo_lagrangian_run_is_bit_identical(tmp_path, monkeypatch):
+    """skrl's loop killed mid-episode at a checkpoint and resumed: the uninterrupted run."""
+    from uasep_env.training import mappo_lagrangian
+
+    def train(extra):
+        return mappo_lagrangian.main([*MAPPO_EXACT, *extra])
+
+    rollout = 2 * 3 * 20
+    mid, total = 2 * rollout, 4 * rollout
+    every = ["--checkpoint-every", str(mid), "--total-timesteps", str(total)]
+    full, killed = tmp_path / "full", tmp_path / "killed"
+    train([*every, "--out-dir", str(full)])
+    put_back = _kill_at(monkeypatch, mid)
+    with pytest.raises(_Killed):
+        train([*every, "--out-dir", str(killed)])
+    put_back()
+    ckpt = killed / "checkpoints" / f"step_{mid}"
+    train([*every, "--out-dir", str(killed), "--resume", str(ckpt)])
+
+    # The checkpoint falls inside episodes, and the multiplier moves with costs that vary.
+    env = np.load(ckpt / "env_state.npz")
+    assert (env["env.world.steps"] > 0).all()
+    rows = _rows(full / "cost_progress.csv")
+    assert len({r["episode_cost_mean"] for r in rows}) > 1
+    assert len({r["multiplier"] for r in rows}) > 2
+
+    end = f"checkpoints/step_{total}"
+    ours, theirs = _checkpoint(killed / end), _checkpoint(full / end)
+    assert same_bits(ours[0], theirs[0]), "the final weights, optimiser or RNG differ"
+    assert ours[1] == theirs[1]  # the multiplier's state, the counters, the window
+    assert (killed / "cost_progress.csv").read_bytes() == (full / "cost_progress.csv").read_bytes()
+    assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
+
+
+@pytest.mark.parametrize("case", ["no env_state.npz", "inside a rollout", "--n-envs 3"])
+def test_a_mappo_resume_that_cannot_continue_the_episodes_restarts_them(case, tmp_path, capsys):
+    """An older checkpoint, one saved inside a rollout, other environments: said, not refused."""
+    from uasep_env.training import mappo_lagrangian
+
+    out = tmp_path / "run"
+    every = "180" if case == "inside a rollout" else "120"  # a rollout: 120 agent-steps
+    mappo_lagrangian.main([*MAPPO_EXACT, "--total-timesteps", "240", "--checkpoint-every",
+                           every, "--out-dir", str(out)])  # fmt: skip
+    ckpt = out / "checkpoints" / f"step_{every}"
+    assert (ckpt / "env_state.npz").exists() == (case != "inside a rollout")
+    if case == "no env_state.npz":
+        (ckpt / "env_state.npz").unlink()
+    extra = case.split() if case.startswith("--") else []
+    capsys.readouterr()
+    summary = mappo_lagrangian.main([*MAPPO_EXACT, *extra, "--total-timesteps", "480",
+                                     "--out-dir", str(out), "--resume", str(ckpt)])  # fmt: skip
+    said = capsys.readouterr().out
+    assert "the environments restart their episodes from their seeds" in said, said
+    assert summary["training"]["agent_steps"] >= 480

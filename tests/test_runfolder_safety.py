@@ -517,6 +517,33 @@ LAGRANGIAN_CASES = {
 }
 
 
+#: skrl MAPPO's ``env_state.npz`` (its checkpoints between two rollouts: the environments,
+#: the agents' last observations, the loop's timestep), crafted in a real checkpoint.
+MAPPO_ENV_CASES = {
+    "env_state skrl.obs NaN": (
+        _env_state(_put("skrl.obs", _nan_at_first)), ("env_state.npz", "skrl.obs", "NaN"),
+    ),
+    "env_state skrl.obs shape": (
+        _env_state(_put("skrl.obs", lambda a: a[:, :1])), ("env_state.npz", "skrl.obs", "shape"),
+    ),
+    "env_state skrl.timestep negative": (
+        _env_state(_put("skrl.timestep", lambda a: a - 10**6)),
+        ("env_state.npz", "skrl.timestep"),
+    ),
+    "env_state skrl.obs missing": (
+        _env_state(lambda arrays: arrays.pop("skrl.obs")), ("env_state.npz", "skrl.obs"),
+    ),
+    "env_state world NaN": (
+        _env_state(_put("env.world.uav_vel", _nan_at_first)),
+        ("env_state.npz", "env.world.uav_vel"),
+    ),
+    "env_state truncated": (
+        lambda ck: (ck / "env_state.npz").write_bytes((ck / "env_state.npz").read_bytes()[:999]),
+        ("env_state.npz",),
+    ),
+}  # fmt: skip
+
+
 def _resume_recipe(recipe, out, capsys):
     ck = out / "checkpoints" / "step_128"
     with pytest.raises(SystemExit) as exc:
@@ -533,14 +560,15 @@ def _tree(path):
 @pytest.mark.parametrize(
     "recipe, case",
     [(r, c) for r in RECIPES for c in RECIPE_CASES]
-    + [(r, c) for r in RECIPES if "lagrangian" in r for c in LAGRANGIAN_CASES],
+    + [(r, c) for r in RECIPES if "lagrangian" in r for c in LAGRANGIAN_CASES]
+    + [(r, c) for r in RECIPES if "mappo" in r for c in MAPPO_ENV_CASES],
 )
 def test_each_recipe_refuses_a_crafted_checkpoint_in_one_line(
     recipe, case, recipe_runs, tmp_path, outside, capsys
 ):
     out = _copy(recipe_runs(recipe), tmp_path)
     capsys.readouterr()  # the reference run's own lines
-    craft, named = {**RECIPE_CASES, **LAGRANGIAN_CASES}[case]
+    craft, named = {**RECIPE_CASES, **LAGRANGIAN_CASES, **MAPPO_ENV_CASES}[case]
     craft(out / "checkpoints" / "step_128")
     before, precious = _tree(out), outside.read_bytes()
     exc, err = _resume_recipe(recipe, out, capsys)
@@ -551,8 +579,12 @@ def test_each_recipe_refuses_a_crafted_checkpoint_in_one_line(
     assert not changed, changed  # the refused run changed nothing, not even its own folder
 
 
-@pytest.mark.parametrize("recipe", list(RECIPES))
-@pytest.mark.parametrize("name", ["state.pt", "state.json", "normalization.npz", "policy.zip"])
+@pytest.mark.parametrize(
+    "recipe, name",
+    [(r, n) for r in RECIPES
+     for n in ("state.pt", "state.json", "normalization.npz", "policy.zip")]
+    + [(r, "env_state.npz") for r in RECIPES if r != "lean"],  # the lean loop's has none
+)  # fmt: skip
 def test_each_recipe_refuses_a_checkpoint_file_linked_out(
     recipe, name, recipe_runs, tmp_path, outside, capsys
 ):

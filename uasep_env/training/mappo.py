@@ -26,10 +26,12 @@ conventions of ``uasep-train ppo_shared`` (every flag of it applies where it mea
 * Budget and outputs as ``ppo_shared.py``: ``--max-minutes`` (55) or ``--total-timesteps``
   agent-steps; ``progress.csv`` and ``curves.png``; ``checkpoints/step_N/`` (``state.pt``
   loaded weights-only, ``normalization.npz``, ``state.json``, ``policy.zip``) and
-  ``checkpoints/latest`` for ``--resume``; ``validation.json``. The run folder follows
-  :mod:`uasep_env.training.rundir`: a used ``--out-dir`` is refused unless ``--resume`` or
-  ``--overwrite``, files are written atomically, and ``--resume`` rewinds ``progress.csv``
-  to the checkpoint and continues its episode window.
+  ``checkpoints/latest`` for ``--resume``; ``validation.json``. A checkpoint between two
+  rollouts also holds ``env_state.npz`` (:meth:`SkrlView.rollout_state`): a run resumed from
+  it continues the episodes in progress and is the uninterrupted run, bit for bit. The run
+  folder follows :mod:`uasep_env.training.rundir`: a used ``--out-dir`` is refused unless
+  ``--resume`` or ``--overwrite``, files are written atomically, and ``--resume`` rewinds
+  ``progress.csv`` to the checkpoint and continues its episode window.
 
 Options of ``ppo_shared.py`` MAPPO does not have (``--critic-warmup``, ``--norm-reward``,
 ``--tensorboard``) are refused. ``--batch-size`` sets skrl's mini-batches per agent
@@ -62,8 +64,9 @@ from uasep_env.training.args import parse_args as _parse_args
 if TYPE_CHECKING:
     from uasep_env.training.rundir import RunFolder
 
-__all__ = ["Args", "Hooks", "SkrlView", "build", "export_policy", "load_checkpoint", "main",
-           "parse_args", "ppo_shared", "run", "save_checkpoint", "train"]  # fmt: skip
+__all__ = ["Args", "Hooks", "SkrlView", "build", "continue_episodes", "export_policy",
+           "load_checkpoint", "main", "parse_args", "ppo_shared", "run", "save_checkpoint",
+           "train"]  # fmt: skip
 
 
 @dataclass
@@ -258,6 +261,7 @@ class SkrlView:
         self.infos: list[dict] = []
         self.dones = np.zeros(self.num_envs * self.n, dtype=bool)
         self._obs: dict = {}
+        self.continued = False  # the episodes go on from a checkpoint's (continue_episodes)
 
     def _split(self, flat: np.ndarray) -> dict:
         import torch
@@ -276,6 +280,44 @@ class SkrlView:
 
         s = torch.from_numpy(np.asarray(self.base.core.state(), dtype=np.float32))
         return {a: torch.cat([s, self._obs[a]], dim=-1) for a in self.possible_agents}
+
+    def rollout_state(self, timestep: int) -> dict[str, np.ndarray]:
+        """Where the environments and this view stand between two rollouts, as arrays.
+
+        The environment stack's state (:func:`uasep_env.training.sb3_state.venv_state`: the
+        episodes in progress, ``VecMonitor``'s and ``VecNormalize``'s running figures,
+        numpy's random state), the agents' last observations (``skrl.obs``: what the next
+        rollout starts from, instead of a reset) and the loop's ``timestep``.
+        """
+        from uasep_env.training.sb3_state import venv_state
+
+        obs = np.stack([self._obs[a].numpy() for a in self.possible_agents], axis=1)
+        return venv_state(
+            self.venv, {"skrl.obs": obs, "skrl.timestep": np.array(timestep, dtype=np.int64)}
+        )
+
+    def load_rollout_state(self, state: dict[str, np.ndarray]) -> int:
+        """Continue from a :meth:`rollout_state` (checked before anything is written).
+
+        Returns:
+            The loop's timestep.
+
+        Raises:
+            ValueError: One line naming the array.
+        """
+        import torch
+
+        from uasep_env.training.sb3_state import load_venv_state
+
+        width = int(np.prod(self.venv.observation_space.shape))
+        like = {
+            "skrl.obs": np.zeros((self.num_envs, self.n, width), np.float32),
+            "skrl.timestep": np.zeros((), dtype=np.int64),
+        }
+        own = load_venv_state(self.venv, state, like, counters=("skrl.timestep",))
+        obs = own["skrl.obs"]
+        self._obs = {a: torch.from_numpy(obs[:, i].copy()) for i, a in enumerate(self.agents)}
+        return int(own["skrl.timestep"])
 
     def step(self, actions: dict) -> tuple:
         """Step with per-agent actions ``(n_envs, 3)``; finished environments auto-reset."""
@@ -322,11 +364,20 @@ def _modules(agent: Any) -> dict:
 
 
 def save_checkpoint(
-    agent: Any, venv: Any, config: Any, args: Args, directory: Path, info: dict
+    agent: Any,
+    venv: Any,
+    config: Any,
+    args: Args,
+    directory: Path,
+    info: dict,
+    env_state: dict[str, np.ndarray] | None = None,
 ) -> None:
     """Everything ``--resume`` needs, plus the policy checkpoint, in ``directory``.
 
     Complete or not at all (:func:`uasep_env.training.rundir.save_checkpoint_dir`).
+    ``env_state``: the environments' and the loop's state between two rollouts
+    (:meth:`SkrlView.rollout_state`), written as ``env_state.npz``; None (a checkpoint
+    inside a rollout, whose transitions so far skrl's memory holds) writes none.
     """
     import torch
 
@@ -341,6 +392,10 @@ def save_checkpoint(
         buf = io.BytesIO()
         np.savez(buf, obs_mean=o.mean, obs_var=o.var, obs_count=o.count)
         atomic_write(tmp / "normalization.npz", buf.getvalue())
+        if env_state is not None:
+            from uasep_env.training.sb3_state import ENV_STATE_FILE, npz_bytes
+
+            atomic_write(tmp / ENV_STATE_FILE, npz_bytes(env_state))
         export_policy(agent, venv, config, args, tmp / "policy.zip", info)
 
     save_checkpoint_dir(directory, write, info, args)
@@ -378,6 +433,47 @@ def load_checkpoint(agent: Any, venv: Any, directory: Path) -> dict:
     restore_rng(directory, "torch_rng", tensor_part(directory, state, "torch_rng"))
     load_normalization(venv, directory / "normalization.npz")  # the observations' only
     return read_state(directory)
+
+
+def continue_episodes(env: SkrlView, args: Args, directory: Path, resumed: dict) -> int | None:
+    """Continue the environments' episodes from a checkpoint's ``env_state.npz``, if it can.
+
+    It can where the checkpoint has one (saved between two rollouts) and the run has the
+    checkpoint's environment options
+    (:func:`~uasep_env.training.sb3_state.continues_episodes`); otherwise (a checkpoint
+    inside a rollout, or of an older version; another ``--n-envs``...) the environments
+    restart their episodes from their seeds, said in a line. Sets ``env.continued``.
+
+    Returns:
+        The loop's timestep to continue from, or None (reset the environments).
+
+    Raises:
+        RunFolderError: ``env_state.npz`` refused (one line naming the array).
+    """
+    from uasep_env.training.rundir import (
+        ENV_STATE_FILE,
+        check_checkpoint,
+        read_env_state,
+        restore_arrays,
+    )
+    from uasep_env.training.sb3_state import continues_episodes
+
+    directory = check_checkpoint(directory)
+    episodes = continues_episodes(args, resumed, directory)
+    state = read_env_state(directory) if episodes else None
+    env.continued = state is not None
+    if state is None:
+        why = (f"{directory.name} has no {ENV_STATE_FILE} (saved inside a rollout, or by an "
+               "older version)" if episodes
+               else "the environment's options are not the checkpoint's")  # fmt: skip
+        print(f"{why}: the environments restart their episodes from their seeds (a valid "
+              "continuation, not bit-identical with an uninterrupted run)")  # fmt: skip
+        return None
+    timestep: list[int] = []
+    restore_arrays(
+        directory, ENV_STATE_FILE, lambda s: timestep.append(env.load_rollout_state(s)), state
+    )
+    return timestep[0]
 
 
 class Hooks:
@@ -437,8 +533,10 @@ def train(
     hooks = hooks or Hooks()
     venv, env, agent = build(args, config, hooks.agent_class)
     resumed = run.resumed
+    timestep = None
     if run.resume is not None:
         load_checkpoint(agent, venv, run.resume)
+        timestep = continue_episodes(env, args, run.resume, resumed)
     hooks.start(agent, env, run.out, resumed)  # checked before the folder is rewound
     if run.resume is not None:
         run.rewind(int(resumed["agent_steps"]))
@@ -487,15 +585,22 @@ def train(
             **hooks.info(),
         }
 
-    def checkpoint() -> None:
+    def checkpoint(between_rollouts: bool) -> None:
+        # Between two rollouts (after the last one's update, skrl's memory spent) the
+        # environments' state is all a resumed run needs to go on exactly.
+        env_state = env.rollout_state(t) if between_rollouts else None
         run.save_checkpoint(
             steps, {**facts(), **hooks.state()}, window,
-            lambda d, state: save_checkpoint(agent, venv, config, args, d, state),
+            lambda d, state: save_checkpoint(agent, venv, config, args, d, state, env_state),
         )  # fmt: skip
 
-    obs, _ = env.reset()
+    if timestep is None:
+        obs, _ = env.reset()
+        t = 0
+    else:  # the episodes go on from the checkpoint's (no reset)
+        obs, t = env._obs, timestep
     states = env.state()
-    t, horizon = 0, max(1, args.total_timesteps // per_step)
+    horizon = max(1, args.total_timesteps // per_step)
     while (
         steps < args.total_timesteps
         and time.perf_counter() - t0 < args.max_minutes * 60
@@ -547,9 +652,9 @@ def train(
                     if s:
                         bar.set_postfix(**ppo_shared.bar_postfix(s))
             if steps >= next_ckpt:
-                checkpoint()
+                checkpoint(i == args.n_steps - 1)
                 next_ckpt += args.checkpoint_every
-    checkpoint()
+    checkpoint(True)
     run.close()
     hooks.close()
     if bar is not None:

@@ -43,7 +43,10 @@ episode cost of the rollout's episodes and of the last 200, the limit and the mu
 ``cost_curves.png`` drawn from it, and the constraint's state (``lagrangian``: cost, limit,
 multiplier and its controller's state) in the checkpoints' ``state.json`` and in
 ``validation.json``. ``--resume`` restores the cost critic, its optimiser and scaler, and the
-multiplier, and rewinds ``cost_progress.csv`` to the checkpoint as ``progress.csv``.
+multiplier, and rewinds ``cost_progress.csv`` to the checkpoint as ``progress.csv``; from a
+checkpoint between two rollouts (with ``env_state.npz``, :func:`mappo.continue_episodes`) the
+episodes and their running costs continue too, and the resumed run is the uninterrupted
+one, bit for bit.
 ``policy.zip`` is the actor only, as ``mappo``'s. ``--norm-reward`` is refused (it would
 rescale the reward but not the cost). Requires the ``train`` extra and skrl.
 """
@@ -288,8 +291,14 @@ class LagrangianHooks(mappo.Hooks):
         path = out / "cost_progress.csv"
         if resumed:
             folder = Path(self.args.resume)
-            restore_json(folder, "lagrangian", self.tracker.load_state_dict, resumed["lagrangian"])
+
+            def load(saved: Any) -> None:
+                # The episodes' running costs go on where the episodes do.
+                self.tracker.load_state_dict(saved, running=env.continued)
+
+            restore_json(folder, "lagrangian", load, resumed["lagrangian"])
             rewind_csv(path, COST_FIELDS, int(resumed["agent_steps"]))
+        self.tracker.start(env.num_envs * env.n)
         agent.multiplier = self.lagrangian.multiplier
         self.log = ProgressLog(path, COST_FIELDS)
 
