@@ -291,17 +291,29 @@ def test_a_resumed_mappo_lagrangian_run_is_bit_identical(tmp_path, monkeypatch):
     assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
 
 
-@pytest.mark.parametrize("case", ["no env_state.npz", "inside a rollout", "--n-envs 3"])
-def test_a_mappo_resume_that_cannot_continue_the_episodes_restarts_them(case, tmp_path, capsys):
-    """An older checkpoint, one saved inside a rollout, other environments: said, not refused."""
+def test_mappo_checkpoints_fall_at_a_rollouts_end(tmp_path):
+    """--checkpoint-every inside a rollout checkpoints at the rollout's end (exact resume)."""
     from uasep_env.training import mappo_lagrangian
 
     out = tmp_path / "run"
-    every = "180" if case == "inside a rollout" else "120"  # a rollout: 120 agent-steps
+    mappo_lagrangian.main([*MAPPO_EXACT, "--total-timesteps", "240", "--checkpoint-every",
+                           "180", "--out-dir", str(out)])  # fmt: skip
+    names = sorted(p.name for p in (out / "checkpoints").iterdir() if p.name.startswith("step_"))
+    assert names == ["step_240"]  # a rollout is 120 agent-steps: 180 falls inside the second
+    assert (out / "checkpoints" / "step_240" / "env_state.npz").exists()
+
+
+@pytest.mark.parametrize("case", ["no env_state.npz", "--n-envs 3"])
+def test_a_mappo_resume_that_cannot_continue_the_episodes_restarts_them(case, tmp_path, capsys):
+    """An older checkpoint (no environment state), other environments: said, not refused."""
+    from uasep_env.training import mappo_lagrangian
+
+    out = tmp_path / "run"
+    every = "120"  # a rollout: 120 agent-steps
     mappo_lagrangian.main([*MAPPO_EXACT, "--total-timesteps", "240", "--checkpoint-every",
                            every, "--out-dir", str(out)])  # fmt: skip
     ckpt = out / "checkpoints" / f"step_{every}"
-    assert (ckpt / "env_state.npz").exists() == (case != "inside a rollout")
+    assert (ckpt / "env_state.npz").exists()
     if case == "no env_state.npz":
         (ckpt / "env_state.npz").unlink()
     extra = case.split() if case.startswith("--") else []

@@ -191,15 +191,17 @@ def test_resume_restores_cost_critic_and_multiplier(tmp_path):
     again.close()
     assert again.tracker.state_dict() == hooks.tracker.state_dict()
     assert fresh.multiplier == hooks.lagrangian.multiplier != 0.7
-    # --resume from the first checkpoint (mid-rollout, at 150): cost_progress.csv is rewound
-    # to it and continues, and the multiplier continues from the checkpoint's.
-    first = json.loads((out / "checkpoints" / "step_150" / "state.json").read_text())
-    args.resume, args.total_timesteps = str(out / "checkpoints" / "step_150"), 300
+    # --resume from the first checkpoint (at the end of the rollout where 150 falls, 192):
+    # cost_progress.csv is rewound to it and continues, and the multiplier continues from
+    # the checkpoint's.
+    first = json.loads((out / "checkpoints" / "step_192" / "state.json").read_text())
+    args.resume, args.total_timesteps = str(out / "checkpoints" / "step_192"), 300
     _, _, info, resumed_hooks = mappo_lagrangian.train(args, cfg, out, 1.0)
     rows = _rows(out / "cost_progress.csv")
     assert tuple(rows[0]) == COST_FIELDS
-    assert [int(r["agent_steps"]) for r in rows] == [96, 246, 342]
-    moved = sum(not math.isnan(float(r["episode_cost_mean"])) for r in rows[1:])
+    assert [int(r["agent_steps"]) for r in rows] == [96, 192, 288, 384]
+    # The rows after the checkpoint's (192, kept by the rewind) are the resumed run's updates.
+    moved = sum(not math.isnan(float(r["episode_cost_mean"])) for r in rows[2:])
     assert moved >= 1
     assert info["lagrangian"]["updates"] == first["lagrangian"]["updates"] + moved
     assert resumed_hooks.lagrangian.updates == info["lagrangian"]["updates"]

@@ -651,9 +651,12 @@ def train(
                     bar.update(steps - bar.n)
                     if s:
                         bar.set_postfix(**ppo_shared.bar_postfix(s))
-            if steps >= next_ckpt:
-                checkpoint(i == args.n_steps - 1)
-                next_ckpt += args.checkpoint_every
+            # Checkpoints fall at a rollout's end (the first at or past each multiple of
+            # --checkpoint-every): there a resumed run goes on exactly, as the SB3 recipes'.
+            if i == args.n_steps - 1 and steps >= next_ckpt:
+                checkpoint(True)
+                while next_ckpt <= steps:
+                    next_ckpt += args.checkpoint_every
     checkpoint(True)
     run.close()
     hooks.close()
