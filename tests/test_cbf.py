@@ -236,10 +236,13 @@ def test_params_are_validated_naming_the_field():
 
 def test_margin_scale_scales_the_radii():
     cfg = make_config()
-    one, two = CBFFilter(cfg), CBFFilter(cfg, CBFParams(margin_scale=2.0))
+    one = CBFFilter(cfg, CBFParams(margin_scale=1.0))
+    two = CBFFilter(cfg, CBFParams(margin_scale=2.0))
     assert two.uav_radius == pytest.approx(2 * one.uav_radius)
     assert two.obstacle_radius == pytest.approx(2 * one.obstacle_radius)
     assert one.obstacle_radius == cfg.uav.obstacle_separation + CBFParams().obstacle_buffer
+    # The default is the knee of CBF-QP's front (2 in -v3), not 1.
+    assert CBFFilter(cfg).obstacle_radius == pytest.approx(two.obstacle_radius)
 
 
 def test_shield_by_name():

@@ -105,7 +105,7 @@ def test_apfs_take_no_side_head_on(name):
     """The APFs push along the line of sight (or the region's normal): head-on they brake,
     and any side comes from the geometry's offset. Documented, not changed (their published
     figures are pinned by tests/test_shipped.py)."""
-    from uasep_env.policies import APF, MotionStateAPF, TraditionalAPF
+    from uasep_env.policies import MotionStateAPF, TraditionalAPF
 
     los = _headings(8)
     k = len(los)
@@ -118,12 +118,13 @@ def test_apfs_take_no_side_head_on(name):
         "obstacle_axes": np.tile([12.0, 12.0, 8.0], (k, 1, 1)),
         "obstacle_heading_cs": np.stack([-los[:, 0], -los[:, 1]], axis=-1)[:, None],
     }
+    # The reference gains (margin scale 1): the obstacle, 20 m off, is inside every margin.
     if name == "apf":
-        f = _obstacle_repulsion(o, APF.default_gains)
+        f = _obstacle_repulsion(o, APFGains())
     else:
         cls = MotionStateAPF if name == "motion-state-apf" else TraditionalAPF
         policy = cls.__new__(cls)
-        policy.gains = cls.default_gains
+        policy.gains = APFGains()
         from uasep_env import make_config
 
         policy.config = make_config()

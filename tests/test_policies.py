@@ -89,11 +89,13 @@ def test_inner_safe_distance_grows_with_approach_speed():
 
 
 def test_obstacle_repulsion_points_out_of_the_region_and_only_when_entering():
-    cfg = make_config(scenario="paper", noise=False)
+    # The enclosing ellipsoid (its axes are the lateral extent used below) and the reference
+    # gains (6 m of safe distance: the UAV below is 10 m out, beyond it).
+    cfg = make_config(scenario="paper", noise=False, prediction={"fit": "enclosing"})
     core = EnvCore(cfg, n_envs=1)
     core.reset(seed=0)
     w = core.world
-    apf = APF(cfg)
+    apf = APF(cfg, APFGains())
     heading = w.pred_heading[0, 0]
     lateral = np.array([-np.sin(heading), np.cos(heading), 0.0])
     center = w.pred_center[0, 0]

@@ -46,7 +46,7 @@ def test_orca_each_uav_takes_half_of_u_head_on():
     # nearer than the cone's sides: 3 sin(asin(8/20)) = 1.2 m/s away). So u = -0.6 e_x.
     u = (p - radius) / tau - v_rel
     assert u == pytest.approx(-0.6)
-    orca = ORCA(CONFIG)
+    orca = ORCA(CONFIG, ORCAParams(margin_scale=1.0))  # radii at the separation distance
     o = _decoded((p, 0.0, 0.0), (v_b - v_a, 0.0, 0.0), (v_a, 0.0, 0.0))
     normals, points, _ = orca.planes(o)
     np.testing.assert_allclose(normals[0, 0], [-1.0, 0.0, 0.0], atol=1e-12)  # n = u / |u|
@@ -63,7 +63,7 @@ def test_orca_each_uav_takes_half_of_u_head_on():
 
 def test_mvp_each_uav_takes_half_of_the_resolution():
     # B 20 m ahead and 2 m to the left of A, closing at 4 m/s along x: CPA in 5 s at 2 m.
-    params = MVPParams()
+    params = MVPParams(margin_scale=1.0)  # BlueSky's zone: 1.05 times the separation
     radius = params.margin_factor * SEP  # 8.4 m
     d, w_x = np.array([20.0, 2.0, 0.0]), -4.0  # d = p_B - p_A, w = v_B - v_A
     # Both UAVs resolve (B sees the mirror case), so the pair's new relative velocity is
@@ -75,7 +75,7 @@ def test_mvp_each_uav_takes_half_of_the_resolution():
     c = (d[1] * w_x) ** 2 - radius**2 * w_x**2
     s = (-b + math.sqrt(b * b - 4.0 * a * c)) / (2.0 * a)
     assert s == pytest.approx(1.3767, abs=1e-4)
-    mvp = MVP(CONFIG)
+    mvp = MVP(CONFIG, params)
     dv_a = mvp.velocity_change(_decoded(d, (w_x, 0.0, 0.0)))[0]
     dv_b = mvp.velocity_change(_decoded(-d, (-w_x, 0.0, 0.0)))[0]
     np.testing.assert_allclose(dv_a, [0.0, -s / 2.0, 0.0], atol=1e-9)  # half each

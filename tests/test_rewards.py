@@ -13,7 +13,10 @@ from uasep_env.interface.rewards import REWARD_TERMS, compute_rewards, term_boun
 
 @pytest.fixture
 def core():
-    c = EnvCore(make_config(scenario="paper", noise=False), n_envs=1)
+    # The enclosing ellipsoid: the tests below walk along its lateral semi-axis.
+    c = EnvCore(
+        make_config(scenario="paper", noise=False, prediction={"fit": "enclosing"}), n_envs=1
+    )
     c.reset(seed=0)
     c.step(np.zeros((1, 3, 3)))
     return c

@@ -3,7 +3,8 @@
 Every results file compares controllers on fixed banks of seeded scenarios: the held-out
 bank (``random``, seeds 5,000,000-5,000,499, and its 20 ``paper`` runs), the validation
 encounters ``train/select_checkpoint.py`` chooses checkpoints on, the paper experiment's
-and trade-off's runs (``paper`` seeds 0-19, ``random`` seeds 100,000-100,199), the size
+and trade-off's runs (``paper`` seeds 0-19; ``random`` seeds 100,000-100,199 for the paper
+experiment, 4,000,500-4,000,699 of the validation range for the trade-off sweep), the size
 and obstacle-count cells of ``baselines/scaling.py`` (seeds 7,000,000-7,000,049) and the
 real-traffic banks (``real_traffic`` on the test flights, seeds 6,000,000-6,000,299). The digest
 records, per seed, the family drawn, a readable summary of the first obstacle (start
@@ -61,7 +62,12 @@ BANKS: dict[str, tuple[Any, ...]] = {
     "random_bank": (
         "random",
         range(100_000, 100_200),
-        "baselines/paper_experiment.py, baselines/tradeoff.py",
+        "baselines/paper_experiment.py",
+    ),
+    "tradeoff_bank": (
+        "random",
+        VALIDATION_SEEDS[500:700],
+        "baselines/tradeoff.py (the validation bank each controller's knee is read on)",
     ),
     "real_traffic_test": (
         "real_traffic",
