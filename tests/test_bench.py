@@ -222,8 +222,7 @@ def _stats(coll, coll_hi, los, los_hi, dev, dev_lo, dev_hi):
 def _verdict_board(rows_by_bank):
     return {
         "banks": {
-            b: {"title": f"bank {b}", "budget": {"loss_of_separation": 0.02}}
-            for b in rows_by_bank
+            b: {"title": f"bank {b}", "budget": {"loss_of_separation": 0.02}} for b in rows_by_bank
         },
         "results": {
             b: {
@@ -252,14 +251,26 @@ def test_verdict_names_the_safest_the_cheapest_and_who_beats_the_apf():
     assert verdict.safest(board["results"]["held_out"]) == ("orca", ["apf"])
     assert verdict.cheapest(board["results"]["held_out"]) == "orca"
     text = verdict.sentences(board)
-    assert text[0].startswith("On bank held_out the safest at its default is **orca**")
-    assert "cheapest is **orca**, 17.0 m" in text[1] and "the APF 36.0 m" in text[1]
+    assert len(text) == 3  # synthetic, real traffic, the APF
+    assert text[0].startswith("Synthetic encounters: on bank held_out the safest at its ")
+    assert "**orca**" in text[0] and "apf not told apart from it" in text[0]
+    assert "is **orca**, 17.0 m of max deviation (the APF 36.0 m)" in text[0]
     # The order changes on real traffic: the APF is safest and cheapest there.
-    assert any("bank real_traffic the safest at its default is **apf**" in t for t in text)
+    assert text[1].startswith(
+        "Real traffic: on bank real_traffic the safest at its default is **apf**"
+    )
+    assert (
+        "cheapest at equal safety (along each front;" in text[1] and "is **apf**, 26.0 m" in text[1]
+    )
     assert text[-1].endswith("on bank held_out: orca.")
     # A row as safe but whose deviation interval touches the APF's does not beat it.
     held["orca"] = (_stats(0.0, 0.01, 0.01, 0.03, 33.0, 31.0, 34.5), 33.0)
     assert "not beaten" in verdict.sentences(_verdict_board({"held_out": held}))[-1]
+    # Rows played in an earlier env version are left out of the verdict.
+    board = _verdict_board({"held_out": held})
+    board["versions"] = {"env": 3}
+    board["results"]["held_out"]["orca"]["env_version"] = 2
+    assert "orca" not in " ".join(verdict.sentences(board))
 
 
 def test_front_banks_sweep_only_those_banks(tmp_path, capsys):

@@ -127,9 +127,13 @@ def figure(board: dict[str, Any], path: Path) -> Path:
     cols = min(4, len(banks))
     rows = math.ceil(len(banks) / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.6 * rows), squeeze=False)
-    colours = plt.get_cmap("tab10")
+    n_rows = max(len(r) for r in board["results"].values())
+    colours = plt.get_cmap("tab10" if n_rows <= 10 else "tab20")
+    env = board["versions"]["env"]
     for ax, bank in zip(axes.flat, banks, strict=False):
         for i, (label, r) in enumerate(board["results"][bank].items()):
+            earlier = r.get("env_version", env) != env  # another env: hollow, named so
+            name = f"{label} (-v{r['env_version']})" if earlier else label
             pts = [p for p in r["front"] if p["max_deviation"]["mean"] is not None]
             if not pts:
                 continue
@@ -143,9 +147,9 @@ def figure(board: dict[str, Any], path: Path) -> Path:
                          else yi) for yi, p in zip(y, pts, strict=True)],
                   [(p["max_deviation"]["ci_high"] if p["max_deviation"]["ci_high"] is not None
                     else yi) - yi for yi, p in zip(y, pts, strict=True)]]  # fmt: skip
-            c = colours(i % 10)
+            c = colours(i % colours.N)
             ax.errorbar(x, y, xerr=xe, yerr=ye, fmt="o-", ms=3, lw=0.8, color=c, alpha=0.8,
-                        label=label)  # fmt: skip
+                        label=name, mfc="none" if earlier else c)  # fmt: skip
         ax.axvline(board["banks"][bank]["budget"]["loss_of_separation"], color="k", ls=":", lw=0.8)
         ax.set_title(board["banks"][bank]["title"], fontsize=9)
         ax.set_xlabel("loss-of-separation rate")

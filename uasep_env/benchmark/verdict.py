@@ -11,8 +11,9 @@ Each sentence is computed from a board (:func:`~uasep_env.benchmark.summary.lead
   ends are no higher than the APF's and its max deviation's interval lies wholly below the
   APF's (the defaults of both).
 
-The sentences name the held-out bank first, then every other bank where the safest or the
-cheapest changes, then where the paper's APF stands.
+One sentence per group of banks (:data:`GROUPS`: synthetic, collision courses, formation
+size, real traffic), each naming every bank's safest and cheapest, so a reader sees where the
+order changes; then where the paper's APF stands.
 """
 
 from __future__ import annotations
@@ -72,42 +73,43 @@ def beats(row: Mapping[str, Any], reference: Mapping[str, Any]) -> bool:
     )
 
 
-def _safest_sentence(board: Mapping[str, Any], bank: str) -> str:
+def _bank_clause(board: Mapping[str, Any], bank: str) -> str:
+    """One bank's safest row (with its ties) and its cheapest at equal safety."""
     rows = board["results"][bank]
+    title = board["banks"][bank]["title"]
     best, ties = safest(rows)
     d = rows[best]["default"]
     text = (
-        f"On {board['banks'][bank]['title']} the safest at its default is **{best}** "
-        f"(collisions {_rate(d['collision'])}, loss of separation "
-        f"{_rate(d['loss_of_separation'])})"
+        f"on {title} the safest at its default is **{best}** (collisions "
+        f"{_rate(d['collision'])}, loss of separation {_rate(d['loss_of_separation'])}"
     )
-    if ties:
-        text += f"; {', '.join(ties)} cannot be told apart from it (intervals overlap)"
-    return text + "."
-
-
-def _cheapest_sentence(board: Mapping[str, Any], bank: str) -> str:
-    rows = board["results"][bank]
+    text += f"; {', '.join(ties)} not told apart from it)" if ties else ")"
     budget = board["banks"][bank]["budget"]["loss_of_separation"]
-    best = cheapest(rows)
-    if best is None:
-        return (
-            f"On {board['banks'][bank]['title']} no row keeps loss of separation within "
-            f"{budget:.1%} with no collision."
-        )
-    eq = rows[best]["equal_safety"]
-    text = (
-        f"At equal safety there (loss of separation within {budget:.1%}, no collision) the "
-        f"cheapest is **{best}**, {eq['deviation']:.1f} m of max deviation"
+    fronts = board.get("settings", {}).get("front_banks")
+    swept = fronts is None or bank in fronts
+    at = "along each front" if swept else "the defaults only, no front swept there"
+    low = cheapest(rows)
+    if low is None:
+        return text + f", and no row keeps loss of separation within {budget:.1%} collision-free"
+    eq = rows[low]["equal_safety"]["deviation"]
+    text += (
+        f", and the cheapest at equal safety ({at}; loss of separation within {budget:.1%}, no "
+        f"collision) is **{low}**, {eq:.1f} m of max deviation"
     )
     ref = rows.get(REFERENCE)
-    if ref is not None and best != REFERENCE:
+    if ref is not None and low != REFERENCE:
         ref_dev = ref["equal_safety"]["deviation"]
-        text += (
-            f", the APF {ref_dev:.1f} m" if ref_dev is not None
-            else ", where the APF's front does not reach the budget"
-        )  # fmt: skip
-    return text + "."
+        text += f" (the APF {ref_dev:.1f} m)" if ref_dev is not None else " (the APF: not reached)"
+    return text
+
+
+#: The verdict's groups of banks, in order (a bank in no group gets a group of its own).
+GROUPS = (
+    ("Synthetic encounters", ("held_out",)),
+    ("Collision courses", ("collision_head_on", "collision_crossing")),
+    ("Formation size", ("uavs_8", "uavs_32")),
+    ("Real traffic", ("real_traffic", "real_traffic_slow")),
+)
 
 
 def _apf_sentence(board: Mapping[str, Any]) -> str:
@@ -140,7 +142,7 @@ def _current(board: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def sentences(board: Mapping[str, Any]) -> list[str]:
-    """The verdict: the held-out bank first, then the banks where the order changes.
+    """The verdict: a sentence per group of banks, then where the paper's APF stands.
 
     Rows played in an earlier env version (checkpoints not yet retrained) are left out.
     """
@@ -148,16 +150,13 @@ def sentences(board: Mapping[str, Any]) -> list[str]:
     banks = list(board["results"])
     if not banks:
         return []
-    first = "held_out" if "held_out" in banks else banks[0]
-    out = [_safest_sentence(board, first), _cheapest_sentence(board, first)]
-    top = (safest(board["results"][first])[0], cheapest(board["results"][first]))
-    for bank in banks:
-        if bank == first:
-            continue
-        rows = board["results"][bank]
-        if safest(rows)[0] != top[0]:
-            out.append(_safest_sentence(board, bank))
-        if cheapest(rows) != top[1]:
-            out.append(_cheapest_sentence(board, bank))
+    grouped = [(name, [b for b in members if b in banks]) for name, members in GROUPS]
+    known = {b for _, members in GROUPS for b in members}
+    grouped += [(board["banks"][b]["title"], [b]) for b in banks if b not in known]
+    out = []
+    for name, members in grouped:
+        if members:
+            clauses = "; ".join(_bank_clause(board, b) for b in members)
+            out.append(f"{name}: {clauses}.")
     out.append(_apf_sentence(board))
     return out
