@@ -161,7 +161,7 @@ def test_a_tiny_set_run_writes_a_checkpoint_that_loads_and_evaluates(recipe, tmp
     main = {"ppo_shared": ppo_shared.main, "mappo": mappo.main}[recipe]
     out = tmp_path / "run"
     main([*TINY, "--out-dir", str(out)])
-    meta, weights, mean, _ = read_checkpoint(out / "policy.zip")
+    meta, weights, _, _ = read_checkpoint(out / "policy.zip")
     assert meta.architecture == "set" and meta.info["args"]["arch"] == "set"
     assert len(weights) == len(tensor_shapes(meta.observation_layout, meta.hidden))
     with zipfile.ZipFile(out / "policy.zip") as z:  # JSON and plain arrays, nothing else

@@ -3,7 +3,8 @@
 A checkpoint is a zip of exactly two members: ``uasep_policy.json`` (the description: format,
 training config, observation layout, network shape, normalisation, training facts) and
 ``weights.npz`` (a zip of ``.npy`` float arrays: ``layer<k>.weight``, ``layer<k>.bias``,
-``obs_mean``, ``obs_var``). Nothing is unpickled and no code from the file runs.
+``obs_mean``, ``obs_var``; a ``"set"`` network's tensors by the names of
+:mod:`~uasep_env.policies.set_network`). Nothing is unpickled and no code from the file runs.
 
 Reading (:mod:`uasep_env.policies.checkpoint_reader`) treats the file as hostile: limits
 are checked before anything is decompressed or parsed, and every failure is a

@@ -13,7 +13,8 @@ A checkpoint fits any environment that gives its network the observation layout 
 (the K nearest UAVs and obstacles, the same features in the same order): a policy trained on
 3 UAVs flies 8 or 32 when ``observation.k_uavs`` / ``k_obstacles`` are fixed to its own
 (:func:`checkpoint_config` builds such a config, :func:`observed_config` gives any config
-the checkpoint's observation).
+the checkpoint's observation). A permutation-invariant checkpoint (``"architecture": "set"``,
+:mod:`~uasep_env.policies.set_network`) reads any K: those two keep a K the config sets.
 
 stable-baselines3 models are another concern: :mod:`uasep_env.policies.sb3_policy`.
 """
@@ -168,7 +169,7 @@ class LearnedPolicy:
         self._act = _ACTIVATIONS[meta.activation]
         # The set network reads the env's own K (its weights fit any); the MLP the stored K.
         self._set = (
-            SetNetwork(meta.observation_layout, env_layout, meta.hidden, meta.activation,
+            SetNetwork(meta.observation_layout, env_layout, meta.hidden, self._act, dense,
                        weights, obs_mean if meta.obs_norm else None, obs_var,
                        meta.obs_epsilon, meta.clip_obs)
             if meta.architecture == "set" else None

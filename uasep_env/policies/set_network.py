@@ -254,7 +254,9 @@ class SetNetwork:
         trained: The stored layout it was trained on.
         env: The layout of the env it acts in (any K; :func:`set_difference` is None).
         hidden: The checkpoint's hidden widths.
-        activation: ``"tanh"`` or ``"relu"``.
+        activation: The activation function.
+        dense: One layer ``dense(x, W.T, b)`` (:func:`~.checkpoint_policy.dense`: float64
+            sums in one order, rounded to float32), as the MLP's.
         weights: ``[(W, b), ...]`` in :func:`tensor_shapes`' order.
         obs_mean: The slot-tied mean of the trained layout (None: no normalisation).
         obs_var: Its variance.
@@ -267,16 +269,15 @@ class SetNetwork:
         trained: Any,
         env: Any,
         hidden: Sequence[int],
-        activation: str,
+        activation: Any,
+        dense: Any,
         weights: Sequence[tuple[np.ndarray, np.ndarray]],
         obs_mean: np.ndarray | None,
         obs_var: np.ndarray | None,
         epsilon: float,
         clip: float,
     ) -> None:
-        from uasep_env.policies.checkpoint_policy import _ACTIVATIONS, dense
-
-        self._dense, self._act = dense, _ACTIVATIONS[activation]
+        self._dense, self._act = dense, activation
         names = list(tensor_shapes(trained, hidden))
         self._w = {
             n: (np.ascontiguousarray(np.asarray(w, np.float32).T, dtype=np.float64),
