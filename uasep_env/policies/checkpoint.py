@@ -3,7 +3,8 @@
 A checkpoint is a zip of exactly two members: ``uasep_policy.json`` (the description: format,
 training config, observation layout, network shape, normalisation, training facts) and
 ``weights.npz`` (a zip of ``.npy`` float arrays: ``layer<k>.weight``, ``layer<k>.bias``,
-``obs_mean``, ``obs_var``). Nothing is unpickled and no code from the file runs.
+``obs_mean``, ``obs_var``; a ``"set"`` network's tensors by the names of
+:mod:`~uasep_env.policies.set_network`). Nothing is unpickled and no code from the file runs.
 
 Reading (:mod:`uasep_env.policies.checkpoint_reader`) treats the file as hostile: limits
 are checked before anything is decompressed or parsed, and every failure is a
@@ -160,6 +161,10 @@ class PolicyCheckpoint:
         format: The file format (:data:`CHECKPOINT_FORMAT` for new files).
         layout: The observation layout the network reads (``None``: the training config's,
             what version-1 files imply and what :func:`save_policy` records).
+        architecture: ``"mlp"`` (the slot MLP: ``layer<k>`` tensors; files that do not say)
+            or ``"set"`` (the permutation-invariant network of
+            :mod:`~uasep_env.policies.set_network`, its tensors named there; it acts with
+            any K nearest UAVs and obstacles).
     """
 
     config: dict[str, Any]
@@ -173,6 +178,7 @@ class PolicyCheckpoint:
     info: dict[str, Any] = field(default_factory=dict)
     format: str = CHECKPOINT_FORMAT
     layout: StoredLayout | None = None
+    architecture: str = "mlp"
 
     @property
     def env_config(self) -> EnvConfig:
@@ -222,13 +228,29 @@ def save_policy(
     (``info["env_version"]``: ``meta.info``'s, else this package's,
     :data:`~uasep_env.registration.ENV_VERSION`, so every recipe records it).
 
+    A ``"set"`` network's ``weights`` come in the order of
+    :func:`~uasep_env.policies.set_network.tensor_shapes`, and are stored by its names; an
+    MLP's as ``layer<k>``. ``architecture`` is written only for a set network (an MLP file
+    reads as before, in this version and earlier ones).
+
     Returns:
         The path written.
     """
+    from uasep_env.policies.set_network import tensor_shapes
+
+    names = (
+        list(tensor_shapes(meta.observation_layout, meta.hidden))
+        if meta.architecture == "set"
+        else [f"layer{k}" for k in range(len(weights))]
+    )
+    if len(names) != len(weights):
+        raise ValueError(
+            f"{len(weights)} layers given, the {meta.architecture} network has {len(names)}"
+        )
     arrays: dict[str, np.ndarray] = {}
-    for k, (w, b) in enumerate(weights):
-        arrays[f"layer{k}.weight"] = np.asarray(w, np.float32)
-        arrays[f"layer{k}.bias"] = np.asarray(b, np.float32)
+    for name, (w, b) in zip(names, weights, strict=True):
+        arrays[f"{name}.weight"] = np.asarray(w, np.float32)
+        arrays[f"{name}.bias"] = np.asarray(b, np.float32)
     if meta.obs_norm:
         arrays["obs_mean"] = np.asarray(obs_mean, np.float64)
         arrays["obs_var"] = np.asarray(obs_var, np.float64)
@@ -243,6 +265,8 @@ def save_policy(
         "n_layers": len(weights),
         "layout": meta.observation_layout.to_dict(),
     }
+    if meta.architecture == "mlp":
+        del desc["architecture"]
     with atomic_output(path) as fh, zipfile.ZipFile(fh, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr(META, dumps(desc, indent=2, sort_keys=True))
         z.writestr(WEIGHTS, buf.getvalue())

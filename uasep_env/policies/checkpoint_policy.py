@@ -13,7 +13,8 @@ A checkpoint fits any environment that gives its network the observation layout 
 (the K nearest UAVs and obstacles, the same features in the same order): a policy trained on
 3 UAVs flies 8 or 32 when ``observation.k_uavs`` / ``k_obstacles`` are fixed to its own
 (:func:`checkpoint_config` builds such a config, :func:`observed_config` gives any config
-the checkpoint's observation).
+the checkpoint's observation). A permutation-invariant checkpoint (``"architecture": "set"``,
+:mod:`~uasep_env.policies.set_network`) reads any K: those two keep a K the config sets.
 
 stable-baselines3 models are another concern: :mod:`uasep_env.policies.sb3_policy`.
 """
@@ -36,6 +37,7 @@ from uasep_env.interface.actions import ResidualAPF
 from uasep_env.policies.checkpoint import META, CheckpointError, PolicyCheckpoint, StoredLayout
 from uasep_env.policies.checkpoint_reader import read_checkpoint
 from uasep_env.policies.guard import finite_observations
+from uasep_env.policies.set_network import SetNetwork, set_difference
 
 if TYPE_CHECKING:
     from uasep_env.policies.apf import APFGains
@@ -145,7 +147,7 @@ class LearnedPolicy:
         self.config = config
         self.name = name
         self.mode = trained.action.mode
-        _check_fits(meta, trained, config)
+        env_layout = _check_fits(meta, trained, config)
         # The base APF flies this env (its size), with the trained action settings.
         self._residual = (
             ResidualAPF(config.replace(action=asdict(trained.action)), base_gains)
@@ -165,6 +167,13 @@ class LearnedPolicy:
             for w, b in weights
         ]  # fmt: skip
         self._act = _ACTIVATIONS[meta.activation]
+        # The set network reads the env's own K (its weights fit any); the MLP the stored K.
+        self._set = (
+            SetNetwork(meta.observation_layout, env_layout, meta.hidden, self._act, dense,
+                       weights, obs_mean if meta.obs_norm else None, obs_var,
+                       meta.obs_epsilon, meta.clip_obs)
+            if meta.architecture == "set" else None
+        )  # fmt: skip
         if meta.obs_norm:
             self._mean = np.asarray(obs_mean, dtype=np.float64)
             self._std = np.sqrt(np.asarray(obs_var, dtype=np.float64) + meta.obs_epsilon)
@@ -172,6 +181,9 @@ class LearnedPolicy:
     def network(self, obs: np.ndarray) -> np.ndarray:
         """The deterministic action (the Gaussian's mean) for the network's own input."""
         x = np.asarray(obs, dtype=np.float32)
+        if self._set is not None:
+            out = self._set(np.ascontiguousarray(x.reshape(-1, x.shape[-1])))
+            return out.reshape(*x.shape[:-1], 3)
         if self.meta.obs_norm:
             x = np.clip((x - self._mean) / self._std, -self.meta.clip_obs, self.meta.clip_obs)
             x = x.astype(np.float32)
@@ -197,17 +209,38 @@ class LearnedPolicy:
         """MLP policies are memoryless."""
 
 
-def _check_fits(meta: PolicyCheckpoint, trained: EnvConfig, config: EnvConfig) -> None:
-    """The env must give the network the layout it reads (any number of UAVs/obstacles)."""
+def _check_fits(meta: PolicyCheckpoint, trained: EnvConfig, config: EnvConfig) -> StoredLayout:
+    """The env must give the network the layout it reads (any number of UAVs/obstacles).
+
+    The slot MLP reads its own K nearest UAVs and obstacles; a set network any K (the same
+    own and slot features). Returns the env's layout.
+    """
     problems = []
     if trained.action.mode == "direct" and config.action.mode != "direct":
         problems.append(f"action.mode: trained with 'direct', this env uses {config.action.mode!r}")
     env_layout = StoredLayout.from_config(config.replace(action=asdict(trained.action)))
-    difference = meta.observation_layout.difference(env_layout)
+    if meta.architecture == "set":
+        difference = set_difference(meta.observation_layout, env_layout)
+    else:
+        difference = meta.observation_layout.difference(env_layout)
     if difference is not None:
         problems.append(difference)
     if problems:
         raise CheckpointError("checkpoint does not fit this environment: " + "; ".join(problems))
+    return env_layout
+
+
+def _own_k(meta: PolicyCheckpoint, observation: dict[str, Any]) -> dict[str, Any]:
+    """The observation's K nearest UAVs and obstacles for the checkpoint's network.
+
+    The slot MLP's own K; a set network keeps the K that ``observation`` sets (its weights
+    fit any), else takes its own.
+    """
+    layout = meta.observation_layout
+    own = {"k_uavs": layout.k_uavs, "k_obstacles": layout.k_obstacles}
+    if meta.architecture == "set":
+        return {k: own[k] if observation.get(k) is None else observation[k] for k in own}
+    return own
 
 
 class EnvVersionWarning(UserWarning):
@@ -281,14 +314,13 @@ def checkpoint_config(
     """
     meta = _read(path)[0]
     trained = meta.env_config
-    layout = meta.observation_layout
     values: dict[str, Any] = {
         "n_uavs": trained.n_uavs if n_uavs is None else n_uavs,
         "n_obstacles": trained.n_obstacles if n_obstacles is None else n_obstacles,
         **overrides,
     }
     observation = {**dict(overrides.get("observation") or {})}
-    observation.update(k_uavs=layout.k_uavs, k_obstacles=layout.k_obstacles)
+    observation.update(_own_k(meta, observation))
     values["observation"] = observation
     values.setdefault("action", {"mode": "direct"})
     config = trained.replace(**values)
@@ -334,12 +366,9 @@ def observed_config(path: str | Path, config: EnvConfig) -> EnvConfig:
         has more than ``k_uavs`` UAVs).
     """
     meta = _read(path)[0]
-    layout = meta.observation_layout  # stored (format 2) or implied by its training config
-    observation = {
-        **asdict(meta.env_config.observation),
-        "k_uavs": layout.k_uavs,
-        "k_obstacles": layout.k_obstacles,
-    }
+    # K: the stored layout's (format 2) or its training config's; a set network's: config's.
+    k = _own_k(meta, asdict(config.observation))
+    observation = {**asdict(meta.env_config.observation), **k}
     return config.replace(observation=observation)
 
 

@@ -32,6 +32,13 @@ from uasep_env.policies.checkpoint import (
     PolicyCheckpoint,
     StoredLayout,
 )
+from uasep_env.policies.set_network import (
+    ARCHITECTURES,
+    NEIGHBOURS,
+    split_layout,
+    tensor_shapes,
+    untied,
+)
 from uasep_env.runtime.boundedzip import HOSTILE_FILE_ERRORS, check_members, read_member
 from uasep_env.runtime.jsonio import DuplicateKeyError, json_depth, loads_unique
 
@@ -131,7 +138,7 @@ def _layout(p: Path, value: Any, limits: CheckpointLimits) -> StoredLayout:
 
 _FIELDS = {
     "format", "config", "obs_dim", "activation", "hidden", "obs_norm", "clip_obs",
-    "obs_epsilon", "algorithm", "info", "n_layers", "layout",
+    "obs_epsilon", "algorithm", "info", "n_layers", "layout", "architecture",
 }  # fmt: skip
 
 
@@ -166,11 +173,26 @@ def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyC
         raise _fail(p, f"hidden must be a list of at most {limits.layers} widths")
     hidden = tuple(_integer(p, f"hidden[{k}]", h, 1, limits.width) for k, h in enumerate(hidden))
     obs_dim = _integer(p, "obs_dim", desc["obs_dim"], 1, limits.obs_dim)
-    sizes = [obs_dim, *hidden, 3]
-    params = sum(i * o + o for i, o in itertools.pairwise(sizes))
+    architecture = desc.get("architecture", "mlp")
+    if architecture not in ARCHITECTURES:
+        raise _fail(p, f"architecture must be one of {ARCHITECTURES}, got {_short(architecture)}")
+    layout = _layout(p, desc["layout"], limits) if "layout" in desc else None
+    if architecture == "set":
+        if layout is None:
+            raise _fail(p, "a set network's checkpoint must store its layout")
+        try:
+            shapes = list(tensor_shapes(layout, hidden).values())
+        except ValueError as err:
+            raise _fail(p, f"set network: {err}") from None
+    else:
+        sizes = [obs_dim, *hidden, 3]
+        shapes = [(o, i) for i, o in itertools.pairwise(sizes)]
+    params = sum(o * i + o for o, i in shapes)
     if params > limits.parameters:
         raise _fail(p, f"network of {params:,} parameters, limit {limits.parameters:,}")
-    n_layers = _integer(p, "n_layers", desc["n_layers"], 1, limits.layers + 1)
+    # A set network has its own, encoders' and attention's layers besides the head's.
+    extra = 1 + 4 * len(NEIGHBOURS) if architecture == "set" else 0
+    n_layers = _integer(p, "n_layers", desc["n_layers"], 1, limits.layers + 1 + extra)
     if desc["activation"] not in ACTIVATIONS:
         raise _fail(p, f"activation must be one of {ACTIVATIONS}, got {_short(desc['activation'])}")
     if not isinstance(desc["obs_norm"], bool):
@@ -185,7 +207,6 @@ def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyC
     algorithm = desc.get("algorithm", "PPO")
     if algorithm not in CHECKPOINT_ALGORITHMS:
         raise _fail(p, f"algorithm must be one of {CHECKPOINT_ALGORITHMS}, got {_short(algorithm)}")
-    layout = _layout(p, desc["layout"], limits) if "layout" in desc else None
     meta = PolicyCheckpoint(
         config=desc["config"],
         obs_dim=obs_dim,
@@ -198,6 +219,7 @@ def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyC
         info=info,
         format=fmt,
         layout=layout,
+        architecture=architecture,
     )
     try:
         trained = meta.env_config
@@ -240,13 +262,19 @@ def _array(p: Path, z: zipfile.ZipFile, info: zipfile.ZipInfo, shape: tuple[int,
 def _weights(
     p: Path, raw: bytes, meta: PolicyCheckpoint, n_layers: int, limits: CheckpointLimits
 ) -> tuple[list[tuple[np.ndarray, np.ndarray]], Any, Any]:
-    sizes = [meta.obs_dim, *meta.hidden, 3]
-    if n_layers != len(sizes) - 1:
-        raise _fail(p, f"{n_layers} layers stored, the description says {sizes[1:]}")
+    if meta.architecture == "set":
+        layers = tensor_shapes(meta.observation_layout, meta.hidden)
+        if n_layers != len(layers):
+            raise _fail(p, f"{n_layers} layers stored, the set network has {len(layers)}")
+    else:
+        sizes = [meta.obs_dim, *meta.hidden, 3]
+        if n_layers != len(sizes) - 1:
+            raise _fail(p, f"{n_layers} layers stored, the description says {sizes[1:]}")
+        layers = {f"layer{k}": (sizes[k + 1], sizes[k]) for k in range(n_layers)}
     shapes: dict[str, tuple[int, ...]] = {}
-    for k in range(n_layers):
-        shapes[f"layer{k}.weight"] = (sizes[k + 1], sizes[k])
-        shapes[f"layer{k}.bias"] = (sizes[k + 1],)
+    for name, (n_out, n_in) in layers.items():
+        shapes[f"{name}.weight"] = (n_out, n_in)
+        shapes[f"{name}.bias"] = (n_out,)
     if meta.obs_norm:
         shapes["obs_mean"] = shapes["obs_var"] = (meta.obs_dim,)
     # Each .npy member: a header (<= 1 KiB) and at most float64 data.
@@ -254,11 +282,16 @@ def _weights(
     with zipfile.ZipFile(io.BytesIO(raw)) as z:
         infos = _members(p, z, expected, limits)
         arrays = {k: _array(p, z, infos[f"{k}.npy"], s) for k, s in shapes.items()}
-    weights = [(arrays[f"layer{k}.weight"], arrays[f"layer{k}.bias"]) for k in range(n_layers)]
+    weights = [(arrays[f"{name}.weight"], arrays[f"{name}.bias"]) for name in layers]
     mean = arrays.get("obs_mean")
     var = arrays.get("obs_var")
     if var is not None and (var < 0).any():
         raise _fail(p, "obs_var has negative entries")
+    if meta.architecture == "set" and mean is not None:
+        # Shared by the slots, or the network would not read its neighbours as a set.
+        problem = untied(split_layout(meta.observation_layout), mean, var)
+        if problem:
+            raise _fail(p, f"obs_mean/obs_var: {problem}")
     return weights, mean, var
 
 

@@ -283,6 +283,7 @@ class Args:
     log_std_init: float = -0.5
     hidden: str = "128,128"
     activation: str = "tanh"
+    arch: str = "mlp"  # "mlp" (slot MLP) or "set" (permutation-invariant; the lean loop's)
     norm_obs: bool = True
     norm_reward: bool = False  # on, the rare -max_steps collisions swamp the scale
     seed: int = 0
@@ -335,6 +336,11 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "log_std_init": (finite_float, "initial log standard deviation of the actions"),
     "hidden": (hidden_sizes, "hidden layer widths, comma-separated"),
     "activation": (choice("tanh", "relu"), "hidden layers' activation"),
+    "arch": (
+        choice("mlp", "set"),
+        "mlp (the K neighbour slots in order) or set (permutation-invariant over the "
+        "neighbours, attention pooled; acts with any K; --trainer lean only)",
+    ),
     "norm_obs": (None, "normalise observations (running mean and variance)"),
     "norm_reward": (None, "normalise returns"),
     "seed": (non_negative_int, "training seed (environments: seed + e)"),

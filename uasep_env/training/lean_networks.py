@@ -43,18 +43,33 @@ class _ActorCritic:
     """The recipes' networks: SB3's ``MlpPolicy`` with separate actor and critic MLPs.
 
     The critic reads ``critic_dim`` inputs (MAPPO's centralised critic), else the
-    observation.
+    observation. Under ``--arch set`` (``args.arch``) the actor, and PPO's critic, are the
+    permutation-invariant network over the neighbour slots of ``layout``
+    (:mod:`~uasep_env.training.set_network_torch`); MAPPO's centralised critic stays an MLP
+    over the global state.
     """
 
-    def __init__(self, obs_dim: int, args: Args, critic_dim: int | None = None) -> None:
+    def __init__(
+        self, obs_dim: int, args: Args, critic_dim: int | None = None, layout: Any = None
+    ) -> None:
         import torch
 
         sizes = hidden(args)
         act = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[args.activation]
-        self.pi = _mlp(obs_dim, sizes, act, torch)
-        self.vf = _mlp(critic_dim or obs_dim, sizes, act, torch)
+        self.arch = getattr(args, "arch", "mlp")
+        self.layout = layout
         self.centralised = critic_dim is not None
-        self.mu, self.v = torch.nn.Linear(sizes[-1], 3), torch.nn.Linear(sizes[-1], 1)
+        if self.arch == "set":
+            from uasep_env.training.set_network_torch import set_body
+
+            self.pi, self.mu = set_body(layout, sizes, act, 3)
+        else:
+            self.pi, self.mu = _mlp(obs_dim, sizes, act, torch), torch.nn.Linear(sizes[-1], 3)
+        if self.arch == "set" and not self.centralised:
+            self.vf, self.v = set_body(layout, sizes, act, 1)
+        else:
+            self.vf = _mlp(critic_dim or obs_dim, sizes, act, torch)
+            self.v = torch.nn.Linear(sizes[-1], 1)
         for body in (self.pi, self.vf):
             _init(body, math.sqrt(2.0), torch)
         _init(self.mu, 0.01, torch)
@@ -97,6 +112,8 @@ class _ActorCritic:
         """The actor's linear layers in order (what the policy checkpoint holds)."""
         import torch
 
+        if self.arch == "set":
+            return [*self.pi.linears(), self.mu]
         return [*(m for m in self.pi if isinstance(m, torch.nn.Linear)), self.mu]
 
 
@@ -181,4 +198,4 @@ def export_policy(
     info = {**info, "implementation": "uasep_env.training.ppo_lean"
             + (" (centralised critic)" if central else "")}  # fmt: skip
     return export_actor(nets.linears(), norm, config, args, path,
-                        "MAPPO" if central else "PPO", info)  # fmt: skip
+                        "MAPPO" if central else "PPO", info, nets.arch)  # fmt: skip

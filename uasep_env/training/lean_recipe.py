@@ -148,9 +148,10 @@ class _Stats:
 
 
 def check_algorithm(directory: Path, info: dict, args: Args, central: bool) -> None:
-    """Refuse a checkpoint of the other algorithm, or of the other value normalisation.
+    """Refuse a checkpoint of the other algorithm, architecture or value normalisation.
 
-    MAPPO's for a PPO run (``central`` False) or the reverse; a MAPPO checkpoint whose
+    MAPPO's for a PPO run (``central`` False) or the reverse; one of the other ``--arch``; a
+    MAPPO checkpoint whose
     ``--value-norm`` (in ``info``, its ``state.json``) is not ``args``'.
 
     Raises:
@@ -159,10 +160,16 @@ def check_algorithm(directory: Path, info: dict, args: Args, central: bool) -> N
     """
     from uasep_env.training.rundir import RunError, check_switch, read_policy
 
-    theirs = read_policy(directory).algorithm
+    policy = read_policy(directory)
+    theirs = policy.algorithm
     ours = "MAPPO" if central else "PPO"
     if theirs != ours:
         raise RunError(f"--resume {directory}: a {theirs} checkpoint, not {ours}'s")
+    if policy.architecture != getattr(args, "arch", "mlp"):
+        raise RunError(
+            f"--resume {directory}: a checkpoint of --arch {policy.architecture}; resume it "
+            f"with --arch {policy.architecture}"
+        )
     if central:
         check_switch(directory, info, args, "value_norm", default=True)
 

@@ -97,7 +97,7 @@ def _check(args: Args) -> str | None:
             f"argument --batch-size: {args.batch_size} must divide n_envs * n_steps = "
             f"{args.n_envs * args.n_steps}"
         )
-    return None
+    return ppo_shared.arch_problem(args)
 
 
 def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:

@@ -78,16 +78,29 @@ class Normaliser:
         norm_obs: Normalise observations.
         norm_reward: Scale rewards by the running standard deviation of the discounted return.
         gamma: The return's discount.
+        tied: A set network's layout
+            (:class:`~uasep_env.policies.set_network.SetLayout`): the statistics are shared by
+            the slots of a neighbour type, taken over the present ones, and leave the masks
+            as they are (:func:`~uasep_env.policies.set_network.tied_moments`), so that they
+            fit any K. None: per column, as ``VecNormalize``.
     """
 
     def __init__(
-        self, obs_dim: int, n_rows: int, *, norm_obs: bool, norm_reward: bool, gamma: float
+        self,
+        obs_dim: int,
+        n_rows: int,
+        *,
+        norm_obs: bool,
+        norm_reward: bool,
+        gamma: float,
+        tied: Any = None,
     ) -> None:
         from stable_baselines3.common.running_mean_std import RunningMeanStd
 
         self.obs_rms = RunningMeanStd(shape=(obs_dim,))
         self.ret_rms = RunningMeanStd(shape=())
         self.norm_obs, self.norm_reward, self.gamma = norm_obs, norm_reward, gamma
+        self.tied = tied
         self.returns = np.zeros(n_rows)
         # What export_actor reads of a VecNormalize.
         self.clip_obs, self.epsilon = CLIP_OBS, EPSILON
@@ -96,7 +109,14 @@ class Normaliser:
     def observe(self, obs: np.ndarray, *, update: bool) -> np.ndarray:
         """``obs`` ``(rows, obs_dim)`` normalised (float32); the statistics first updated."""
         if update and self.norm_obs:
-            self.obs_rms.update(obs)
+            if self.tied is None:
+                self.obs_rms.update(obs)
+            else:
+                from uasep_env.policies.set_network import tied_moments
+
+                rms = self.obs_rms
+                mean, var = tied_moments(self.tied, obs, rms.mean, rms.var)
+                rms.update_from_moments(mean, var, obs.shape[0])
         return self.normalise(obs)
 
     def normalise(self, obs: np.ndarray) -> np.ndarray:
@@ -421,14 +441,22 @@ def train(
     core = EnvCore(config, n_envs=args.n_envs)
     rows = args.n_envs * config.n_uavs
     critic_dim = state_dim(config) + core.obs_dim if central else None
-    nets = _ActorCritic(core.obs_dim, args, critic_dim)
+    layout = tied = None
+    if getattr(args, "arch", "mlp") == "set":
+        from uasep_env.policies.checkpoint import StoredLayout
+        from uasep_env.policies.set_network import split_layout
+
+        layout = StoredLayout.from_config(config)
+        tied = split_layout(layout)
+    nets = _ActorCritic(core.obs_dim, args, critic_dim, layout)
     # The rollout acts on the CPU (a few hundred rows a step: a GPU's launches and copies
     # would cost more than they save); the update runs on args.device, on its own copy.
     learner = _learner(nets, torch.device(args.device))
     opt = torch.optim.Adam(learner.params, lr=args.learning_rate, eps=1e-5)
     norm = Normaliser(
-        core.obs_dim, rows, norm_obs=args.norm_obs, norm_reward=args.norm_reward, gamma=args.gamma
-    )
+        core.obs_dim, rows, norm_obs=args.norm_obs, norm_reward=args.norm_reward,
+        gamma=args.gamma, tied=tied,
+    )  # fmt: skip
     state = State(nets=nets, learner=learner, opt=opt, norm=norm)
     if central:
         state.critic_norm = Normaliser(

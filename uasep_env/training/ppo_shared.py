@@ -108,6 +108,15 @@ def _check(args: Args) -> str | None:
     """What the PPO recipes refuse beyond each flag's range (one message naming the flag)."""
     if args.trainer == "lean" and args.tensorboard:
         return "argument --tensorboard: SB3's logger; not with --trainer lean"
+    return arch_problem(args)
+
+
+def arch_problem(args: Args) -> str | None:
+    """Why ``--arch`` cannot train with these flags (one line naming the flag), or None."""
+    if args.arch == "set" and args.trainer != "lean":
+        return "argument --arch: 'set' trains with --trainer lean only"
+    if args.arch == "set" and args.n_uavs < 2:
+        return f"argument --n-uavs: --arch set needs 2 or more UAVs, got {args.n_uavs}"
     return None
 
 

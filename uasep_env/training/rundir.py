@@ -443,12 +443,20 @@ def check_switch(directory: Path, info: dict, args: Any, name: str, default: boo
 
 
 def export_actor(
-    linears: list, venv: Any, config: Any, args: Args, path: Path, algorithm: str, info: dict
+    linears: list,
+    venv: Any,
+    config: Any,
+    args: Args,
+    path: Path,
+    algorithm: str,
+    info: dict,
+    architecture: str = "mlp",
 ) -> Path:
-    """Write an MLP actor and its observation normalisation as a policy checkpoint.
+    """Write an actor and its observation normalisation as a policy checkpoint.
 
     Every recipe exports through here: ``linears`` are the actor's ``torch.nn.Linear``
-    layers in order, the normalisation is ``venv``'s; the file is pickle-free.
+    layers in order (a set network's in its checkpoint order, ``architecture`` ``"set"``),
+    the normalisation is ``venv``'s; the file is pickle-free.
     """
     from uasep_env.policies.learned import PolicyCheckpoint, save_policy
 
@@ -463,6 +471,7 @@ def export_actor(
         obs_epsilon=float(venv.epsilon),
         algorithm=algorithm,
         info={**info, "args": dataclasses.asdict(args)},
+        architecture=architecture,
     )
     rms = venv.obs_rms
     return save_policy(path, meta, weights, rms.mean, rms.var)
