@@ -54,7 +54,7 @@ NEIGHBOURS = ("uav", "obstacle")
 _SLOT = re.compile(r"^(uav|obstacle)(\d+)\.(.+)$")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Slots:
     """One neighbour type's slots in the vector.
 
@@ -84,7 +84,7 @@ class Slots:
         return -1
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SetLayout:
     """A stored observation layout split into own features and neighbour slots.
 
@@ -135,8 +135,10 @@ def split_layout(layout: Any) -> SetLayout:
         k = getattr(layout, f"k_{kind}s")
         if len(blocks) != k or any(b != blocks[0] for b in blocks):
             raise ValueError(f"layout: {len(blocks)} {kind} slots, not {k} alike ones")
-        slots[kind] = Slots(start.get(kind, col), k, tuple(blocks[0]) if blocks else ())
-    return SetLayout(tuple(own_cols), tuple(own), slots, col)
+        slots[kind] = Slots(
+            start=start.get(kind, col), k=k, features=tuple(blocks[0]) if blocks else ()
+        )
+    return SetLayout(own_cols=tuple(own_cols), own_features=tuple(own), slots=slots, dim=col)
 
 
 def _width(block: list[tuple[str, int]]) -> int:
