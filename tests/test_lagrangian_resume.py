@@ -187,6 +187,23 @@ def _without_wall(path):
     return [",".join(c for k, c in enumerate(line.split(",")) if k != col) for line in lines]
 
 
+def _assert_costs_and_multiplier_vary(full):
+    """What makes an exact-resume test able to fail: costs and multiplier that move."""
+    rows = _rows(full / "cost_progress.csv")
+    assert len({r["episode_cost_mean"] for r in rows}) > 1
+    assert len({r["multiplier"] for r in rows}) > 2
+
+
+def _assert_same_run(killed, full, total):
+    """The resumed run ends as the uninterrupted one: weights, λ, both CSVs."""
+    end = f"checkpoints/step_{total}"
+    ours, theirs = _checkpoint(killed / end), _checkpoint(full / end)
+    assert same_bits(ours[0], theirs[0]), "the final weights, optimiser or RNG differ"
+    assert ours[1] == theirs[1]  # the multiplier's state, the counters, the window
+    assert (killed / "cost_progress.csv").read_bytes() == (full / "cost_progress.csv").read_bytes()
+    assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
+
+
 @pytest.mark.parametrize("name", [*SB3_RECIPES, "ppo_shared"])
 def test_a_resumed_sb3_run_is_bit_identical(name, tmp_path, monkeypatch):
     """Killed mid-episode at a checkpoint and resumed: the uninterrupted run, bit for bit."""
@@ -212,16 +229,9 @@ def test_a_resumed_sb3_run_is_bit_identical(name, tmp_path, monkeypatch):
         end = f"checkpoints/step_{total}"
         assert same_bits(_checkpoint(killed / end), _checkpoint(full / end))
         return
-    rows = _rows(full / "cost_progress.csv")
-    assert len({r["episode_cost_mean"] for r in rows}) > 1
-    assert len({r["multiplier"] for r in rows}) > 2
+    _assert_costs_and_multiplier_vary(full)
 
-    end = f"checkpoints/step_{total}"
-    ours, theirs = _checkpoint(killed / end), _checkpoint(full / end)
-    assert same_bits(ours[0], theirs[0]), "the final weights, optimiser or RNG differ"
-    assert ours[1] == theirs[1]  # the multiplier's state, the counters, the window
-    assert (killed / "cost_progress.csv").read_bytes() == (full / "cost_progress.csv").read_bytes()
-    assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
+    _assert_same_run(killed, full, total)
     assert (
         json.loads((killed / "validation.json").read_text())["training"]["lagrangian"]
         == (json.loads((full / "validation.json").read_text())["training"]["lagrangian"])
@@ -279,16 +289,9 @@ def test_a_resumed_mappo_lagrangian_run_is_bit_identical(tmp_path, monkeypatch):
     # The checkpoint falls inside episodes, and the multiplier moves with costs that vary.
     env = np.load(ckpt / "env_state.npz")
     assert (env["env.world.steps"] > 0).all()
-    rows = _rows(full / "cost_progress.csv")
-    assert len({r["episode_cost_mean"] for r in rows}) > 1
-    assert len({r["multiplier"] for r in rows}) > 2
+    _assert_costs_and_multiplier_vary(full)
 
-    end = f"checkpoints/step_{total}"
-    ours, theirs = _checkpoint(killed / end), _checkpoint(full / end)
-    assert same_bits(ours[0], theirs[0]), "the final weights, optimiser or RNG differ"
-    assert ours[1] == theirs[1]  # the multiplier's state, the counters, the window
-    assert (killed / "cost_progress.csv").read_bytes() == (full / "cost_progress.csv").read_bytes()
-    assert _without_wall(killed / "progress.csv") == _without_wall(full / "progress.csv")
+    _assert_same_run(killed, full, total)
 
 
 def test_mappo_checkpoints_fall_at_a_rollouts_end(tmp_path):

@@ -108,6 +108,19 @@ def _cells(line: str) -> list[str]:
     return [c.strip() for c in line.strip().strip("|").split("|")]
 
 
+def _after_heading(text: str, heading: str) -> list[str]:
+    """The lines after the first heading line (``#``) containing ``heading``.
+
+    Raises:
+        ValueError: If there is no such heading.
+    """
+    lines = text.splitlines()
+    start = next((i for i, ln in enumerate(lines) if ln.startswith("#") and heading in ln), None)
+    if start is None:
+        raise ValueError(f"no heading with {heading!r}")
+    return lines[start + 1 :]
+
+
 def section_table(text: str, heading: str) -> tuple[list[str], list[list[str]]]:
     """The first markdown table after the heading line containing ``heading``.
 
@@ -121,12 +134,8 @@ def section_table(text: str, heading: str) -> tuple[list[str], list[list[str]]]:
     Raises:
         ValueError: If there is no such heading or no table after it.
     """
-    lines = text.splitlines()
-    start = next((i for i, ln in enumerate(lines) if ln.startswith("#") and heading in ln), None)
-    if start is None:
-        raise ValueError(f"no heading with {heading!r}")
     table: list[str] = []
-    for ln in lines[start + 1 :]:
+    for ln in _after_heading(text, heading):
         if ln.startswith("|"):
             table.append(ln)
         elif table or ln.startswith("#"):
@@ -142,12 +151,8 @@ def section_list(text: str, heading: str) -> list[str]:
     Raises:
         ValueError: If there is no such heading or no list after it.
     """
-    lines = text.splitlines()
-    start = next((i for i, ln in enumerate(lines) if ln.startswith("#") and heading in ln), None)
-    if start is None:
-        raise ValueError(f"no heading with {heading!r}")
     items: list[str] = []
-    for ln in lines[start + 1 :]:
+    for ln in _after_heading(text, heading):
         if ln.startswith("* "):
             items.append(ln)
         elif items and ln.startswith("  ") and ln.strip():

@@ -24,8 +24,9 @@ __all__ = [
     "register_envs",
 ]
 
-#: The env ids' version: bumped whenever episodes or rewards change (see CHANGELOG.md).
-ENV_VERSION = 3
+#: The env ids' version: bumped whenever episodes or rewards change (see CHANGELOG.md), by
+#: adding the new version's row to :data:`~uasep_env.config.VERSION_DEFAULTS` (one source).
+ENV_VERSION = max(VERSION_DEFAULTS)
 
 #: Each env version, newest first: ``(version, package release, what changed)``. Bumping
 #: :data:`ENV_VERSION` needs a row here (tested); the env cards' version history is this

@@ -21,10 +21,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["beats", "cheapest", "safest", "sentences"]
+from uasep_env.benchmark.runner import REFERENCE
 
-#: The row every verdict compares with (the paper's APF).
-REFERENCE = "apf"
+__all__ = ["beats", "cheapest", "safest", "sentences"]
 
 
 def _rate(s: Mapping[str, Any]) -> str:
