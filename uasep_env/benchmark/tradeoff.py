@@ -3,13 +3,12 @@
     uasep-tradeoff [--workers 2] [--paper-episodes 20] [--bank-episodes 200] [--out tradeoff]
     uasep-tradeoff --methods apf --paper-episodes 2 --bank-episodes 2 --no-figures  # a quick look
 
-A single setting per controller says little: the README's tables compare the APF keeping
-17 m from the obstacle with a motion-state APF keeping 11 m. Here each controller's safety
-margin is swept over a grid (:data:`METHODS`), every setting plays the same encounters as
-the paper experiment (the ``paper`` scenario, seeds 0-19, and the 200-encounter ``random``
-bank, seeds 4000500-4000699 of the validation range), and efficiency (max deviation,
-longest conflict resolution, acceleration fluctuation) is plotted against safety (min
-UAV-obstacle distance,
+A single setting per controller says little: at their defaults the controllers keep
+different distances from the obstacle. Here each controller's safety margin is swept over a
+grid (:data:`METHODS`), every setting plays the same encounters (the paper experiment's
+``paper`` scenario, seeds 0-19, and the 200-encounter ``random`` bank, seeds
+4000500-4000699 of the validation range), and efficiency (max deviation, longest conflict
+resolution, acceleration fluctuation) is plotted against safety (min UAV-obstacle distance,
 loss-of-separation rate, collision rate), with 95 % intervals (Student-t for means, Wilson
 for rates) and each method's Pareto front.
 
