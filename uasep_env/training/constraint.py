@@ -13,7 +13,7 @@ loss of separation) at most a limit, with a PID Lagrange multiplier
 * :func:`cost_limit`, :func:`make_lagrangian`, :func:`measure_budget` (``budget.json``);
 * :class:`CostTracker`: the agents' running episode costs, the multiplier's update at the
   end of each rollout, the ``cost_progress.csv`` rows
-  (:data:`uasep_env.training.sb3_lagrangian.COST_FIELDS`) and the state a checkpoint keeps.
+  (:data:`COST_FIELDS`) and the state a checkpoint keeps.
 
 ``--cost-limit``: a number >= 0 (steps in loss of separation per agent and episode),
 ``apf`` (the APF's mean episode cost on ``--budget-episodes`` validation encounters) or
@@ -41,9 +41,11 @@ from uasep_env.training.args import non_negative_float, positive_int
 from uasep_env.training.lagrangian import PIDLagrangian, check_cost_limit
 
 __all__ = [
+    "COST_FIELDS",
     "COST_FILES",
     "CostTracker",
     "LagrangianArgs",
+    "LeanCost",
     "check",
     "cost_limit",
     "cost_limit_option",
@@ -51,6 +53,19 @@ __all__ = [
     "make_lagrangian",
     "measure_budget",
 ]
+
+#: Columns of ``cost_progress.csv``, one row per rollout: agent-steps, agent-episodes ended so
+#: far (one per UAV; ``progress.csv``'s ``episodes`` count environment episodes), the mean
+#: episode cost per agent of the rollout's episodes (what the multiplier was updated with;
+#: empty: none ended) and of the last 200, the limit, and the multiplier after the update.
+COST_FIELDS = (
+    "agent_steps",
+    "agent_episodes",
+    "episode_cost_mean",
+    "episode_cost_window",
+    "cost_limit",
+    "multiplier",
+)
 
 #: What a Lagrangian run writes beside its recipe's run files (``--overwrite`` deletes them).
 COST_FILES = ("cost_progress.csv", "cost_curves.png", "budget.json")
@@ -117,14 +132,18 @@ class LagrangianArgs:
     multiplier_max: float = _opt(100.0, non_negative_float, "multiplier's bound (0: none)")
 
 
-def check(args: Any) -> str | None:
-    """What the Lagrangian recipes refuse beyond each flag's range (a message), or None."""
+def check(args: Any, trainers: tuple[str, ...] = ("default",)) -> str | None:
+    """What the Lagrangian recipes refuse beyond each flag's range (a message), or None.
+
+    ``trainers``: the loops the recipe's constraint runs in (PPO-Lagrangian: SB3's and the
+    lean loop; MAPPO-Lagrangian: skrl's only).
+    """
     from uasep_env.scenarios import VALIDATION_SEEDS
 
-    if args.trainer != "default":
+    if args.trainer not in trainers:
         return (
-            f"argument --trainer: {args.trainer!r} is not for a Lagrangian recipe (its "
-            "constraint runs in SB3's or skrl's loop)"
+            f"argument --trainer: {args.trainer!r} is not for this Lagrangian recipe (its "
+            f"constraint runs in the loops {', '.join(trainers)})"
         )
     if args.norm_reward:
         return (
@@ -238,7 +257,7 @@ class CostTracker:
         """Move the multiplier with the mean cost of the rollout's episodes (if any ended).
 
         Returns:
-            The ``cost_progress.csv`` row (:data:`uasep_env.training.sb3_lagrangian.COST_FIELDS`).
+            The ``cost_progress.csv`` row (:data:`COST_FIELDS`).
         """
         batch = float(np.mean(self._batch)) if self._batch else math.nan
         if self._batch:
@@ -309,3 +328,76 @@ class CostTracker:
         self._batch = []
         self._running[:] = 0.0
         self._resumed = resumed
+
+
+class LeanCost:
+    """The multiplier applied in the lean loop (:mod:`~uasep_env.training.ppo_lean`).
+
+    What :class:`~uasep_env.training.sb3_lagrangian.LagrangianCallback` does in SB3's loop,
+    on the batched core's step results: each agent's reward becomes
+    ``(r - lambda c) / (1 + lambda)`` (before a time limit's bootstrap, as in SB3), its
+    cost is added to its running episode's, and at the end of each rollout ``lambda`` moves
+    with the mean cost of the episodes that ended during it (one ``cost_progress.csv`` row).
+
+    Args:
+        lagrangian: The multiplier's controller.
+        cost: ``"cost"`` or a cost term's name.
+        csv_path: Where the rows go (appended; a new file gets a header), or None.
+        window: Episodes in the running mean ``episode_cost_window``.
+    """
+
+    def __init__(
+        self, lagrangian: PIDLagrangian, cost: str = "cost", csv_path: Path | None = None,
+        window: int = 200,
+    ) -> None:  # fmt: skip
+        try:
+            cost_name(cost)
+        except argparse.ArgumentTypeError as err:
+            raise ValueError(f"cost={cost!r}: {err}") from None
+        self.lagrangian, self.cost, self.csv_path = lagrangian, cost, csv_path
+        self.tracker = CostTracker(lagrangian, cost, 1, window)
+        self._fh: Any = None
+
+    def start(self, n: int) -> None:
+        """Begin ``n`` running agent-episodes (environments x UAVs) and the CSV."""
+        self.tracker.start(n)
+        if self.csv_path is not None and self._fh is None:
+            from uasep_env.training.curves import ProgressLog
+
+            self._fh = ProgressLog(self.csv_path, COST_FIELDS)
+
+    def shape(self, res: Any, reward: np.ndarray, dones: np.ndarray) -> np.ndarray:
+        """The rewards PPO learns from for one step of the core; the step's costs counted.
+
+        Args:
+            res: The core's :class:`~uasep_env.envs.core.StepResult` (costs ``(E, N)``).
+            reward: ``(E * N,)`` the agents' rewards, environment-major.
+            dones: ``(E * N,)`` whether each agent's episode ended with the step.
+        """
+        cost = res.cost if self.cost == "cost" else res.cost_terms[self.cost]
+        costs = np.asarray(cost, dtype=np.float64).reshape(-1)
+        lam = self.lagrangian.multiplier
+        if lam:  # as SB3's callback writes into its float32 reward array
+            reward = ((reward - lam * costs) / (1.0 + lam)).astype(reward.dtype)
+        self.tracker.step(costs, dones)
+        return reward
+
+    def rollout_end(self, agent_steps: int) -> None:
+        """Move the multiplier; write the rollout's ``cost_progress.csv`` row."""
+        row = self.tracker.end_rollout(agent_steps)
+        if self._fh is not None:
+            self._fh.write(row)
+
+    def state_dict(self) -> dict[str, Any]:
+        """:meth:`CostTracker.state_dict` (what a checkpoint keeps)."""
+        return self.tracker.state_dict()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict`; the episodes start anew (as the lean loop's do)."""
+        self.tracker.load_state_dict(state, running=False)
+
+    def close(self) -> None:
+        """Close the CSV."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None

@@ -245,10 +245,15 @@ def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
     ``--trainer lean`` (and :func:`uasep_env.training.mappo.main`, with ``central``: MAPPO's
     centralised critic).
 
+    ``plugin``: the PPO-Lagrangian recipes' constraint, whose ``start_lean(out, config,
+    resumed)`` gives the loop's multiplier (:class:`~uasep_env.training.constraint.LeanCost`:
+    the rewards shaped at every step, the multiplier moved at every rollout's end); its
+    ``facts()`` go into every checkpoint and ``validation.json``.
+
     Raises:
-        ValueError: A ``plugin`` (the Lagrangian recipes' constraint is SB3's callback).
+        ValueError: A ``plugin`` with no lean-loop part.
     """
-    if plugin is not None:
+    if plugin is not None and not hasattr(plugin, "start_lean"):
         raise ValueError(f"trainer 'lean': the {plugin.title} recipe trains on SB3 only")
     import torch
 
@@ -259,7 +264,9 @@ def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
     torch.set_num_threads(args.torch_threads)
     config = make_env_config(args)
     run = RunFolder.start(args, lambda ck, info: check_algorithm(ck, info, args, central))
-    hooks = _RunHooks(run, config)
+    # The constraint's state restored (and checked) before the folder is rewound.
+    cost = plugin.start_lean(run.out, config, run.resumed) if plugin is not None else None
+    hooks = _RunHooks(run, config, cost, plugin.facts if plugin is not None else None)
 
     def prepare(state: Any) -> None:
         hooks.last_state = state
@@ -278,20 +285,22 @@ def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
     else:  # resumed at the end: only the final outputs are (re)written
         info = run.resumed_info()
     hooks.close()
-    title = "MAPPO, lean loop" if central else f"PPO, lean loop ({args.action_mode})"
+    name = plugin.title if plugin is not None else "PPO"
+    title = "MAPPO, lean loop" if central else f"{name}, lean loop ({args.action_mode})"
     return run.publish(
         lambda path: ppo_lean.export_policy(nets, norm, config, args, path, info),
-        config, info, title,
+        config, info, title, more=plugin.finish if plugin is not None else None,
     )  # fmt: skip
 
 
 class _RunHooks(Hooks):
     """The run's learning curve, progress bar and checkpoints around the lean loop."""
 
-    def __init__(self, run: Any, config: Any) -> None:
+    def __init__(self, run: Any, config: Any, cost: Any = None, facts: Any = None) -> None:
         self.run, self.args, self.config = run, run.args, config
         self.last_state: Any = None  # the loop's State
         self.bar: Any = None
+        self.cost, self.facts = cost, facts  # a Lagrangian recipe's multiplier and state
 
     def start(self, nets: Any, norm: Any) -> None:
         args, run = self.args, self.run
@@ -299,6 +308,8 @@ class _RunHooks(Hooks):
         steps = int(run.resumed.get("agent_steps", 0))
         self.next_ckpt = run.next_checkpoint(steps)
         self.csv = run.progress_log()
+        if self.cost is not None:
+            self.cost.start(self.args.n_envs * self.config.n_uavs)
         if args.progress:
             from tqdm import tqdm
 
@@ -311,8 +322,13 @@ class _RunHooks(Hooks):
             )  # fmt: skip
 
     def rollout_end(self, agent_steps: int) -> None:
+        if self.cost is not None:
+            self.cost.rollout_end(agent_steps)
         if self.bar is not None:
             self.bar.update(agent_steps - self.bar.n)
+
+    def shape(self, res: Any, reward: Any, dones: Any) -> Any:
+        return reward if self.cost is None else self.cost.shape(res, reward, dones)
 
     def update_end(self, state: Any) -> None:
         from uasep_env.training.rundir import bar_postfix, window_summary
@@ -334,7 +350,8 @@ class _RunHooks(Hooks):
 
         return {"agent_steps": int(state.agent_steps), "wall_s": state.wall_s,
                 "episodes": state.episodes, "updates": state.updates,
-                **window_summary(self.window)}  # fmt: skip
+                **window_summary(self.window),
+                **(self.facts() if self.facts is not None else {})}  # fmt: skip
 
     def checkpoint(self, state: Any) -> None:
         self.run.save_checkpoint(
@@ -343,6 +360,8 @@ class _RunHooks(Hooks):
         )  # fmt: skip
 
     def close(self) -> None:
+        if self.cost is not None:
+            self.cost.close()
         self.run.close()
         if self.bar is not None:
             self.bar.close()

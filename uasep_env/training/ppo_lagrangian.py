@@ -48,6 +48,7 @@ from uasep_env.training.args import parse_args as _parse_args
 from uasep_env.training.constraint import (
     COST_FILES,
     LagrangianArgs,
+    LeanCost,
     check,
     cost_limit,
     make_lagrangian,
@@ -84,7 +85,7 @@ def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> A
         prog=ppo_shared._prog(),
         # The residual recipe's own text under ``uasep-train ppo_lagrangian_residual``.
         description=ppo_shared._PROG.get("doc") or __doc__,
-        check=check,
+        check=lambda a: check(a, trainers=("default", "lean")),
     )
 
 
@@ -97,11 +98,9 @@ class Constraint:
         self.args = args
         self.callback: Any = None
 
-    def start(self, out: Path, config: Any, resumed: dict) -> list:
-        """The multiplier's callback, its state restored from ``resumed`` if any."""
-        from uasep_env.training.rundir import restore_json, rewind_csv
-        from uasep_env.training.sb3_lagrangian import COST_FIELDS, LagrangianCallback
-        from uasep_env.training.sb3_state import continues_episodes
+    def _begin(self, out: Path, config: Any, resumed: dict) -> tuple[Any, dict, Path]:
+        """The multiplier (the limit measured, or a resumed run's own), its saved state, folder."""
+        from uasep_env.training.rundir import restore_json
 
         task = config.reward == config.reward.task()
         print(f"reward: {'the task reward' if task else config.reward} "
@@ -116,7 +115,15 @@ class Constraint:
             restore_json(folder, "lagrangian.cost_limit", check_cost_limit, limit)
         else:
             limit = measure_budget(self.args, config, out)
-        lagrangian = make_lagrangian(self.args, float(limit))
+        return make_lagrangian(self.args, float(limit)), kept, folder
+
+    def start(self, out: Path, config: Any, resumed: dict) -> list:
+        """The multiplier's callback, its state restored from ``resumed`` if any."""
+        from uasep_env.training.rundir import restore_json, rewind_csv
+        from uasep_env.training.sb3_lagrangian import COST_FIELDS, LagrangianCallback
+        from uasep_env.training.sb3_state import continues_episodes
+
+        lagrangian, kept, folder = self._begin(out, config, resumed)
         path = out / "cost_progress.csv"
         self.callback = LagrangianCallback(lagrangian, self.args.cost, path)
         if resumed:
@@ -132,6 +139,24 @@ class Constraint:
             # Rows of the abandoned continuation go, as progress.csv's.
             rewind_csv(path, COST_FIELDS, int(resumed["agent_steps"]))
         return [self.callback]
+
+    def start_lean(self, out: Path, config: Any, resumed: dict) -> LeanCost:
+        """The multiplier for the lean loop (:class:`~uasep_env.training.constraint.LeanCost`).
+
+        A resumed run continues its multiplier, window and ``cost_progress.csv``; its
+        episodes start anew, as the lean loop's environments do.
+        """
+        from uasep_env.training.constraint import COST_FIELDS
+        from uasep_env.training.rundir import restore_json, rewind_csv
+
+        lagrangian, kept, folder = self._begin(out, config, resumed)
+        path = out / "cost_progress.csv"
+        self.callback = LeanCost(lagrangian, self.args.cost, path)
+        if resumed:
+            restore_json(folder, "lagrangian.state", self.callback.load_state_dict,
+                         kept.get("state"))  # fmt: skip
+            rewind_csv(path, COST_FIELDS, int(resumed["agent_steps"]))
+        return self.callback
 
     def facts(self) -> dict:
         """The constraint's state, saved in every checkpoint and in ``validation.json``."""

@@ -214,6 +214,14 @@ class Hooks:
     def rollout_end(self, agent_steps: int) -> None:
         """After each rollout, before its update."""
 
+    def shape(self, res: Any, reward: np.ndarray, dones: np.ndarray) -> np.ndarray:
+        """The rewards ``(E * N,)`` PPO learns from for the core's step ``res`` (unchanged here).
+
+        Called at every step before a time limit's bootstrap: the Lagrangian recipes apply
+        their multiplier here (:class:`uasep_env.training.constraint.LeanCost`).
+        """
+        return reward
+
     def update_end(self, state: State) -> None:
         """After each update; ``state.finished`` holds the episodes ended since the last one."""
 
@@ -272,12 +280,13 @@ class _Timing:
 class _Rollout:
     """The rollout's state and buffers: ``n_steps`` steps of every agent of the core."""
 
-    def __init__(self, core: Any, state: State, n_steps: int) -> None:
+    def __init__(self, core: Any, state: State, n_steps: int, hooks: Hooks | None = None) -> None:
         import torch
 
         from uasep_env.envs.episode_safety import EpisodeSafety
 
         self.core, self.nets, self.norm, self.state = core, state.nets, state.norm, state
+        self.hooks = hooks or Hooks()
         self.n_envs, self.n = core.n_envs, core.n_uavs
         rows, dim = self.n_envs * self.n, core.obs_dim
         self.obs_t = torch.zeros((n_steps, rows, dim))
@@ -357,6 +366,7 @@ class _Rollout:
                 self._track(res, done_env)
                 dones = np.repeat(done_env, n)
                 reward = norm.reward(res.rewards.reshape(-1).astype(np.float32), dones)
+                reward = self.hooks.shape(res, reward, dones)
                 raw = res.obs.reshape(len(self.obs), -1)
                 if not done_env.any():
                     self.obs = norm.observe(raw, update=True)
@@ -468,7 +478,7 @@ def train(
         prepare(state)
         if learner is not nets:
             nets.load_from(learner)
-    roll = _Rollout(core, state, args.n_steps)
+    roll = _Rollout(core, state, args.n_steps, hooks)
     if state.agent_steps < args.total_timesteps and state.wall_s < args.max_minutes * 60.0:
         # Not when nothing is left to train: the reset's observations would move the
         # normalisation a resumed run exports unchanged.

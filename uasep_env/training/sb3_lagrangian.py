@@ -39,23 +39,10 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
 from uasep_env.interface.costs import COST_TERMS
-from uasep_env.training.constraint import CostTracker
+from uasep_env.training.constraint import COST_FIELDS, CostTracker
 from uasep_env.training.lagrangian import PIDLagrangian
 
 __all__ = ["COST_FIELDS", "LagrangianCallback", "cost_reader", "plot_cost_curves"]
-
-#: Columns of the callback's CSV, one row per rollout: agent-steps, agent-episodes ended so
-#: far (one per UAV; ``progress.csv``'s ``episodes`` count environment episodes), the mean
-#: episode cost per agent of the rollout's episodes (what the multiplier was updated with;
-#: empty: none ended) and of the last 200, the limit, and the multiplier after the update.
-COST_FIELDS = (
-    "agent_steps",
-    "agent_episodes",
-    "episode_cost_mean",
-    "episode_cost_window",
-    "cost_limit",
-    "multiplier",
-)
 
 
 def cost_reader(cost: str) -> Any:
