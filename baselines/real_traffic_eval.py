@@ -27,8 +27,9 @@ real-traffic episode; the synthetic bank's aggregates, its episodes being those 
 ``learned_vs_apf.json.gz``), and prints the tables.
 
 ``--prediction`` chooses the predicted region (``prediction.fit``) of the runs: ``enclosing``
-(the default, the files above) and/or ``calibrated`` (the conformal region per aircraft class,
-:mod:`uasep_env.reachable.calibrated`): the same banks with ``prediction.fit="calibrated"``,
+(the default of ``-v2``, the files above) and/or ``calibrated`` (the default from ``-v3`` on:
+the conformal region per aircraft class, :mod:`uasep_env.reachable.calibrated`): the same
+banks with ``prediction.fit="calibrated"``,
 written to ``real_traffic_eval_calibrated.{md,json.gz}`` beside the enclosing runs' summary
 (beside the enclosing figures: those of this run with ``enclosing,calibrated``, else those
 stored in ``real_traffic_eval.json.gz``).
@@ -123,9 +124,7 @@ def stored_enclosing(path: Path) -> dict[str, _Aggregates | None]:
 
 
 def with_fit(config: dict, fit: str) -> dict:
-    """``config`` with ``prediction.fit`` set (the enclosing fit: unchanged)."""
-    if fit == "enclosing":
-        return config
+    """``config`` with ``prediction.fit`` set (always: the default moved in ``-v3``)."""
     return {**config, "prediction": {**config.get("prediction", {}), "fit": fit}}
 
 
@@ -262,9 +261,10 @@ def calibrated_page(
     pair = {"real, enclosing": enc["real"], "real, calibrated": cal["real"]}
     sections = [
         "### Real traffic: enclosing vs calibrated prediction",
-        f"Real: the real-traffic bank ({real_what}); `prediction.fit` enclosing (the default) "
-        "and calibrated (conformal regions per aircraft class, `docs/real_traffic.md`). Rates "
-        "with 95 % Wilson intervals, means with 95 % Student-t intervals.",
+        f"Real: the real-traffic bank ({real_what}); `prediction.fit` enclosing (`-v2`'s "
+        "default) and calibrated (the default from `-v3` on: conformal regions per aircraft "
+        "class, `docs/real_traffic.md`). Rates with 95 % Wilson intervals, means with 95 % "
+        "Student-t intervals.",
         summary(pair, rows),
     ]
     if enc["synthetic"] is not None and cal["synthetic"] is not None:

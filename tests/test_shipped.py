@@ -7,9 +7,10 @@ dynamics, the APF or the scenarios that moves what a policy does fails here, ins
 leaving the published tables silently stale. The figures are reproduced bit for bit on the
 machine that made them; the tolerance leaves room only for a maths library's last bits.
 
-The file is of ``-v2`` (the env the shipped checkpoints were trained in): the encounters are
-flown with ``-v2``'s defaults (``VERSION_DEFAULTS[2]``) and the APFs with the margins they
-had in ``-v2`` (:data:`V2_MARGINS`), so this also checks that ``-v2`` stays reproducible.
+The file is of ``-v3``, the env the shipped checkpoints were trained in: the encounters are
+flown with the current defaults and the APFs at their registered (knee) margins. ``-v2``'s
+episodes are pinned by ``tests/test_pinned_numbers.py``; its checkpoints, kept in
+``baselines/seeds/``, by ``tests/test_env_versions.py``.
 """
 
 from __future__ import annotations
@@ -22,9 +23,8 @@ from typing import Any
 import pytest
 from conftest import ROOT
 
-from uasep_env.config import VERSION_DEFAULTS, make_config
+from uasep_env.config import make_config
 from uasep_env.evaluation import evaluate
-from uasep_env.policies import REGISTRY
 
 RESULTS = ROOT / "baselines" / "results" / "learned_vs_apf.json.gz"
 CHECKPOINTS = sorted((ROOT / "baselines" / "checkpoints").glob("*.zip"))
@@ -32,8 +32,8 @@ CHECKPOINTS = sorted((ROOT / "baselines" / "checkpoints").glob("*.zip"))
 #: -v2 ground fix) and a multi-obstacle one.
 SEEDS = [5_000_000, 5_000_008, 5_000_011]
 RTOL = 1e-6
-#: The APFs' default margin scales in -v2 (before -v3 moved each to its validation knee).
-V2_MARGINS = {"apf": 1.0, "motion-state-apf": 1.5, "traditional-apf": 0.75}
+#: The controllers flown beside the checkpoints, at their registered defaults.
+CONTROLLERS = ("apf", "motion-state-apf", "traditional-apf")
 STALE = (
     "moved from the figures published in baselines/results/learned_vs_apf.json.gz. If the change "
     "is meant, bump the env ids' version and regenerate every results file "
@@ -84,8 +84,8 @@ def published() -> dict[str, Any]:
 
 @pytest.fixture(scope="module")
 def flown() -> dict[str, Any]:
-    cfg = make_config(VERSION_DEFAULTS[2], scenario="random")
-    policies = {name: REGISTRY[name].margin(cfg, scale) for name, scale in V2_MARGINS.items()}
+    cfg = make_config(scenario="random")
+    policies: dict[str, Any] = {name: name for name in CONTROLLERS}
     policies |= {p.stem: str(p) for p in CHECKPOINTS}
     result = evaluate(policies, cfg, SEEDS, batch_size=len(SEEDS))
     return json.loads(result.to_json())["results"]
@@ -98,7 +98,7 @@ def test_the_shipped_checkpoints():
 
 @pytest.mark.parametrize(
     "policy",
-    ["apf", "motion-state-apf", "traditional-apf", *(p.stem for p in CHECKPOINTS)],
+    [*CONTROLLERS, *(p.stem for p in CHECKPOINTS)],
 )
 def test_policies_fly_their_published_figures(policy, flown, published):
     stored = {e["seed"]: e for e in published[policy]["episodes"]}
