@@ -288,3 +288,20 @@ def test_front_banks_sweep_only_those_banks(tmp_path, capsys):
     # A front bank outside --banks is a one-line error naming it.
     assert main([*argv[:6], "--front-banks", "uavs_8", "--out", str(tmp_path / "x"), *SHORT]) == 2
     assert "uavs_8 not in --banks" in capsys.readouterr().err
+
+
+def test_a_checkpoint_replaced_under_the_same_path_is_not_read_from_its_old_cells(tmp_path):
+    """The cell key holds the checkpoint's digest: a retrained file is refused, not reused."""
+    import shutil
+
+    from conftest import ROOT
+
+    seeds = ROOT / "baselines" / "seeds" / "shared"
+    ck = tmp_path / "policy.zip"
+    shutil.copyfile(seeds / "seed_0" / "selected.zip", ck)
+    argv = ["--policy", str(ck), "--banks", "held_out", "--episodes", "2", "--no-front",
+            "--out", str(tmp_path / "bench"), *SHORT]  # fmt: skip
+    assert main(argv) == 0
+    assert main(argv) == 0  # the same file: its cells are read back
+    shutil.copyfile(seeds / "seed_2" / "selected.zip", ck)  # retrained, same path
+    assert main(argv) == 2

@@ -78,11 +78,26 @@ def _config_digest(cfg: EnvConfig) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def _checkpoint_digest(entry: Entry) -> str | None:
+    """The sha256 (16 hex) of the checkpoint file behind ``entry``, or None if it has none."""
+    from uasep_env.policies import shipped_policy_path
+
+    if entry.kind != "name":
+        return None
+    base = Path(entry.base)
+    path = base if base.is_file() else shipped_policy_path(entry.base)
+    return None if path is None else hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+
+
 def cell_key(cell: Cell, cfg: EnvConfig, seeds: Sequence[int]) -> dict[str, Any]:
-    """What identifies a cell's numbers: a file with another key is another suite's."""
+    """What identifies a cell's numbers: a file with another key is another suite's.
+
+    A policy checkpoint's key holds the file's digest: a checkpoint retrained under the same
+    name or path is another policy, never read from the old one's cells.
+    """
     from uasep_env import __version__
 
-    return {
+    key = {
         "bank": cell.bank,
         "policy": cell.entry.spec,
         "setting": cell.setting,
@@ -90,6 +105,10 @@ def cell_key(cell: Cell, cfg: EnvConfig, seeds: Sequence[int]) -> dict[str, Any]
         "seeds": [int(seeds[0]), len(seeds)],
         "version": __version__,
     }
+    digest = _checkpoint_digest(cell.entry)
+    if digest is not None:
+        key["checkpoint_sha256"] = digest
+    return key
 
 
 def cell_stats(aggregate: dict[str, dict[str, Any]]) -> dict[str, Any]:

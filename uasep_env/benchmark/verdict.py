@@ -134,10 +134,11 @@ def _apf_sentence(board: Mapping[str, Any]) -> str:
 def _current(board: Mapping[str, Any]) -> dict[str, Any]:
     """The board's results without the rows played in another env version (not comparable)."""
     env = board.get("versions", {}).get("env")
-    return {
+    current = {
         bank: {k: r for k, r in rows.items() if r.get("env_version", env) == env}
         for bank, rows in board["results"].items()
     }
+    return {bank: rows for bank, rows in current.items() if rows}  # a bank with none: no clause
 
 
 def sentences(board: Mapping[str, Any]) -> list[str]:
