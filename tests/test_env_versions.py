@@ -1,7 +1,8 @@
 """Env versions of learned policies: checkpoints play the env version they were trained in.
 
-The shipped checkpoints were trained in ``-v2`` (their files predate the recorded
-``info["env_version"]``); the ``-v2`` ids and ``VERSION_DEFAULTS[2]`` still play its
+The policies shipped before ``-v3`` were trained in ``-v2`` (their files predate the recorded
+``info["env_version"]``; kept in ``baselines/seeds/``, the residual one is :data:`V2`); the
+``-v2`` ids and ``VERSION_DEFAULTS[2]`` still play its
 episodes, and ``uasep-eval``, ``uasep-bench`` and ``uasep-report`` play a checkpoint in
 its own version unless asked otherwise (issue 56).
 """
@@ -15,24 +16,28 @@ import warnings
 import gymnasium
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import uasep_env.evaluation
 from uasep_env import make_config
 from uasep_env.config import VERSION_DEFAULTS
 from uasep_env.envs.core import EnvCore
 from uasep_env.evaluation import evaluate
-from uasep_env.policies import APF, APFGains, CheckpointError, load_policy, shipped_policy_path
+from uasep_env.policies import APF, APFGains, CheckpointError, load_policy
 from uasep_env.policies.checkpoint import save_policy
 from uasep_env.policies.checkpoint_reader import read_checkpoint
 from uasep_env.policies.env_version import EnvVersionWarning, current_version, env_defaults_for
 from uasep_env.registration import ENV_VERSION
 
-SHIPPED = "ppo_residual_apf"
+#: The residual policy shipped in -v2 (its seed folder since the -v3 policies shipped).
+V2 = ROOT / "baselines" / "seeds" / "residual_apf" / "seed_0" / "selected.zip"
+SHIPPED = str(V2)
+LABEL = V2.stem  # its row's name in uasep-bench (uasep-eval names it by its path)
 
 
 def _copy(tmp_path, name: str, **info) -> str:
-    """The shipped checkpoint ``SHIPPED`` rewritten with ``info`` entries set."""
-    meta, weights, mean, var = read_checkpoint(shipped_policy_path(SHIPPED))
+    """The -v2 checkpoint ``V2`` rewritten with ``info`` entries set."""
+    meta, weights, mean, var = read_checkpoint(V2)
     meta = dataclasses.replace(meta, info={**meta.info, **info})
     return str(save_policy(tmp_path / f"{name}.zip", meta, weights, mean, var))
 
@@ -74,7 +79,7 @@ def test_the_v2_ids_play_the_v2_episodes_bit_for_bit():
 
 def test_old_files_say_v2_and_new_ones_record_the_current_version(tmp_path):
     assert current_version() == ENV_VERSION  # read below the registration's layer
-    meta = read_checkpoint(shipped_policy_path(SHIPPED))[0]
+    meta = read_checkpoint(V2)[0]
     assert "env_version" not in meta.info and meta.env_version == 2
     assert meta.env_config.prediction.fit == "enclosing"
     assert env_defaults_for(meta) == VERSION_DEFAULTS[2]
@@ -114,10 +119,10 @@ def test_uasep_eval_plays_the_checkpoints_version(tmp_path, capsys):
         f"(--env-version {ENV_VERSION} to play the current ones)"
     )
     assert line in captured.err
-    assert data["env_version"] == 2 and data["trained_env_versions"] == {SHIPPED: 2}
+    assert data["env_version"] == 2 and data["trained_env_versions"] == {LABEL: 2}
     assert data["config"]["prediction"]["fit"] == "enclosing"
     header = next(ln for ln in captured.out.splitlines() if ln.startswith("metric"))
-    assert header.split()[1:] == [SHIPPED, "(-v2)", "apf"]  # the checkpoint's label only
+    assert header.split()[1:] == [LABEL, "(-v2)", "apf"]  # the checkpoint's label only
     # The APF beside it played the -v2 episodes, not the current ones.
     for version, same in ((2, True), (ENV_VERSION, False)):
         cfg = make_config(VERSION_DEFAULTS[version], scenario="paper")
@@ -156,7 +161,7 @@ def test_load_policy_warns_in_another_env_version():
         load_policy(SHIPPED, make_config(scenario="random"))
     assert len(record) == 1
     text = str(record[0].message)
-    assert "ppo_residual_apf.zip" in text and "-v2" in text
+    assert "selected.zip" in text and "-v2" in text
     assert "'enclosing'" in text and "'calibrated'" in text
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -175,16 +180,16 @@ def test_uasep_bench_plays_each_row_in_its_version(tmp_path):
     assert rc == 0
     board = json.loads((out / "bench.json").read_text())
     rows = board["results"]["held_out"]
-    assert rows[SHIPPED]["env_version"] == 2 and rows["apf"]["env_version"] == ENV_VERSION
+    assert rows[LABEL]["env_version"] == 2 and rows["apf"]["env_version"] == ENV_VERSION
     table = (out / "bench.md").read_text()
-    assert "| env " in table and f"| {SHIPPED} " in table and "| -v2 " in table
+    assert "| env " in table and f"| {LABEL} " in table and "| -v2 " in table
     # The learned row is uasep-eval's on the -v2 bank.
     cfg = bank_config("held_out", {"episode_duration": 20}, version=2)
     assert cfg.prediction.fit == "enclosing"
     seeds = board["banks"]["held_out"]["seeds"]
     seeds = range(seeds["first"], seeds["first"] + 2)
-    agg = evaluate([SHIPPED], cfg, seeds).results[SHIPPED].aggregate
-    assert rows[SHIPPED]["default"]["max_deviation"]["mean"] == agg["episode.max_deviation"]["mean"]
+    agg = evaluate({LABEL: SHIPPED}, cfg, seeds).results[LABEL].aggregate
+    assert rows[LABEL]["default"]["max_deviation"]["mean"] == agg["episode.max_deviation"]["mean"]
 
 
 def test_uasep_report_plays_a_checkpoint_in_its_version():
