@@ -242,3 +242,28 @@ def test_a_tampered_set_checkpoint_is_refused_in_one_line(policies, tmp_path, ch
         read_checkpoint(bad)
     message = str(info.value)
     assert "\n" not in message and named in message, message
+
+
+def test_a_set_run_resumes_from_its_checkpoints(tmp_path):
+    """Resumed at its end, a set run exports the same weights; from mid-run it trains on."""
+    import shutil
+
+    out = tmp_path / "run"
+    ppo_shared.main([*TINY, "--checkpoint-every", "500", "--out-dir", str(out)])
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy, symlinks=True)
+    (copy / "policy.zip").unlink()
+    ppo_shared.main([*TINY, "--out-dir", str(copy),
+                     "--resume", str(copy / "checkpoints" / "latest")])  # fmt: skip
+    theirs, mine = read_checkpoint(out / "policy.zip"), read_checkpoint(copy / "policy.zip")
+    assert mine[0].architecture == "set"
+    for a, b in zip(theirs[1], mine[1], strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+    first = min((out / "checkpoints").glob("step_*"), key=lambda p: int(p.name[5:]))
+    again = tmp_path / "again"
+    shutil.copytree(out, again, symlinks=True)
+    summary = ppo_shared.main([*TINY, "--out-dir", str(again), "--resume",
+                               str(again / "checkpoints" / first.name)])  # fmt: skip
+    assert summary["training"]["agent_steps"] >= 2000
+    assert read_checkpoint(again / "policy.zip")[0].architecture == "set"
