@@ -305,3 +305,37 @@ def test_a_checkpoint_replaced_under_the_same_path_is_not_read_from_its_old_cell
     assert main(argv) == 0  # the same file: its cells are read back
     shutil.copyfile(seeds / "seed_2" / "selected.zip", ck)  # retrained, same path
     assert main(argv) == 2
+
+
+def test_verdict_says_whether_a_learned_policy_meets_the_best_classical_controller():
+    from uasep_env.benchmark import verdict
+
+    safe = _stats(0.0, 0.01, 0.0, 0.01, 23.0, 22.0, 24.0)
+
+    def board(learned_real, learned_dev=(17.0, 16.5, 17.5)):
+        rows = {
+            "apf": (safe, 23.0),
+            "mvp-region": (_stats(0.0, 0.01, 0.0, 0.01, 21.4, 20.6, 22.1), 21.4),
+            "mvp": (_stats(0.05, 0.08, 0.6, 0.65, 9.0, 8.5, 9.5), None),  # less safe
+            "ppo_residual_apf": (_stats(0.0, 0.01, 0.0, 0.01, *learned_dev), 17.0),
+        }
+        real = dict(rows, ppo_residual_apf=(learned_real, None))
+        banks = {"held_out": rows, "uavs_8": rows, "uavs_32": rows, "real_traffic": real}
+        return _verdict_board(banks)
+
+    good = board(safe)
+    assert verdict.best_classical(good) == "mvp-region"  # least deviation among the safest
+    assert verdict.meets(good, "ppo_residual_apf", "mvp-region") == []
+    text = verdict.sentences(good)[-1]
+    assert text.startswith("Learned policies against the best classical controller, "
+                           "**mvp-region**")  # fmt: skip
+    assert "**ppo_residual_apf** meets it (17.0 [16.5, 17.5] m" in text
+    # Less safe on real traffic (the upper end above the controller's): not met, said why.
+    worse = board(_stats(0.0, 0.01, 0.08, 0.12, 20.0, 19.0, 21.0))
+    text = verdict.sentences(worse)[-1]
+    assert "none meets it (ppo_residual_apf: LoS on real_traffic 8.0% [6.0%, 12.0%]" in text
+    # As safe, but its deviation interval touches the controller's: not closer.
+    close = board(safe, learned_dev=(20.0, 19.0, 20.7))
+    assert verdict.meets(close, "ppo_residual_apf", "mvp-region") == [
+        "max deviation on held_out 20.0 [19.0, 20.7] against 21.4 [20.6, 22.1] m"
+    ]

@@ -11,9 +11,17 @@ Each sentence is computed from a board (:func:`~uasep_env.benchmark.summary.lead
   ends are no higher than the APF's and its max deviation's interval lies wholly below the
   APF's (the defaults of both).
 
+* **the learned policies against the best classical controller**: the best classical
+  controller is, on the held-out bank, the reference controller with the least mean max
+  deviation among the safest at their defaults (the safest and those not told apart from
+  it); a learned row (a checkpoint, shielded or not) *meets* it when on each of
+  :data:`LEARNED_BANKS` its collision and LoS intervals' upper ends are no higher than the
+  controller's, and on the held-out bank its max deviation's interval lies wholly below.
+
 One sentence per group of banks (:data:`GROUPS`: synthetic, collision courses, formation
 size, real traffic), each naming every bank's safest and cheapest, so a reader sees where the
-order changes; then where the paper's APF stands.
+order changes; then where the paper's APF stands, and how the learned policies fare against
+the best classical controller.
 """
 
 from __future__ import annotations
@@ -23,7 +31,10 @@ from typing import Any
 
 from uasep_env.benchmark.runner import REFERENCE
 
-__all__ = ["beats", "cheapest", "safest", "sentences"]
+__all__ = ["LEARNED_BANKS", "beats", "best_classical", "cheapest", "meets", "safest", "sentences"]
+
+#: The banks on which a learned policy must be as safe as the best classical controller.
+LEARNED_BANKS = ("held_out", "uavs_8", "uavs_32", "real_traffic")
 
 
 def _rate(s: Mapping[str, Any]) -> str:
@@ -131,6 +142,74 @@ def _apf_sentence(board: Mapping[str, Any]) -> str:
     )
 
 
+def _classical(board: Mapping[str, Any], label: str) -> bool:
+    """Whether a row is a registered reference controller (not a checkpoint, not shielded)."""
+    from uasep_env.policies import REGISTRY
+
+    spec = board.get("policies", {}).get(label, {}).get("spec", label)
+    entry = REGISTRY.get(spec)
+    return entry is not None and entry.reference
+
+
+def best_classical(board: Mapping[str, Any]) -> str | None:
+    """The best classical controller on the held-out bank (the module's rule), or None."""
+    rows = board["results"].get("held_out", {})
+    rows = {k: r for k, r in rows.items() if _classical(board, k)}
+    if not rows:
+        return None
+    best, ties = safest(rows)
+    return min([best, *ties], key=lambda k: rows[k]["default"]["max_deviation"]["mean"])
+
+
+def meets(board: Mapping[str, Any], learned: str, classical: str) -> list[str]:
+    """Why ``learned`` does not meet ``classical`` (the module's rule); [] when it does."""
+    why = []
+    for bank in LEARNED_BANKS:
+        rows = board["results"].get(bank, {})
+        if learned not in rows or classical not in rows:
+            why.append(f"not played on {bank}")
+            continue
+        a, b = rows[learned]["default"], rows[classical]["default"]
+        for col, name in (("collision", "collisions"), ("loss_of_separation", "LoS")):
+            if a[col]["ci_high"] > b[col]["ci_high"]:
+                why.append(f"{name} on {bank} {_rate(a[col])} against {_rate(b[col])}")
+    rows = board["results"].get("held_out", {})
+    if learned in rows and classical in rows:
+        a = rows[learned]["default"]["max_deviation"]
+        b = rows[classical]["default"]["max_deviation"]
+        if a["ci_high"] is None or b["ci_low"] is None or not a["ci_high"] < b["ci_low"]:
+            why.append(f"max deviation on held_out {_mean(a)} against {_mean(b)} m")
+    return why
+
+
+def _mean(s: Mapping[str, Any]) -> str:
+    if s["mean"] is None:
+        return "-"
+    return f"{s['mean']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]"
+
+
+def _learned_sentence(board: Mapping[str, Any]) -> str | None:
+    best = best_classical(board)
+    learned = [k for k in board["results"].get("held_out", {}) if not _classical(board, k)]
+    if best is None or not learned:
+        return None
+    head = (
+        f"Learned policies against the best classical controller, **{best}** (on the held-out "
+        "bank the least deviation among the safest at their defaults; a learned policy meets it "
+        "when it is as safe on the held-out bank, at 8 and 32 UAVs and on real traffic, by the "
+        "intervals' upper ends, and closer to the plan on the held-out bank, the intervals apart)"
+    )
+    met = [k for k in learned if not meets(board, k, best)]
+    if met:
+        dev = board["results"]["held_out"]
+        parts = [f"**{k}** meets it ({_mean(dev[k]['default']['max_deviation'])} m of max "
+                 f"deviation against {_mean(dev[best]['default']['max_deviation'])} m)"
+                 for k in met]  # fmt: skip
+        return f"{head}: {'; '.join(parts)}."
+    parts = [f"{k}: {meets(board, k, best)[0]}" for k in learned]
+    return f"{head}: none meets it ({'; '.join(parts)})."
+
+
 def _current(board: Mapping[str, Any]) -> dict[str, Any]:
     """The board's results without the rows played in another env version (not comparable)."""
     env = board.get("versions", {}).get("env")
@@ -159,4 +238,7 @@ def sentences(board: Mapping[str, Any]) -> list[str]:
             clauses = "; ".join(_bank_clause(board, b) for b in members)
             out.append(f"{name}: {clauses}.")
     out.append(_apf_sentence(board))
+    learned = _learned_sentence(board)
+    if learned:
+        out.append(learned)
     return out
