@@ -15,8 +15,8 @@ def _run(tmp_path, name, *argv):
 def test_a_checkpoint_beside_the_apf_at_eight_uavs(tmp_path, capsys):
     both = _run(tmp_path, "both", "--policy", "ppo_shared,apf", "--config", "n_uavs=8")
     assert capsys.readouterr().err == ""  # --quiet: no note
-    # (in the -v2 episodes, the version ppo_shared was trained in, which the comparison plays)
-    alone = _run(tmp_path, "apf", "--policy", "apf", "--config", "n_uavs=8", "--env-version", "2")
+    # (in the episodes of the version ppo_shared was trained in, the current one)
+    alone = _run(tmp_path, "apf", "--policy", "apf", "--config", "n_uavs=8")
     explicit = _run(
         tmp_path, "explicit", "--policy", "ppo_shared", "--config", "n_uavs=8",
         "--config", "observation.k_uavs=2", "--config", "observation.k_obstacles=1",
