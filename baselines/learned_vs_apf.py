@@ -47,7 +47,14 @@ sys.path.insert(0, str(ROOT))
 from paper_experiment import ROWS, table  # noqa: E402
 
 CHECKPOINTS = ROOT / "checkpoints"
-LEARNED = ("ppo_shared", "ppo_residual_apf", "mappo", "ppo_lagrangian", "mappo_lagrangian")
+LEARNED = (
+    "ppo_shared",
+    "ppo_residual_apf",
+    "ppo_residual_apf_set",
+    "mappo",
+    "ppo_lagrangian",
+    "mappo_lagrangian",
+)
 #: Shipped only if it earns its place (issue 29): no "missing" row when absent.
 OPTIONAL = ("mappo_lagrangian",)
 #: Rows of the tables: the paper's, with the combined loss-of-separation rate first.
@@ -89,8 +96,11 @@ def targets(bank: EvaluationResult, meta: dict[str, dict]) -> list[tuple[str, st
         if "reproduces" in facts:  # retrained to a report's checkpoint: the original run's
             rep = facts["reproduces"]  # budget is the recipe's
             facts = rep["original_training"]
-            how = ("reproduces it bit for bit" if rep["held_out"]["identical"] else
-                   "was retrained from that seed to its checkpoint's agent-steps, not bit for bit")
+            how = (
+                "reproduces it bit for bit"
+                if rep["held_out"]["identical"]
+                else "was retrained from that seed to its checkpoint's agent-steps, not bit for bit"
+            )
             note = f" (the original run, {rep['report']} seed {rep['seed']}; this file {how})"
         wall = float(facts.get("wall_s", float("nan")))
         steps = int(facts.get("agent_steps", 0))

@@ -29,7 +29,7 @@ def test_nested_dicts_and_replace():
     "kwargs,match",
     [
         ({"n_uavs": 1}, "n_uavs=1"),
-        ({"n_uavs": 33}, "n_uavs=33"),
+        ({"n_uavs": 65}, "n_uavs=65"),
         ({"n_obstacles": 9}, "n_obstacles=9"),
         ({"n_uavs": 2.5}, "n_uavs=2.5"),
         ({"dt": -0.1}, "dt=-0.1"),

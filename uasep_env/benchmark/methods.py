@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from uasep_env.config import AS_PUBLISHED, EnvConfig
+from uasep_env.config.groups import CALIBRATED_HORIZONS
 from uasep_env.policies import (
     APF,
     REGISTRY,
@@ -35,8 +36,9 @@ __all__ = ["HORIZONS_S", "METHODS", "SCALES", "Method", "registry_methods", "swe
 
 #: Margin scales: 9 settings from a quarter to three times the default margin.
 SCALES = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0)
-#: Prediction horizons (s) for the pure learned policies (trained at 10 s).
-HORIZONS_S = (4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0)
+#: Prediction horizons (s) for the pure learned policies (trained at 10 s): the calibrated
+#: prediction's (the default fit from -v3 on), which it calibrates at these horizons only.
+HORIZONS_S = CALIBRATED_HORIZONS
 
 
 def _scaled(names: Sequence[str], scale: float) -> APFGains:

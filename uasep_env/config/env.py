@@ -90,7 +90,7 @@ class EnvConfig:
     """The whole configuration of a world / environment.
 
     Attributes:
-        n_uavs: Number of cooperative UAVs (2-32).
+        n_uavs: Number of cooperative UAVs (2-64).
         n_obstacles: Number of obstacle slots (0-8). Scenarios may leave some inactive.
         scenario: Scenario family, one of the registered families (:data:`SCENARIOS`, see
             :mod:`uasep_env.scenarios`).
@@ -136,7 +136,7 @@ class EnvConfig:
     render_mode: str | None = None
 
     def __post_init__(self) -> None:
-        check_int_in("n_uavs", self.n_uavs, 2, 32)
+        check_int_in("n_uavs", self.n_uavs, 2, 64)
         check_int_in("n_obstacles", self.n_obstacles, 0, 8)
         check_one_of("scenario", self.scenario, scenario_names())
         if isinstance(self.formation, str):
