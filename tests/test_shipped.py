@@ -92,7 +92,7 @@ def flown() -> dict[str, Any]:
 
 
 def test_the_shipped_checkpoints():
-    shipped = {"ppo_shared", "ppo_residual_apf", "mappo", "ppo_lagrangian"}
+    shipped = {"ppo_shared", "ppo_residual_apf", "ppo_residual_apf_set", "mappo", "ppo_lagrangian"}
     assert {p.stem for p in CHECKPOINTS} == shipped
 
 
