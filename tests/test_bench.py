@@ -317,14 +317,17 @@ def test_verdict_says_whether_a_learned_policy_meets_the_best_classical_controll
             "apf": (safe, 23.0),
             "mvp-region": (_stats(0.0, 0.01, 0.0, 0.01, 21.4, 20.6, 22.1), 21.4),
             "mvp": (_stats(0.05, 0.08, 0.6, 0.65, 9.0, 8.5, 9.5), None),  # less safe
+            "orca": (_stats(0.0, 0.01, 0.0, 0.01, 12.0, 11.5, 12.5), 12.0),  # but on real traffic
             "ppo_residual_apf": (_stats(0.0, 0.01, 0.0, 0.01, *learned_dev), 17.0),
         }
-        real = dict(rows, ppo_residual_apf=(learned_real, None))
+        real = dict(rows, ppo_residual_apf=(learned_real, None),
+                    orca=(_stats(0.02, 0.05, 0.2, 0.25, 14.0, 13.0, 15.0), None))  # fmt: skip
         banks = {"held_out": rows, "uavs_8": rows, "uavs_32": rows, "real_traffic": real}
         return _verdict_board(banks)
 
     good = board(safe)
-    assert verdict.best_classical(good) == "mvp-region"  # least deviation among the safest
+    # The least deviation among the safest on every bank: not orca, less safe on real traffic.
+    assert verdict.best_classical(good) == "mvp-region"
     assert verdict.meets(good, "ppo_residual_apf", "mvp-region") == []
     text = verdict.sentences(good)[-1]
     assert text.startswith("Learned policies against the best classical controller, "
