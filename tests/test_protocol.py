@@ -123,7 +123,7 @@ def test_scaling_script_writes_tables_figure_and_targets(tmp_path, capsys):
     [
         (["--policy", "nope"], "--policy 'nope'"),
         (["--policy", "os:nope"], "cannot import"),
-        (["--uavs", "3,40"], "n_uavs"),
+        (["--uavs", "3,65"], "n_uavs"),
         (["--episodes", "0"], "--episodes"),
         (["--policy", "=apf"], "empty label"),
     ],
