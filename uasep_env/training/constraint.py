@@ -376,9 +376,7 @@ class LeanCost:
         """
         cost = res.cost if self.cost == "cost" else res.cost_terms[self.cost]
         costs = np.asarray(cost, dtype=np.float64).reshape(-1)
-        lam = self.lagrangian.multiplier
-        if lam:  # as SB3's callback writes into its float32 reward array
-            reward = ((reward - lam * costs) / (1.0 + lam)).astype(reward.dtype)
+        reward = self.lagrangian.penalise(reward, costs)
         self.tracker.step(costs, dones)
         return reward
 

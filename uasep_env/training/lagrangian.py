@@ -137,6 +137,17 @@ class PIDLagrangian:
         self.updates += 1
         return self.multiplier
 
+    def penalise(self, rewards: Any, costs: Any) -> Any:
+        """The rewards PPO learns from: ``(r - lambda c) / (1 + lambda)``, in ``rewards``' dtype.
+
+        ``rewards`` itself (the same array) while the multiplier is 0. The one formula of the
+        SB3 callback and the lean loop's :class:`~uasep_env.training.constraint.LeanCost`.
+        """
+        lam = self.multiplier
+        if not lam:
+            return rewards
+        return ((rewards - lam * costs) / (1.0 + lam)).astype(rewards.dtype)
+
     def state_dict(self) -> dict[str, Any]:
         """The controller's state (JSON-friendly), for checkpoints."""
         return {

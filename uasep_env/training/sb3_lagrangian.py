@@ -162,9 +162,7 @@ class LagrangianCallback(BaseCallback):
     def _on_step(self) -> bool:
         costs = self._costs(self.locals["infos"])
         rewards = self.locals["rewards"]  # the array PPO stores next: shaped in place
-        lam = self.lagrangian.multiplier
-        if lam:
-            rewards[...] = (rewards - lam * costs) / (1.0 + lam)
+        rewards[...] = self.lagrangian.penalise(rewards, costs)
         self.tracker.step(costs, np.asarray(self.locals["dones"]))
         return True
 
