@@ -1,4 +1,4 @@
-"""The residual_apf action mode: a zero correction flies the APF exactly, in every view."""
+"""The residual action modes: a zero correction flies the base controller exactly, in every view."""
 
 import gymnasium
 import numpy as np
@@ -9,7 +9,7 @@ from uasep_env import make_config
 from uasep_env.envs.core import EnvCore
 from uasep_env.interface.actions import ResidualAPF
 from uasep_env.interface.observation import ObservationLayout
-from uasep_env.policies import APF
+from uasep_env.policies import APF, MVP, MVPParams
 
 RESIDUAL = {"action": {"mode": "residual_apf"}}
 
@@ -22,10 +22,17 @@ def test_layout_adds_the_apf_command_at_the_end():
     assert len(residual.feature_names()) == residual.dim
 
 
-def test_core_zero_residual_is_the_apf_bit_for_bit():
+_BASES = {
+    "residual_apf": APF,
+    "residual_mvp_region": lambda c: MVP(c, MVPParams(obstacle_model="region")),
+}
+
+
+@pytest.mark.parametrize("mode", list(_BASES))
+def test_core_zero_residual_is_the_base_bit_for_bit(mode):
     cfg = make_config(scenario="random", n_obstacles=2)
-    a, b = EnvCore(cfg, 6), EnvCore(cfg.replace(**RESIDUAL), 6)
-    apf = APF(cfg)
+    a, b = EnvCore(cfg, 6), EnvCore(cfg.replace(action={"mode": mode}), 6)
+    apf = _BASES[mode](cfg)  # the base controller, flown directly
     oa, ob = a.reset(seed=5), b.reset(seed=5)
     for _ in range(200):
         np.testing.assert_array_equal(ob[..., :-3], oa)
@@ -34,6 +41,25 @@ def test_core_zero_residual_is_the_apf_bit_for_bit():
         np.testing.assert_array_equal(ra.rewards, rb.rewards)
         np.testing.assert_array_equal(a.world.uav_pos, b.world.uav_pos)
         oa, ob = ra.obs, rb.obs
+    assert mode != "residual_mvp_region" or not np.array_equal(a.world.uav_pos, _apf_flight(cfg))
+
+
+def _apf_flight(cfg):
+    """Where the APF's formation is after the test's 200 steps (another base flies elsewhere)."""
+    core, apf = EnvCore(cfg, 6), APF(cfg)
+    obs = core.reset(seed=5)
+    for _ in range(200):
+        obs = core.step(apf(obs)).obs
+    return core.world.uav_pos
+
+
+def test_an_unknown_residual_base_is_named():
+    with pytest.raises(ValueError, match="action.mode.*residual_orca"):
+        make_config(action={"mode": "residual_orca"})
+    with pytest.raises(ValueError, match="mode='direct'"):
+        ResidualAPF(make_config())  # a direct config names no base
+    with pytest.raises(ValueError, match="only the residual_apf mode's base has APF gains"):
+        ResidualAPF(make_config(action={"mode": "residual_mvp_region"}), APF.default_gains)
 
 
 def test_residual_is_bounded_and_added():

@@ -184,8 +184,9 @@ def test_the_network_gives_the_same_bits_whichever_blas_kernel_runs(tmp_path):
     assert len({d[0] for d in digests.values()}) == 1, digests
 
 
-def test_residual_checkpoint_in_a_direct_env_equals_the_residual_env(tmp_path):
-    cfg = make_config(scenario="random", action={"mode": "residual_apf"})
+@pytest.mark.parametrize("mode", ["residual_apf", "residual_mvp_region"])
+def test_residual_checkpoint_in_a_direct_env_equals_the_residual_env(tmp_path, mode):
+    cfg = make_config(scenario="random", action={"mode": mode})
     _random_checkpoint(tmp_path / "r.zip", cfg, seed=1)
     direct = cfg.replace(action={"mode": "direct"})
     in_direct = load_policy(tmp_path / "r.zip", direct)
@@ -218,6 +219,15 @@ def test_mismatched_env_is_named(tmp_path, env, message):
     _random_checkpoint(tmp_path / "p.zip", cfg)
     with pytest.raises(CheckpointError, match=message):
         load_policy(tmp_path / "p.zip", cfg.replace(**env))
+
+
+def test_a_residual_policy_refuses_another_base(tmp_path):
+    cfg = make_config(scenario="random", action={"mode": "residual_mvp_region"})
+    _random_checkpoint(tmp_path / "p.zip", cfg)
+    other = cfg.replace(action={"mode": "residual_apf"})
+    message = "trained with 'residual_mvp_region', this env uses 'residual_apf'"
+    with pytest.raises(CheckpointError, match=message):
+        load_policy(tmp_path / "p.zip", other)
 
 
 class _Boom:
@@ -383,7 +393,7 @@ def test_base_gains_only_for_a_residual_policy_flying_its_own_base():
     cfg = make_config(scenario="random")
     wide = APFGains().scaled(("obstacle_safe_min",), 2.0)
     residual = load_policy(CHECKPOINTS / "ppo_residual_apf.zip", cfg, base_gains=wide)
-    assert residual._residual.apf.gains == wide
+    assert residual._residual.controller.gains == wide
     with pytest.raises(ValueError, match=r"base_gains=APFGains\(.*a direct policy in a direct"):
         load_policy(CHECKPOINTS / "ppo_shared.zip", cfg, base_gains=wide)
     with pytest.raises(ValueError, match="a residual_apf policy in a residual_apf environment"):

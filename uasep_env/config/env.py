@@ -204,10 +204,11 @@ class EnvConfig:
             + (" (recorded tracks: scenario 'real_traffic')" if needs == "dubins" else ""),
         )
         check(
-            self.action.mode != "residual_apf" or self.observation.clip >= 1.0,
+            self.action.mode == "direct" or self.observation.clip >= 1.0,
             "observation.clip",
             self.observation.clip,
-            "must be >= 1 with action.mode='residual_apf' (the observed APF command is in [-1, 1])",
+            f"must be >= 1 with action.mode={self.action.mode!r} (the observed base command is "
+            "in [-1, 1])",
         )
 
     @property

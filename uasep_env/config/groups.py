@@ -473,7 +473,7 @@ class CostWeights:
 
 
 #: Names accepted for ``ActionConfig.mode`` (see :mod:`uasep_env.interface.actions`).
-ACTION_MODES = ("direct", "residual_apf")
+ACTION_MODES = ("direct", "residual_apf", "residual_mvp_region")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -485,7 +485,9 @@ class ActionConfig:
             ``uav.max_accel`` per axis. ``"residual_apf"``: the action is a bounded
             correction added to the paper's APF command for the same observation; the
             observation then ends with that APF command (3 more entries).
-        residual_scale: In ``residual_apf`` mode, the largest correction per axis, as a
+            ``"residual_mvp_region"``: the same on MVP with obstacles on their predicted
+            regions (the leaderboard's best classical controller).
+        residual_scale: In the residual modes, the largest correction per axis, as a
             fraction of ``uav.max_accel`` (the sum is clipped to the acceleration bound).
         strict: Finite actions outside the action box ``[-1, 1]`` raise a ``ValueError``
             naming them. Off (the default, the ecosystem's convention), they are clipped to

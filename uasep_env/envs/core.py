@@ -20,7 +20,7 @@ import numpy as np
 from uasep_env.config import EnvConfig, make_config
 from uasep_env.config.checks import is_real
 from uasep_env.envs._infos import row_dicts
-from uasep_env.interface.actions import ResidualAPF
+from uasep_env.interface.actions import Residual
 from uasep_env.interface.costs import COST_TERMS, SAFETY_FLAGS
 from uasep_env.interface.observation import ObservationLayout, build_observations, global_state
 from uasep_env.interface.outcome import compute_outcome
@@ -282,9 +282,9 @@ class EnvCore:
         self.n_envs = n_envs
         self.n_uavs = self.config.n_uavs
         self._obs = np.zeros((n_envs, self.n_uavs, self.layout.world_dim), dtype=np.float32)
-        # residual_apf mode: the APF's command for the current observations (what the next
-        # action corrects); None in direct mode.
-        self.residual = ResidualAPF(self.config) if self.layout.base_action else None
+        # A residual mode: the base controller's command for the current observations (what
+        # the next action corrects); None in direct mode.
+        self.residual = Residual(self.config) if self.layout.base_action else None
         self._base = np.zeros((n_envs, self.n_uavs, 3), dtype=np.float32)
 
     def state_dict(self) -> dict[str, np.ndarray]:

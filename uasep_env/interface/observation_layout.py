@@ -52,9 +52,9 @@ defaults (``clip * position_scale`` = 1,200 m; a default plan's final way-point 
 (a higher ``cruise_speed`` or a longer ``episode_duration``) reads that bound until the
 formation comes within it. None of the APF controllers uses it.
 
-In the ``residual_apf`` action mode (``action.mode``, see :mod:`uasep_env.interface.actions`) the
-vector ends with one more feature, ``base_action`` (3): the APF's normalised command for
-the rest of the vector, the command the agent's action corrects. It is not clipped.
+In the residual action modes (``action.mode``, see :mod:`uasep_env.interface.actions`) the
+vector ends with one more feature, ``base_action`` (3): the base controller's normalised
+command for the rest of the vector, the command the agent's action corrects. It is not clipped.
 """
 
 from __future__ import annotations
@@ -166,7 +166,7 @@ class ObservationLayout:
         acc_scale: Acceleration divisor (m/s^2).
         clip: Clip bound of the normalised entries.
         sensing_range: Range beyond which nothing is observed (m).
-        base_action: Whether the vector ends with the APF's command (``residual_apf``).
+        base_action: Whether the vector ends with the base controller's command (a residual mode).
         features: The keys (:attr:`Feature.key`) of the features the vector has, a
             sub-sequence of :data:`FEATURES` (``None``: the default ones).
     """
@@ -211,7 +211,7 @@ class ObservationLayout:
             acc_scale=config.uav.max_accel,
             clip=oc.clip,
             sensing_range=oc.sensing_range,
-            base_action=config.action.mode == "residual_apf",
+            base_action=config.action.mode != "direct",
             features=tuple(f.key for f in FEATURES if f.default or f.key in extra),
         )
 

@@ -196,7 +196,7 @@ class PolicyCheckpoint:
 
     @property
     def action_mode(self) -> str:
-        """``"direct"`` or ``"residual_apf"``."""
+        """``"direct"`` or a residual mode (``"residual_apf"``, ``"residual_mvp_region"``)."""
         return self.env_config.action.mode
 
     @property

@@ -33,7 +33,7 @@ import numpy as np
 
 from uasep_env._numba import compiled_twin
 from uasep_env.config import EnvConfig
-from uasep_env.interface.actions import ResidualAPF
+from uasep_env.interface.actions import Residual
 from uasep_env.policies.checkpoint import META, CheckpointError, PolicyCheckpoint, StoredLayout
 from uasep_env.policies.checkpoint_reader import read_checkpoint
 from uasep_env.policies.guard import finite_observations
@@ -105,12 +105,13 @@ _ACTIVATIONS = {
 class LearnedPolicy:
     """A checkpoint's actor (an MLP in numpy) behind the common policy interface.
 
-    The policy acts in an environment whose config is ``config``. A ``residual_apf``
-    policy in a ``direct`` environment computes the APF's command itself and returns the
-    corrected command (:class:`~uasep_env.interface.actions.ResidualAPF`, the same numbers as the
-    ``residual_apf`` environment), so it is evaluated beside the APFs on the same seeds;
-    in a ``residual_apf`` environment it returns its correction. (The corrected command is
-    returned in float64, the precision the residual environment adds it in.)
+    The policy acts in an environment whose config is ``config``. A residual policy
+    (``residual_apf``, ``residual_mvp_region``) in a ``direct`` environment computes its base
+    controller's command itself and returns the corrected command
+    (:class:`~uasep_env.interface.actions.Residual`, the same numbers as the residual
+    environment), so it is evaluated beside the controllers on the same seeds; in its own
+    residual environment it returns its correction. (The corrected command is returned in
+    float64, the precision the residual environment adds it in.)
 
     Args:
         meta: The checkpoint's description.
@@ -148,16 +149,16 @@ class LearnedPolicy:
         self.name = name
         self.mode = trained.action.mode
         env_layout = _check_fits(meta, trained, config)
-        # The base APF flies this env (its size), with the trained action settings.
+        # The base controller flies this env (its size), with the trained action settings.
         self._residual = (
-            ResidualAPF(config.replace(action=asdict(trained.action)), base_gains)
-            if self.mode == "residual_apf" and config.action.mode == "direct"
+            Residual(config.replace(action=asdict(trained.action)), base_gains)
+            if self.mode != "direct" and config.action.mode == "direct"
             else None
         )
         if base_gains is not None and self._residual is None:
             raise ValueError(
-                f"base_gains={base_gains!r}: only a residual_apf policy acting in a direct "
-                f"environment computes its base APF (this is a {self.mode} policy in a "
+                f"base_gains={base_gains!r}: only a residual policy acting in a direct "
+                f"environment computes its base controller (this is a {self.mode} policy in a "
                 f"{config.action.mode} environment)"
             )
         # float32 as stored, kept transposed in float64 for :func:`dense`.
@@ -218,6 +219,12 @@ def _check_fits(meta: PolicyCheckpoint, trained: EnvConfig, config: EnvConfig) -
     problems = []
     if trained.action.mode == "direct" and config.action.mode != "direct":
         problems.append(f"action.mode: trained with 'direct', this env uses {config.action.mode!r}")
+    elif config.action.mode not in ("direct", trained.action.mode):
+        # A correction of one base added to another's command would fly neither.
+        problems.append(
+            f"action.mode: trained with {trained.action.mode!r}, this env uses "
+            f"{config.action.mode!r}"
+        )
     env_layout = StoredLayout.from_config(config.replace(action=asdict(trained.action)))
     if meta.architecture == "set":
         difference = set_difference(meta.observation_layout, env_layout)

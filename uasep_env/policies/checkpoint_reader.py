@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from uasep_env.config.groups import ACTION_MODES
 from uasep_env.policies.checkpoint import (
     ACTIVATIONS,
     CHECKPOINT_ALGORITHMS,
@@ -227,7 +228,7 @@ def _description(p: Path, raw: bytes, limits: CheckpointLimits) -> tuple[PolicyC
         raise _fail(p, f"invalid checkpoint description (config: {err})") from err
     if layout is not None and layout.dim != obs_dim:
         raise _fail(p, f"layout is {layout.dim} wide, obs_dim says {obs_dim}")
-    if trained.action.mode not in ("direct", "residual_apf"):  # pragma: no cover - config checks
+    if trained.action.mode not in ACTION_MODES:  # pragma: no cover - config checks
         raise _fail(p, f"unknown action mode {trained.action.mode!r}")
     return meta, n_layers
 

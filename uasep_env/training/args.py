@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
+from uasep_env.config.groups import ACTION_MODES
+
 __all__ = [
     "FIELDS",
     "PER_RUN",
@@ -256,7 +258,7 @@ def config_overrides(text: str) -> str:
 class Args:
     """Command-line options (``--total-timesteps``, ``--n-envs``, ...)."""
 
-    action_mode: str = "direct"  # "direct" (pure policy) or "residual_apf"
+    action_mode: str = "direct"  # "direct" (pure policy) or a residual mode (ACTION_MODES)
     residual_scale: float = 0.5  # residual_apf: largest correction, fraction of max_accel
     scenario: str = "random"
     n_uavs: int = 3
@@ -307,8 +309,11 @@ def _scenario(text: str) -> str:
 
 #: Each field's validator (argparse ``type=``; None for an on/off flag) and help text.
 FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
-    "action_mode": (choice("direct", "residual_apf"), "direct (pure policy) or residual_apf"),
-    "residual_scale": (positive_float, "residual_apf: largest correction, fraction of max_accel"),
+    "action_mode": (
+        choice(*ACTION_MODES),
+        "direct (pure policy), or a residual on a base: " + ", ".join(ACTION_MODES[1:]),
+    ),
+    "residual_scale": (positive_float, "residual modes: largest correction, fraction of max_accel"),
     "scenario": (_scenario, "scenario family of the training encounters"),
     "n_uavs": (positive_int, "formation size"),
     "n_obstacles": (non_negative_int, "obstacles per encounter"),
