@@ -298,6 +298,7 @@ class Args:
     torch_threads: int = 1
     device: str = "cpu"  # where torch computes: SB3's whole policy, or the lean loop's update
     trainer: str = "default"  # "default" (SB3's PPO; skrl's MAPPO) or "lean" (ppo_lean)
+    shield: str = "none"  # "cbf": train under the CBF shield (lean loop; shield_loop)
     progress: bool = True
 
 
@@ -362,6 +363,11 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "trainer": (
         choice("default", "lean"),
         "default (SB3's PPO; skrl's MAPPO) or lean (uasep_env.training.ppo_lean)",
+    ),
+    "shield": (
+        choice("none", "cbf"),
+        "cbf: every action flies through the CBF filter while training (--trainer lean "
+        "only; evaluated as <policy>+cbf)",
     ),
     "progress": (None, "progress bar on stderr"),
     # MAPPO's own (uasep_env.training.mappo.Args).
@@ -526,6 +532,13 @@ def network_problem(args: Args) -> str | None:
     need = network_bytes(hidden(args), n_in, 3, args.batch_size)
     need += network_bytes(hidden(args), 4 * n_in, 1, args.batch_size)
     return memory_problem(need, "the actor and the critic, their gradients and Adam's state")
+
+
+def shield_problem(args: Args) -> str | None:
+    """Why ``--shield`` cannot train with these flags (one line naming the flag), or None."""
+    if args.shield != "none" and args.trainer != "lean":
+        return f"argument --shield: {args.shield!r} trains with --trainer lean only"
+    return None
 
 
 def threads_problem() -> str | None:

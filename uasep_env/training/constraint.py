@@ -37,8 +37,9 @@ from typing import Any
 import numpy as np
 
 from uasep_env.interface.costs import COST_TERMS
-from uasep_env.training.args import non_negative_float, positive_int
+from uasep_env.training.args import non_negative_float, positive_int, shield_problem
 from uasep_env.training.lagrangian import PIDLagrangian, check_cost_limit
+from uasep_env.training.shield_loop import SHIELD_COST
 
 __all__ = [
     "COST_FIELDS",
@@ -72,11 +73,16 @@ COST_FILES = ("cost_progress.csv", "cost_curves.png", "budget.json")
 
 
 def cost_name(text: str) -> str:
-    """An argparse type: a cost the environments report (``cost`` or a term's name)."""
-    if text != "cost" and text not in COST_TERMS:
+    """An argparse type: a cost the environments report, or the shield's interventions.
+
+    ``cost`` or a term's name; ``shield``: the interventions while training under the
+    shield (``--shield cbf``).
+    """
+    if text != "cost" and text not in COST_TERMS and text != SHIELD_COST:
         raise argparse.ArgumentTypeError(
             f"cost {text!r} is not reported by the environment; choose 'cost' or one of its "
-            f"terms {COST_TERMS}"
+            f"terms {COST_TERMS}, or {SHIELD_COST!r} (the shield's interventions, with "
+            "--shield cbf)"
         )
     return text
 
@@ -149,6 +155,19 @@ def check(args: Any, trainers: tuple[str, ...] = ("default",)) -> str | None:
         return (
             "argument --norm-reward: rescales the reward but not the cost; a Lagrangian "
             "recipe trains without it"
+        )
+    problem = shield_problem(args)
+    if problem:
+        return problem
+    if args.cost == SHIELD_COST and args.shield == "none":
+        return (
+            f"argument --cost: {SHIELD_COST!r} counts the shield's interventions; add --shield cbf"
+        )
+    if args.cost == SHIELD_COST and isinstance(cost_limit(args), str):
+        return (
+            f"argument --cost-limit: {args.cost_limit!r} is the APF's budget of the "
+            f"environment's cost; with --cost {SHIELD_COST} give a number (interventions per "
+            "agent and episode)"
         )
     if isinstance(cost_limit(args), str) and args.budget_episodes > len(VALIDATION_SEEDS):
         return (
@@ -366,15 +385,28 @@ class LeanCost:
 
             self._fh = ProgressLog(self.csv_path, COST_FIELDS)
 
-    def shape(self, res: Any, reward: np.ndarray, dones: np.ndarray) -> np.ndarray:
+    def shape(
+        self, res: Any, reward: np.ndarray, dones: np.ndarray, shield: np.ndarray | None = None
+    ) -> np.ndarray:
         """The rewards PPO learns from for one step of the core; the step's costs counted.
 
         Args:
             res: The core's :class:`~uasep_env.envs.core.StepResult` (costs ``(E, N)``).
             reward: ``(E * N,)`` the agents' rewards, environment-major.
             dones: ``(E * N,)`` whether each agent's episode ended with the step.
+            shield: ``(E * N,)`` the shield's interventions in the step
+                (:class:`~uasep_env.training.shield_loop.ShieldInLoop`), the cost under
+                ``cost="shield"``.
+
+        Raises:
+            ValueError: ``cost="shield"`` with no interventions given (no shield).
         """
-        cost = res.cost if self.cost == "cost" else res.cost_terms[self.cost]
+        if self.cost == SHIELD_COST:
+            if shield is None:
+                raise ValueError("cost='shield': the run trains without a shield (--shield cbf)")
+            cost = shield
+        else:
+            cost = res.cost if self.cost == "cost" else res.cost_terms[self.cost]
         costs = np.asarray(cost, dtype=np.float64).reshape(-1)
         reward = self.lagrangian.penalise(reward, costs)
         self.tracker.step(costs, dones)

@@ -267,6 +267,10 @@ def train(args: Args, plugin: Any = None, central: bool = False) -> dict:
     # The constraint's state restored (and checked) before the folder is rewound.
     cost = plugin.start_lean(run.out, config, run.resumed) if plugin is not None else None
     hooks = _RunHooks(run, config, cost, plugin.facts if plugin is not None else None)
+    if args.shield == "cbf":
+        from uasep_env.training.shield_loop import ShieldInLoop
+
+        hooks.shield = ShieldInLoop(config)
 
     def prepare(state: Any) -> None:
         hooks.last_state = state
@@ -301,6 +305,7 @@ class _RunHooks(Hooks):
         self.last_state: Any = None  # the loop's State
         self.bar: Any = None
         self.cost, self.facts = cost, facts  # a Lagrangian recipe's multiplier and state
+        self.shield: Any = None  # training under the shield: its filter (--shield cbf)
 
     def start(self, nets: Any, norm: Any) -> None:
         args, run = self.args, self.run
@@ -327,8 +332,14 @@ class _RunHooks(Hooks):
         if self.bar is not None:
             self.bar.update(agent_steps - self.bar.n)
 
+    def act(self, actions: Any, observations: Any) -> Any:
+        return actions if self.shield is None else self.shield.act(actions, observations)
+
     def shape(self, res: Any, reward: Any, dones: Any) -> Any:
-        return reward if self.cost is None else self.cost.shape(res, reward, dones)
+        if self.cost is None:
+            return reward
+        shield = self.shield.interventions if self.shield is not None else None
+        return self.cost.shape(res, reward, dones, shield)
 
     def update_end(self, state: Any) -> None:
         from uasep_env.training.rundir import bar_postfix, window_summary
@@ -351,7 +362,14 @@ class _RunHooks(Hooks):
         return {"agent_steps": int(state.agent_steps), "wall_s": state.wall_s,
                 "episodes": state.episodes, "updates": state.updates,
                 **window_summary(self.window),
-                **(self.facts() if self.facts is not None else {})}  # fmt: skip
+                **(self.facts() if self.facts is not None else {}),
+                **(self._shield_facts() if self.shield is not None else {})}  # fmt: skip
+
+    def _shield_facts(self) -> dict:
+        """Training under the shield: its interventions per agent-step (this process's run)."""
+        rate = self.shield.rate()
+        return {"shield": {"filter": "cbf", "interventions_per_agent_step":
+                           None if rate != rate else round(rate, 6)}}  # fmt: skip
 
     def checkpoint(self, state: Any) -> None:
         self.run.save_checkpoint(

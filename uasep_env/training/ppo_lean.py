@@ -214,6 +214,16 @@ class Hooks:
     def rollout_end(self, agent_steps: int) -> None:
         """After each rollout, before its update."""
 
+    def act(self, actions: np.ndarray, observations: np.ndarray) -> np.ndarray:
+        """The actions ``(E, N, 3)`` the core steps with (the sampled ones, clipped, here).
+
+        ``observations``: the raw ``(E, N, obs_dim)`` observations they were sampled for.
+        Training under the shield filters them here
+        (:class:`~uasep_env.training.shield_loop.ShieldInLoop`); PPO learns from the
+        sampled actions.
+        """
+        return actions
+
     def shape(self, res: Any, reward: np.ndarray, dones: np.ndarray) -> np.ndarray:
         """The rewards ``(E * N,)`` PPO learns from for the core's step ``res`` (unchanged here).
 
@@ -303,6 +313,7 @@ class _Rollout:
         self.starts = np.zeros((n_steps, rows), dtype=np.float32)
         self.last_value = np.zeros(rows, dtype=np.float32)
         self.obs = np.zeros((rows, dim), dtype=np.float32)  # the next observation, normalised
+        self.raw = np.zeros((rows, dim), dtype=np.float32)  # the same, as observed
         self.start = np.ones(rows, dtype=np.float32)  # 1 where it begins an episode
         # The running episodes: safety, and the first UAV's return and length (raw rewards).
         self.safety = EpisodeSafety(self.n_envs)
@@ -312,6 +323,7 @@ class _Rollout:
     def reset(self, seed: int) -> None:
         """Reset every environment (environment ``e`` gets ``seed + e``)."""
         raw = self.core.reset(seed=seed).reshape(len(self.obs), -1)
+        self.raw = raw
         self.obs = self.norm.observe(raw, update=True)
         self.start[:] = 1.0
         self.safety.clear()
@@ -359,8 +371,12 @@ class _Rollout:
                     self.crit_t[t] = c
                 self.values[t] = self.value(c)
                 self.starts[t] = self.start
+                flown = self.hooks.act(
+                    np.clip(act.numpy(), -1.0, 1.0).reshape(self.n_envs, n, 3),
+                    self.raw.reshape(self.n_envs, n, -1),
+                )
                 e0 = time.perf_counter()
-                res = core.step(np.clip(act.numpy(), -1.0, 1.0).reshape(self.n_envs, n, 3))
+                res = core.step(flown)
                 env_s += time.perf_counter() - e0
                 done_env = res.terminated | res.truncated
                 self._track(res, done_env)
@@ -385,6 +401,7 @@ class _Rollout:
                         last = torch.from_numpy(norm.normalise(final[timeout]))
                         rows_out = np.flatnonzero(dones)[timeout]
                         reward[rows_out] += gamma * self.value(last)
+                self.raw = raw
                 self.rewards[t] = reward
                 self.start = dones.astype(np.float32)
             # Not counted in the statistics: the next rollout's first step counts it.

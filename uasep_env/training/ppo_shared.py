@@ -62,7 +62,14 @@ from typing import Any
 
 import numpy as np
 
-from uasep_env.training.args import Args, budget_notice, hidden, make_env_config, rounded_budget
+from uasep_env.training.args import (
+    Args,
+    budget_notice,
+    hidden,
+    make_env_config,
+    rounded_budget,
+    shield_problem,
+)
 from uasep_env.training.args import parse_args as _parse_args
 
 # What every trainer writes the same way (rundir); mappo and the scripts read it from here too.
@@ -108,7 +115,7 @@ def _check(args: Args) -> str | None:
     """What the PPO recipes refuse beyond each flag's range (one message naming the flag)."""
     if args.trainer == "lean" and args.tensorboard:
         return "argument --tensorboard: SB3's logger; not with --trainer lean"
-    return arch_problem(args)
+    return arch_problem(args) or shield_problem(args)
 
 
 def arch_problem(args: Args) -> str | None:

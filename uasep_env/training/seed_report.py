@@ -282,7 +282,7 @@ def render_report(data: dict[str, Any], curves_name: str = "curves.png") -> str:
             f"encounters only; {n} held-out encounters (seeds {first:,}-{first + n - 1:,}). Per "
             "seed: rates with 95 % Wilson intervals, means with 95 % Student-t intervals. Across "
             "seeds: interquartile mean (IQM) of the per-family scores, 95 % stratified bootstrap "
-            "interval (seeds resampled within each scenario family).",
+            "interval (seeds resampled within each scenario family)." + _shield_sentence(data),
             "",
             "## Held-out bank",
             "",
@@ -304,6 +304,17 @@ def render_report(data: dict[str, Any], curves_name: str = "curves.png") -> str:
             f"Learning curves of every seed: `{curves_name}`.",
             "",
         ]
+    )
+
+
+def _shield_sentence(data: dict[str, Any]) -> str:
+    """A report's word on the shield its seeds trained under (and play under), if any."""
+    shield = (data.get("recipe_args") or {}).get("shield", "none")
+    if shield in (None, "none"):
+        return ""
+    return (
+        f" Trained under the {shield.upper()} shield (`--shield {shield}`) and evaluated under it: "
+        f"every seed's checkpoint plays as `<checkpoint>+{shield}`."
     )
 
 

@@ -249,10 +249,12 @@ def held_out(chosen: list[Path], episodes: int, workers: int) -> Any:
     from uasep_env import make_config
     from uasep_env.evaluation import evaluate
     from uasep_env.scenarios import HELD_OUT_SEEDS
+    from uasep_env.training.shield_loop import deployed
 
     cfg = make_config(scenario="random")
     policies: dict[str, Any] = {"apf": "apf"}
-    policies |= {f"seed_{k}": str(p) for k, p in enumerate(chosen)}
+    # As deployed: a checkpoint trained under the shield plays shielded.
+    policies |= {f"seed_{k}": deployed(p) for k, p in enumerate(chosen)}
     return evaluate(policies, cfg, list(HELD_OUT_SEEDS)[:episodes], workers=workers)
 
 

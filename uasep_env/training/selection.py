@@ -10,7 +10,8 @@ the APF on the same seeds. The choice, safety first: the checkpoints whose rates
 ends (a collision or a lost UAV), collisions and losses of separation are no higher than
 the APF's (or, if none is, the one lowest in those rates, in that order), and of those
 the lowest mean max deviation. Writes ``<run>/selection.csv`` (one row per checkpoint)
-and prints the choice.
+and prints the choice. A checkpoint trained under the shield (``--shield cbf``) plays shielded,
+as it is deployed (:func:`uasep_env.training.shield_loop.deployed`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from uasep_env.policies import load_policy
 from uasep_env.runtime.atomic import atomic_copy, atomic_output
 from uasep_env.scenarios import VALIDATION_SEEDS
 from uasep_env.training.curves import read_rows
+from uasep_env.training.shield_loop import deployed
 
 KEYS = ("terminated", "collision", "loss_of_separation", "max_deviation")
 
@@ -103,13 +105,14 @@ def main(argv: list[str] | None = None) -> Path:
         p.error(f"no checkpoints under {args.run}")
     cfg = make_config(scenario="random")
     seeds = list(VALIDATION_SEEDS)[: args.episodes]
-    policies = {"apf": "apf"} | {str(q): load_policy(q, cfg) for q in paths}
+    metas = {str(q): load_policy(q, cfg).meta for q in paths}
+    policies = {"apf": "apf"} | {str(q): deployed(q) for q in paths}
     result = evaluate(policies, cfg, seeds, workers=args.workers)
     apf = _figures(result, "apf")
     rows = []
     for q in paths:
         f = _figures(result, str(q))
-        info = policies[str(q)].meta.info
+        info = metas[str(q)].info
         safe = all(f[k] <= apf[k] for k in KEYS[:3])
         rows.append({"policy": str(q), "agent_steps": info.get("agent_steps"), **f, "safe": safe})
     best = choose(rows, apf)
