@@ -1242,7 +1242,8 @@ def test_reward_terms_agree_between_table_numpy_kernel_and_weights():
     written = re.findall(r"terms\[ix\.(\w+), e, i\]", inspect.getsource(kernel._reward_agent))
     assert sorted(written) == sorted(names)  # each row once, by name
     assert not re.search(r"terms\[\d", inspect.getsource(kernel))  # no literal rows
-    weight_names = {f.name for f in dataclasses.fields(RewardWeights)} - {"shared"}
+    not_terms = {"shared", "deviation_scale"}
+    weight_names = {f.name for f in dataclasses.fields(RewardWeights)} - not_terms
     assert weight_names == set(names)
     for name in names:
         assert f"``{name}``" in rewards.__doc__

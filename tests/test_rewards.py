@@ -220,3 +220,30 @@ def test_cores_of_different_configs_stepped_in_turn_keep_their_own_constants():
             np.testing.assert_array_equal(got.safety["lost"], off > core.config.uav.lost_distance)
             lost[k] += int(got.safety["lost"].any())
     assert lost[1] > lost[0]  # the other lost distance shows
+
+
+def test_the_deviation_scale_keeps_the_slope_far_from_the_plan(core):
+    """``reward.deviation_scale``: ``-d / (d + s)``, the core's step and compute_rewards alike."""
+    w = core.world
+    plan, _ = w.planned()
+    wide = make_config(scenario="paper", noise=False, prediction={"fit": "enclosing"},
+                       reward={"deviation_scale": 200.0})  # fmt: skip
+    w.uav_pos[0, 2] = plan[0, 2] + np.array([0, 0, 100.0])
+    w._start_safety(np.arange(1))
+    default = compute_rewards(w, core.config.reward)[1]["deviation"][0, 2]
+    sloped = compute_rewards(w, wide.reward)[1]["deviation"][0, 2]
+    assert default == pytest.approx(-100 / 120) and sloped == pytest.approx(-100 / 300)
+    configs = (make_config(scenario="random"),
+               make_config(scenario="random", reward={"deviation_scale": 200.0}))  # fmt: skip
+    cores = [EnvCore(c, n_envs=2) for c in configs]
+    a = np.full((2, 3, 3), 0.7)
+    for c in cores:
+        c.reset(seed=2)
+    for _ in range(30):
+        got = [c.step(a) for c in cores]
+    for c, g in zip(cores, got, strict=True):
+        dev = np.linalg.norm(c.world.uav_pos - c.world.plan_pos, axis=-1)
+        s = c.config.reward.deviation_scale
+        np.testing.assert_allclose(g.terms["deviation"], -dev / (dev + s), rtol=1e-12)
+    with pytest.raises(ValueError, match=r"reward\.deviation_scale"):
+        make_config(reward={"deviation_scale": 0.0})

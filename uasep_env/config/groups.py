@@ -396,6 +396,9 @@ class RewardWeights:
         collision: Weight of the collision term (``-max_steps`` on a collision).
         progress: Weight of the per-step alive bonus.
         shared: Share of the team-mean reward in each agent's reward, in [0, 1].
+        deviation_scale: The deviation term's scale (m): the term is ``-d / (d + scale)``,
+            -1/2 at ``d = scale``. Larger keeps more of its slope far from the plan (a
+            policy 100 m off is paid more to come back), still bounded in ``(-1, 0]``.
     """
 
     # Defaults: a step's reward is in [0, 1] and a collision costs a whole episode (why:
@@ -409,11 +412,16 @@ class RewardWeights:
     collision: float = 1.0
     progress: float = 1.0
     shared: float = 0.0
+    deviation_scale: float = 20.0  # m (uasep_env.interface.rewards.DEVIATION_SCALE_M)
 
     def __post_init__(self) -> None:
         for f in fields(self):
             check_finite(f"reward.{f.name}", getattr(self, f.name), MAX_WEIGHT)
         check(0.0 <= self.shared <= 1.0, "reward.shared", self.shared, "must be in [0, 1]")
+        check(
+            0.1 <= self.deviation_scale <= 1e5, "reward.deviation_scale", self.deviation_scale,
+            "must be in [0.1, 1e5] m",
+        )  # fmt: skip
 
     @classmethod
     def task(cls) -> RewardWeights:

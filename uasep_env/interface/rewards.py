@@ -14,7 +14,8 @@ Term                       Value per agent (unweighted)
 ``separation_region``      ``-min(2, max(0, 1 - d_region / d_osep))``: signed distance
                            to the nearest predicted reachable ellipsoid; grows as the UAV
                            moves towards and into the region
-``deviation``              ``-d / (d + 20 m)``, ``d = |p - p_planned|``: in ``(-1, 0]``,
+``deviation``              ``-d / (d + s)``, ``d = |p - p_planned|``, ``s`` =
+                           ``reward.deviation_scale`` (20 m): in ``(-1, 0]``,
                            steepest near the plan and still sloped 100 m off it
 ``control``                ``-|a_cmd / a_max|^2 / 3``: control effort
 ``smoothness``             ``-|(a_cmd - a_cmd_prev) / a_max|^2 / 3``: change of command
@@ -51,7 +52,10 @@ never collide).
   (``tests/test_rewards.py::test_collision_never_pays``).
 * The deviation term saturates (``(-1, 0]``) so a policy far off the plan is not paid to
   end the episode, but keeps a slope at any distance, so a policy that has drifted still
-  sees which way the plan is. Its scale, 20 m, is that of the APF's manoeuvres.
+  sees which way the plan is. Its scale, 20 m, is that of the APF's manoeuvres; at 100 m
+  the slope is 1/36 of its value on the plan, so a policy that has drifted that far is paid
+  little to come back. ``reward.deviation_scale`` (e.g. 200 m: 0.44 of it at 100 m) keeps
+  more of the slope there, still in ``(-1, 0]``.
 
 The task reward of constrained training, ``make_config(reward="task")``
 (:meth:`RewardWeights.task() <uasep_env.config.RewardWeights.task>`), keeps only the task:
@@ -87,7 +91,8 @@ __all__ = [
     "term_bounds",
 ]
 
-#: Deviation (m) at which the deviation term is -1/2 (it tends to -1 far off the plan).
+#: Deviation (m) at which the deviation term is -1/2 (it tends to -1 far off the plan): the
+#: default of ``reward.deviation_scale``.
 DEVIATION_SCALE_M = 20.0
 #: Cap of the region term's intrusion depth (units of ``uav.obstacle_separation``).
 REGION_TERM_CAP = 2.0
@@ -211,7 +216,7 @@ class _Constants(NamedTuple):
     separation_distance: float  # m
     obstacle_separation: float  # m
     collision_distance: float  # m
-    deviation_scale: float  # m, DEVIATION_SCALE_M
+    deviation_scale: float  # m, reward.deviation_scale (DEVIATION_SCALE_M by default)
     region_cap: float  # the region term's bound, REGION_TERM_CAP
     max_steps: float  # the collision term's magnitude
 
@@ -269,7 +274,7 @@ def _vectors(weights: RewardWeights, u: UAVConfig, max_steps: int) -> tuple[np.n
         separation_distance=u.separation_distance,
         obstacle_separation=u.obstacle_separation,
         collision_distance=u.collision_distance,
-        deviation_scale=DEVIATION_SCALE_M,
+        deviation_scale=weights.deviation_scale,
         region_cap=-TERMS[REWARD_TERMS.index("separation_region")].low,
         max_steps=float(max_steps),
     )
