@@ -54,7 +54,7 @@ def _apf_flight(cfg):
 
 
 def test_an_unknown_residual_base_is_named():
-    with pytest.raises(ValueError, match="action.mode.*residual_orca"):
+    with pytest.raises(ValueError, match=r"action\.mode.*residual_orca"):
         make_config(action={"mode": "residual_orca"})
     with pytest.raises(ValueError, match="mode='direct'"):
         ResidualAPF(make_config())  # a direct config names no base
