@@ -84,6 +84,7 @@ def shielded_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     torch.set_num_threads(1)
     out = tmp_path_factory.mktemp("shield_loop") / "run"
     argv = [*TINY, "--episode-duration", "4", "--total-timesteps", str(3 * PER_UPDATE),
+            "--checkpoint-every", str(2 * PER_UPDATE),
             "--out-dir", str(out), "--shield", "cbf", "--cost", "shield",
             "--cost-limit", "1"]  # fmt: skip
     ppo_lagrangian.main(argv, RESIDUAL_LAGRANGIAN_DEFAULTS)
@@ -131,3 +132,20 @@ def test_shield_flags_that_cannot_work_are_refused_in_one_line(capsys, tmp_path,
     with pytest.raises(SystemExit):
         ppo_shared.parse_args(["--shield", "cbf", "--out-dir", str(tmp_path / "r")])
     assert "--trainer lean only" in capsys.readouterr().err
+
+
+def test_a_shielded_run_resumes_under_the_shield(shielded_run, tmp_path):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(shielded_run, out, symlinks=True)
+    ck = out / "checkpoints" / f"step_{2 * PER_UPDATE}"
+    assert ck.is_dir()
+    argv = [*TINY, "--episode-duration", "4", "--total-timesteps", str(4 * PER_UPDATE),
+            "--out-dir", str(out), "--shield", "cbf", "--cost", "shield", "--cost-limit", "1",
+            "--resume", str(ck)]  # fmt: skip
+    ppo_lagrangian.main(argv, RESIDUAL_LAGRANGIAN_DEFAULTS)
+    training = json.loads((out / "validation.json").read_text())["training"]
+    assert training["agent_steps"] == 4 * PER_UPDATE
+    assert training["shield"]["interventions_per_agent_step"] > 0.0  # still shielded
+    assert training["lagrangian"]["cost"] == "shield"
