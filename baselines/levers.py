@@ -57,6 +57,11 @@ def _bench_cell(s: dict, kind: str) -> str:
     return f"{s['mean']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]"
 
 
+def _steps(study: dict) -> str:
+    steps = sorted({t["agent_steps"] for t in study["training"].values() if "agent_steps" in t})
+    return "-".join(f"{s:,}" for s in steps) if steps else "-"
+
+
 def _minutes(study: dict) -> str:
     walls = [t["wall_s"] / 60 for t in study["training"].values() if "wall_s" in t]
     return f"{min(walls):.1f}-{max(walls):.1f}" if walls else "-"
@@ -72,7 +77,9 @@ def rows(results: Path = RESULTS) -> tuple[list[list[str]], list[str]]:
     if best is not None:
         row = bench["results"]["held_out"][best]["default"]
         cells = [_bench_cell(row[k.split(".")[1]], kind) for k, _, kind in _METRICS]
-        out.append([f"{best} (the leaderboard's best classical controller)", "-", "-", *cells, "-"])
+        out.append(
+            [f"{best} (the leaderboard's best classical controller)", "-", "-", "-", *cells, "-"]
+        )
     for lever, flags, name, ref in LEVERS:
         path = results / f"{name}.json"
         if not path.exists():
@@ -85,7 +92,7 @@ def rows(results: Path = RESULTS) -> tuple[list[list[str]], list[str]]:
             base = json.loads((results / f"{ref}.json").read_text())["across_seeds"]
             a, b = agg["episode.max_deviation"]["iqm"], base["episode.max_deviation"]["iqm"]
             change = f"{(a - b) / b:+.0%}" if b and not math.isnan(a) else "-"
-        out.append([lever, f"`{flags}`" if flags != "-" else "-", _minutes(study),
+        out.append([lever, f"`{flags}`" if flags != "-" else "-", _steps(study), _minutes(study),
                     *(_cell(agg[k], kind) for k, _, kind in _METRICS), change])  # fmt: skip
     return out, missing
 
@@ -95,8 +102,8 @@ def render(results: Path = RESULTS) -> str:
     from uasep_env.runtime.tables import render_table
 
     table, missing = rows(results)
-    headers = ["lever", "flags", "train (min a seed)", *(label for _, label, _ in _METRICS),
-               "max deviation vs its reference"]  # fmt: skip
+    headers = ["lever", "flags", "agent-steps a seed", "train (min a seed)",
+               *(label for _, label, _ in _METRICS), "max deviation vs its reference"]  # fmt: skip
     text = [
         "# Levers toward a learned policy past the best classical controller",
         "",
