@@ -4,11 +4,12 @@
     python baselines/levers.py --interventions 32  # the shield's interventions on the APF
 
 Each lever is one flag or config of a recipe, trained with three seeds by ``train/seeds.py``
-at its reference recipe's flags and agent-steps (its command at the top of its seed study,
-``baselines/results/seeds_lever_*_v3.md``); this script reads the studies' JSON (no episode
-is played) and writes, per lever, the held-out IQM across seeds with its 95 % stratified
-bootstrap interval beside its reference recipe's and the best classical controller's row
-of the leaderboard (``baselines/results/bench/bench.json``, the same 500 held-out encounters).
+at its reference recipe's flags (its command at the top of its seed study,
+``baselines/results/seeds_lever_*_v3.md``; two ran fewer agent-steps, the table says them);
+this script reads the studies' JSON (no episode is played) and writes, per lever, the held-
+out IQM across seeds with its 95 % stratified bootstrap interval beside its reference
+recipe's and the best classical controller's row of the leaderboard
+(``baselines/results/bench/bench.json``, the same 500 held-out encounters).
 ``--interventions N`` flies the APF (a zero residual) under the CBF shield on the first
 ``N`` validation encounters and prints how many of each agent's steps the shield changed
 (what ``--cost shield`` counts; the limit of the shield lever is set from it).
@@ -109,10 +110,10 @@ def render(results: Path = RESULTS) -> str:
         "",
         "Made by `python baselines/levers.py` from the seed studies' JSON (each lever's "
         "command at the top of its `seeds_*.md`; three training seeds each, the reference "
-        "recipe's flags and agent-steps). Held-out bank, 500 `random` encounters (seeds "
-        "5,000,000-5,000,499): IQM across seeds of the per-family scores with 95 % stratified "
-        "bootstrap intervals; the classical row is the leaderboard's (rates with Wilson, means "
-        "with Student-t intervals, the same encounters).",
+        "recipe's flags, the agent-steps in the table). Held-out bank, 500 `random` encounters "
+        "(seeds 5,000,000-5,000,499): IQM across seeds of the per-family scores with 95 % "
+        "stratified bootstrap intervals; the classical row is the leaderboard's (rates with "
+        "Wilson, means with Student-t intervals, the same encounters).",
         "",
         "## Held-out bank",
         "",
