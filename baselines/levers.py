@@ -46,18 +46,6 @@ _METRICS = (
 )
 
 
-def _cell(s: dict, kind: str) -> str:
-    if kind == "rate":
-        return f"{s['iqm']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}]"
-    return f"{s['iqm']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]"
-
-
-def _bench_cell(s: dict, kind: str) -> str:
-    if kind == "rate":
-        return f"{s['rate']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}]"
-    return f"{s['mean']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}]"
-
-
 def _steps(study: dict) -> str:
     steps = sorted({t["agent_steps"] for t in study["training"].values() if "agent_steps" in t})
     return "-".join(f"{s:,}" for s in steps) if steps else "-"
@@ -71,13 +59,18 @@ def _minutes(study: dict) -> str:
 def rows(results: Path = RESULTS) -> tuple[list[list[str]], list[str]]:
     """The table's rows and the studies not found (a lever not trained yet)."""
     out, missing = [], []
+    from uasep_env.benchmark.output import _mean, _rate
     from uasep_env.benchmark.verdict import best_classical
+    from uasep_env.training.seed_report import iqm_cell
 
     bench = json.loads((results / "bench" / "bench.json").read_text())
     best = best_classical(bench)
     if best is not None:
         row = bench["results"]["held_out"][best]["default"]
-        cells = [_bench_cell(row[k.split(".")[1]], kind) for k, _, kind in _METRICS]
+        # The leaderboard's row as bench.md writes it.
+        cells = [
+            (_rate if kind == "rate" else _mean)(row[k.split(".")[1]]) for k, _, kind in _METRICS
+        ]
         out.append(
             [f"{best} (the leaderboard's best classical controller)", "-", "-", "-", *cells, "-"]
         )
@@ -94,7 +87,7 @@ def rows(results: Path = RESULTS) -> tuple[list[list[str]], list[str]]:
             a, b = agg["episode.max_deviation"]["iqm"], base["episode.max_deviation"]["iqm"]
             change = f"{(a - b) / b:+.0%}" if b and not math.isnan(a) else "-"
         out.append([lever, f"`{flags}`" if flags != "-" else "-", _steps(study), _minutes(study),
-                    *(_cell(agg[k], kind) for k, _, kind in _METRICS), change])  # fmt: skip
+                    *(iqm_cell(agg[k], kind) for k, _, kind in _METRICS), change])  # fmt: skip
     return out, missing
 
 

@@ -107,6 +107,17 @@ def test_a_shielded_lagrangian_run_constrains_the_interventions(shielded_run):
         != "+cbf"
     )
     assert load_policy(policy).meta.info["args"]["shield"] == "cbf"
+    # validation.json holds the shielded policy's figures on its encounters, not the bare one's.
+    from uasep_env.evaluation import evaluate
+    from uasep_env.scenarios import VALIDATION_SEEDS
+
+    seen = json.loads((shielded_run / "validation.json").read_text())["validation"]["learned"]
+    cfg = load_policy(policy).config
+    seeds = list(VALIDATION_SEEDS)[:2]
+    played = evaluate({"s": f"{policy}+cbf", "b": str(policy)}, cfg, seeds).results
+    dev = {k: r.aggregate["episode.max_deviation"]["mean"] for k, r in played.items()}
+    assert dev["s"] != dev["b"]  # the shield moves these episodes: the check can tell
+    assert seen["max_deviation"] == pytest.approx(dev["s"], rel=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -65,23 +65,22 @@ class Residual:
     """A residual action mode: the base controller's command plus a bounded correction.
 
     Args:
-        config: The environment config (its ``action.residual_scale`` bounds the correction).
-        mode: The residual mode (a key of :data:`RESIDUAL_BASES`; default: ``config``'s,
-            which must then be one; give it to act in a ``direct`` environment).
+        config: The environment config: its ``action.mode`` (a key of
+            :data:`RESIDUAL_BASES`) names the base, its ``action.residual_scale`` bounds the
+            correction (a policy acting in a ``direct`` environment passes its trained action
+            settings).
         gains: The base APF's gains in ``residual_apf`` mode (default: the reference gains,
             :class:`~uasep_env.policies.apf.APFGains`'s field defaults, what the environments
             use); other gains only to study a trained policy on another base
             (``baselines/tradeoff.py``).
 
     Raises:
-        ValueError: ``mode`` is not a residual mode, or ``gains`` are given for a base that
-            is not the APF.
+        ValueError: ``config``'s mode is not a residual mode, or ``gains`` are given for a base
+            that is not the APF.
     """
 
-    def __init__(
-        self, config: EnvConfig, gains: APFGains | None = None, mode: str | None = None
-    ) -> None:
-        mode = config.action.mode if mode is None else mode
+    def __init__(self, config: EnvConfig, gains: APFGains | None = None) -> None:
+        mode = config.action.mode
         if mode not in RESIDUAL_BASES:
             raise ValueError(f"mode={mode!r}: not a residual action mode {tuple(RESIDUAL_BASES)}")
         self.mode = mode

@@ -368,7 +368,7 @@ class _RunHooks(Hooks):
     def _shield_facts(self) -> dict:
         """Training under the shield: its interventions per agent-step (this process's run)."""
         rate = self.shield.rate()
-        return {"shield": {"filter": "cbf", "interventions_per_agent_step":
+        return {"shield": {"filter": self.args.shield, "interventions_per_agent_step":
                            None if rate != rate else round(rate, 6)}}  # fmt: skip
 
     def checkpoint(self, state: Any) -> None:

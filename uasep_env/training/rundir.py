@@ -489,13 +489,10 @@ def write_validation(out: Path, config: Any, policy_path: Path, info: dict, epis
     seeds = list(VALIDATION_SEEDS)[:episodes]
     summary: dict = {"training": info, "policy": str(policy_path), "validation": {}}
     if seeds:
-        from uasep_env.policies import SHIELDS
-        from uasep_env.training.shield_loop import trained_shield
+        from uasep_env.training.shield_loop import deployed
 
-        learned: Any = load_policy(policy_path, eval_cfg)
-        shield = trained_shield(learned.meta)
-        if shield is not None:  # trained under the shield: validated under it, as deployed
-            learned = SHIELDS[shield](learned, eval_cfg)
+        # As deployed: a checkpoint trained under the shield is validated under it.
+        learned = deployed(policy_path, load_policy(policy_path, eval_cfg).meta)
         policies = {"learned": learned, "apf": "apf"}
         result = evaluate(policies, eval_cfg, seeds)
         keys = ("collision", "loss_of_separation", "max_deviation")

@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> Path:
     cfg = make_config(scenario="random")
     seeds = list(VALIDATION_SEEDS)[: args.episodes]
     metas = {str(q): load_policy(q, cfg).meta for q in paths}
-    policies = {"apf": "apf"} | {str(q): deployed(q) for q in paths}
+    policies = {"apf": "apf"} | {str(q): deployed(q, metas[str(q)]) for q in paths}
     result = evaluate(policies, cfg, seeds, workers=args.workers)
     apf = _figures(result, "apf")
     rows = []

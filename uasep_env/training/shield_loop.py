@@ -79,9 +79,16 @@ def trained_shield(meta: Any) -> str | None:
     return None if shield in (None, "none") else str(shield)
 
 
-def deployed(path: Any) -> str:
-    """The policy spec a checkpoint is evaluated as: ``"<path>+cbf"`` if trained shielded."""
-    from uasep_env.policies import load_policy
+def deployed(path: Any, meta: Any = None) -> str:
+    """The policy spec a checkpoint is evaluated as: ``"<path>+cbf"`` if trained shielded.
 
-    shield = trained_shield(load_policy(path).meta)
+    Args:
+        path: The checkpoint.
+        meta: Its description, if the caller has loaded it (else it is read here).
+    """
+    if meta is None:
+        from uasep_env.policies import load_policy
+
+        meta = load_policy(path).meta
+    shield = trained_shield(meta)
     return str(path) if shield is None else f"{path}+{shield}"
