@@ -48,7 +48,12 @@ unless ``--overwrite`` (which replaces those files).
 Recipes: ``residual_apf`` (shipped ``ppo_residual_apf.zip``) and ``shared``
 (``ppo_shared.zip``), the SB3 recipes of :mod:`uasep_env.training`, and ``mappo``
 (``mappo.zip``, skrl's MAPPO; its rollout time is the training less the env, the learner and
-the checks, skrl having no rollout method to time). ``--trainer lean`` trains a PPO recipe
+the checks, skrl having no rollout method to time); on the lean loop only,
+``residual_apf_set`` (``ppo_residual_apf_set.zip``: the residual recipe with the set
+network's shipped flags, :data:`SET_FLAGS`, trained at 8 UAVs and checked on validation
+encounters at the held-out bank's 3, where the APF does not clear its bar) and
+``lagrangian_residual`` (``ppo_lagrangian.zip``: the residual PPO-Lagrangian, its cost limit
+measured before the clock starts). ``--trainer lean`` trains a PPO recipe
 with :mod:`uasep_env.training.ppo_lean` (SB3's PPO arithmetic without SB3's per-step layers)
 in place of SB3, and MAPPO with the same loop's centralised critic in place of skrl; the
 record says which (``trainer``). Needs the ``train`` extra. Speed
@@ -82,23 +87,48 @@ class Recipe(NamedTuple):
         module: The module holding its defaults.
         attr: Their name there (an ``Args`` instance, or the class: its defaults).
         reader: The module whose ``parse_args`` reads its flags and whose loop trains it
-            (:data:`TRAINERS`): SB3's PPO or skrl's MAPPO.
+            (:data:`TRAINERS`): SB3's PPO, skrl's MAPPO or the PPO-Lagrangian's.
+        flags: The shipped run's own flags, read before the caller's (after ``--``): a
+            policy shipped from flags of another recipe (the set network's) is timed with
+            them.
+        checks: Flags' values (``Args`` fields) the checks' encounters are played with in
+            place of the training run's: the set network trains at 8 UAVs, where the APF
+            itself clears its shipped policy's bar on validation encounters, and is checked
+            at the held-out bank's 3.
     """
 
     shipped: str
     module: str
     attr: str
     reader: str
+    flags: tuple[str, ...] = ()
+    checks: tuple[tuple[str, Any], ...] = ()
 
 
 _PPO, _MAPPO = "uasep_env.training.ppo_shared", "uasep_env.training.mappo"
+_LAGRANGIAN = "uasep_env.training.ppo_lagrangian"
+#: The set network's shipped run (``baselines/results/seeds_residual_apf_set_v3.md``).
+SET_FLAGS = ("--trainer", "lean", "--arch", "set", "--hidden", "32,64", "--n-uavs", "8",
+             "--k-uavs", "7", "--n-envs", "64", "--n-steps", "64", "--batch-size", "8192",
+             "--n-epochs", "1", "--learning-rate", "0.0003400372129740376")  # fmt: skip
 #: ``--recipe`` -> the recipe.
 RECIPES = {
     "residual_apf": Recipe(
         "ppo_residual_apf", "uasep_env.training.ppo_residual_apf", "RESIDUAL_DEFAULTS", _PPO
     ),
+    "residual_apf_set": Recipe(
+        "ppo_residual_apf_set",
+        "uasep_env.training.ppo_residual_apf",
+        "RESIDUAL_DEFAULTS",
+        _PPO,
+        flags=SET_FLAGS,
+        checks=(("n_uavs", 3), ("k_uavs", 2)),
+    ),
     "shared": Recipe("ppo_shared", "uasep_env.training.args", "Args", _PPO),
     "mappo": Recipe("mappo", _MAPPO, "Args", _MAPPO),
+    "lagrangian_residual": Recipe(
+        "ppo_lagrangian", _LAGRANGIAN, "RESIDUAL_LAGRANGIAN_DEFAULTS", _LAGRANGIAN
+    ),
 }
 
 
@@ -183,7 +213,7 @@ def _recipe_args(recipe: str, run_dir: Path, extra: list[str]) -> Any:
     r = RECIPES[recipe]
     defaults = getattr(importlib.import_module(r.module), r.attr)
     defaults = defaults() if isinstance(defaults, type) else defaults
-    argv = ["--out-dir", str(run_dir), "--no-progress", "--max-minutes", "1e6", *extra]
+    argv = ["--out-dir", str(run_dir), "--no-progress", "--max-minutes", "1e6", *r.flags, *extra]
     return importlib.import_module(r.reader).parse_args(argv, defaults)
 
 
@@ -334,30 +364,54 @@ def _train_skrl(args: Any, config: Any, run_dir: Path, checker: Checker) -> int:
 
 
 def _train_lean(
-    args: Any, config: Any, run_dir: Path, checker: Checker, central: bool = False
+    args: Any,
+    config: Any,
+    run_dir: Path,
+    checker: Checker,
+    central: bool = False,
+    constrained: bool = False,
 ) -> int:
     """Train a recipe with the lean loop (:mod:`uasep_env.training.ppo_lean`).
 
     ``central``: MAPPO's centralised critic (the MAPPO recipe's lean trainer).
+    ``constrained``: the PPO-Lagrangian's multiplier shapes the rewards, as its recipe's
+    run does (:meth:`uasep_env.training.ppo_lagrangian.Constraint.start_lean`; its cost
+    limit measured before the clock starts).
     """
     from uasep_env.training import ppo_lean
 
     clock = checker.clock
+    cost = None
+    if constrained:
+        from uasep_env.training.ppo_lagrangian import Constraint
+
+        cost = Constraint(args).start_lean(run_dir, config, {})
 
     class Hooks(ppo_lean.Hooks):
         def start(self, nets: Any, norm: Any) -> None:
             self.nets, self.norm = nets, norm
+            if cost is not None:
+                cost.start(args.n_envs * config.n_uavs)
             checker.t0 = time.perf_counter()
 
         def rollout_end(self, agent_steps: int) -> None:
+            if cost is not None:
+                cost.rollout_end(agent_steps)  # the multiplier moves before the check
             export = functools.partial(ppo_lean.export_policy, self.nets, self.norm, config,
                                        args, run_dir / "check.zip", {})  # fmt: skip
             checker.maybe_check(agent_steps, export)
 
+        def shape(self, res: Any, reward: Any, dones: Any) -> Any:
+            return reward if cost is None else cost.shape(res, reward, dones)
+
         def stop(self) -> bool:
             return checker.spent()
 
-    _, _, facts = ppo_lean.train(args, config, Hooks(), central=central)
+    try:
+        _, _, facts = ppo_lean.train(args, config, Hooks(), central=central)
+    finally:
+        if cost is not None:
+            cost.close()
     # The loop times its own parts (the checks in none of them); the rollout's figure holds
     # the environment, as SB3's collect_rollouts does.
     clock.env_s, clock.learner_s = facts["env_s"], facts["learner_s"]
@@ -368,7 +422,11 @@ def _train_lean(
 #: Each recipe's training loop, by :attr:`Recipe.reader`.
 TRAINERS = {_PPO: _train_sb3, _MAPPO: _train_skrl}
 #: ``--trainer lean``: the lean loop in place of SB3's PPO and skrl's MAPPO.
-LEAN = {_PPO: _train_lean, _MAPPO: functools.partial(_train_lean, central=True)}
+LEAN = {
+    _PPO: _train_lean,
+    _MAPPO: functools.partial(_train_lean, central=True),
+    _LAGRANGIAN: functools.partial(_train_lean, constrained=True),
+}
 
 
 def _loop(recipe: str, trainer: str) -> Any:
@@ -413,10 +471,18 @@ def run(
     if "lean" in (trainer, args.trainer):
         trainer, args = "lean", replace(args, trainer="lean")
     train = _loop(recipe, trainer)
+    if getattr(args, "shield", "none") != "none":
+        # The checks play the bare policy: a policy trained under the shield is deployed with it.
+        raise SystemExit(
+            f"time_to_policy.py: error: argument --shield: {args.shield!r} is not timed here "
+            "(the checks play the policy without the shield)"
+        )
     prepare_out_dir(run_dir, "", overwrite)  # before the bar's evaluation: refused at once
     torch.set_num_threads(args.torch_threads)
     config = ppo_shared.make_env_config(args)
-    eval_cfg = config.replace(action={"mode": "direct"})
+    played_with = dict(RECIPES[recipe].checks)
+    played = ppo_shared.make_env_config(replace(args, **played_with)) if played_with else config
+    eval_cfg = played.replace(action={"mode": "direct"})
     seeds = list(VALIDATION_SEEDS)[:episodes]
     shipped = CHECKPOINTS / f"{RECIPES[recipe].shipped}.zip"
     bar = make_bar(_evaluate(load_policy(shipped, eval_cfg), eval_cfg, seeds), episodes)
@@ -443,6 +509,8 @@ def run(
         "trainer": trainer,
         "shipped": f"baselines/checkpoints/{shipped.name}",
         "bar": asdict(bar),
+        # The training run's flags the checks' encounters replace (Recipe.checks).
+        "checks_played_with": played_with,
         "apf": apf,
         "apf_clears_bar": reached(apf, bar),
         "reached": hit is not None,
@@ -736,7 +804,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if a.recipe is None:
         p.error("the following arguments are required: --recipe")
     try:
-        _loop(a.recipe, a.trainer)
+        # The recipe's --trainer (its shipped flags' or after --) says the same as the script's.
+        lean = a.trainer == "lean" or _recipe_args(a.recipe, ROOT, extra).trainer == "lean"
+        _loop(a.recipe, "lean" if lean else a.trainer)
     except ValueError as err:
         p.error(f"argument --trainer: {err}")
     out = a.out or ROOT / "benchmarks" / "results" / f"time_to_policy_{a.recipe}.json"

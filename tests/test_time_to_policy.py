@@ -45,6 +45,7 @@ def test_the_bar_is_the_shipped_intervals_upper_ends():
         ("mappo", "default"),
         ("residual_apf", "lean"),
         ("mappo", "lean"),
+        ("lagrangian_residual", "lean"),
     ],
 )
 def test_a_run_stops_at_the_bar_and_records_where_the_time_went(
@@ -148,11 +149,78 @@ def _check_held_out(out, rec):
     assert got["figures"]["reached"]["max_deviation"]["ci_high"] == dev["ci_high"]
 
 
+RESIDUAL = ("residual_apf", "residual_apf_set", "lagrangian_residual")
 RECORDS = sorted((ROOT / "benchmarks" / "results").glob("time_to_policy_*.json"))
 
 
-def test_the_residual_recipe_has_a_committed_record():
-    assert ROOT / "benchmarks/results/time_to_policy_residual_apf.json" in RECORDS
+def test_every_recipe_has_a_committed_record():
+    """Each recipe's time to its shipped policy is measured (``time_to_policy_<recipe>.json``)."""
+    for recipe in ttp.RECIPES:
+        path = ROOT / f"benchmarks/results/time_to_policy_{recipe}.json"
+        assert path in RECORDS, f"no record for {recipe}"
+        assert json.loads(path.read_text())["recipe"] == recipe
+
+
+def test_the_set_recipe_trains_its_shipped_flags_and_is_checked_at_3_uavs(tmp_path, monkeypatch):
+    """The set network trains at 8 UAVs with its shipped run's flags; every check (and the
+    bar) plays the validation encounters at 3 UAVs, where the APF does not clear the bar."""
+    from uasep_env.policies.learned import read_checkpoint
+
+    played = []
+    evaluate = ttp._evaluate
+
+    def spy(policy, config, seeds):
+        played.append(config.n_uavs)
+        return evaluate(policy, config, seeds)
+
+    monkeypatch.setattr(ttp, "_evaluate", spy)
+    tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--hidden", "8,8",
+            "--total-timesteps", "1024", "--episode-duration", "20"]  # fmt: skip
+    rec = ttp.main(["--recipe", "residual_apf_set", "--episodes", "2", "--check-every", "512",
+                    "--out", str(tmp_path / "r.json"), "--run-dir", str(tmp_path / "run"),
+                    "--", *tiny])  # fmt: skip
+    a = rec["recipe_args"]
+    assert (a["arch"], a["n_uavs"], a["k_uavs"], a["trainer"]) == ("set", 8, 7, "lean")
+    assert (a["n_envs"], a["hidden"]) == (2, "8,8")  # the caller's flags after the shipped run's
+    assert rec["trainer"] == "lean" and rec["shipped"].endswith("ppo_residual_apf_set.zip")
+    assert rec["checks_played_with"] == {"n_uavs": 3, "k_uavs": 2}
+    assert rec["checks"] and played == [3] * (2 + len(rec["checks"]))  # bar, APF, checks
+    meta = read_checkpoint(tmp_path / "run" / "check.zip")[0]
+    assert meta.architecture == "set"  # the policy checked is the set network
+
+
+def test_the_lagrangian_recipe_trains_under_its_multiplier(tmp_path, monkeypatch, capsys):
+    from uasep_env.training import constraint
+
+    shaped = []
+    shape = constraint.LeanCost.shape
+
+    def spy(self, *args, **kwargs):
+        shaped.append(1)
+        return shape(self, *args, **kwargs)
+
+    monkeypatch.setattr(constraint.LeanCost, "shape", spy)
+    tiny = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1",
+            "--hidden", "16", "--total-timesteps", "400", "--cost-limit", "0.5"]  # fmt: skip
+    flags = ["--recipe", "lagrangian_residual", "--episodes", "2", "--check-every", "192"]
+    rec = ttp.main([*flags, "--trainer", "lean", "--out", str(tmp_path / "r.json"),
+                    "--run-dir", str(tmp_path / "run"), "--", *tiny])  # fmt: skip
+    assert rec["trainer"] == "lean" and rec["shipped"].endswith("ppo_lagrangian.zip")
+    rollouts = rec["agent_steps"] // (2 * 3 * 32)  # 2 envs x 3 UAVs x 32 steps
+    assert rollouts >= 2 and len(shaped) == 32 * rollouts  # every step of every rollout
+    rows = (tmp_path / "run" / "cost_progress.csv").read_text().splitlines()
+    assert len(rows) == 1 + rollouts  # the header and a row a rollout: the multiplier moved
+    capsys.readouterr()
+    shield = ["--", "--shield", "cbf", "--trainer", "lean"]
+    for bad, named in ((["--trainer", "default"], "--trainer: trainer 'default'"),
+                       (shield, "--shield: 'cbf'")):  # fmt: skip
+        with pytest.raises(SystemExit) as err:
+            ttp.main([*flags, "--out", str(tmp_path / "b.json"),
+                      "--run-dir", str(tmp_path / "new"), *bad])  # fmt: skip
+        said = f"{capsys.readouterr().err}\n{err.value.code}".splitlines()
+        errors = [line for line in said if "error:" in line]  # one line, naming the flag
+        assert len(errors) == 1 and named in errors[0]
+    assert not (tmp_path / "new").exists() and not (tmp_path / "b.json").exists()
 
 
 @pytest.mark.parametrize("path", RECORDS, ids=lambda p: p.stem)
@@ -197,7 +265,7 @@ def _check_record(rec):
         assert rec["training_minutes"] == pytest.approx(t["training"] / 60.0)
     parts = t["env"] + t["rollout_other"] + t["learner"]  # the rest: checkpoints, logging
     assert 0.99 * t["training"] <= parts <= t["training"]
-    if rec["recipe"] == "residual_apf":  # it starts at the APF: else the bar measures nothing
+    if rec["recipe"] in RESIDUAL:  # it starts at the APF: else the bar measures nothing
         assert not rec["apf_clears_bar"]
     # A GPU figure names its GPU, and only a run with its learner there has one.
     on_gpu = rec["recipe_args"].get("device", "cpu") != "cpu"
