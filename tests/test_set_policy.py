@@ -267,3 +267,83 @@ def test_a_set_run_resumes_from_its_checkpoints(tmp_path):
                                str(again / "checkpoints" / first.name)])  # fmt: skip
     assert summary["training"]["agent_steps"] >= 2000
     assert read_checkpoint(again / "policy.zip")[0].architecture == "set"
+
+
+# (e) Trained at several formation sizes (--formation-sizes).
+
+
+def test_a_smaller_formations_padded_observation_acts_as_its_own(policies):
+    """3 UAVs observe 2 UAV slots; padded to the trained 4 (zeros, masks 0), the action is
+    the one the policy takes on the 3 UAVs' own observation, bit for bit."""
+    path, _, _, config = policies["set"]
+    small = config.replace(n_uavs=3, action={"mode": "direct"})
+    full = config.replace(action={"mode": "direct"})
+    obs = _obs(small, 4)
+    pad = ppo_lean._padding(small, full)
+    padded = pad(obs)
+    assert padded.shape == (len(obs), nets_dim(full)) and obs.shape[1] < padded.shape[1]
+    mine = load_policy(path, small).network(obs)
+    np.testing.assert_array_equal(load_policy(path, full).network(padded), mine)
+    # The slots past the formation's own are absent: a present one would change the action.
+    s = split_layout(StoredLayout.from_config(full)).slots["uav"]
+    padded[:, s.start + 3 * s.width + s.mask] = 1.0
+    assert np.abs(load_policy(path, full).network(padded) - mine).max() > 1e-3
+    assert ppo_lean._padding(full, full) is None  # the same width: nothing to pad
+
+
+SIZES = [*TINY, "--n-uavs", "5", "--k-uavs", "4", "--n-obstacles", "2", "--k-obstacles", "2"]
+
+
+def test_a_run_of_several_formation_sizes_trains_them_in_turn(tmp_path):
+    out = tmp_path / "run"
+    ppo_shared.main([*SIZES, "--formation-sizes", "3,5", "--out-dir", str(out)])
+    rows = (out / "progress.csv").read_text().splitlines()[1:]
+    steps = [int(r.split(",")[0]) for r in rows]
+    per = [b - a for a, b in zip([0, *steps], steps, strict=False)]
+    # Rollouts of 2 environments x 16 steps: 5 UAVs (--n-uavs, first), then 3, in turn.
+    assert per == [2 * 16 * (5 if k % 2 == 0 else 3) for k in range(len(per))]
+    assert len(per) >= 3
+    meta = read_checkpoint(out / "policy.zip")[0]
+    assert meta.info["args"]["formation_sizes"] == "3,5"
+    assert meta.env_config.n_uavs == 5 and meta.observation_layout.k_uavs == 4
+    # A resumed run goes on with the size its updates have reached.
+    again = tmp_path / "again"
+    first = min((out / "checkpoints").glob("step_*"), key=lambda p: int(p.name[5:]))
+    import shutil
+
+    shutil.copytree(out, again, symlinks=True)
+    ppo_shared.main([*SIZES, "--formation-sizes", "3,5", "--out-dir", str(again),
+                     "--resume", str(again / "checkpoints" / first.name)])  # fmt: skip
+    resumed = [int(r.split(",")[0]) for r in (again / "progress.csv").read_text().splitlines()[1:]]
+    assert resumed == steps
+
+
+@pytest.mark.parametrize(
+    ("flags", "named"),
+    [
+        (["--trainer", "default", "--arch", "mlp", "--k-uavs", "2"], "--trainer lean only"),
+        (["--formation-sizes", "3,4"], "the largest --n-uavs (5)"),
+        (["--formation-sizes", "3,5,5"], "distinct"),
+        (["--arch", "mlp"], "--arch set reads any number"),
+        (["--norm-reward"], "--norm-reward"),
+        (["--shield", "cbf"], "--shield"),
+        (["--formation-sizes", "1,5"], "each 2-64"),
+    ],
+)
+def test_bad_formation_sizes_are_refused_in_one_line(flags, named, capsys):
+    argv = [*SIZES, "--formation-sizes", "3,5", *flags]
+    with pytest.raises(SystemExit):
+        ppo_shared.parse_args(argv)
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--formation-sizes" in err and named in err
+
+
+@pytest.mark.parametrize("recipe", ["mappo", "ppo_lagrangian"])
+def test_recipes_of_one_formation_size_refuse_several(recipe, capsys):
+    from uasep_env.training import ppo_lagrangian
+
+    parse = {"mappo": mappo.parse_args, "ppo_lagrangian": ppo_lagrangian.parse_args}[recipe]
+    with pytest.raises(SystemExit):
+        parse([*SIZES, "--formation-sizes", "3,5"])
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--formation-sizes" in err and "one formation size" in err

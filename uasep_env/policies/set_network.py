@@ -42,6 +42,7 @@ __all__ = [
     "SetLayout",
     "SetNetwork",
     "set_difference",
+    "slot_padding",
     "split_layout",
     "tensor_shapes",
     "tied_moments",
@@ -143,6 +144,29 @@ def split_layout(layout: Any) -> SetLayout:
 
 def _width(block: list[tuple[str, int]]) -> int:
     return sum(w for _, w in block)
+
+
+def slot_padding(small: SetLayout, full: SetLayout) -> np.ndarray:
+    """Where each column of ``full`` comes from in ``small`` (-1: a padded, absent slot).
+
+    A formation of fewer UAVs than ``k_uavs + 1`` observes fewer UAV slots; its observation
+    padded to ``full`` has the same own features and first slots, and zeros (masks 0: left
+    out by the set network) in the slots past its own.
+
+    Raises:
+        ValueError: The own features or a type's slot features differ, or ``small`` has
+            more slots of a type than ``full``.
+    """
+    if small.own_features != full.own_features:
+        raise ValueError("slot padding: the own features differ")
+    src = np.full(full.dim, -1, dtype=np.int64)
+    src[list(full.own_cols)] = small.own_cols
+    for kind, f in full.slots.items():
+        s = small.slots[kind]
+        if s.k > f.k or (s.k and s.features != f.features):
+            raise ValueError(f"slot padding: {s.k} {kind} slots do not pad to {f.k}")
+        src[f.start : f.start + s.k * s.width] = np.arange(s.start, s.start + s.k * s.width)
+    return src
 
 
 def tensor_shapes(layout: Any, hidden: Sequence[int]) -> dict[str, tuple[int, int]]:

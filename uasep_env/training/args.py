@@ -205,6 +205,21 @@ def hidden_sizes(text: str) -> str:
     return text
 
 
+def formation_sizes_option(text: str) -> str:
+    """An argparse type: comma-separated formation sizes, each 2-64 (``"3,4,5,6,7,8"``), or ""."""
+    if not text.strip():
+        return ""
+    try:
+        sizes = [int(n) for n in text.split(",")]
+    except ValueError:
+        sizes = []
+    if not sizes or min(sizes) < 2 or max(sizes) > 64:
+        raise argparse.ArgumentTypeError(
+            f"comma-separated formation sizes, each 2-64 (3,4,5,6,7,8), got {text!r}"
+        )
+    return ",".join(str(n) for n in sizes)
+
+
 def torch_device(text: str) -> str:
     """An argparse type: a torch device name, ``cpu``, ``cuda`` or ``cuda:N`` (not checked here).
 
@@ -265,6 +280,8 @@ class Args:
     n_obstacles: int = 1
     # Fixed K (observation.k_uavs / k_obstacles): the observation's width does not depend on
     # n_uavs or n_obstacles, so the policy flies any formation size / obstacle count.
+    # Formation sizes the lean loop's rollouts take in turn ("3,4,5,6,7,8"); "": n_uavs only.
+    formation_sizes: str = ""
     k_uavs: int = 2  # nearest other UAVs observed (all of them at 3 UAVs)
     k_obstacles: int = 1  # nearest obstacles observed (by distance to its predicted region)
     episode_duration: float = 200.0  # s
@@ -317,6 +334,11 @@ FIELDS: dict[str, tuple[Callable[[str], Any] | None, str]] = {
     "residual_scale": (positive_float, "residual modes: largest correction, fraction of max_accel"),
     "scenario": (_scenario, "scenario family of the training encounters"),
     "n_uavs": (positive_int, "formation size"),
+    "formation_sizes": (
+        formation_sizes_option,
+        "formation sizes the rollouts take in turn, comma-separated (3,4,5,6,7,8; --trainer "
+        "lean only); validation and the exported policy's config keep --n-uavs",
+    ),
     "n_obstacles": (non_negative_int, "obstacles per encounter"),
     "k_uavs": (positive_int, "nearest other UAVs observed (observation.k_uavs)"),
     "k_obstacles": (positive_int, "nearest obstacles observed (observation.k_obstacles)"),
@@ -404,6 +426,8 @@ def rounded_budget(args: Args, n_uavs: int, start: int = 0) -> int:
 
 def budget_notice(args: Args, n_uavs: int, start: int = 0) -> str | None:
     """The line a run prints at its start when its step budget is rounded up, or None."""
+    if getattr(args, "formation_sizes", ""):
+        return None  # rollouts of several sizes: the budget is passed by less than one
     end = rounded_budget(args, n_uavs, start)
     if start >= args.total_timesteps or end == args.total_timesteps:
         return None  # nothing left to train, or nothing rounded
@@ -532,6 +556,44 @@ def network_problem(args: Args) -> str | None:
     need = network_bytes(hidden(args), n_in, 3, args.batch_size)
     need += network_bytes(hidden(args), 4 * n_in, 1, args.batch_size)
     return memory_problem(need, "the actor and the critic, their gradients and Adam's state")
+
+
+def formation_sizes(args: Args) -> list[int]:
+    """The formation sizes a run trains with: ``--formation-sizes``, else ``[--n-uavs]``."""
+    text = getattr(args, "formation_sizes", "")
+    return [int(n) for n in text.split(",")] if text else [args.n_uavs]
+
+
+def sizes_problem(args: Args, recipe: str | None = None) -> str | None:
+    """Why ``--formation-sizes`` cannot train with these flags (one line naming it), or None.
+
+    ``recipe``: a recipe that trains with one formation size a run (its name, said in the
+    message), or None for the PPO recipes.
+    """
+    if not getattr(args, "formation_sizes", ""):
+        return None
+    flag = f"argument --formation-sizes: {args.formation_sizes!r}"
+    if recipe is not None:
+        return f"{flag} is not for {recipe} (one formation size a run)"
+    if args.trainer != "lean":
+        return f"{flag} trains with --trainer lean only"
+    sizes = formation_sizes(args)
+    if len(set(sizes)) != len(sizes) or max(sizes) != args.n_uavs:
+        # The network, its normalisation and the exported policy keep --n-uavs's layout:
+        # the widest (smaller formations' observations are padded to it).
+        return f"{flag} must be distinct sizes, the largest --n-uavs ({args.n_uavs})"
+    if args.arch != "set" and min(sizes) <= args.k_uavs:
+        return (
+            f"{flag}: {min(sizes)} UAVs observe fewer than --k-uavs {args.k_uavs} others; the "
+            "slot MLP reads a fixed K (--arch set reads any number)"
+        )
+    # Per-row state that assumes one formation size: the return's running statistics and
+    # the shield's filter (built for one formation).
+    if args.norm_reward:
+        return f"{flag} is not with --norm-reward (its returns are tracked per agent row)"
+    if args.shield != "none":
+        return f"{flag} is not with --shield (the filter is built for one formation size)"
+    return None
 
 
 def shield_problem(args: Args) -> str | None:

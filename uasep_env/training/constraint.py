@@ -37,7 +37,12 @@ from typing import Any
 import numpy as np
 
 from uasep_env.interface.costs import COST_TERMS
-from uasep_env.training.args import non_negative_float, positive_int, shield_problem
+from uasep_env.training.args import (
+    non_negative_float,
+    positive_int,
+    shield_problem,
+    sizes_problem,
+)
 from uasep_env.training.lagrangian import PIDLagrangian, check_cost_limit
 from uasep_env.training.shield_loop import SHIELD_COST
 
@@ -156,7 +161,8 @@ def check(args: Any, trainers: tuple[str, ...] = ("default",)) -> str | None:
             "argument --norm-reward: rescales the reward but not the cost; a Lagrangian "
             "recipe trains without it"
         )
-    problem = shield_problem(args)
+    # The multiplier's running costs are tracked per agent row: one formation size a run.
+    problem = shield_problem(args) or sizes_problem(args, "the Lagrangian recipes")
     if problem:
         return problem
     if args.cost == SHIELD_COST and args.shield == "none":

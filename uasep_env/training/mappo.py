@@ -58,7 +58,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from uasep_env.training import ppo_shared
-from uasep_env.training.args import budget_notice, rounded_budget, shield_problem
+from uasep_env.training.args import budget_notice, rounded_budget, shield_problem, sizes_problem
 from uasep_env.training.args import parse_args as _parse_args
 
 if TYPE_CHECKING:
@@ -97,7 +97,9 @@ def _check(args: Args) -> str | None:
             f"argument --batch-size: {args.batch_size} must divide n_envs * n_steps = "
             f"{args.n_envs * args.n_steps}"
         )
-    return ppo_shared.arch_problem(args) or shield_problem(args)
+    # The centralised critic's global state has one formation's width.
+    problem = sizes_problem(args, "the MAPPO recipes")
+    return ppo_shared.arch_problem(args) or shield_problem(args) or problem
 
 
 def parse_args(argv: list[str] | None = None, defaults: Args | None = None) -> Args:

@@ -290,7 +290,14 @@ class _Timing:
 class _Rollout:
     """The rollout's state and buffers: ``n_steps`` steps of every agent of the core."""
 
-    def __init__(self, core: Any, state: State, n_steps: int, hooks: Hooks | None = None) -> None:
+    def __init__(
+        self,
+        core: Any,
+        state: State,
+        n_steps: int,
+        hooks: Hooks | None = None,
+        pad: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         import torch
 
         from uasep_env.envs.episode_safety import EpisodeSafety
@@ -298,7 +305,9 @@ class _Rollout:
         self.core, self.nets, self.norm, self.state = core, state.nets, state.norm, state
         self.hooks = hooks or Hooks()
         self.n_envs, self.n = core.n_envs, core.n_uavs
-        rows, dim = self.n_envs * self.n, core.obs_dim
+        # A smaller formation's observations padded to the network's slots (--formation-sizes).
+        self.pad = pad or (lambda obs: obs)
+        rows, dim = self.n_envs * self.n, state.norm.observation_space.shape[0]
         self.obs_t = torch.zeros((n_steps, rows, dim))
         # MAPPO: the critic's inputs, stored apart (the PPO critic reads obs_t).
         self.central = state.critic_norm is not None
@@ -322,7 +331,7 @@ class _Rollout:
 
     def reset(self, seed: int) -> None:
         """Reset every environment (environment ``e`` gets ``seed + e``)."""
-        raw = self.core.reset(seed=seed).reshape(len(self.obs), -1)
+        raw = self.pad(self.core.reset(seed=seed).reshape(len(self.obs), -1))
         self.raw = raw
         self.obs = self.norm.observe(raw, update=True)
         self.start[:] = 1.0
@@ -383,13 +392,13 @@ class _Rollout:
                 dones = np.repeat(done_env, n)
                 reward = norm.reward(res.rewards.reshape(-1).astype(np.float32), dones)
                 reward = self.hooks.shape(res, reward, dones)
-                raw = res.obs.reshape(len(self.obs), -1)
+                raw = self.pad(res.obs.reshape(len(self.obs), -1))
                 if not done_env.any():
                     self.obs = norm.observe(raw, update=True)
                 else:
                     final = raw[dones]  # a copy: the resets below write into raw
                     e0 = time.perf_counter()
-                    raw[dones] = core.reset_some(done_env).reshape(-1, raw.shape[1])
+                    raw[dones] = self.pad(core.reset_some(done_env).reshape(-1, core.obs_dim))
                     env_s += time.perf_counter() - e0
                     # VecNormalize's order: the statistics take the new observations
                     # first, then the finished episodes' last ones are normalised.
@@ -461,9 +470,17 @@ def train(
     from uasep_env.envs.core import EnvCore
     from uasep_env.interface.observation import state_dim
     from uasep_env.scenarios import check_training_seeds
+    from uasep_env.training.args import formation_sizes
 
     hooks = hooks or Hooks()
-    check_training_seeds(args.seed, args.n_envs)
+    # --formation-sizes: a core a size, its rollouts in turn; the first is the config's own.
+    sizes = formation_sizes(args)
+    configs = [config] + [config.replace(n_uavs=n) for n in sizes if n != config.n_uavs]
+    if set(sizes) != {c.n_uavs for c in configs} or len(set(sizes)) != len(sizes):
+        raise ValueError(
+            f"args.formation_sizes: {sizes} must be distinct and hold n_uavs={config.n_uavs}"
+        )
+    check_training_seeds(args.seed, args.n_envs * len(configs))
     torch.manual_seed(args.seed)
     core = EnvCore(config, n_envs=args.n_envs)
     rows = args.n_envs * config.n_uavs
@@ -495,11 +512,14 @@ def train(
         prepare(state)
         if learner is not nets:
             nets.load_from(learner)
-    roll = _Rollout(core, state, args.n_steps, hooks)
+    cores = [core] + [EnvCore(c, n_envs=args.n_envs) for c in configs[1:]]
+    rolls = [_Rollout(c, state, args.n_steps, hooks, _padding(c.config, config)) for c in cores]
     if state.agent_steps < args.total_timesteps and state.wall_s < args.max_minutes * 60.0:
         # Not when nothing is left to train: the reset's observations would move the
-        # normalisation a resumed run exports unchanged.
-        roll.reset(args.seed)
+        # normalisation a resumed run exports unchanged. Each size's environments get
+        # their own seeds (the first's those of a run of one size).
+        for k, roll in enumerate(rolls):
+            roll.reset(args.seed + k * args.n_envs)
     timing = _Timing()
     hooks.start(nets, norm)
     t0 = time.perf_counter()
@@ -516,8 +536,10 @@ def train(
         if stop:
             break
         r0 = time.perf_counter()
+        # The formation sizes in turn, by update: a resumed run goes on with the next one.
+        roll = rolls[state.updates % len(rolls)]
         env_s = roll.collect(args.gamma)
-        state.agent_steps += args.n_steps * rows
+        state.agent_steps += args.n_steps * roll.n_envs * roll.n
         timing.env_s += env_s
         timing.rollout_s += time.perf_counter() - r0 - env_s
         h0 = time.perf_counter()
@@ -550,6 +572,31 @@ def train(
         "learner_s": timing.learner_s,
     }
     return nets, norm, facts
+
+
+def _padding(small: Any, full: Any) -> Callable[[np.ndarray], np.ndarray] | None:
+    """Pads the observations of config ``small`` to those of ``full`` (None: the same width).
+
+    A formation of fewer UAVs than ``k_uavs + 1`` observes fewer UAV slots: its rows get
+    the missing slots as zeros, masks 0, which the set network leaves out
+    (:func:`~uasep_env.policies.set_network.slot_padding`).
+    """
+    from uasep_env.policies.checkpoint import StoredLayout
+    from uasep_env.policies.set_network import slot_padding, split_layout
+
+    mine, theirs = (split_layout(StoredLayout.from_config(c)) for c in (small, full))
+    if mine.dim == theirs.dim:
+        return None
+    src = slot_padding(mine, theirs)
+    keep = src >= 0
+    cols = src[keep]
+
+    def pad(obs: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(obs), theirs.dim), dtype=obs.dtype)
+        out[:, keep] = obs[:, cols]
+        return out
+
+    return pad
 
 
 def _learner(nets: _ActorCritic, device: Any) -> _ActorCritic:

@@ -69,6 +69,7 @@ from uasep_env.training.args import (
     make_env_config,
     rounded_budget,
     shield_problem,
+    sizes_problem,
 )
 from uasep_env.training.args import parse_args as _parse_args
 
@@ -115,7 +116,7 @@ def _check(args: Args) -> str | None:
     """What the PPO recipes refuse beyond each flag's range (one message naming the flag)."""
     if args.trainer == "lean" and args.tensorboard:
         return "argument --tensorboard: SB3's logger; not with --trainer lean"
-    return arch_problem(args) or shield_problem(args)
+    return arch_problem(args) or shield_problem(args) or sizes_problem(args)
 
 
 def arch_problem(args: Args) -> str | None:
