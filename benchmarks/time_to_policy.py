@@ -50,7 +50,7 @@ Recipes: ``residual_apf`` (shipped ``ppo_residual_apf.zip``) and ``shared``
 (``mappo.zip``, skrl's MAPPO; its rollout time is the training less the env, the learner and
 the checks, skrl having no rollout method to time); on the lean loop only,
 ``residual_apf_set`` (``ppo_residual_apf_set.zip``: the residual recipe with the set
-network's shipped flags, :data:`SET_FLAGS`, trained at 8 UAVs and checked on validation
+network's shipped flags, :data:`SET_FLAGS`, trained at 3-8 UAVs and checked on validation
 encounters at the held-out bank's 3, where the APF does not clear its bar) and
 ``lagrangian_residual`` (``ppo_lagrangian.zip``: the residual PPO-Lagrangian, its cost limit
 measured before the clock starts). ``--trainer lean`` trains a PPO recipe
@@ -92,9 +92,9 @@ class Recipe(NamedTuple):
             policy shipped from flags of another recipe (the set network's) is timed with
             them.
         checks: Flags' values (``Args`` fields) the checks' encounters are played with in
-            place of the training run's: the set network trains at 8 UAVs, where the APF
-            itself clears its shipped policy's bar on validation encounters, and is checked
-            at the held-out bank's 3.
+            place of the training run's: the set network's run validates at 8 UAVs, where
+            the APF itself clears its shipped policy's bar on validation encounters, and is
+            checked at the held-out bank's 3.
     """
 
     shipped: str
@@ -107,10 +107,11 @@ class Recipe(NamedTuple):
 
 _PPO, _MAPPO = "uasep_env.training.ppo_shared", "uasep_env.training.mappo"
 _LAGRANGIAN = "uasep_env.training.ppo_lagrangian"
-#: The set network's shipped run (``baselines/results/seeds_residual_apf_set_v3.md``).
+#: The set network's shipped run (``baselines/results/seeds_residual_apf_set_mix_v3.md``).
 SET_FLAGS = ("--trainer", "lean", "--arch", "set", "--hidden", "32,64", "--n-uavs", "8",
-             "--k-uavs", "7", "--n-envs", "64", "--n-steps", "64", "--batch-size", "8192",
-             "--n-epochs", "1", "--learning-rate", "0.0003400372129740376")  # fmt: skip
+             "--k-uavs", "7", "--formation-sizes", "3,4,5,6,7,8", "--n-envs", "64",
+             "--n-steps", "64", "--batch-size", "8192", "--n-epochs", "1",
+             "--learning-rate", "0.0003400372129740376")  # fmt: skip
 #: ``--recipe`` -> the recipe.
 RECIPES = {
     "residual_apf": Recipe(

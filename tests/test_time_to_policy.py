@@ -162,7 +162,7 @@ def test_every_recipe_has_a_committed_record():
 
 
 def test_the_set_recipe_trains_its_shipped_flags_and_is_checked_at_3_uavs(tmp_path, monkeypatch):
-    """The set network trains at 8 UAVs with its shipped run's flags; every check (and the
+    """The set network trains at 3-8 UAVs with its shipped run's flags; every check (and the
     bar) plays the validation encounters at 3 UAVs, where the APF does not clear the bar."""
     from uasep_env.policies.learned import read_checkpoint
 
@@ -181,6 +181,7 @@ def test_the_set_recipe_trains_its_shipped_flags_and_is_checked_at_3_uavs(tmp_pa
                     "--", *tiny])  # fmt: skip
     a = rec["recipe_args"]
     assert (a["arch"], a["n_uavs"], a["k_uavs"], a["trainer"]) == ("set", 8, 7, "lean")
+    assert a["formation_sizes"] == "3,4,5,6,7,8"
     assert (a["n_envs"], a["hidden"]) == (2, "8,8")  # the caller's flags after the shipped run's
     assert rec["trainer"] == "lean" and rec["shipped"].endswith("ppo_residual_apf_set.zip")
     assert rec["checks_played_with"] == {"n_uavs": 3, "k_uavs": 2}
