@@ -602,8 +602,8 @@ def held_out(record: dict[str, Any], episodes: int, workers: int = 1) -> dict[st
         workers: Evaluation processes (the figures do not depend on them).
 
     Returns:
-        ``{"episodes", "policy_sha256", "figures": {label: {key: {value, ci_low, ci_high}}}}``
-        for the labels ``apf``, ``shipped`` and ``reached``.
+        ``{"episodes", "env_version", "policy_sha256", "figures": {label: {key: {value,
+        ci_low, ci_high}}}}`` for the labels ``apf``, ``shipped`` and ``reached``.
 
     Raises:
         ValueError: The record did not reach its bar, or its policy file is gone.
@@ -629,8 +629,12 @@ def held_out(record: dict[str, Any], episodes: int, workers: int = 1) -> dict[st
             }
             for key in HELD_OUT_KEYS
         }
+    from uasep_env.policies.env_version import current_version
+
     return {
         "episodes": episodes,
+        # The env the bank was played in (records without it: -v2's, before -v3).
+        "env_version": current_version(),
         "policy_sha256": hashlib.sha256(policy.read_bytes()).hexdigest(),
         "figures": figs,
     }
