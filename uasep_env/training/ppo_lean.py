@@ -581,6 +581,8 @@ def _padding(small: Any, full: Any) -> Callable[[np.ndarray], np.ndarray] | None
     the missing slots as zeros, masks 0, which the set network leaves out
     (:func:`~uasep_env.policies.set_network.slot_padding`).
     """
+    if small is full:
+        return None
     from uasep_env.policies.checkpoint import StoredLayout
     from uasep_env.policies.set_network import slot_padding, split_layout
 
