@@ -342,3 +342,22 @@ def test_verdict_says_whether_a_learned_policy_meets_the_best_classical_controll
     assert verdict.meets(close, "ppo_residual_apf", "mvp-region") == [
         "max deviation on held_out 20.0 [19.0, 20.7] against 21.4 [20.6, 22.1] m"
     ]
+
+
+def test_label_equals_spec_names_a_row(tmp_path, capsys):
+    """Two checkpoints of one file name: refused as one row name, told apart by LABEL=SPEC."""
+    from conftest import ROOT
+
+    seeds = ROOT / "baselines" / "seeds" / "lever_mvp_base_v3"
+    a, b = (seeds / f"seed_{k}" / "selected.zip" for k in (0, 1))
+    out = tmp_path / "bench"
+    argv = ["--banks", "held_out", "--episodes", "2", "--no-front", "--out", str(out), *SHORT]
+    assert main(["--policy", f"{a},{b}", *argv]) == 2
+    assert "share a row name" in capsys.readouterr().err
+    assert main(["--policy", f"first={a},second={b}+cbf", *argv]) == 0
+    rows = set(_board(out)["results"]["held_out"])
+    assert rows == {"first", "second+cbf"}
+    capsys.readouterr()
+    assert main(["--policy", f"={a}", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "LABEL=SPEC" in err

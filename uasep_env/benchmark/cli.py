@@ -51,8 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         metavar="SPEC",
         help="registered or shipped name, a checkpoint path, or module:callable (a factory "
-        "called with each bank's EnvConfig); +cbf for the shielded policy; repeatable, "
-        "comma-separated (default: the reference controllers)",
+        "called with each bank's EnvConfig); +cbf for the shielded policy; LABEL=SPEC names "
+        "its row; repeatable, comma-separated (default: the reference controllers)",
     )
     p.add_argument(
         "--banks",

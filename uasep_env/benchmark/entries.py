@@ -73,6 +73,9 @@ class Entry:
 def parse_entries(specs: Sequence[str]) -> list[Entry]:
     """Entries for ``--policy`` values, in order, duplicates dropped.
 
+    ``LABEL=SPEC`` names a policy's row (two checkpoint files of the same name, say); a
+    shielded one's row keeps its ``+cbf``.
+
     Raises:
         ValueError: Naming a value that is no policy name, file or importable
             ``module:callable``, or a checkpoint of an env version this package does not
@@ -83,18 +86,25 @@ def parse_entries(specs: Sequence[str]) -> list[Entry]:
     from uasep_env.reporting.scaling import load_factory
 
     out: list[Entry] = []
-    for spec in dict.fromkeys(s.strip() for s in specs if s.strip()):
+    for item in dict.fromkeys(s.strip() for s in specs if s.strip()):
+        named, spec = None, item
+        if "=" in item and not Path(item).exists():  # LABEL=SPEC: the row named LABEL
+            named, _, spec = (part.strip() for part in item.partition("="))
+            if not named or not spec:
+                raise ValueError(f"unknown policy {item!r}: LABEL=SPEC needs both")
         base, _shield = split_shield(spec)
         if ":" in base and not Path(base).exists():
             try:
                 load_factory(base)
             except ValueError as err:
                 raise ValueError(f"unknown policy {spec!r}: {err}") from None
-            out.append(Entry(label=spec, spec=spec, kind="factory", sweep=None))
+            out.append(Entry(label=named or spec, spec=spec, kind="factory", sweep=None))
             continue
         check_policy_name(spec)  # ValueError: "unknown policy 'x': use one of ..."
         sweep = sweep_of(base) if not Path(base).exists() else None
         label = spec if not Path(base).exists() else Path(base).stem + spec[len(base) :]
+        if named:  # the shield stays in the row's name: "+cbf" rows are shielded
+            label = named + spec[len(base) :]
         version = policy_env_version(base)  # a checkpoint's; ValueError: one not reproduced
         out.append(Entry(label=label, spec=spec, kind="name", sweep=sweep, trained_version=version))
     if not out:
