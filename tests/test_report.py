@@ -100,3 +100,22 @@ def test_a_cell_carries_the_episode_cost():
         stats = row["metrics"][key]
         assert stats["kind"] == "mean" and stats["n"] == 2 and stats["mean"] >= 0.0
     assert row["metrics"]["episode.max_uav_cost"]["mean"] >= row["metrics"]["episode.cost"]["mean"]
+
+
+def test_a_policy_trained_at_several_sizes_says_so_and_its_cells_are_not_zero_shot():
+    """The shipped set policy trained at 3-8 UAVs: its entry holds the sizes, its cells at
+    3-8 UAVs are not zero-shot (16 is), and the table's line says "3-8 UAVs"."""
+    from uasep_env.reporting.scaling import _zero_shot
+    from uasep_env.reporting.scaling_views import sizes_text
+
+    (entry,) = parse_policies(["ppo_residual_apf_set"])
+    assert entry.sizes == (3, 4, 5, 6, 7, 8) and entry.trained == (8, 1)
+    assert [_zero_shot(entry, n, 1) for n in (3, 8, 16)] == [False, False, True]
+    assert _zero_shot(entry, 3, 2)  # another obstacle count
+    (slot,) = parse_policies(["ppo_residual_apf"])  # one size: its own alone
+    assert slot.sizes is None and [_zero_shot(slot, n, 1) for n in (3, 8)] == [False, True]
+    result = _result({"apf": (0, 5)})
+    result["policies"].append({"label": "set", "kind": "checkpoint", "trained": [8, 1],
+                               "layout": [7, 1], "sizes": list(entry.sizes)})  # fmt: skip
+    assert "`set`: trained with 3-8 UAVs and 1 obstacle(s)" in markdown(result, "r", 1.0)
+    assert (sizes_text([8]), sizes_text([3, 5, 8]), sizes_text([4, 3])) == ("8", "3, 5, 8", "3, 4")

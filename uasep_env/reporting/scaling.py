@@ -111,6 +111,8 @@ class PolicyEntry:
         trained: For a checkpoint, ``(n_uavs, n_obstacles)`` it was trained with.
         env_version: For a checkpoint, the env version it was trained in: it plays that
             version of every cell (:mod:`uasep_env.policies.env_version`); None: the current.
+        sizes: For a checkpoint trained at several formation sizes (``--formation-sizes``),
+            those sizes; None: ``trained``'s alone.
     """
 
     label: str
@@ -119,6 +121,7 @@ class PolicyEntry:
     layout: tuple[int, int] | None = None
     trained: tuple[int, int] | None = None
     env_version: int | None = None
+    sizes: tuple[int, ...] | None = None
 
 
 def checkpoint_layout(path: str | Path) -> tuple[EnvConfig, tuple[int, int]]:
@@ -126,6 +129,21 @@ def checkpoint_layout(path: str | Path) -> tuple[EnvConfig, tuple[int, int]]:
     meta = load_policy(path).meta
     layout = meta.observation_layout  # stored (format 2) or implied by its training config
     return meta.env_config, (layout.k_uavs, layout.k_obstacles)
+
+
+def trained_sizes(path: str | Path) -> tuple[int, ...] | None:
+    """The formation sizes a checkpoint was trained at (``--formation-sizes``), or None."""
+    args = load_policy(path).meta.info.get("args")
+    text = args.get("formation_sizes", "") if isinstance(args, dict) else ""
+    return tuple(int(n) for n in text.split(",")) if text else None
+
+
+def _zero_shot(entry: PolicyEntry, n_uavs: int, n_obstacles: int) -> bool:
+    """Whether a cell is one a checkpoint was not trained at (never, for a controller)."""
+    if entry.trained is None:
+        return False
+    sizes = entry.sizes or (entry.trained[0],)
+    return n_uavs not in sizes or n_obstacles != entry.trained[1]
 
 
 def cell_config(
@@ -202,6 +220,7 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
                 layout=layout,
                 trained=(trained.n_uavs, trained.n_obstacles),
                 env_version=policy_env_version(shipped),
+                sizes=trained_sizes(shipped),
             )
         elif Path(spec).is_file():
             if not is_policy_checkpoint(spec):
@@ -214,6 +233,7 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
                 layout=layout,
                 trained=(trained.n_uavs, trained.n_obstacles),
                 env_version=policy_env_version(spec),
+                sizes=trained_sizes(spec),
             )
         elif ":" in spec:
             load_factory(spec)
@@ -290,7 +310,7 @@ def evaluate_cell(
                 "n_uavs": n,
                 "n_obstacles": m,
                 "policy": e.label,
-                "zero_shot": e.trained is not None and e.trained != (n, m),
+                "zero_shot": _zero_shot(e, n, m),
                 "formation": cfg.formation if isinstance(cfg.formation, str) else "slots",
                 "env_version": e.env_version or current_version(),
                 "metrics": {k: agg[k] for k, _, _ in METRICS if k in agg},
@@ -500,6 +520,9 @@ def _render(path: Path, with_figure: bool) -> dict[str, Any]:
     result = json.loads(path.read_text())
     if not {"rows", "cells", "policies", "command", "elapsed_s"} <= set(result):
         raise SystemExit(f"--render: {path} is not a scaling result (uasep-report's)")
+    for p in result["policies"]:  # written before the field: the checkpoint says
+        if p["kind"] == "checkpoint" and "sizes" not in p and Path(p["spec"]).is_file():
+            p["sizes"] = trained_sizes(p["spec"])
     _write_views(result, path.with_suffix(""), with_figure)
     return result
 

@@ -39,6 +39,14 @@ METRICS: tuple[tuple[str, str, str], ...] = (
 TARGET_UAVS = (8, 32)
 
 
+def sizes_text(sizes: list[int]) -> str:
+    """Formation sizes as a reader says them: ``8``, ``3-8`` (consecutive) or ``3, 5, 8``."""
+    sizes = sorted(sizes)
+    if len(sizes) > 2 and sizes == list(range(sizes[0], sizes[-1] + 1)):
+        return f"{sizes[0]}-{sizes[-1]}"
+    return ", ".join(str(n) for n in sizes)
+
+
 def _fmt(stats: dict[str, Any] | None, unit: str) -> str:
     if stats is None:
         return "-"
@@ -122,8 +130,9 @@ def markdown(result: dict[str, Any], command: str, elapsed_s: float) -> str:
     ]
     for p in result["policies"]:
         if p["kind"] == "checkpoint":
+            sizes = p.get("sizes") or [p["trained"][0]]
             lines.append(
-                f"* `{p['label']}`: trained with {p['trained'][0]} UAVs and {p['trained'][1]} "
+                f"* `{p['label']}`: trained with {sizes_text(sizes)} UAVs and {p['trained'][1]} "
                 f"obstacle(s), observes the {p['layout'][0]} nearest UAVs and "
                 f"{p['layout'][1]} nearest obstacle(s); other cells are zero-shot."
             )
