@@ -403,10 +403,10 @@ def test_a_fast_report_is_what_its_command_and_checkpoints_say(recipe, name):
     flags = shlex.split(fast["command"].split(" -- ", 1)[1])  # the driver quotes its command
     args = vars(ppo_shared.parse_args(flags, defaults))
     now = {k: v for k, v in args.items() if k not in PER_RUN}
-    # Options the recipes gained after a report (--device, --trainer, --arch, --shield): at
-    # their defaults.
+    # Options the recipes gained after a report (--device, --trainer, --arch, --shield,
+    # --formation-sizes): at their defaults.
     added = set(now) - set(fast["recipe_args"])
-    assert added <= {"device", "trainer", "arch", "shield"}
+    assert added <= {"device", "trainer", "arch", "shield", "formation_sizes"}
     assert all(now[k] == getattr(defaults, k) for k in added)
     assert fast["recipe_args"] == {k: now[k] for k in fast["recipe_args"]}
     for k in range(3):
