@@ -53,6 +53,7 @@ LEARNED = (
     "ppo_residual_apf_set",
     "mappo",
     "ppo_lagrangian",
+    "ppo_lagrangian_deviation",
     "mappo_lagrangian",
 )
 #: Shipped only if it earns its place (issue 29): no "missing" row when absent.
