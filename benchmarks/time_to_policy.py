@@ -218,6 +218,18 @@ def _recipe_args(recipe: str, run_dir: Path, extra: list[str]) -> Any:
     return importlib.import_module(r.reader).parse_args(argv, defaults)
 
 
+def _resolved(recipe: str, run_dir: Path, extra: list[str], trainer: str) -> tuple[Any, str]:
+    """The recipe's arguments and its trainer, lean if either of its two sources says so.
+
+    The script's ``--trainer`` and the recipe's (its shipped flags' or after ``--``) say the
+    same thing.
+    """
+    args = _recipe_args(recipe, run_dir, extra)
+    if "lean" in (trainer, args.trainer):
+        return replace(args, trainer="lean"), "lean"
+    return args, trainer
+
+
 def _evaluate(policy: Any, config: Any, seeds: list[int]) -> dict[str, Any]:
     from uasep_env.evaluation import evaluate
 
@@ -467,10 +479,7 @@ def run(
     from uasep_env.training import ppo_shared
     from uasep_env.training.rundir import prepare_out_dir
 
-    args = _recipe_args(recipe, run_dir, extra)
-    # The script's --trainer and the recipe's (after --) say the same thing.
-    if "lean" in (trainer, args.trainer):
-        trainer, args = "lean", replace(args, trainer="lean")
+    args, trainer = _resolved(recipe, run_dir, extra, trainer)
     train = _loop(recipe, trainer)
     if getattr(args, "shield", "none") != "none":
         # The checks play the bare policy: a policy trained under the shield is deployed with it.
@@ -809,9 +818,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if a.recipe is None:
         p.error("the following arguments are required: --recipe")
     try:
-        # The recipe's --trainer (its shipped flags' or after --) says the same as the script's.
-        lean = a.trainer == "lean" or _recipe_args(a.recipe, ROOT, extra).trainer == "lean"
-        _loop(a.recipe, "lean" if lean else a.trainer)
+        _loop(a.recipe, _resolved(a.recipe, ROOT, extra, a.trainer)[1])
     except ValueError as err:
         p.error(f"argument --trainer: {err}")
     out = a.out or ROOT / "benchmarks" / "results" / f"time_to_policy_{a.recipe}.json"

@@ -81,17 +81,16 @@ def parse_entries(specs: Sequence[str]) -> list[Entry]:
             ``module:callable``, or a checkpoint of an env version this package does not
             play.
     """
-    from uasep_env.policies import check_policy_name, split_shield
+    from uasep_env.policies import check_policy_name, split_label, split_shield
     from uasep_env.policies.env_version import policy_env_version
     from uasep_env.reporting.scaling import load_factory
 
     out: list[Entry] = []
     for item in dict.fromkeys(s.strip() for s in specs if s.strip()):
-        named, spec = None, item
-        if "=" in item and not Path(item).exists():  # LABEL=SPEC: the row named LABEL
-            named, _, spec = (part.strip() for part in item.partition("="))
-            if not named or not spec:
-                raise ValueError(f"unknown policy {item!r}: LABEL=SPEC needs both")
+        try:
+            named, spec = split_label(item)  # LABEL=SPEC: the row named LABEL
+        except ValueError as err:
+            raise ValueError(f"unknown policy {err}") from None
         base, _shield = split_shield(spec)
         if ":" in base and not Path(base).exists():
             try:

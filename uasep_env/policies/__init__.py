@@ -73,6 +73,7 @@ __all__ = [
     "register_policy",
     "shipped_policies",
     "shipped_policy_path",
+    "split_label",
     "split_shield",
 ]
 
@@ -86,6 +87,22 @@ def _unknown_policy(name: str) -> ValueError:
     if _looks_like_path(name) and not Path(name).exists():
         return ValueError(f"no such file {name!r} (a policy is one of {names} or a path)")
     return ValueError(f"unknown policy {name!r}: use one of {names} or a model path")
+
+
+def split_label(item: str) -> tuple[str | None, str]:
+    """Split a ``LABEL=SPEC`` policy value into its row's label and the policy (``"a=apf"``).
+
+    A value without ``=``, or naming an existing file, gives ``(None, item)``.
+
+    Raises:
+        ValueError: An empty label or policy, naming the value.
+    """
+    if "=" not in item or Path(item).exists():
+        return None, item
+    label, _, spec = (part.strip() for part in item.partition("="))
+    if not label or not spec:
+        raise ValueError(f"{item!r}: empty label or policy in LABEL=SPEC")
+    return label, spec
 
 
 def check_policy_name(name: str) -> str:

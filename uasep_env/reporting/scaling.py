@@ -71,6 +71,7 @@ from uasep_env.policies import (
     load_policy,
     observed_config,
     shipped_policy_path,
+    split_label,
     split_shield,
 )
 from uasep_env.policies.env_version import current_version, policy_env_version, version_config
@@ -131,11 +132,26 @@ def checkpoint_layout(path: str | Path) -> tuple[EnvConfig, tuple[int, int]]:
     return meta.env_config, (layout.k_uavs, layout.k_obstacles)
 
 
-def trained_sizes(path: str | Path) -> tuple[int, ...] | None:
-    """The formation sizes a checkpoint was trained at (``--formation-sizes``), or None."""
-    args = load_policy(path).meta.info.get("args")
+def trained_sizes(meta: Any) -> tuple[int, ...] | None:
+    """The formation sizes a checkpoint (its ``meta``) was trained at, or None (one size)."""
+    args = meta.info.get("args")
     text = args.get("formation_sizes", "") if isinstance(args, dict) else ""
     return tuple(int(n) for n in text.split(",")) if text else None
+
+
+def _checkpoint_entry(label: str, path: str) -> PolicyEntry:
+    """The entry of a policy checkpoint file (its meta read once)."""
+    meta = load_policy(path).meta
+    layout = meta.observation_layout  # stored (format 2) or implied by its training config
+    return PolicyEntry(
+        label=label,
+        kind="checkpoint",
+        spec=path,
+        layout=(layout.k_uavs, layout.k_obstacles),
+        trained=(meta.env_config.n_uavs, meta.env_config.n_obstacles),
+        env_version=policy_env_version(path),
+        sizes=trained_sizes(meta),
+    )
 
 
 def _zero_shot(entry: PolicyEntry, n_uavs: int, n_obstacles: int) -> bool:
@@ -203,38 +219,19 @@ def parse_policies(specs: Sequence[str]) -> list[PolicyEntry]:
     for item in (s.strip() for raw in specs for s in raw.split(",")):
         if not item:
             continue
-        name, spec = None, item
-        if "=" in item and not Path(item).exists():  # LABEL=SPEC
-            name, _, spec = item.partition("=")
-            if not name.strip():
-                raise ValueError(f"--policy {item!r}: empty label before '='")
+        try:
+            name, spec = split_label(item)  # LABEL=SPEC
+        except ValueError as err:
+            raise ValueError(f"--policy {err}") from None
         spec, shield = split_shield(spec)  # "<policy>+cbf": the policy, shielded
         if spec in POLICIES:
             entry = PolicyEntry(label=spec, kind="builtin", spec=spec)
         elif not Path(spec).exists() and (shipped := shipped_policy_path(spec)) is not None:
-            trained, layout = checkpoint_layout(shipped)  # a shipped checkpoint, by name
-            entry = PolicyEntry(
-                label=spec,
-                kind="checkpoint",
-                spec=str(shipped),
-                layout=layout,
-                trained=(trained.n_uavs, trained.n_obstacles),
-                env_version=policy_env_version(shipped),
-                sizes=trained_sizes(shipped),
-            )
+            entry = _checkpoint_entry(spec, str(shipped))  # a shipped checkpoint, by name
         elif Path(spec).is_file():
             if not is_policy_checkpoint(spec):
                 raise ValueError(f"--policy {spec!r}: not a policy checkpoint (.zip)")
-            trained, layout = checkpoint_layout(spec)
-            entry = PolicyEntry(
-                label=Path(spec).stem,
-                kind="checkpoint",
-                spec=spec,
-                layout=layout,
-                trained=(trained.n_uavs, trained.n_obstacles),
-                env_version=policy_env_version(spec),
-                sizes=trained_sizes(spec),
-            )
+            entry = _checkpoint_entry(Path(spec).stem, spec)
         elif ":" in spec:
             load_factory(spec)
             entry = PolicyEntry(label=spec.rpartition(":")[2], kind="factory", spec=spec)
@@ -522,7 +519,7 @@ def _render(path: Path, with_figure: bool) -> dict[str, Any]:
         raise SystemExit(f"--render: {path} is not a scaling result (uasep-report's)")
     for p in result["policies"]:  # written before the field: the checkpoint says
         if p["kind"] == "checkpoint" and "sizes" not in p and Path(p["spec"]).is_file():
-            p["sizes"] = trained_sizes(p["spec"])
+            p["sizes"] = trained_sizes(load_policy(p["spec"]).meta)
     _write_views(result, path.with_suffix(""), with_figure)
     return result
 

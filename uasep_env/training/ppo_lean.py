@@ -470,16 +470,15 @@ def train(
     from uasep_env.envs.core import EnvCore
     from uasep_env.interface.observation import state_dim
     from uasep_env.scenarios import check_training_seeds
-    from uasep_env.training.args import formation_sizes
+    from uasep_env.training.args import formation_sizes, sizes_problem
 
     hooks = hooks or Hooks()
     # --formation-sizes: a core a size, its rollouts in turn; the first is the config's own.
+    problem = sizes_problem(args)  # the recipes' own check, for callers that skip parsing
+    if problem:
+        raise ValueError(problem)
     sizes = formation_sizes(args)
     configs = [config] + [config.replace(n_uavs=n) for n in sizes if n != config.n_uavs]
-    if set(sizes) != {c.n_uavs for c in configs} or len(set(sizes)) != len(sizes):
-        raise ValueError(
-            f"args.formation_sizes: {sizes} must be distinct and hold n_uavs={config.n_uavs}"
-        )
     check_training_seeds(args.seed, args.n_envs * len(configs))
     torch.manual_seed(args.seed)
     core = EnvCore(config, n_envs=args.n_envs)
